@@ -1,0 +1,29 @@
+"""mcchain: batch Monte Carlo studies of planar linkages with revolute-joint clearance.
+
+Heavy modules (numba kernels, xarray, dask, rerun) are imported lazily so that light
+commands such as ``mcchain runs`` start fast.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+if TYPE_CHECKING:
+    import xarray
+
+
+def open_run(run: str) -> xarray.Dataset:
+    """The ensemble of a run folder as a lazy :class:`xarray.Dataset`."""
+    from mcchain.runs import open_run as _open_run
+
+    return _open_run(run)
+
+
+def __getattr__(name: str) -> Any:
+    if name in {"load_scene", "compile_model"}:
+        from mcchain import scene
+
+        return getattr(scene, name)
+    raise AttributeError(f"module 'mcchain' has no attribute {name!r}")

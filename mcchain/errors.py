@@ -1,0 +1,17 @@
+"""Errors raised for bad user input (never inside kernels).
+
+Every message is one line that names the offending key path or argument and the reason,
+e.g. ``joint.O.clearance: must be >= 0, got -0.001``. The CLI prints it and exits with 2.
+"""
+
+
+class McchainError(Exception):
+    """Base class of mcchain's user-facing errors."""
+
+
+class SceneError(McchainError, ValueError):
+    """A scene file that cannot be run: malformed, inconsistent or not assemblable."""
+
+
+class RunError(McchainError):
+    """A run folder or CLI argument that cannot be used (exists, not found, bad flag)."""

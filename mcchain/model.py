@@ -1,0 +1,260 @@
+"""The compiled model: a scene as flat arrays that numba kernels read.
+
+A :class:`Model` holds two kinds of arrays:
+
+* **topology** (static for the whole ensemble, int64): which bodies each joint, driver,
+  force and spring connects, the joint kind, and the first constraint row of each joint
+  and driver. Index ``-1`` is the fixed ground body.
+* **parameters** (float64) with a *leading sample axis* of size 1 or ``nsample``. A kernel
+  reads sample ``s`` with the broadcast index ``a[s % a.shape[0]]``, so any scalar can vary
+  per sample at no cost to the ones that do not.
+
+Generalised coordinates follow DESIGN §2: ``q = [X_1, Y_1, θ_1, …, X_n, Y_n, θ_n]`` (m, m,
+rad). Constraint rows are ordered by joint (2 rows for an ideal joint, 1 for a clearance
+joint), then by driver (1 row each); ``joint_row`` / ``driver_row`` give the first row.
+
+Shapes are written ``(*, nbody)`` for a parameter with a leading sample axis of size 1 or
+``nsample``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from typing import NamedTuple
+
+import numpy as np
+
+GROUND = -1
+"""Body index of the fixed ground body (r = 0, θ = 0)."""
+
+JOINT_IDEAL = 0
+"""Ideal revolute joint: Φ = d = 0 (two rows)."""
+JOINT_CLEARANCE = 1
+"""Revolute joint with radial clearance c: Φ = |d| − c = 0 (one row)."""
+
+
+class KernelModel(NamedTuple):
+    """The arrays a numba kernel reads, in one (heterogeneous) named tuple.
+
+    Numba accepts a NamedTuple of arrays as one argument; passing the model this way keeps
+    kernel signatures short. Field meanings and shapes are those of :class:`Model`.
+    """
+
+    joint_body_a: np.ndarray
+    joint_body_b: np.ndarray
+    joint_kind: np.ndarray
+    joint_row: np.ndarray
+    driver_body: np.ndarray
+    driver_row: np.ndarray
+    force_body: np.ndarray
+    spring_body_a: np.ndarray
+    spring_body_b: np.ndarray
+    gravity: np.ndarray
+    body_mass: np.ndarray
+    body_inertia: np.ndarray
+    joint_point_a: np.ndarray
+    joint_point_b: np.ndarray
+    joint_clearance: np.ndarray
+    joint_eccentricity: np.ndarray
+    driver_angle0: np.ndarray
+    driver_omega: np.ndarray
+    force_point: np.ndarray
+    force_value: np.ndarray
+    force_torque: np.ndarray
+    spring_point_a: np.ndarray
+    spring_point_b: np.ndarray
+    spring_stiffness: np.ndarray
+    spring_rest_length: np.ndarray
+    spring_damping: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+
+
+def _i64(values: object = ()) -> np.ndarray:
+    return np.asarray(values, dtype=np.int64).reshape(-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A scene compiled to arrays, for ``nsample`` instances.
+
+    Names (tuples of str) label the axes of the ensemble; arrays are documented with units
+    and shapes. ``nbody``/``njoint``/... are derived from the topology arrays.
+
+    Attributes:
+        body_names: (nbody,) body names, in coordinate order.
+        joint_names: (njoint,) joint names.
+        driver_names: (ndriver,) the driven body's name for each driver.
+        force_names: (nforce,) force names.
+        spring_names: (nspring,) spring names.
+        param_paths: (nparam,) sampled parameter paths (``kind.name.key[i]``).
+        parameters: (nsample, nparam) the sampled values, one column per path.
+        nsample: number of instances.
+        joint_body_a: (njoint,) int64 bearing body index (``GROUND`` = -1).
+        joint_body_b: (njoint,) int64 journal body index.
+        joint_kind: (njoint,) int64 ``JOINT_IDEAL`` or ``JOINT_CLEARANCE``.
+        joint_row: (njoint,) int64 first constraint row of each joint.
+        driver_body: (ndriver,) int64 driven body.
+        driver_row: (ndriver,) int64 constraint row of each driver.
+        force_body: (nforce,) int64 loaded body.
+        spring_body_a, spring_body_b: (nspring,) int64 bodies a spring joins.
+        gravity: (*, 2) m/s².
+        body_mass: (*, nbody) kg.
+        body_inertia: (*, nbody) centroidal moment of inertia, kg m².
+        joint_point_a, joint_point_b: (*, njoint, 2) local attachment points on the bearing
+            (a) and journal (b) bodies, m.
+        joint_clearance: (*, njoint) radial clearance c, m (ignored for ideal joints).
+        joint_eccentricity: (*, njoint) initial direction α of d, rad; NaN: from positions.
+        driver_angle0: (*, ndriver) θ_0, rad.
+        driver_omega: (*, ndriver) ω, rad/s.
+        force_point: (*, nforce, 2) local application point, m.
+        force_value: (*, nforce, 2) constant force, global frame, N.
+        force_torque: (*, nforce) constant couple, N m (counter-clockwise positive).
+        spring_point_a, spring_point_b: (*, nspring, 2) local attachment points, m.
+        spring_stiffness: (*, nspring) N/m.
+        spring_rest_length: (*, nspring) m.
+        spring_damping: (*, nspring) N s/m, along the spring.
+        q0: (*, 3 nbody) initial positions [X, Y, θ]*.
+        v0: (*, 3 nbody) initial velocities.
+    """
+
+    body_names: tuple[str, ...]
+    joint_names: tuple[str, ...]
+    driver_names: tuple[str, ...]
+    force_names: tuple[str, ...]
+    spring_names: tuple[str, ...]
+    param_paths: tuple[str, ...]
+    parameters: np.ndarray
+    nsample: int
+    joint_body_a: np.ndarray
+    joint_body_b: np.ndarray
+    joint_kind: np.ndarray
+    joint_row: np.ndarray
+    driver_body: np.ndarray
+    driver_row: np.ndarray
+    force_body: np.ndarray
+    spring_body_a: np.ndarray
+    spring_body_b: np.ndarray
+    gravity: np.ndarray
+    body_mass: np.ndarray
+    body_inertia: np.ndarray
+    joint_point_a: np.ndarray
+    joint_point_b: np.ndarray
+    joint_clearance: np.ndarray
+    joint_eccentricity: np.ndarray
+    driver_angle0: np.ndarray
+    driver_omega: np.ndarray
+    force_point: np.ndarray
+    force_value: np.ndarray
+    force_torque: np.ndarray
+    spring_point_a: np.ndarray
+    spring_point_b: np.ndarray
+    spring_stiffness: np.ndarray
+    spring_rest_length: np.ndarray
+    spring_damping: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+    meta: dict[str, object] = field(default_factory=dict)
+
+    # -- sizes -----------------------------------------------------------------------------
+    @property
+    def nbody(self) -> int:
+        return len(self.body_names)
+
+    @property
+    def ndof(self) -> int:
+        """Number of coordinates, 3 nbody."""
+        return 3 * self.nbody
+
+    @property
+    def njoint(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def ndriver(self) -> int:
+        return len(self.driver_names)
+
+    @property
+    def nforce(self) -> int:
+        return len(self.force_names)
+
+    @property
+    def nspring(self) -> int:
+        return len(self.spring_names)
+
+    @property
+    def ncon(self) -> int:
+        """Number of constraint rows: 2 per ideal joint, 1 per clearance joint and driver."""
+        rows = np.where(self.joint_kind == JOINT_IDEAL, 2, 1).sum() if self.njoint else 0
+        return int(rows) + self.ndriver
+
+    @property
+    def nmode(self) -> int:
+        """Nominal degrees of freedom, 3 nbody − ncon (modes reported per sample)."""
+        return self.ndof - self.ncon
+
+    @property
+    def has_clearance(self) -> bool:
+        return bool(np.any(self.joint_kind == JOINT_CLEARANCE))
+
+    # -- arrays for kernels ----------------------------------------------------------------
+    def kernel_arrays(self) -> KernelModel:
+        """The arrays as one :class:`KernelModel`, contiguous with the dtypes kernels expect."""
+        values = {}
+        for name in KernelModel._fields:
+            arr = getattr(self, name)
+            dtype = np.int64 if arr.dtype.kind in "iub" else np.float64
+            values[name] = np.ascontiguousarray(arr, dtype=dtype)
+        return KernelModel(**values)
+
+    def select(self, start: int, stop: int) -> Model:
+        """The sub-model of samples ``start:stop`` (per-sample arrays sliced, others kept)."""
+        changes: dict[str, object] = {"nsample": stop - start}
+        for f in fields(self):
+            arr = getattr(self, f.name)
+            if f.name == "parameters":
+                changes[f.name] = arr[start:stop]
+            elif (
+                f.name in _PER_SAMPLE_FIELDS
+                and isinstance(arr, np.ndarray)
+                and arr.shape[0] == self.nsample
+                and self.nsample > 1
+            ):
+                changes[f.name] = arr[start:stop]
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+
+_TOPOLOGY_FIELDS = frozenset(
+    {
+        "joint_body_a",
+        "joint_body_b",
+        "joint_kind",
+        "joint_row",
+        "driver_body",
+        "driver_row",
+        "force_body",
+        "spring_body_a",
+        "spring_body_b",
+    }
+)
+_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS
+
+PER_SAMPLE_FIELDS = _PER_SAMPLE_FIELDS
+"""Names of the parameter arrays that carry a leading sample axis (size 1 or nsample)."""
+
+
+def constraint_rows(joint_kind: np.ndarray, ndriver: int) -> tuple[np.ndarray, np.ndarray]:
+    """First constraint row of each joint and of each driver.
+
+    Args:
+        joint_kind: (njoint,) ``JOINT_IDEAL`` / ``JOINT_CLEARANCE``.
+        ndriver: number of drivers.
+
+    Returns:
+        ``(joint_row, driver_row)``, int64 arrays of shape (njoint,) and (ndriver,).
+    """
+    sizes = np.where(np.asarray(joint_kind) == JOINT_IDEAL, 2, 1)
+    joint_row = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    first_driver_row = int(sizes.sum())
+    driver_row = first_driver_row + np.arange(ndriver, dtype=np.int64)
+    return joint_row[: len(sizes)], driver_row
