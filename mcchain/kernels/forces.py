@@ -1,0 +1,187 @@
+"""Applied forces of one sample: gravity, constant loads, linear spring-dampers. DESIGN §2.
+
+``F`` is the generalised force vector (3 nbody,) [N, N, N m]*; ``K_out += −∂F/∂q`` adds the
+load stiffness used by equilibrium Newton and the eigen step (at q̇ = 0, where dampers add
+nothing). Loops run over the scene's own forces and springs only, so a scene without them
+runs no code for them. Nothing here allocates or raises.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from mcchain.kernels.config import JIT
+from mcchain.kernels.joints import add_pair_outer, body_pose, body_velocity, rotate
+
+
+@njit(**JIT)
+def spring_vectors(km, s, q, k):
+    """Rotated points p_a, p_b and the vector u from point a to point b of spring ``k``."""
+    a = km.spring_body_a[k]
+    b = km.spring_body_b[k]
+    ia = s % km.spring_point_a.shape[0]
+    ib = s % km.spring_point_b.shape[0]
+    xa, ya, ca, sa = body_pose(q, a)
+    xb, yb, cb, sb = body_pose(q, b)
+    pax, pay = rotate(ca, sa, km.spring_point_a[ia, k, 0], km.spring_point_a[ia, k, 1])
+    pbx, pby = rotate(cb, sb, km.spring_point_b[ib, k, 0], km.spring_point_b[ib, k, 1])
+    return pax, pay, pbx, pby, xb + pbx - xa - pax, yb + pby - ya - pay
+
+
+@njit(**JIT)
+def _add_generalised(F_out, body, sign, fx, fy, px, py):
+    """F += sign · (f, p × f) on ``body`` (nothing for the ground)."""
+    if body < 0:
+        return
+    F_out[3 * body] += sign * fx
+    F_out[3 * body + 1] += sign * fy
+    F_out[3 * body + 2] += sign * (px * fy - py * fx)
+
+
+@njit(**JIT)
+def applied_forces(km, s, q, v, F_out):
+    """F(q, q̇) into ``F_out`` (3 nbody,): gravity, constant forces/torques, springs.
+
+    A spring's force on body b is −(k (L − L₀) + c L̇) e along u/L from a to b; with
+    L₀ = 0 the spring is isotropic, −k u − c u̇, defined also at L = 0.
+    """
+    F_out[:] = 0.0
+    ig = s % km.gravity.shape[0]
+    gx = km.gravity[ig, 0]
+    gy = km.gravity[ig, 1]
+    im = s % km.body_mass.shape[0]
+    for b in range(km.body_mass.shape[1]):
+        F_out[3 * b] = km.body_mass[im, b] * gx
+        F_out[3 * b + 1] = km.body_mass[im, b] * gy
+    for k in range(km.force_body.shape[0]):
+        b = km.force_body[k]
+        if b < 0:
+            continue
+        _, _, c, sn = body_pose(q, b)
+        ip = s % km.force_point.shape[0]
+        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
+        iv = s % km.force_value.shape[0]
+        _add_generalised(F_out, b, 1.0, km.force_value[iv, k, 0], km.force_value[iv, k, 1], px, py)
+        F_out[3 * b + 2] += km.force_torque[s % km.force_torque.shape[0], k]
+    for k in range(km.spring_body_a.shape[0]):
+        a = km.spring_body_a[k]
+        b = km.spring_body_b[k]
+        pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
+        vax, vay, wa = body_velocity(v, a)
+        vbx, vby, wb = body_velocity(v, b)
+        dux = vbx - pby * wb - vax + pay * wa
+        duy = vby + pbx * wb - vay - pax * wa
+        stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
+        rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
+        damping = km.spring_damping[s % km.spring_damping.shape[0], k]
+        if rest == 0.0:
+            fx = -stiffness * ux - damping * dux
+            fy = -stiffness * uy - damping * duy
+        else:
+            length = math.hypot(ux, uy)
+            ex = ux / length
+            ey = uy / length
+            tension = stiffness * (length - rest) + damping * (ex * dux + ey * duy)
+            fx = -tension * ex
+            fy = -tension * ey
+        _add_generalised(F_out, b, 1.0, fx, fy, pbx, pby)
+        _add_generalised(F_out, a, -1.0, fx, fy, pax, pay)
+
+
+@njit(**JIT)
+def applied_stiffness_add(km, s, q, K_out):
+    """K += −∂F/∂q at q̇ = 0 (exact; symmetric since every load here is conservative).
+
+    Constant force f at p: −∂F_θ/∂θ = p·f. Spring with V = ½ k (L − L₀)²:
+    ∂²V/∂q² = k gₑᵀgₑ + k (L − L₀)/L gₙᵀgₙ + k (L − L₀) e·∂²u/∂q², gₑ/gₙ = e/n·∂u/∂q.
+    """
+    for k in range(km.force_body.shape[0]):
+        b = km.force_body[k]
+        if b < 0:
+            continue
+        _, _, c, sn = body_pose(q, b)
+        ip = s % km.force_point.shape[0]
+        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
+        iv = s % km.force_value.shape[0]
+        K_out[3 * b + 2, 3 * b + 2] += px * km.force_value[iv, k, 0] + py * km.force_value[iv, k, 1]
+    for k in range(km.spring_body_a.shape[0]):
+        a = km.spring_body_a[k]
+        b = km.spring_body_b[k]
+        pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
+        stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
+        rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
+        if rest == 0.0:
+            # V = ½ k |u|²: k (∂u/∂q)ᵀ(∂u/∂q) + k u·∂²u/∂q².
+            add_pair_outer(K_out, stiffness, a, b, 1.0, 0.0, pax, pay, pbx, pby)
+            add_pair_outer(K_out, stiffness, a, b, 0.0, 1.0, pax, pay, pbx, pby)
+            wx = stiffness * ux
+            wy = stiffness * uy
+        else:
+            length = math.hypot(ux, uy)
+            ex = ux / length
+            ey = uy / length
+            tension = stiffness * (length - rest)
+            add_pair_outer(K_out, stiffness, a, b, ex, ey, pax, pay, pbx, pby)
+            add_pair_outer(K_out, tension / length, a, b, -ey, ex, pax, pay, pbx, pby)
+            wx = tension * ex
+            wy = tension * ey
+        # w·∂²u/∂θ_b² = −w·p_b, w·∂²u/∂θ_a² = +w·p_a.
+        if b >= 0:
+            K_out[3 * b + 2, 3 * b + 2] -= wx * pbx + wy * pby
+        if a >= 0:
+            K_out[3 * a + 2, 3 * a + 2] += wx * pax + wy * pay
+
+
+@njit(**JIT)
+def potential_energy(km, s, q):
+    """Potential energy, J: −m g·r, −f·(r + p), −τ θ, and ½ k (L − L₀)²."""
+    energy = 0.0
+    ig = s % km.gravity.shape[0]
+    im = s % km.body_mass.shape[0]
+    for b in range(km.body_mass.shape[1]):
+        energy -= km.body_mass[im, b] * (
+            km.gravity[ig, 0] * q[3 * b] + km.gravity[ig, 1] * q[3 * b + 1]
+        )
+    for k in range(km.force_body.shape[0]):
+        b = km.force_body[k]
+        if b < 0:
+            continue
+        x, y, c, sn = body_pose(q, b)
+        ip = s % km.force_point.shape[0]
+        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
+        iv = s % km.force_value.shape[0]
+        energy -= km.force_value[iv, k, 0] * (x + px) + km.force_value[iv, k, 1] * (y + py)
+        energy -= km.force_torque[s % km.force_torque.shape[0], k] * q[3 * b + 2]
+    for k in range(km.spring_body_a.shape[0]):
+        _, _, _, _, ux, uy = spring_vectors(km, s, q, k)
+        stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
+        stretch = math.hypot(ux, uy) - km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
+        energy += 0.5 * stiffness * stretch * stretch
+    return energy
+
+
+@njit(**JIT)
+def kinetic_energy(km, s, v):
+    """Kinetic energy ½ q̇ᵀ M q̇, J."""
+    energy = 0.0
+    im = s % km.body_mass.shape[0]
+    ij = s % km.body_inertia.shape[0]
+    for b in range(km.body_mass.shape[1]):
+        vx = v[3 * b]
+        vy = v[3 * b + 1]
+        w = v[3 * b + 2]
+        energy += 0.5 * (km.body_mass[im, b] * (vx * vx + vy * vy) + km.body_inertia[ij, b] * w * w)
+    return energy
+
+
+@njit(**JIT)
+def mass_diagonal(km, s, m_out):
+    """diag(M) into ``m_out`` (3 nbody,): m, m, J per body."""
+    im = s % km.body_mass.shape[0]
+    ij = s % km.body_inertia.shape[0]
+    for b in range(km.body_mass.shape[1]):
+        m_out[3 * b] = km.body_mass[im, b]
+        m_out[3 * b + 1] = km.body_mass[im, b]
+        m_out[3 * b + 2] = km.body_inertia[ij, b]

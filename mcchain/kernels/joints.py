@@ -1,0 +1,239 @@
+"""Constraints of one sample: joints (ideal, clearance) and drivers. DESIGN §2.
+
+All functions take the kernel model ``km`` (:class:`mcchain.model.KernelModel`), the sample
+index ``s`` (parameters are read with the broadcast index ``a[s % a.shape[0]]``) and the
+coordinates ``q`` (3 nbody,) of that sample. Rows are ordered as ``km.joint_row`` /
+``km.driver_row`` say. Nothing here allocates or raises.
+
+For joint k between bearing body a and journal body b, with p = A(θ) s the rotated local
+point, d = r_b + p_b − r_a − p_a (journal centre minus bearing centre):
+
+* ideal:      Φ = d,          rows [I, Ω p_b] on b and [−I, −Ω p_a] on a;
+* clearance:  Φ = |d| − c,    row e·∂d/∂q with e = d/|d|;
+* driver:     Φ = θ_j − θ_0 − ω t.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from mcchain.kernels.config import JIT
+
+JOINT_IDEAL = 0  # mirrors mcchain.model.JOINT_IDEAL (numba reads module globals as constants)
+
+
+@njit(**JIT)
+def body_pose(q, b):
+    """Centre (x, y) and (cos θ, sin θ) of body ``b``; the ground (b < 0) is at rest at 0."""
+    if b < 0:
+        return 0.0, 0.0, 1.0, 0.0
+    theta = q[3 * b + 2]
+    return q[3 * b], q[3 * b + 1], math.cos(theta), math.sin(theta)
+
+
+@njit(**JIT)
+def body_velocity(v, b):
+    """Velocity (ẋ, ẏ, θ̇) of body ``b``; zero for the ground."""
+    if b < 0:
+        return 0.0, 0.0, 0.0
+    return v[3 * b], v[3 * b + 1], v[3 * b + 2]
+
+
+@njit(**JIT)
+def rotate(c, sn, px, py):
+    """A(θ) p for (cos θ, sin θ) = (c, sn)."""
+    return c * px - sn * py, sn * px + c * py
+
+
+@njit(**JIT)
+def joint_vectors(km, s, q, k):
+    """Rotated points p_a, p_b and separation d of joint ``k``.
+
+    Returns:
+        (pax, pay, pbx, pby, dx, dy), m.
+    """
+    a = km.joint_body_a[k]
+    b = km.joint_body_b[k]
+    ia = s % km.joint_point_a.shape[0]
+    ib = s % km.joint_point_b.shape[0]
+    xa, ya, ca, sa = body_pose(q, a)
+    xb, yb, cb, sb = body_pose(q, b)
+    pax, pay = rotate(ca, sa, km.joint_point_a[ia, k, 0], km.joint_point_a[ia, k, 1])
+    pbx, pby = rotate(cb, sb, km.joint_point_b[ib, k, 0], km.joint_point_b[ib, k, 1])
+    dx = xb + pbx - xa - pax
+    dy = yb + pby - ya - pay
+    return pax, pay, pbx, pby, dx, dy
+
+
+@njit(**JIT)
+def joint_separation_rate(v, a, b, pax, pay, pbx, pby):
+    """ḋ = ṙ_b + Ω p_b θ̇_b − ṙ_a − Ω p_a θ̇_a, m/s."""
+    vax, vay, wa = body_velocity(v, a)
+    vbx, vby, wb = body_velocity(v, b)
+    ddx = vbx - pby * wb - vax + pay * wa
+    ddy = vby + pbx * wb - vay - pax * wa
+    return ddx, ddy
+
+
+@njit(**JIT)
+def constraint_residual(km, s, q, t, phi_out):
+    """Φ(q, t) into ``phi_out`` (ncon,): m for joints, rad for drivers."""
+    for k in range(km.joint_body_a.shape[0]):
+        _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+        row = km.joint_row[k]
+        if km.joint_kind[k] == JOINT_IDEAL:
+            phi_out[row] = dx
+            phi_out[row + 1] = dy
+        else:
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            phi_out[row] = math.hypot(dx, dy) - c
+    for j in range(km.driver_body.shape[0]):
+        i = s % km.driver_omega.shape[0]
+        i0 = s % km.driver_angle0.shape[0]
+        theta = q[3 * km.driver_body[j] + 2]
+        phi_out[km.driver_row[j]] = theta - km.driver_angle0[i0, j] - km.driver_omega[i, j] * t
+
+
+@njit(**JIT)
+def _add_point_rows(B_out, row, body, sign, wx, wy, px, py):
+    """Add ``sign * w·∂(r + p)/∂q_body`` to row ``row`` of B (nothing for the ground)."""
+    if body < 0:
+        return
+    B_out[row, 3 * body] += sign * wx
+    B_out[row, 3 * body + 1] += sign * wy
+    B_out[row, 3 * body + 2] += sign * (-wx * py + wy * px)
+
+
+@njit(**JIT)
+def constraint_jacobian(km, s, q, B_out):
+    """B = ∂Φ/∂q into ``B_out`` (ncon, 3 nbody); the array is overwritten.
+
+    A clearance row whose |d| is 0 has no direction: it is left as zeros, which the solvers
+    see as rank loss (status SINGULAR).
+    """
+    B_out[:, :] = 0.0
+    for k in range(km.joint_body_a.shape[0]):
+        a = km.joint_body_a[k]
+        b = km.joint_body_b[k]
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+        row = km.joint_row[k]
+        if km.joint_kind[k] == JOINT_IDEAL:
+            _add_point_rows(B_out, row, b, 1.0, 1.0, 0.0, pbx, pby)
+            _add_point_rows(B_out, row, a, -1.0, 1.0, 0.0, pax, pay)
+            _add_point_rows(B_out, row + 1, b, 1.0, 0.0, 1.0, pbx, pby)
+            _add_point_rows(B_out, row + 1, a, -1.0, 0.0, 1.0, pax, pay)
+        else:
+            dist = math.hypot(dx, dy)
+            if dist > 0.0:
+                ex = dx / dist
+                ey = dy / dist
+                _add_point_rows(B_out, row, b, 1.0, ex, ey, pbx, pby)
+                _add_point_rows(B_out, row, a, -1.0, ex, ey, pax, pay)
+    for j in range(km.driver_body.shape[0]):
+        B_out[km.driver_row[j], 3 * km.driver_body[j] + 2] = 1.0
+
+
+@njit(**JIT)
+def constraint_gamma(km, s, q, v, gamma_out):
+    """γ = −(Ḃ q̇ + Φ_tt) into ``gamma_out`` (ncon,), so that B q̈ = γ. m/s² or rad/s².
+
+    Ideal: γ = p_b θ̇_b² − p_a θ̇_a². Clearance: γ = e·(p_b θ̇_b² − p_a θ̇_a²)
+    − (|ḋ|² − (e·ḋ)²)/|d|. Drivers (θ_0 + ω t): γ = 0.
+    """
+    for k in range(km.joint_body_a.shape[0]):
+        a = km.joint_body_a[k]
+        b = km.joint_body_b[k]
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+        wa = v[3 * a + 2] if a >= 0 else 0.0
+        wb = v[3 * b + 2] if b >= 0 else 0.0
+        gx = pbx * wb * wb - pax * wa * wa
+        gy = pby * wb * wb - pay * wa * wa
+        row = km.joint_row[k]
+        if km.joint_kind[k] == JOINT_IDEAL:
+            gamma_out[row] = gx
+            gamma_out[row + 1] = gy
+        else:
+            dist = math.hypot(dx, dy)
+            ex = dx / dist
+            ey = dy / dist
+            ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
+            along = ex * ddx + ey * ddy
+            gamma_out[row] = ex * gx + ey * gy - (ddx * ddx + ddy * ddy - along * along) / dist
+    for j in range(km.driver_body.shape[0]):
+        gamma_out[km.driver_row[j]] = 0.0
+
+
+@njit(**JIT)
+def constraint_velocity_rhs(km, s, nu_out):
+    """ν = −Φ_t into ``nu_out`` (ncon,), so that B q̇ = ν: ω for drivers, 0 for joints."""
+    nu_out[:] = 0.0
+    for j in range(km.driver_body.shape[0]):
+        nu_out[km.driver_row[j]] = km.driver_omega[s % km.driver_omega.shape[0], j]
+
+
+@njit(**JIT)
+def add_pair_outer(K_out, scale, a, b, wx, wy, pax, pay, pbx, pby):
+    """K += scale · gᵀg with g = w·∂d/∂q, d = (r_b + p_b) − (r_a + p_a) for any point pair."""
+    # g has at most six non-zeros: (+wx, +wy, w·Ωp_b) on b and their negatives on a.
+    idx = (3 * b, 3 * b + 1, 3 * b + 2, 3 * a, 3 * a + 1, 3 * a + 2)
+    val = (wx, wy, -wx * pby + wy * pbx, -wx, -wy, wx * pay - wy * pax)
+    # The ground's indices 3·(−1) + {0, 1, 2} are negative: skipped.
+    for i in range(6):
+        if idx[i] < 0:
+            continue
+        for j in range(6):
+            if idx[j] >= 0:
+                K_out[idx[i], idx[j]] += scale * val[i] * val[j]
+
+
+@njit(**JIT)
+def constraint_hessian_add(km, s, q, lam, K_out):
+    """K += Σ_r λ_r ∂²Φ_r/∂q² = ∂(Bᵀλ)/∂q at fixed λ (exact second derivatives).
+
+    ∂²d/∂θ_b² = −p_b and ∂²d/∂θ_a² = +p_a; a clearance row adds (λ/|d|) gᵀg with
+    g = n·∂d/∂q, n ⟂ e (the curvature of |d|). Drivers are linear in q.
+    """
+    for k in range(km.joint_body_a.shape[0]):
+        a = km.joint_body_a[k]
+        b = km.joint_body_b[k]
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+        row = km.joint_row[k]
+        if km.joint_kind[k] == JOINT_IDEAL:
+            lx = lam[row]
+            ly = lam[row + 1]
+        else:
+            dist = math.hypot(dx, dy)
+            ex = dx / dist
+            ey = dy / dist
+            lx = lam[row] * ex
+            ly = lam[row] * ey
+            add_pair_outer(K_out, lam[row] / dist, a, b, -ey, ex, pax, pay, pbx, pby)
+        if b >= 0:
+            K_out[3 * b + 2, 3 * b + 2] -= lx * pbx + ly * pby
+        if a >= 0:
+            K_out[3 * a + 2, 3 * a + 2] += lx * pax + ly * pay
+
+
+@njit(**JIT)
+def joint_forces(km, s, q, lam, force_out, contact_out):
+    """Force on the journal body b by the bearing body a, and clearance contact forces.
+
+    Args:
+        lam: (ncon,) multipliers.
+        force_out: (njoint, 2) global frame, N: −λ (ideal) or −λ e (clearance).
+        contact_out: (njoint,) λ of clearance joints (> 0: real contact), NaN for ideal ones.
+    """
+    for k in range(km.joint_body_a.shape[0]):
+        row = km.joint_row[k]
+        if km.joint_kind[k] == JOINT_IDEAL:
+            force_out[k, 0] = -lam[row]
+            force_out[k, 1] = -lam[row + 1]
+            contact_out[k] = math.nan
+        else:
+            _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+            dist = math.hypot(dx, dy)
+            force_out[k, 0] = -lam[row] * dx / dist
+            force_out[k, 1] = -lam[row] * dy / dist
+            contact_out[k] = lam[row]
