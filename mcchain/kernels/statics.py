@@ -1,0 +1,578 @@
+"""Batch kernels of the static analyses: assembly, equilibrium (Newton), eigenpulsations.
+
+Each ``*_one`` function treats one sample and returns status bits; each ``*_batch``
+function loops ``prange`` over samples and calls it. No reductions across samples, so a
+sample's numbers are bit-identical alone, in any chunk, with any thread count. Failed samples
+get NaN outputs and their bits (mcchain.status). Work arrays are allocated once per sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from mcchain.kernels.config import JIT, PJIT
+from mcchain.kernels.forces import applied_forces, applied_stiffness_add, mass_diagonal
+from mcchain.kernels.joints import (
+    JOINT_IDEAL,
+    _add_point_rows,
+    constraint_hessian_add,
+    constraint_jacobian,
+    constraint_residual,
+    constraint_velocity_rhs,
+    joint_forces,
+    joint_vectors,
+)
+from mcchain.kernels.linalg import (
+    EPS,
+    cholesky,
+    cholesky_solve,
+    jacobi_eigh,
+    lu_factor,
+    lu_solve,
+    null_space,
+)
+from mcchain.status import (
+    ASSEMBLY_FAILED,
+    CONTACT_LOST,
+    EQUILIBRIUM_NOT_CONVERGED,
+    SINGULAR,
+    UNSTABLE_EQUILIBRIUM,
+)
+
+KKT_PIVOT_RTOL = 1e-13
+"""LU pivot below this × max |J| entry: the Newton KKT matrix is singular."""
+SCHUR_PIVOT_RTOL = 1e-12
+"""Cholesky pivot of B M⁻¹ Bᵀ below this × its largest diagonal: rank-deficient B."""
+RANK_RTOL = 1e-9
+"""A row of B (after QR pivoting) shorter than this × the first: B has lost rank."""
+ZERO_MODE_RTOL = 1e3 * EPS
+"""|p²| below this × the eigen problem's scale is an exact zero mode (not noise)."""
+ASSEMBLY_MAX_ITER = 50
+
+
+# --------------------------------------------------------------------------------------
+# scales
+# --------------------------------------------------------------------------------------
+@njit(**JIT)
+def length_scale(km, s):
+    """Characteristic length of sample ``s``, m: the largest attachment-point distance."""
+    scale = 0.0
+    for k in range(km.joint_point_a.shape[1]):
+        for side in range(2):
+            arr = km.joint_point_a if side == 0 else km.joint_point_b
+            i = s % arr.shape[0]
+            scale = max(scale, math.hypot(arr[i, k, 0], arr[i, k, 1]))
+    for k in range(km.spring_point_a.shape[1]):
+        for side in range(2):
+            arr = km.spring_point_a if side == 0 else km.spring_point_b
+            i = s % arr.shape[0]
+            scale = max(scale, math.hypot(arr[i, k, 0], arr[i, k, 1]))
+    return scale if scale > 0.0 else 1.0
+
+
+@njit(**JIT)
+def max_abs(x, n):
+    """max |x[:n]|, NaN-propagating (a NaN entry gives NaN)."""
+    result = 0.0
+    for i in range(n):
+        a = abs(x[i])
+        if a > result or a != a:
+            result = a
+    return result
+
+
+# --------------------------------------------------------------------------------------
+# Schur complement solves (B M⁻¹ Bᵀ)
+# --------------------------------------------------------------------------------------
+@njit(**JIT)
+def schur_factor(B, minv, m, n, S_out):
+    """S = B M⁻¹ Bᵀ into ``S_out`` (m, m), Cholesky-factored in place; False if singular."""
+    for i in range(m):
+        for j in range(i + 1):
+            acc = 0.0
+            for k in range(n):
+                acc += B[i, k] * minv[k] * B[j, k]
+            S_out[i, j] = acc
+            S_out[j, i] = acc
+    return cholesky(S_out, m, SCHUR_PIVOT_RTOL)
+
+
+@njit(**JIT)
+def project_onto_rows(B, minv, m, n, S, residual, x):
+    """x ← x − M⁻¹Bᵀ S⁻¹ residual: the M-orthogonal correction that removes ``residual``.
+
+    ``S`` is the factor from :func:`schur_factor`; ``residual`` (m,) is overwritten.
+    """
+    cholesky_solve(S, m, residual)
+    for k in range(n):
+        acc = 0.0
+        for i in range(m):
+            acc += B[i, k] * residual[i]
+        x[k] -= minv[k] * acc
+
+
+# --------------------------------------------------------------------------------------
+# assembly
+# --------------------------------------------------------------------------------------
+@njit(**JIT)
+def _assembly_residual(km, s, q, target, psi_out, J_out):
+    """Ψ(q) and ∂Ψ/∂q with every clearance joint held at d = c u (two rows each).
+
+    ``target`` (njoint, 2) holds u. Rows: two per joint (joint k at 2k), then drivers.
+    """
+    J_out[:, :] = 0.0
+    nj = km.joint_body_a.shape[0]
+    for k in range(nj):
+        a = km.joint_body_a[k]
+        b = km.joint_body_b[k]
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+        c = 0.0
+        if km.joint_kind[k] != JOINT_IDEAL:
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+        psi_out[2 * k] = dx - c * target[k, 0]
+        psi_out[2 * k + 1] = dy - c * target[k, 1]
+        _add_point_rows(J_out, 2 * k, b, 1.0, 1.0, 0.0, pbx, pby)
+        _add_point_rows(J_out, 2 * k, a, -1.0, 1.0, 0.0, pax, pay)
+        _add_point_rows(J_out, 2 * k + 1, b, 1.0, 0.0, 1.0, pbx, pby)
+        _add_point_rows(J_out, 2 * k + 1, a, -1.0, 0.0, 1.0, pax, pay)
+    for j in range(km.driver_body.shape[0]):
+        body = km.driver_body[j]
+        psi_out[2 * nj + j] = q[3 * body + 2] - km.driver_angle0[s % km.driver_angle0.shape[0], j]
+        J_out[2 * nj + j, 3 * body + 2] = 1.0
+
+
+@njit(**JIT)
+def assemble_one(km, s, q, v):
+    """Project q and v of sample ``s`` onto the constraints (t = 0), in place.
+
+    Positions already satisfying |Φ| ≤ 1e-12 × the length scale are kept bit for bit.
+    Otherwise every clearance joint is first placed at d = c u, u from ``eccentricity``,
+    else the direction of the given d, else gravity's (a journal resting on its bearing's
+    bottom), else +x; Gauss–Newton then takes the M-smallest correction. Velocities are
+    corrected the same way onto B q̇ = ν unless they already satisfy it.
+
+    Returns:
+        status bits (ASSEMBLY_FAILED, SINGULAR).
+    """
+    n = q.shape[0]
+    m = 0
+    for k in range(km.joint_kind.shape[0]):
+        m += 2 if km.joint_kind[k] == JOINT_IDEAL else 1
+    m += km.driver_body.shape[0]
+    nj = km.joint_body_a.shape[0]
+    lscale = length_scale(km, s)
+    tol = 1e-12 * lscale
+    minv = np.empty(n)
+    mass_diagonal(km, s, minv)
+    for i in range(n):
+        minv[i] = 1.0 / minv[i]
+    phi = np.empty(m)
+    constraint_residual(km, s, q, 0.0, phi)
+    if not max_abs(phi, m) <= tol:
+        # hold each clearance journal at d = c u during the projection
+        target = np.zeros((nj, 2))
+        ig = s % km.gravity.shape[0]
+        gnorm = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1])
+        for k in range(nj):
+            if km.joint_kind[k] == JOINT_IDEAL:
+                continue
+            alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+            dist = math.hypot(dx, dy)
+            if alpha == alpha:
+                target[k, 0] = math.cos(alpha)
+                target[k, 1] = math.sin(alpha)
+            elif dist > 1e-3 * c and dist > 0.0:
+                target[k, 0] = dx / dist
+                target[k, 1] = dy / dist
+            elif gnorm > 0.0:
+                target[k, 0] = km.gravity[ig, 0] / gnorm
+                target[k, 1] = km.gravity[ig, 1] / gnorm
+            else:
+                target[k, 0] = 1.0
+        ma = 2 * nj + km.driver_body.shape[0]
+        psi = np.empty(ma)
+        J = np.empty((ma, n))
+        S = np.empty((ma, ma))
+        converged = False
+        for _it in range(ASSEMBLY_MAX_ITER):
+            _assembly_residual(km, s, q, target, psi, J)
+            if max_abs(psi, ma) <= 1e-14 * lscale:
+                converged = True
+                break
+            if not schur_factor(J, minv, ma, n, S):
+                return ASSEMBLY_FAILED | SINGULAR
+            project_onto_rows(J, minv, ma, n, S, psi, q)
+        constraint_residual(km, s, q, 0.0, phi)
+        if not converged or not max_abs(phi, m) <= tol:
+            return ASSEMBLY_FAILED
+    B = np.empty((m, n))
+    constraint_jacobian(km, s, q, B)
+    nu = np.empty(m)
+    constraint_velocity_rhs(km, s, nu)
+    vscale = 0.0
+    for i in range(m):
+        acc = -nu[i]
+        for k in range(n):
+            acc += B[i, k] * v[k]
+        nu[i] = acc
+        vscale = max(vscale, abs(acc))
+    if vscale > 1e-12 * (1.0 + max_abs(v, n)):
+        S = np.empty((m, m))
+        if not schur_factor(B, minv, m, n, S):
+            return SINGULAR
+        project_onto_rows(B, minv, m, n, S, nu, v)
+    return 0
+
+
+@njit(**PJIT)
+def assemble_batch(km, q_out, v_out, status_out):
+    """Assemble every sample in place.
+
+    Args:
+        km: KernelModel.
+        q_out: (nsample, 3 nbody) initial positions in, assembled positions out (NaN on failure).
+        v_out: (nsample, 3 nbody) initial velocities in, consistent velocities out.
+        status_out: (nsample,) uint32, bits OR-ed in.
+    """
+    for s in prange(q_out.shape[0]):
+        bits = assemble_one(km, s, q_out[s], v_out[s])
+        if bits != 0:
+            status_out[s] |= bits
+            q_out[s, :] = np.nan
+            v_out[s, :] = np.nan
+
+
+# --------------------------------------------------------------------------------------
+# equilibrium
+# --------------------------------------------------------------------------------------
+@njit(**JIT)
+def _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R_out):
+    """R = [Bᵀλ − F; Φ] into ``R_out`` and its scaled max norm (force rows / F scale, moment
+    rows / (F scale × L scale), constraint rows / L scale). F is evaluated at rest (``v_rest`` = 0);
+    B and F are overwritten for q."""
+    constraint_jacobian(km, s, q, B)
+    applied_forces(km, s, q, v_rest, F)
+    for k in range(n):
+        acc = -F[k]
+        for i in range(m):
+            acc += B[i, k] * lam[i]
+        R_out[k] = acc
+    constraint_residual(km, s, q, 0.0, R_out[n:])
+    norm = 0.0
+    for k in range(n):
+        scale = fscale * lscale if k % 3 == 2 else fscale
+        a = abs(R_out[k]) / scale
+        if a > norm or a != a:
+            norm = a
+    for i in range(m):
+        a = abs(R_out[n + i]) / lscale
+        if a > norm or a != a:
+            norm = a
+    return norm
+
+
+@njit(**JIT)
+def equilibrium_one(km, s, q, lam, tol, max_iter, history):
+    """Newton on (q, λ) for Φ(q) = 0, Bᵀλ = F(q) (DESIGN §2), from q, in place.
+
+    Jacobian [[K, Bᵀ], [B, 0]] with K = ∂(Bᵀλ)/∂q − ∂F/∂q (exact). λ starts from the least
+    squares fit of Bᵀλ = F. A backtracking line search on the scaled residual globalises
+    the step. Once the residual is ≤ ``tol`` one more (polishing) step is taken unless it
+    is already at round-off level.
+
+    Args:
+        q: (3 nbody,) start in, equilibrium out.
+        lam: (ncon,) multipliers out.
+        history: (max_iter + 1,) scaled residual norm before each iteration (NaN after).
+
+    Returns:
+        (status bits, iterations taken to reach ``tol``).
+    """
+    n = q.shape[0]
+    m = lam.shape[0]
+    lscale = length_scale(km, s)
+    minv = np.empty(n)
+    mass_diagonal(km, s, minv)
+    for i in range(n):
+        minv[i] = 1.0 / minv[i]
+    B = np.empty((m, n))
+    F = np.empty(n)
+    v_rest = np.zeros(n)
+    constraint_jacobian(km, s, q, B)
+    applied_forces(km, s, q, v_rest, F)
+    fscale = 0.0
+    for k in range(n):
+        fscale = max(fscale, abs(F[k]) / (lscale if k % 3 == 2 else 1.0))
+    if not fscale > 0.0:
+        fscale = 1.0
+    # λ₀: least squares Bᵀλ ≈ F, i.e. S λ = B M⁻¹ F
+    S = np.empty((m, m))
+    if not schur_factor(B, minv, m, n, S):
+        return SINGULAR, 0
+    for i in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += B[i, k] * minv[k] * F[k]
+        lam[i] = acc
+    cholesky_solve(S, m, lam)
+
+    size = n + m
+    R = np.empty(size)
+    J = np.empty((size, size))
+    piv = np.empty(size, dtype=np.int64)
+    step = np.empty(size)
+    q_trial = np.empty(n)
+    lam_trial = np.empty(m)
+    R_trial = np.empty(size)
+    norm = _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+    iterations = 0
+    converged = False
+    polished = False
+    for it in range(max_iter + 1):
+        if not converged:
+            history[it] = norm
+            if norm <= tol:
+                converged = True
+                iterations = it
+        if converged and (polished or norm <= 16.0 * EPS):
+            break
+        if it == max_iter:
+            break
+        # KKT Jacobian
+        J[:, :] = 0.0
+        constraint_hessian_add(km, s, q, lam, J)
+        applied_stiffness_add(km, s, q, J)
+        for i in range(m):
+            for k in range(n):
+                J[n + i, k] = B[i, k]
+                J[k, n + i] = B[i, k]
+        if not lu_factor(J, size, piv, KKT_PIVOT_RTOL):
+            return SINGULAR, it
+        for i in range(size):
+            step[i] = -R[i]
+        lu_solve(J, size, piv, step)
+        if converged:
+            # polishing step: full Newton, no line search
+            for k in range(n):
+                q[k] += step[k]
+            for i in range(m):
+                lam[i] += step[n + i]
+            norm = _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+            polished = True
+            continue
+        alpha = 1.0
+        accepted = False
+        for _ls in range(30):
+            for k in range(n):
+                q_trial[k] = q[k] + alpha * step[k]
+            for i in range(m):
+                lam_trial[i] = lam[i] + alpha * step[n + i]
+            trial = _equilibrium_residual(
+                km, s, q_trial, lam_trial, n, m, fscale, lscale, v_rest, B, F, R_trial
+            )
+            if trial <= (1.0 - 1e-4 * alpha) * norm:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            # no decrease along the Newton direction: stop here, not converged
+            _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+            return EQUILIBRIUM_NOT_CONVERGED, it + 1
+        q[:] = q_trial
+        lam[:] = lam_trial
+        R[:] = R_trial
+        norm = trial
+    if not converged:
+        return EQUILIBRIUM_NOT_CONVERGED, max_iter
+    return 0, iterations
+
+
+@njit(**PJIT)
+def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history_out, status_out):
+    """Equilibrium of every sample, starting from ``q_out``.
+
+    Args:
+        km: KernelModel.
+        tol: scaled residual tolerance.
+        max_iter: Newton iteration limit.
+        q_out: (nsample, 3 nbody) start in (assembled), equilibrium out.
+        lam_out: (nsample, ncon) multipliers out.
+        iterations_out: (nsample,) int64 Newton iterations to reach ``tol``.
+        history_out: (nsample, max_iter + 1) scaled residual norms, NaN-filled by the caller.
+        status_out: (nsample,) uint32; samples already flagged are skipped (NaN).
+    """
+    for s in prange(q_out.shape[0]):
+        if status_out[s] != 0:
+            q_out[s, :] = np.nan
+            lam_out[s, :] = np.nan
+            continue
+        bits, iterations = equilibrium_one(
+            km, s, q_out[s], lam_out[s], tol, max_iter, history_out[s]
+        )
+        iterations_out[s] = iterations
+        if bits != 0:
+            status_out[s] |= bits
+            q_out[s, :] = np.nan
+            lam_out[s, :] = np.nan
+            continue
+        # continuous contact needs λ > 0 at every clearance joint
+        for k in range(km.joint_kind.shape[0]):
+            if km.joint_kind[k] != JOINT_IDEAL and not lam_out[s, km.joint_row[k]] > 0.0:
+                status_out[s] |= CONTACT_LOST
+
+
+# --------------------------------------------------------------------------------------
+# eigenpulsations
+# --------------------------------------------------------------------------------------
+@njit(**JIT)
+def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
+    """Eigenpulsations about the equilibrium (q, λ) of sample ``s`` (DESIGN §2.2).
+
+    N spans the null space of B (QR of Bᵀ with pivoting); (NᵀKN) v = p² (NᵀMN) v is
+    reduced with the Cholesky factor L of NᵀMN to the symmetric C = L⁻¹ NᵀKN L⁻ᵀ and solved
+    by Jacobi. |p²| ≤ ZERO_MODE_RTOL × max(‖C‖, g/L) is an exact zero. p is reported signed,
+    p = sign(p²) √|p²|, ascending; any p² < 0 flags UNSTABLE_EQUILIBRIUM.
+
+    Args:
+        omega_out: (nmode,) rad/s.
+        shapes_out: (nmode, 3 nbody) mass-normalised mode shapes z = N v (if ``want_shapes``).
+
+    Returns:
+        status bits (SINGULAR if B lost rank, UNSTABLE_EQUILIBRIUM).
+    """
+    n = q.shape[0]
+    m = lam.shape[0]
+    f = omega_out.shape[0]
+    B = np.empty((m, n))
+    constraint_jacobian(km, s, q, B)
+    Q = np.empty((n, n))
+    work = np.empty((n, m + 1))
+    rank = null_space(B, m, n, RANK_RTOL, Q, work)
+    if rank != m or n - rank != f:
+        return SINGULAR
+    K = np.zeros((n, n))
+    constraint_hessian_add(km, s, q, lam, K)
+    applied_stiffness_add(km, s, q, K)
+    mdiag = np.empty(n)
+    mass_diagonal(km, s, mdiag)
+    # reduced matrices; N = Q[:, m:]
+    KN = np.empty((n, f))
+    for i in range(n):
+        for j in range(f):
+            acc = 0.0
+            for k in range(n):
+                acc += 0.5 * (K[i, k] + K[k, i]) * Q[k, m + j]
+            KN[i, j] = acc
+    Kr = np.empty((f, f))
+    Mr = np.empty((f, f))
+    for i in range(f):
+        for j in range(f):
+            acck = 0.0
+            accm = 0.0
+            for k in range(n):
+                acck += Q[k, m + i] * KN[k, j]
+                accm += Q[k, m + i] * mdiag[k] * Q[k, m + j]
+            Kr[i, j] = acck
+            Mr[i, j] = accm
+    for i in range(f):
+        for j in range(i):
+            avg = 0.5 * (Kr[i, j] + Kr[j, i])
+            Kr[i, j] = avg
+            Kr[j, i] = avg
+    if not cholesky(Mr, f, SCHUR_PIVOT_RTOL):
+        return SINGULAR
+    # C = L⁻¹ Kr L⁻ᵀ: forward-substitute columns, then rows
+    for j in range(f):
+        for i in range(f):
+            acc = Kr[i, j]
+            for k in range(i):
+                acc -= Mr[i, k] * Kr[k, j]
+            Kr[i, j] = acc / Mr[i, i]
+    for i in range(f):
+        for j in range(f):
+            acc = Kr[i, j]
+            for k in range(j):
+                acc -= Mr[j, k] * Kr[i, k]
+            Kr[i, j] = acc / Mr[j, j]
+    cnorm = 0.0
+    for i in range(f):
+        for j in range(f):
+            cnorm += Kr[i, j] * Kr[i, j]
+    cnorm = math.sqrt(cnorm)
+    ig = s % km.gravity.shape[0]
+    gravity_scale = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1]) / length_scale(km, s)
+    threshold = ZERO_MODE_RTOL * max(cnorm, gravity_scale)
+    mu = np.empty(f)
+    W = np.empty((f, f))
+    if not jacobi_eigh(Kr, f, mu, W):
+        return SINGULAR
+    bits = 0
+    for i in range(f):
+        if abs(mu[i]) <= threshold:
+            mu[i] = 0.0
+        if mu[i] < 0.0:
+            bits |= UNSTABLE_EQUILIBRIUM
+            omega_out[i] = -math.sqrt(-mu[i])
+        else:
+            omega_out[i] = math.sqrt(mu[i])
+    if want_shapes:
+        # v = L⁻ᵀ w, z = N v; sign fixed so the largest component is positive
+        for j in range(f):
+            for i in range(f - 1, -1, -1):
+                acc = W[i, j]
+                for k in range(i + 1, f):
+                    acc -= Mr[k, i] * W[k, j]
+                W[i, j] = acc / Mr[i, i]
+            big = 0.0
+            for k in range(n):
+                acc = 0.0
+                for i in range(f):
+                    acc += Q[k, m + i] * W[i, j]
+                shapes_out[j, k] = acc
+                if abs(acc) > abs(big):
+                    big = acc
+            if big < 0.0:
+                for k in range(n):
+                    shapes_out[j, k] = -shapes_out[j, k]
+    return bits
+
+
+@njit(**PJIT)
+def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out):
+    """Eigenpulsations of every sample about its equilibrium.
+
+    Args:
+        q_eq: (nsample, 3 nbody), lam_eq: (nsample, ncon) the equilibria.
+        omega_out: (nsample, nmode) signed p, rad/s, ascending.
+        want_shapes: whether to write ``shapes_out``.
+        shapes_out: (nsample, nmode, 3 nbody); any (1, nmode, 3 nbody) array if not wanted.
+        status_out: (nsample,) uint32; failed samples are skipped (NaN).
+    """
+    for s in prange(q_eq.shape[0]):
+        if status_out[s] & (ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR):
+            omega_out[s, :] = np.nan
+            continue
+        shapes = shapes_out[s % shapes_out.shape[0]]
+        bits = modes_one(km, s, q_eq[s], lam_eq[s], omega_out[s], shapes, want_shapes)
+        status_out[s] |= bits
+        if bits & SINGULAR:
+            omega_out[s, :] = np.nan
+            if want_shapes:
+                shapes_out[s] = np.nan
+
+
+@njit(**PJIT)
+def joint_forces_batch(km, q, lam, force_out, contact_out):
+    """Joint forces of every sample from (q, λ): see :func:`joints.joint_forces`.
+
+    Args:
+        q: (nsample, 3 nbody); lam: (nsample, ncon).
+        force_out: (nsample, njoint, 2) N; contact_out: (nsample, njoint) N (NaN: ideal).
+    """
+    for s in prange(q.shape[0]):
+        joint_forces(km, s, q[s], lam[s], force_out[s], contact_out[s])

@@ -1,0 +1,189 @@
+"""Static analyses: assembly, equilibrium and eigenpulsations for a batch of samples.
+
+Contract (DESIGN §2, §5):
+
+1. :func:`assemble` projects every sample's initial state onto the constraints (positions
+   that already satisfy them are kept bit for bit).
+2. :func:`solve_equilibrium` runs Newton on (q, λ) from the assembled positions.
+3. :func:`solve_modes` reduces (K, M) to the null space of B and returns the signed
+   eigenpulsations p (rad/s, ascending) and optionally the mode shapes.
+4. Failed samples are NaN with their status bits set; nothing raises for a bad sample.
+   :func:`check_scene` raises :class:`~mcchain.errors.SceneError` for a scene whose
+   *nominal* instance cannot run at all (redundant constraints, no assembly).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mcchain.errors import SceneError
+from mcchain.kernels import statics as kernels
+from mcchain.model import JOINT_IDEAL, Model
+from mcchain.status import STATUS_DTYPE, Status
+
+DEFAULT_TOLERANCE = 1e-10
+DEFAULT_MAX_ITERATIONS = 50
+
+
+@dataclass(frozen=True)
+class Assembled:
+    """Consistent initial states. q, v: (nsample, 3 nbody); status: (nsample,) uint32."""
+
+    q: np.ndarray
+    v: np.ndarray
+    status: np.ndarray
+
+
+@dataclass(frozen=True)
+class Equilibrium:
+    """Equilibria of a batch.
+
+    Attributes:
+        q: (nsample, 3 nbody) configuration, NaN where failed.
+        lam: (nsample, ncon) multipliers (DESIGN §2 sign convention).
+        joint_force: (nsample, njoint, 2) force on body b by body a, N.
+        contact_force: (nsample, njoint) λ of clearance joints, NaN for ideal ones, N.
+        iterations: (nsample,) Newton iterations to reach the tolerance.
+        history: (nsample, max_iterations + 1) scaled residual norm per iteration (NaN after).
+        status: (nsample,) uint32 status bits (including those of assembly).
+    """
+
+    q: np.ndarray
+    lam: np.ndarray
+    joint_force: np.ndarray
+    contact_force: np.ndarray
+    iterations: np.ndarray
+    history: np.ndarray
+    status: np.ndarray
+
+
+@dataclass(frozen=True)
+class Modes:
+    """Eigenpulsations of a batch.
+
+    Attributes:
+        omega: (nsample, nmode) signed p = sign(p²)√|p²|, rad/s, ascending; NaN where failed.
+        shapes: (nsample, nmode, 3 nbody) mass-normalised mode shapes, or None.
+        stable: (nsample,) bool, no p² < 0 (False where failed).
+        status: (nsample,) uint32 status bits.
+    """
+
+    omega: np.ndarray
+    shapes: np.ndarray | None
+    stable: np.ndarray
+    status: np.ndarray
+
+
+def assemble(model: Model, status: np.ndarray | None = None) -> Assembled:
+    """Project every sample's initial positions and velocities onto the constraints."""
+    nsample = model.nsample
+    q = np.array(np.broadcast_to(model.q0, (nsample, model.ndof)), dtype=np.float64)
+    v = np.array(np.broadcast_to(model.v0, (nsample, model.ndof)), dtype=np.float64)
+    status = _status_or_new(status, nsample)
+    kernels.assemble_batch(model.kernel_arrays(), q, v, status)
+    return Assembled(q=q, v=v, status=status)
+
+
+def solve_equilibrium(
+    model: Model,
+    q_start: np.ndarray,
+    status: np.ndarray | None = None,
+    tolerance: float = DEFAULT_TOLERANCE,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> Equilibrium:
+    """Newton equilibrium of every sample from ``q_start`` (nsample, 3 nbody).
+
+    Samples whose ``status`` already carries a bit are skipped (NaN).
+    """
+    nsample = model.nsample
+    q = np.array(q_start, dtype=np.float64, copy=True)
+    lam = np.full((nsample, model.ncon), np.nan)
+    iterations = np.zeros(nsample, dtype=np.int64)
+    history = np.full((nsample, max_iterations + 1), np.nan)
+    status = _status_or_new(status, nsample).copy()
+    km = model.kernel_arrays()
+    kernels.equilibrium_batch(km, tolerance, max_iterations, q, lam, iterations, history, status)
+    joint_force = np.full((nsample, model.njoint, 2), np.nan)
+    contact_force = np.full((nsample, model.njoint), np.nan)
+    kernels.joint_forces_batch(km, q, lam, joint_force, contact_force)
+    return Equilibrium(q, lam, joint_force, contact_force, iterations, history, status)
+
+
+def solve_modes(model: Model, equilibrium: Equilibrium, shapes: bool = False) -> Modes:
+    """Eigenpulsations about each sample's equilibrium (DESIGN §2.2)."""
+    nsample = model.nsample
+    omega = np.full((nsample, model.nmode), np.nan)
+    shape_rows = nsample if shapes else 1
+    shape_array = np.full((shape_rows, model.nmode, model.ndof), np.nan)
+    status = equilibrium.status.copy()
+    kernels.modes_batch(
+        model.kernel_arrays(), equilibrium.q, equilibrium.lam, shapes, omega, shape_array, status
+    )
+    stable = (status & (Status.UNSTABLE_EQUILIBRIUM | _FAILED)) == 0
+    return Modes(omega, shape_array if shapes else None, stable, status)
+
+
+_FAILED = Status.ASSEMBLY_FAILED | Status.EQUILIBRIUM_NOT_CONVERGED | Status.SINGULAR
+
+
+def check_scene(model: Model) -> Assembled:
+    """Raise :class:`SceneError` if the nominal instance (sample 0) cannot be assembled or
+    has redundant constraints; return its assembled state otherwise.
+
+    The degrees of freedom are 3 nbody − ncon; they must be ≥ 0 and B must have full row
+    rank at the assembled configuration.
+    """
+    nominal = model.select(0, 1)
+    dof = nominal.ndof - nominal.ncon
+    if dof < 0:
+        raise SceneError(
+            f"joint: negative degrees of freedom: {nominal.ncon} constraint rows for "
+            f"{nominal.ndof} coordinates ({nominal.nbody} bodies)"
+        )
+    assembled = assemble(nominal)
+    bits = int(assembled.status[0])
+    if bits & Status.ASSEMBLY_FAILED:
+        raise SceneError(
+            "body: initial positions cannot be assembled: no configuration near them "
+            "satisfies the joints and drivers (check joint points and body positions)"
+        )
+    rank = constraint_rank(nominal, assembled.q[0])
+    if bits & Status.SINGULAR or rank < nominal.ncon:
+        raise SceneError(
+            f"joint: redundant constraints: rank of B is {rank} < {nominal.ncon} constraint "
+            "rows at the initial configuration (a joint or driver repeats another's constraint)"
+        )
+    return assembled
+
+
+def constraint_rank(model: Model, q: np.ndarray, sample: int = 0) -> int:
+    """Numerical rank of B at q (3 nbody,) for one sample, by the kernels' QR test."""
+    from mcchain.kernels.joints import constraint_jacobian
+    from mcchain.kernels.linalg import null_space
+
+    km = model.kernel_arrays()
+    B = np.zeros((model.ncon, model.ndof))
+    constraint_jacobian(km, sample, np.ascontiguousarray(q, dtype=np.float64), B)
+    Q = np.empty((model.ndof, model.ndof))
+    work = np.empty((model.ndof, model.ncon + 1))
+    return int(null_space(B, model.ncon, model.ndof, kernels.RANK_RTOL, Q, work))
+
+
+def describe_constraints(model: Model) -> list[tuple[str, str, int, int]]:
+    """(name, kind, first row, rows) of every joint and driver, for ``mcchain validate``."""
+    rows = []
+    for k, name in enumerate(model.joint_names):
+        ideal = model.joint_kind[k] == JOINT_IDEAL
+        kind = "ideal revolute" if ideal else "clearance revolute"
+        rows.append((name, kind, int(model.joint_row[k]), 2 if ideal else 1))
+    for j, name in enumerate(model.driver_names):
+        rows.append((name, "driver", int(model.driver_row[j]), 1))
+    return rows
+
+
+def _status_or_new(status: np.ndarray | None, nsample: int) -> np.ndarray:
+    if status is None:
+        return np.zeros(nsample, dtype=STATUS_DTYPE)
+    return np.ascontiguousarray(status, dtype=STATUS_DTYPE)
