@@ -1,0 +1,61 @@
+"""Scenes: TOML file -> validated :class:`Scene` -> compiled :class:`~mcchain.model.Model`.
+
+``load_scene(path)`` reads and checks a scene file (DESIGN §4) and raises
+:class:`~mcchain.errors.SceneError` with one line ``key.path: reason``;
+``compile_model(scene, nsample, seed)`` draws the ``[sample]`` parameters and lays the scene
+out as the flat arrays the kernels read. This package never imports numba or the kernels.
+"""
+
+from __future__ import annotations
+
+from mcchain.scene.compile import compile_model, parameter_slot
+from mcchain.scene.sampling import philox_uniform, ppf, sample_parameters, unit_design
+from mcchain.scene.schema import (
+    GROUND_NAME,
+    Body,
+    Distribution,
+    Driver,
+    Equilibrium,
+    Force,
+    Joint,
+    Modes,
+    ParamRef,
+    Sample,
+    Scene,
+    SceneSection,
+    Simulate,
+    Spring,
+    Storage,
+    load_scene,
+    load_scene_text,
+    parse_path,
+    scene_from_dict,
+)
+
+__all__ = [
+    "GROUND_NAME",
+    "Body",
+    "Distribution",
+    "Driver",
+    "Equilibrium",
+    "Force",
+    "Joint",
+    "Modes",
+    "ParamRef",
+    "Sample",
+    "Scene",
+    "SceneSection",
+    "Simulate",
+    "Spring",
+    "Storage",
+    "compile_model",
+    "load_scene",
+    "load_scene_text",
+    "parameter_slot",
+    "parse_path",
+    "philox_uniform",
+    "ppf",
+    "sample_parameters",
+    "scene_from_dict",
+    "unit_design",
+]

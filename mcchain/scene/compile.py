@@ -1,0 +1,265 @@
+"""Compile a validated :class:`~mcchain.scene.schema.Scene` into a :class:`~mcchain.model.Model`.
+
+The model's parameter arrays have a leading sample axis of size 1, except the arrays a
+``[sample.vary]`` path lands in, which get ``nsample`` rows (and arrays derived from a varied
+value: a driver's default ``angle0`` follows its body's sampled angle, a spring's default
+rest length follows sampled positions/points). Where each path lands:
+
+========================================  ==========================================
+path                                      array slot (after the sample axis)
+========================================  ==========================================
+``scene.gravity[k]``                      ``gravity[k]``
+``body.B.mass`` / ``inertia``             ``body_mass[b]`` / ``body_inertia[b]``
+``body.B.position[k]`` / ``angle``        ``q0[3b + k]`` / ``q0[3b + 2]``
+``body.B.velocity[k]`` / ``angular_...``  ``v0[3b + k]`` / ``v0[3b + 2]``
+``joint.J.points[0|1][k]``                ``joint_point_a[j, k]`` / ``joint_point_b[j, k]``
+``joint.J.clearance`` / ``eccentricity``  ``joint_clearance[j]`` / ``joint_eccentricity[j]``
+``driver.B.omega`` / ``angle0``           ``driver_omega[d]`` / ``driver_angle0[d]``
+``force.F.point[k]`` / ``value[k]``       ``force_point[f, k]`` / ``force_value[f, k]``
+``force.F.torque``                        ``force_torque[f]``
+``spring.S.points[0|1][k]``               ``spring_point_a[s, k]`` / ``spring_point_b[s, k]``
+``spring.S.stiffness`` / ...              ``spring_stiffness[s]`` / ``spring_rest_length[s]``
+                                          / ``spring_damping[s]``
+========================================  ==========================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mcchain.errors import SceneError
+from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model, constraint_rows
+from mcchain.scene.sampling import sample_parameters
+from mcchain.scene.schema import (
+    GROUND_NAME,
+    MAX_SEED,
+    PARAM_DOMAINS,
+    PARAM_SHAPES,
+    ParamRef,
+    Scene,
+    _quote,
+    parse_path,
+)
+
+Slot = tuple[str, tuple[int, ...]]
+
+
+def parameter_slot(ref: ParamRef) -> Slot:
+    """The model array and the index (without the sample axis) a parameter path lands in."""
+    i, key, idx = ref.index, ref.key, ref.indices
+    if ref.kind == "scene":
+        return "gravity", idx
+    if ref.kind == "body":
+        if key in ("mass", "inertia"):
+            return f"body_{key}", (i,)
+        if key == "position":
+            return "q0", (3 * i + idx[0],)
+        if key == "angle":
+            return "q0", (3 * i + 2,)
+        if key == "velocity":
+            return "v0", (3 * i + idx[0],)
+        return "v0", (3 * i + 2,)  # angular_velocity
+    if ref.kind in ("joint", "spring") and key == "points":
+        side = "a" if idx[0] == 0 else "b"
+        return f"{ref.kind}_point_{side}", (i, idx[1])
+    return f"{ref.kind}_{key}", (i, *idx)
+
+
+def _check_count(name: str, value: int, low: int, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise SceneError(f"{name}: expected an integer, got {value!r}")
+    if value < low or (high is not None and value > high):
+        rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise SceneError(f"{name}: must be {rng}, got {value}")
+    return int(value)
+
+
+def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = None) -> Model:
+    """Lay a scene out as a :class:`Model` of ``nsample`` instances.
+
+    Args:
+        scene: a validated scene (:func:`mcchain.scene.load_scene`).
+        nsample: number of instances; default ``[sample] count``, or 1 without ``[sample]``
+            (then every instance is the same and there are no parameters).
+        seed: sampling seed; default ``[sample] seed`` (0 without ``[sample]``).
+
+    Returns:
+        The model; ``parameters`` (nsample, nparam) holds the sampled values in the order of
+        ``[sample.vary]`` and ``param_paths`` their paths as written. ``meta`` carries
+        ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``.
+
+    Raises:
+        SceneError: a bad ``nsample``/``seed``, or a sampled value outside its parameter's
+            domain (e.g. a normal mass draw <= 0), naming the path and the sample.
+    """
+    sample = scene.sample
+    if nsample is None:
+        nsample = sample.count if sample is not None else 1
+    if seed is None:
+        seed = sample.seed if sample is not None else 0
+    nsample = _check_count("nsample", nsample, 1)
+    seed = _check_count("seed", seed, 0, MAX_SEED)
+
+    arrays = _base_arrays(scene)
+    varied: set[Slot] = set()
+    paths = scene.param_paths
+    if sample is not None and paths:
+        values = sample_parameters(sample, count=nsample, seed=seed)
+        for j, path in enumerate(paths):
+            ref = parse_path(scene, path, PARAM_SHAPES)
+            column = values[:, j]
+            _check_domain(ref, path, column)
+            name, idx = parameter_slot(ref)
+            arr = arrays[name]
+            if arr.shape[0] != nsample:
+                arr = arrays[name] = np.repeat(arr, nsample, axis=0)
+            where: tuple[slice | int, ...] = (slice(None), *idx)
+            arr[where] = column
+            varied.add((name, idx))
+    else:
+        values = np.empty((nsample, 0), dtype=np.float64)
+    _derived_defaults(scene, arrays, varied, nsample)
+
+    kind = np.array(
+        [
+            JOINT_CLEARANCE
+            if j.clearance > 0 or ("joint_clearance", (k,)) in varied
+            else JOINT_IDEAL
+            for k, j in enumerate(scene.joint)
+        ],
+        dtype=np.int64,
+    )
+    joint_row, driver_row = constraint_rows(kind, len(scene.driver))
+    index = {name: i for i, name in enumerate(scene.body_names)}
+    index[GROUND_NAME] = GROUND
+
+    def topo(refs: list[str]) -> np.ndarray:
+        return np.array([index[r] for r in refs], dtype=np.int64)
+
+    return Model(
+        body_names=tuple(scene.body_names),
+        joint_names=tuple(scene.joint_names),
+        driver_names=tuple(scene.driver_names),
+        force_names=tuple(scene.force_names),
+        spring_names=tuple(scene.spring_names),
+        param_paths=tuple(paths),
+        parameters=np.ascontiguousarray(values, dtype=np.float64),
+        nsample=nsample,
+        joint_body_a=topo([j.bodies[0] for j in scene.joint]),
+        joint_body_b=topo([j.bodies[1] for j in scene.joint]),
+        joint_kind=kind,
+        joint_row=joint_row,
+        driver_body=topo([d.body for d in scene.driver]),
+        driver_row=driver_row,
+        force_body=topo([f.body for f in scene.force]),
+        spring_body_a=topo([s.bodies[0] for s in scene.spring]),
+        spring_body_b=topo([s.bodies[1] for s in scene.spring]),
+        meta={
+            "scene_name": scene.name,
+            "seed": seed,
+            "design": sample.design if sample is not None else None,
+            "nsample": nsample,
+        },
+        **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
+    )
+
+
+def _base_arrays(scene: Scene) -> dict[str, np.ndarray]:
+    """The parameter arrays of the scene as written, each with a sample axis of size 1."""
+
+    def a(values: object, *shape: int) -> np.ndarray:
+        return np.asarray(values, dtype=np.float64).reshape(1, *shape)
+
+    nb, nj, nd = len(scene.body), len(scene.joint), len(scene.driver)
+    nf, ns = len(scene.force), len(scene.spring)
+    angle_of = {b.name: b.angle for b in scene.body}
+    nan = float("nan")
+    return {
+        "gravity": a(scene.scene.gravity, 2),
+        "body_mass": a([b.mass for b in scene.body], nb),
+        "body_inertia": a([b.inertia for b in scene.body], nb),
+        "joint_point_a": a([j.points[0] for j in scene.joint], nj, 2),
+        "joint_point_b": a([j.points[1] for j in scene.joint], nj, 2),
+        "joint_clearance": a([j.clearance for j in scene.joint], nj),
+        "joint_eccentricity": a(
+            [nan if j.eccentricity is None else j.eccentricity for j in scene.joint], nj
+        ),
+        "driver_angle0": a(
+            [angle_of[d.body] if d.angle0 is None else d.angle0 for d in scene.driver], nd
+        ),
+        "driver_omega": a([d.omega for d in scene.driver], nd),
+        "force_point": a([f.point for f in scene.force], nf, 2),
+        "force_value": a([f.value or (0.0, 0.0) for f in scene.force], nf, 2),
+        "force_torque": a([f.torque or 0.0 for f in scene.force], nf),
+        "spring_point_a": a([s.points[0] for s in scene.spring], ns, 2),
+        "spring_point_b": a([s.points[1] for s in scene.spring], ns, 2),
+        "spring_stiffness": a([s.stiffness for s in scene.spring], ns),
+        "spring_rest_length": a(
+            [nan if s.rest_length is None else s.rest_length for s in scene.spring], ns
+        ),
+        "spring_damping": a([s.damping for s in scene.spring], ns),
+        "q0": a([[*b.position, b.angle] for b in scene.body], 3 * nb),
+        "v0": a([[*b.velocity, b.angular_velocity] for b in scene.body], 3 * nb),
+    }
+
+
+def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
+    domain = PARAM_DOMAINS.get((ref.kind, ref.key))
+    ok = np.isfinite(column)
+    if domain is not None:
+        ok &= domain.contains(column)
+    if not ok.all():
+        i = int(np.argmin(ok))
+        rule = f"{ref.key} must be {domain.text}" if domain is not None else "not finite"
+        raise SceneError(
+            f"sample.vary.{_quote(path)}: sampled value {column[i]!r} at sample {i}: {rule} "
+            "(bound the distribution, e.g. with truncnormal)"
+        )
+
+
+def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
+    """r + A(θ) s for a body (or the point itself on ground); shapes broadcast over samples."""
+    if body == GROUND:
+        return point
+    x, y, th = q0[:, 3 * body], q0[:, 3 * body + 1], q0[:, 3 * body + 2]
+    c, s = np.cos(th), np.sin(th)
+    return np.stack(
+        [x + c * point[:, 0] - s * point[:, 1], y + s * point[:, 0] + c * point[:, 1]], axis=1
+    )
+
+
+def _derived_defaults(
+    scene: Scene, arrays: dict[str, np.ndarray], varied: set[Slot], nsample: int
+) -> None:
+    """Fill defaults that follow other values: driver angle0, spring rest length."""
+    index = {name: i for i, name in enumerate(scene.body_names)}
+    index[GROUND_NAME] = GROUND
+    q0 = arrays["q0"]
+
+    def body_varied(b: int) -> bool:
+        return b != GROUND and any(("q0", (3 * b + k,)) in varied for k in range(3))
+
+    for d, driver in enumerate(scene.driver):
+        b = index[driver.body]
+        if driver.angle0 is None and ("q0", (3 * b + 2,)) in varied:
+            if arrays["driver_angle0"].shape[0] != nsample:
+                arrays["driver_angle0"] = np.repeat(arrays["driver_angle0"], nsample, axis=0)
+            arrays["driver_angle0"][:, d] = q0[:, 3 * b + 2]
+
+    for s, spring in enumerate(scene.spring):
+        if spring.rest_length is not None or ("spring_rest_length", (s,)) in varied:
+            continue
+        a, b = index[spring.bodies[0]], index[spring.bodies[1]]
+        pa, pb = arrays["spring_point_a"][:, s], arrays["spring_point_b"][:, s]
+        wa, wb = _world_point(q0, a, pa), _world_point(q0, b, pb)
+        length = np.hypot(*(wb - wa).T)
+        per_sample = (
+            body_varied(a)
+            or body_varied(b)
+            or any(("spring_point_a", (s, k)) in varied for k in range(2))
+            or any(("spring_point_b", (s, k)) in varied for k in range(2))
+        )
+        rest = arrays["spring_rest_length"]
+        if per_sample and rest.shape[0] != nsample:
+            rest = arrays["spring_rest_length"] = np.repeat(rest, nsample, axis=0)
+        rest[:, s] = length if per_sample else length[0]

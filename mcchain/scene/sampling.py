@@ -1,0 +1,184 @@
+"""Sampling designs (unit hypercube) and distributions (inverse CDFs) for ``[sample]``.
+
+A design fills an (n, nparam) array of uniforms strictly inside (0, 1); each column is then
+mapped through its distribution's inverse CDF (:func:`ppf`). Designs:
+
+* ``"random"``: :func:`philox_uniform` — column j of sample i is a pure function of
+  (seed, i, j): Philox4x32-10 (Salmon et al., SC'11, the Random123 generator) keyed by the
+  64-bit seed, counter (i mod 2³², i div 2³², j div 2, stream). So sample i's values do not
+  depend on the count, on the chunking, or on how many parameters come after column j.
+* ``"sobol"``: scrambled Sobol' points, ``scipy.stats.qmc.Sobol(scramble=True)`` with the
+  scrambling drawn from ``numpy.random.default_rng(seed)``; point i is the i-th point of the
+  sequence whatever the count (counts that are powers of 2 keep its balance properties).
+  Points are moved to the centre of their 2⁻³⁰ cell so that none is exactly 0.
+* ``"lhs"``: ``scipy.stats.qmc.LatinHypercube`` with ``default_rng(seed)``: one point in each
+  of ``count`` strata per column, so a sample's values depend on the count (not on chunking).
+
+Everything here is vectorised over samples: 10⁵ samples take milliseconds.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy import special, stats
+from scipy.stats import qmc
+
+from mcchain.scene.schema import Distribution, Sample
+
+DESIGNS = ("random", "sobol", "lhs")
+
+STREAM_DESIGN = 0
+"""The Philox stream (4th counter word) of the ``random`` design; other uses take others."""
+
+_MASK32 = 0xFFFFFFFF
+_PHILOX_M = (0xD2511F53, 0xCD9E8D57)
+_PHILOX_W = (0x9E3779B9, 0xBB67AE85)
+_SOBOL_BITS = 30
+
+
+def philox4x32(
+    counter: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], key: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Philox4x32-10 on arrays of counters (uint64 arrays holding 32-bit words).
+
+    Args:
+        counter: four arrays of 32-bit words (as uint64), broadcastable together.
+        key: two 32-bit key words.
+
+    Returns:
+        The four 32-bit output words (uint64 arrays). Matches Random123's ``philox4x32_10``.
+    """
+    c0, c1, c2, c3 = (np.asarray(c, dtype=np.uint64) for c in counter)
+    k0, k1 = key
+    m0, m1 = np.uint64(_PHILOX_M[0]), np.uint64(_PHILOX_M[1])
+    mask, shift = np.uint64(_MASK32), np.uint64(32)
+    for r in range(10):
+        if r:
+            k0 = (k0 + _PHILOX_W[0]) & _MASK32
+            k1 = (k1 + _PHILOX_W[1]) & _MASK32
+        p0 = m0 * c0
+        p1 = m1 * c2
+        c0, c1, c2, c3 = (
+            (p1 >> shift) ^ c1 ^ np.uint64(k0),
+            p1 & mask,
+            (p0 >> shift) ^ c3 ^ np.uint64(k1),
+            p0 & mask,
+        )
+    return c0, c1, c2, c3
+
+
+def philox_uniform(
+    seed: int, start: int, stop: int, ncol: int, stream: int = STREAM_DESIGN
+) -> np.ndarray:
+    """Uniforms in (0, 1) for samples ``start:stop`` and columns ``0:ncol``.
+
+    Entry (i, j) is ``(k + 0.5) / 2**53`` with k the 53 bits of Philox4x32-10 output
+    (key = seed, counter = (i lo, i hi, j // 2, stream), words 2(j % 2), 2(j % 2) + 1):
+    never exactly 0 or 1, and a pure function of (seed, i, j, stream).
+    """
+    if not 0 <= seed < 2**64:
+        raise ValueError(f"seed must be in [0, 2**64), got {seed}")
+    n = max(stop - start, 0)
+    out = np.empty((n, ncol), dtype=np.float64)
+    if n == 0 or ncol == 0:
+        return out
+    i = np.arange(start, stop, dtype=np.uint64)
+    lo, hi = i & np.uint64(_MASK32), i >> np.uint64(32)
+    key = (seed & _MASK32, seed >> 32)
+    for block in range((ncol + 1) // 2):
+        words = philox4x32(
+            (lo, hi, np.full_like(lo, block), np.full_like(lo, stream & _MASK32)), key
+        )
+        for half in range(2):
+            j = 2 * block + half
+            if j >= ncol:
+                break
+            a, b = words[2 * half], words[2 * half + 1]
+            k = ((a >> np.uint64(5)) << np.uint64(26)) | (b >> np.uint64(6))
+            out[:, j] = (k.astype(np.float64) + 0.5) * 2.0**-53
+    return out
+
+
+def unit_design(
+    design: str, ncol: int, count: int, seed: int, start: int = 0, stop: int | None = None
+) -> np.ndarray:
+    """Rows ``start:stop`` (default ``0:count``) of a design's (count, ncol) unit hypercube.
+
+    All values lie strictly inside (0, 1). For ``random`` and ``sobol`` rows do not depend on
+    ``count``; for ``lhs`` they do (the strata are 1/count wide).
+    """
+    stop = count if stop is None else stop
+    if not 0 <= start <= stop:
+        raise ValueError(f"bad sample range {start}:{stop}")
+    n = stop - start
+    if design == "random":
+        return philox_uniform(seed, start, stop, ncol)
+    if ncol == 0 or n == 0:
+        return np.empty((n, ncol), dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    if design == "sobol":
+        if stop > 2**_SOBOL_BITS:
+            raise ValueError(f"sobol design: at most 2**{_SOBOL_BITS} samples")
+        sobol = qmc.Sobol(ncol, scramble=True, bits=_SOBOL_BITS, rng=rng)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "balance properties ... power of 2"
+            if start:
+                sobol.fast_forward(start)
+            u = sobol.random(n)
+        # Scrambled points are multiples of 2**-30 in [0, 1): use the cell centres.
+        return u + 2.0 ** -(_SOBOL_BITS + 1)
+    if design == "lhs":
+        u = qmc.LatinHypercube(ncol, rng=rng).random(count)[start:stop]
+        return np.clip(u, 2.0**-54, 1.0 - 2.0**-53)
+    raise ValueError(f"unknown design {design!r} (expected one of: {', '.join(DESIGNS)})")
+
+
+def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
+    """Map uniforms ``u`` in (0, 1) to the distribution's values (inverse CDF).
+
+    uniform [lo, hi]: lo + u (hi - lo); normal [mean, std]: mean + std Φ⁻¹(u); lognormal
+    [mu, sigma]: exp(mu + sigma Φ⁻¹(u)); truncnormal [mean, std, lo, hi]: scipy.stats.truncnorm
+    (clipped to [lo, hi] against rounding); choice [v...]: v[floor(u n)].
+    """
+    u = np.asarray(u, dtype=np.float64)
+    a = dist.args
+    kind = dist.kind
+    if kind == "uniform":
+        return a[0] + u * (a[1] - a[0])
+    if kind == "normal":
+        return a[0] + a[1] * special.ndtri(u)
+    if kind == "lognormal":
+        return np.exp(a[0] + a[1] * special.ndtri(u))
+    if kind == "truncnormal":
+        mean, std, lo, hi = a
+        x = stats.truncnorm.ppf(u, (lo - mean) / std, (hi - mean) / std, loc=mean, scale=std)
+        return np.clip(x, lo, hi)
+    if kind == "choice":
+        values = np.asarray(a, dtype=np.float64)
+        k = np.minimum((u * len(values)).astype(np.int64), len(values) - 1)
+        return values[k]
+    raise ValueError(f"unknown distribution {kind!r}")
+
+
+def sample_parameters(
+    sample: Sample,
+    count: int | None = None,
+    seed: int | None = None,
+    start: int = 0,
+    stop: int | None = None,
+) -> np.ndarray:
+    """The sampled values, (stop - start, nparam) float64, columns in ``vary`` order.
+
+    ``count``/``seed`` default to the section's; ``start:stop`` (default ``0:count``) picks a
+    range of samples, identical to the same rows of the full draw.
+    """
+    count = sample.count if count is None else count
+    seed = sample.seed if seed is None else seed
+    dists = list(sample.vary.values())
+    u = unit_design(sample.design, len(dists), count, seed, start, stop)
+    values = np.empty_like(u)
+    for j, dist in enumerate(dists):
+        values[:, j] = ppf(dist, u[:, j])
+    return values

@@ -1,0 +1,1073 @@
+"""The scene file schema (DESIGN §4): pydantic v2 models of a validated scene.
+
+A scene file is TOML. Its tables map one to one onto the models below; every model forbids
+unknown keys, every number must be finite, and ints are accepted where floats are expected
+(``mass = 2`` is 2.0) but not the other way round (``count = 10.0`` is an error). Each field
+documents its default; a field without a default is required.
+
+Shape checks (types, ranges, one-key distributions) live in the models. Checks that relate
+one part of the file to another (a joint naming a body, duplicate names, sampled paths) live
+in :func:`check_scene`, which :func:`mcchain.scene.load_scene` runs after the models; both
+raise :class:`~mcchain.errors.SceneError` with a one-line ``key.path: reason`` message.
+Kinematic checks (rank of B, assembly) need the kernels and are not made here.
+
+Conventions: SI units (m, kg, s, rad, N); ``"ground"`` is the fixed body; a joint's
+``bodies = [bearing, journal]`` and its ``points`` are local coordinates on each of them (for
+ground, global coordinates); angles are counter-clockwise from the global x axis.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+import types
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
+
+from pydantic import (
+    AfterValidator,
+    AllowInfNan,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    Strict,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic.fields import FieldInfo
+
+from mcchain.errors import SceneError
+
+GROUND_NAME = "ground"
+"""The name of the fixed body in ``bodies``/``body`` keys."""
+
+DEFAULT_GRAVITY = (0.0, -9.81)
+DEFAULT_SAMPLE_COUNT = 1000
+DEFAULT_SAMPLE_SEED = 0
+MAX_SEED = 2**64 - 1
+
+Num = Annotated[float, Strict(), AllowInfNan(False)]
+"""A finite number (TOML int or float)."""
+Int = Annotated[int, Strict()]
+"""A TOML integer (a float such as 10.0 is refused)."""
+Vec2 = Annotated[list[Num], Field(min_length=2, max_length=2)]
+"""Two finite numbers ``[x, y]``."""
+Points = Annotated[list[Vec2], Field(min_length=2, max_length=2)]
+"""Two local points ``[[xa, ya], [xb, yb]]``, one on each of the two bodies."""
+
+_NAME_RE = re.compile(r"^[^\s.\[\]\"'/\\]+$")
+
+
+def _check_name(value: str) -> str:
+    if not _NAME_RE.match(value):
+        raise ValueError(
+            f"invalid name {value!r}: use a non-empty name without spaces, dots, brackets, "
+            "quotes or slashes"
+        )
+    return value
+
+
+Name = Annotated[str, Strict(), AfterValidator(_check_name)]
+"""A name: non-empty, without whitespace, ``.``, ``[``, ``]``, quotes or slashes (they
+delimit sampled paths such as ``body.bar.position[0]`` and run folder names)."""
+BodyRef = Annotated[str, Strict()]
+"""The name of a body, or ``"ground"``."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=False)
+
+
+# -- [scene] -------------------------------------------------------------------------------
+class SceneSection(_Section):
+    """``[scene]``: name and gravity. The whole table may be omitted."""
+
+    name: Name | None = Field(
+        default=None,
+        description="scene name; default: the file's stem (``clearance-bar`` for "
+        "``clearance-bar.toml``), or ``scene`` for text without a file.",
+    )
+    gravity: Vec2 = Field(
+        default=list(DEFAULT_GRAVITY),
+        description="gravitational acceleration, global frame, m/s²; default [0, -9.81].",
+    )
+
+
+# -- [[body]] ------------------------------------------------------------------------------
+class Body(_Section):
+    """``[[body]]``: a rigid body, with its state at t = 0."""
+
+    name: Name = Field(description="unique body name (not ``ground``); required.")
+    mass: Num = Field(gt=0, description="mass m, kg; required, > 0.")
+    inertia: Num = Field(gt=0, description="centroidal moment of inertia J, kg m²; required.")
+    position: Vec2 = Field(
+        default=[0.0, 0.0], description="centre of mass (X, Y) at t = 0, m; default [0, 0]."
+    )
+    angle: Num = Field(default=0.0, description="angle θ at t = 0, rad; default 0.")
+    velocity: Vec2 = Field(
+        default=[0.0, 0.0], description="centre-of-mass velocity at t = 0, m/s; default [0, 0]."
+    )
+    angular_velocity: Num = Field(default=0.0, description="θ̇ at t = 0, rad/s; default 0.")
+
+
+# -- [[joint]] -----------------------------------------------------------------------------
+class Joint(_Section):
+    """``[[joint]]``: a revolute joint, ideal (``clearance = 0``) or with radial clearance."""
+
+    name: Name | None = Field(
+        default=None,
+        description='unique joint name; default "<bearing>-<journal>" (e.g. "ground-bar").',
+    )
+    bodies: Annotated[list[BodyRef], Field(min_length=2, max_length=2)] = Field(
+        description="[bearing, journal] body names (``ground`` allowed); required."
+    )
+    points: Points = Field(
+        description="[[x, y] on the bearing, [x, y] on the journal]: local coordinates of "
+        "the bearing centre and the journal centre, m; required."
+    )
+    clearance: Num = Field(
+        default=0.0,
+        ge=0,
+        description="radial clearance c, m; default 0 (ideal joint). A clearance > 0, or a "
+        "sampled clearance, makes a clearance joint (one constraint row).",
+    )
+    eccentricity: Num | None = Field(
+        default=None,
+        description="initial direction α of d (journal centre minus bearing centre), global, "
+        "rad; default: from the positions (NaN in the model). Ignored by ideal joints.",
+    )
+
+    _auto_name: bool = PrivateAttr(default=False)
+
+
+# -- [[driver]] ----------------------------------------------------------------------------
+class Driver(_Section):
+    """``[[driver]]``: prescribed rotation θ = angle0 + ω t of one body (named by the body)."""
+
+    body: BodyRef = Field(description="the driven body (not ground); required.")
+    omega: Num = Field(description="angular speed ω, rad/s; required.")
+    angle0: Num | None = Field(
+        default=None, description="θ_0, rad; default: the body's initial ``angle``."
+    )
+
+    @property
+    def name(self) -> str:
+        """A driver is named by its body (``driver.crank.omega``)."""
+        return self.body
+
+
+# -- [[force]] -----------------------------------------------------------------------------
+class Force(_Section):
+    """``[[force]]``: a constant load on a body: a force (global frame), a couple, or both."""
+
+    name: Name | None = Field(
+        default=None, description="unique force name; default: the body's name."
+    )
+    body: BodyRef = Field(description="the loaded body (not ground); required.")
+    point: Vec2 = Field(
+        default=[0.0, 0.0],
+        description="local application point of ``value``, m; default [0, 0] (the centre of mass).",
+    )
+    value: Vec2 | None = Field(
+        default=None, description="force [Fx, Fy], global frame, N; default [0, 0]."
+    )
+    torque: Num | None = Field(
+        default=None, description="couple, N m, counter-clockwise positive; default 0."
+    )
+
+    _auto_name: bool = PrivateAttr(default=False)
+
+    @model_validator(mode="after")
+    def _value_or_torque(self) -> Force:
+        if self.value is None and self.torque is None:
+            raise ValueError("a force needs `value = [Fx, Fy]`, `torque = T`, or both")
+        return self
+
+
+# -- [[spring]] ----------------------------------------------------------------------------
+class Spring(_Section):
+    """``[[spring]]``: a linear spring-damper between two points, acting along the line."""
+
+    name: Name | None = Field(
+        default=None, description='unique spring name; default "<a>-<b>" from ``bodies``.'
+    )
+    bodies: Annotated[list[BodyRef], Field(min_length=2, max_length=2)] = Field(
+        description="[a, b] body names (``ground`` allowed); required."
+    )
+    points: Points = Field(description="[[x, y] on a, [x, y] on b], local, m; required.")
+    stiffness: Num = Field(ge=0, description="stiffness k, N/m; required, >= 0.")
+    rest_length: Num | None = Field(
+        default=None,
+        ge=0,
+        description="rest length, m; default: the distance between the two points at the "
+        "scene's initial positions (the spring is unstressed at t = 0).",
+    )
+    damping: Num = Field(
+        default=0.0, ge=0, description="damping along the spring, N s/m; default 0."
+    )
+
+    _auto_name: bool = PrivateAttr(default=False)
+
+
+# -- [sample] ------------------------------------------------------------------------------
+DISTRIBUTIONS = ("uniform", "normal", "lognormal", "truncnormal", "choice")
+
+
+class Distribution(_Section):
+    """A one-key table giving a parameter's distribution.
+
+    * ``uniform = [low, high]`` (low <= high);
+    * ``normal = [mean, std]`` (std >= 0);
+    * ``lognormal = [mu, sigma]``: the log of the value is normal(mu, sigma), sigma >= 0;
+    * ``truncnormal = [mean, std, low, high]``: normal(mean, std) restricted to [low, high],
+      std > 0, low < high, low <= mean <= high;
+    * ``choice = [v1, v2, ...]``: one of the values, each equally likely.
+    """
+
+    uniform: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
+    normal: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
+    lognormal: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
+    truncnormal: Annotated[list[Num], Field(min_length=4, max_length=4)] | None = None
+    choice: Annotated[list[Num], Field(min_length=1)] | None = None
+
+    @field_validator("uniform")
+    @classmethod
+    def _uniform(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and v[0] > v[1]:
+            raise ValueError(f"low > high ({v[0]!r} > {v[1]!r})")
+        return v
+
+    @field_validator("normal", "lognormal")
+    @classmethod
+    def _normal(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and v[1] < 0:
+            raise ValueError(f"the standard deviation must be >= 0, got {v[1]!r}")
+        return v
+
+    @field_validator("truncnormal")
+    @classmethod
+    def _truncnormal(cls, v: list[float] | None) -> list[float] | None:
+        if v is None:
+            return v
+        mean, std, low, high = v
+        if std <= 0:
+            raise ValueError(f"the standard deviation must be > 0, got {std!r}")
+        if low >= high:
+            raise ValueError(f"bounds inverted or empty: low {low!r} >= high {high!r}")
+        if not low <= mean <= high:
+            raise ValueError(f"mean {mean!r} outside the bounds [{low!r}, {high!r}]")
+        return v
+
+    @model_validator(mode="after")
+    def _one_key(self) -> Distribution:
+        given = [k for k in DISTRIBUTIONS if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                "a distribution is a table with exactly one of "
+                f"{', '.join(DISTRIBUTIONS)}; got " + (", ".join(given) if given else "none")
+            )
+        return self
+
+    @property
+    def kind(self) -> str:
+        """The distribution's name (``uniform``, ``normal``, ...)."""
+        return next(k for k in DISTRIBUTIONS if getattr(self, k) is not None)
+
+    @property
+    def args(self) -> list[float]:
+        """The distribution's numbers, as written."""
+        value = getattr(self, self.kind)
+        assert value is not None
+        return list(value)
+
+    def bounds(self) -> tuple[float, float] | None:
+        """The closed interval of the values a bounded distribution can give (uniform,
+        truncnormal, choice); None for the unbounded ones (normal, lognormal)."""
+        a = self.args
+        kind = self.kind
+        if kind == "uniform":
+            return a[0], a[1]
+        if kind == "truncnormal":
+            return a[2], a[3]
+        if kind == "choice":
+            return min(a), max(a)
+        return None
+
+
+def _flatten_dotted(value: Any, is_leaf: Any) -> Any:
+    """Undo TOML's dotted bare keys: ``{"body": {"bar": {"mass": X}}}`` -> ``{"body.bar.mass": X}``.
+
+    A sampled path should be a quoted key (``"body.bar.mass" = {...}``); written bare, TOML
+    nests it. A nested table is flattened while it is not a leaf (a distribution table).
+    """
+    if not isinstance(value, dict):
+        return value
+    out: dict[str, Any] = {}
+
+    def walk(prefix: str, node: Any) -> None:
+        if isinstance(node, dict) and node and not is_leaf(node):
+            for key, sub in node.items():
+                walk(f"{prefix}.{key}" if prefix else key, sub)
+        else:
+            out[prefix] = node
+
+    for key, sub in value.items():
+        walk(key, sub)
+    return out
+
+
+def _is_distribution_table(node: dict[str, Any]) -> bool:
+    return any(k in DISTRIBUTIONS for k in node) or not all(
+        isinstance(v, dict) for v in node.values()
+    )
+
+
+class Sample(_Section):
+    """``[sample]``: Monte Carlo sampling. Absent: one instance, no parameters.
+
+    Designs fill the unit hypercube, one column per ``vary`` path, then each column is mapped
+    through its distribution's inverse CDF:
+
+    * ``"random"`` (default): independent uniforms; sample i, column j is a pure function of
+      (seed, i, j) (a Philox4x32-10 counter-based generator keyed by the seed), so a sample's
+      values never depend on the count or on the chunking.
+    * ``"sobol"``: scrambled Sobol' points (scipy.stats.qmc, scrambling drawn from the seed);
+      point i is the i-th of the sequence whatever the count. Counts that are powers of 2
+      keep the balance properties.
+    * ``"lhs"``: Latin hypercube (scipy.stats.qmc.LatinHypercube) stratified over the whole
+      count: sample i's values depend on the count (not on the chunking).
+    """
+
+    count: Int = Field(
+        default=DEFAULT_SAMPLE_COUNT,
+        ge=1,
+        description=f"number of instances; default {DEFAULT_SAMPLE_COUNT} (CLI --samples).",
+    )
+    seed: Int = Field(
+        default=DEFAULT_SAMPLE_SEED,
+        ge=0,
+        le=MAX_SEED,
+        description="random seed, 0 <= seed < 2**64; default 0 (CLI --seed).",
+    )
+    design: Literal["random", "sobol", "lhs"] = Field(
+        default="random", description='"random" (default), "sobol" or "lhs".'
+    )
+    vary: dict[str, Distribution] = Field(
+        default_factory=dict,
+        description="parameter path -> distribution, in parameter order; default none "
+        "(``count`` identical instances).",
+    )
+
+    @field_validator("vary", mode="before")
+    @classmethod
+    def _flatten(cls, v: Any) -> Any:
+        return _flatten_dotted(v, _is_distribution_table)
+
+
+# -- analyses -----------------------------------------------------------------------------
+class Equilibrium(_Section):
+    """``[equilibrium]``: compute the static equilibrium (Newton on Φ = 0, Bᵀλ = F)."""
+
+    tolerance: Num = Field(
+        default=1e-10, gt=0, description="scaled residual tolerance; default 1e-10."
+    )
+    max_iterations: Int = Field(default=50, ge=1, description="Newton iterations; default 50.")
+
+
+class Modes(_Section):
+    """``[modes]``: eigenpulsations about the equilibrium (needs ``[equilibrium]``)."""
+
+    shapes: bool = Field(default=False, description="store the mode shapes; default false.")
+
+
+SIMULATE_METHODS = ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau")
+FIXED_STEP_METHODS = ("rk4", "rk4-projection", "generalized-alpha")
+
+
+class Simulate(_Section):
+    """``[simulate]``: a time history from t = 0 to ``t_end``."""
+
+    t_end: Num = Field(gt=0, description="end time, s; required.")
+    dt: Num = Field(
+        gt=0,
+        description="time step, s (the initial step of the adaptive methods); required.",
+    )
+    method: Literal["rk4", "rk4-projection", "generalized-alpha", "rk45", "radau"] = Field(
+        default="rk4",
+        description='"rk4" (default), "rk4-projection", "generalized-alpha", "rk45" '
+        '(adaptive embedded) or "radau".',
+    )
+    output_dt: Num | None = Field(
+        default=None,
+        gt=0,
+        description="output interval, s; default dt. For fixed-step methods a whole "
+        "multiple of dt.",
+    )
+    start: Literal["scene", "equilibrium"] = Field(
+        default="scene",
+        description='start state: "scene" (default: the scene\'s positions and velocities) '
+        'or "equilibrium".',
+    )
+    perturb: dict[str, Num] = Field(
+        default_factory=dict,
+        description="additions to the start state: ``body.<name>.position[0|1]``, "
+        "``body.<name>.angle``, ``body.<name>.velocity[0|1]``, "
+        "``body.<name>.angular_velocity``; default none.",
+    )
+    rtol: Num = Field(default=1e-8, gt=0, description="relative tolerance (rk45, radau).")
+    atol: Num = Field(default=1e-10, gt=0, description="absolute tolerance (rk45, radau).")
+    rho_inf: Num = Field(
+        default=0.8, ge=0, le=1, description="spectral radius at infinity (generalized-alpha)."
+    )
+    baumgarte: Vec2 | None = Field(
+        default=None,
+        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0 (rk4); default: the solver's.",
+    )
+    constraint_tolerance: Num = Field(
+        default=1e-6, gt=0, description="max |Φ| past which a sample diverged; default 1e-6."
+    )
+    max_newton: Int = Field(
+        default=20, ge=1, description="Newton iterations of implicit steps; default 20."
+    )
+
+    @field_validator("perturb", mode="before")
+    @classmethod
+    def _flatten(cls, v: Any) -> Any:
+        return _flatten_dotted(v, lambda node: False)
+
+    @property
+    def output_step(self) -> float:
+        """``output_dt`` resolved (dt when omitted), s."""
+        return self.dt if self.output_dt is None else self.output_dt
+
+
+class Storage(_Section):
+    """``[storage]``: how the ensemble is written (all keys optional)."""
+
+    history_dtype: Literal["float32", "float64"] = Field(
+        default="float32", description='dtype of time histories; default "float32".'
+    )
+    compression: Literal["zlib", "zstd", "none"] = Field(
+        default="zlib", description='"zlib" (default), "zstd" or "none".'
+    )
+    complevel: Int = Field(
+        default=1, ge=0, le=22, description="compression level; default 1 (zlib: 0-9)."
+    )
+    chunk_size: Int = Field(
+        default=1024, ge=1, description="samples per chunk; default 1024 (CLI --chunk-size)."
+    )
+
+    @model_validator(mode="after")
+    def _zlib_level(self) -> Storage:
+        if self.compression == "zlib" and self.complevel > 9:
+            raise ValueError(f"complevel {self.complevel} > 9 for zlib")
+        return self
+
+
+# -- the scene -----------------------------------------------------------------------------
+class Scene(_Section):
+    """A validated scene. Build it with :func:`mcchain.scene.load_scene` (or
+    ``load_scene_text``), which also runs :func:`check_scene`.
+
+    ``text`` is the file's source text and ``source`` where it came from; neither is part of
+    the validated data.
+    """
+
+    scene: SceneSection = Field(default_factory=SceneSection, description="``[scene]``.")
+    body: Annotated[list[Body], Field(min_length=1)] = Field(
+        description="``[[body]]``, at least one; coordinate order is file order."
+    )
+    joint: list[Joint] = Field(default_factory=list, description="``[[joint]]``; default none.")
+    driver: list[Driver] = Field(default_factory=list, description="``[[driver]]``; default none.")
+    force: list[Force] = Field(default_factory=list, description="``[[force]]``; default none.")
+    spring: list[Spring] = Field(default_factory=list, description="``[[spring]]``; default none.")
+    sample: Sample | None = Field(default=None, description="``[sample]``; default none.")
+    equilibrium: Equilibrium | None = Field(
+        default=None, description="``[equilibrium]``; absent: not computed."
+    )
+    modes: Modes | None = Field(default=None, description="``[modes]``; absent: not computed.")
+    simulate: Simulate | None = Field(
+        default=None, description="``[simulate]``; absent: no time history."
+    )
+    storage: Storage = Field(default_factory=Storage, description="``[storage]``.")
+
+    _text: str = PrivateAttr(default="")
+    _source: str = PrivateAttr(default="<string>")
+
+    @model_validator(mode="after")
+    def _default_names(self) -> Scene:
+        for joint in self.joint:
+            if joint.name is None:
+                joint.name = f"{joint.bodies[0]}-{joint.bodies[1]}"
+                joint._auto_name = True
+        for force in self.force:
+            if force.name is None:
+                force.name = force.body
+                force._auto_name = True
+        for spring in self.spring:
+            if spring.name is None:
+                spring.name = f"{spring.bodies[0]}-{spring.bodies[1]}"
+                spring._auto_name = True
+        return self
+
+    @property
+    def name(self) -> str:
+        """The scene's name (``[scene] name``, resolved)."""
+        return self.scene.name or "scene"
+
+    @property
+    def text(self) -> str:
+        """The source text of the scene file ("" when built from a dict)."""
+        return self._text
+
+    @property
+    def source(self) -> str:
+        """The file the scene was read from, or a label such as ``<string>``."""
+        return self._source
+
+    @property
+    def body_names(self) -> list[str]:
+        return [b.name for b in self.body]
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [str(j.name) for j in self.joint]
+
+    @property
+    def driver_names(self) -> list[str]:
+        return [d.body for d in self.driver]
+
+    @property
+    def force_names(self) -> list[str]:
+        return [str(f.name) for f in self.force]
+
+    @property
+    def spring_names(self) -> list[str]:
+        return [str(s.name) for s in self.spring]
+
+    @property
+    def param_paths(self) -> list[str]:
+        """The ``[sample.vary]`` paths, in order (empty without ``[sample]``)."""
+        return list(self.sample.vary) if self.sample else []
+
+
+# -- parameter paths -----------------------------------------------------------------------
+KINDS = ("body", "joint", "driver", "force", "spring")
+
+PARAM_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {
+    "scene": {"gravity": (2,)},
+    "body": {
+        "mass": (),
+        "inertia": (),
+        "position": (2,),
+        "angle": (),
+        "velocity": (2,),
+        "angular_velocity": (),
+    },
+    "joint": {"points": (2, 2), "clearance": (), "eccentricity": ()},
+    "driver": {"omega": (), "angle0": ()},
+    "force": {"point": (2,), "value": (2,), "torque": ()},
+    "spring": {"points": (2, 2), "stiffness": (), "rest_length": (), "damping": ()},
+}
+"""For each kind, the keys a sampled path may name and their array shapes."""
+
+PERTURB_KEYS = {"position": (2,), "angle": (), "velocity": (2,), "angular_velocity": ()}
+"""The body keys ``[simulate] perturb`` may name."""
+
+_PATH_RE = re.compile(r"^(?P<head>[^\[\]]+?)(?P<idx>(\[[^\[\]]*\])*)$")
+
+
+@dataclass(frozen=True)
+class ParamRef:
+    """A resolved parameter path ``kind.name.key[i][j]``.
+
+    Attributes:
+        kind: ``scene``, ``body``, ``joint``, ``driver``, ``force`` or ``spring``.
+        name: the item's name ("" for ``scene``).
+        index: the item's position in its list (0 for ``scene``).
+        key: the key in the item (``mass``, ``points``, ...).
+        indices: indices into the key's array, as many as its dimensions.
+    """
+
+    kind: str
+    name: str
+    index: int
+    key: str
+    indices: tuple[int, ...]
+
+    def canonical(self) -> str:
+        head = "scene" if self.kind == "scene" else f"{self.kind}.{self.name}"
+        return f"{head}.{self.key}" + "".join(f"[{i}]" for i in self.indices)
+
+
+def _names_of(scene: Scene, kind: str) -> list[str]:
+    return {
+        "body": scene.body_names,
+        "joint": scene.joint_names,
+        "driver": scene.driver_names,
+        "force": scene.force_names,
+        "spring": scene.spring_names,
+    }[kind]
+
+
+def parse_path(scene: Scene, path: str, shapes: dict[str, dict[str, tuple[int, ...]]]) -> ParamRef:
+    """Resolve ``path`` against ``scene``; raise ``ValueError(reason)`` if it names nothing.
+
+    ``shapes`` is :data:`PARAM_SHAPES` (sampled parameters) or a subset of it.
+    """
+    m = _PATH_RE.match(path)
+    if not m:
+        raise ValueError("not a parameter path such as `body.bar.mass` or `joint.O.points[1][0]`")
+    head, idx_text = m.group("head"), m.group("idx")
+    parts = head.split(".")
+    raw_indices = re.findall(r"\[([^\[\]]*)\]", idx_text)
+    kinds = ", ".join(shapes)
+    if parts[0] == "scene":
+        if "scene" not in shapes:
+            raise ValueError(f"unknown kind 'scene' (expected one of: {kinds})")
+        if len(parts) != 2:
+            raise ValueError("expected `scene.<key>`, e.g. `scene.gravity[1]`")
+        kind, name, index, key = "scene", "", 0, parts[1]
+    elif parts[0] in shapes:
+        kind = parts[0]
+        if len(parts) != 3 or not parts[1] or not parts[2]:
+            raise ValueError(f"expected `{kind}.<name>.<key>`")
+        name, key = parts[1], parts[2]
+        names = _names_of(scene, kind)
+        if name not in names:
+            what = "driver (named by its body)" if kind == "driver" else kind
+            known = ", ".join(names) if names else "none"
+            raise ValueError(f"unknown {what} {name!r} (known: {known})")
+        index = names.index(name)
+    else:
+        raise ValueError(f"unknown kind {parts[0]!r} (expected one of: {kinds})")
+    keys = shapes[kind]
+    if key not in keys:
+        raise ValueError(f"unknown key {key!r} of a {kind} (expected one of: {', '.join(keys)})")
+    shape = keys[key]
+    indices: list[int] = []
+    for text in raw_indices:
+        if not text.isdigit() or (len(text) > 1 and text[0] == "0"):
+            raise ValueError(f"bad index [{text}]: expected a non-negative integer")
+        indices.append(int(text))
+    if len(indices) != len(shape):
+        if not shape:
+            raise ValueError(f"`{key}` is a number and takes no index")
+        dims = "".join(f"[0..{n - 1}]" for n in shape)
+        raise ValueError(
+            f"`{key}` needs {len(shape)} index{'es' if len(shape) > 1 else ''} "
+            f"{dims}, got {len(indices)}"
+        )
+    for i, n in zip(indices, shape, strict=True):
+        if i >= n:
+            raise ValueError(f"index {i} out of range 0..{n - 1} of `{key}`")
+    return ParamRef(kind, name, index, key, tuple(indices))
+
+
+# -- cross checks ------------------------------------------------------------------------
+def _quote(key: str) -> str:
+    """A key as TOML writes it in a dotted path: bare if it can be, else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_\-]+", key) else f'"{key}"'
+
+
+def item_path(kind: str, index: int, name: str | None) -> str:
+    """``kind.name`` when the item has a usable name, else ``kind[index]``."""
+    if isinstance(name, str) and _NAME_RE.match(name):
+        return f"{kind}.{name}"
+    return f"{kind}[{index}]"
+
+
+def _item(scene: Scene, kind: str, index: int) -> str:
+    entry = getattr(scene, kind)[index]
+    if kind == "driver":
+        return item_path(kind, index, entry.body)
+    if getattr(entry, "_auto_name", False):
+        return f"{kind}[{index}]"
+    return item_path(kind, index, entry.name)
+
+
+def check_scene(scene: Scene) -> None:
+    """Cross-reference checks the models cannot make; raise :class:`SceneError`.
+
+    Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
+    drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
+    distributions' supports against the parameter's domain, ``[modes]`` without
+    ``[equilibrium]``, ``output_dt`` against ``dt``. Kinematics are not checked.
+    """
+    bodies = scene.body_names
+    known = {GROUND_NAME, *bodies}
+    listing = ", ".join([GROUND_NAME, *bodies])
+
+    def unique(kind: str, names: list[str]) -> None:
+        seen: dict[str, int] = {}
+        for i, name in enumerate(names):
+            if name in seen:
+                entry = getattr(scene, kind)[i]
+                auto = " (a default name: give the item a `name`)" if entry._auto_name else ""
+                raise SceneError(
+                    f"{kind}[{i}].name: duplicate {kind} name {name!r} "
+                    f"(also {kind}[{seen[name]}]){auto}"
+                )
+            seen[name] = i
+
+    for i, name in enumerate(bodies):
+        if name == GROUND_NAME:
+            raise SceneError(f"body[{i}].name: {GROUND_NAME!r} is reserved for the fixed body")
+    seen_body: dict[str, int] = {}
+    for i, name in enumerate(bodies):
+        if name in seen_body:
+            raise SceneError(
+                f"body[{i}].name: duplicate body name {name!r} (also body[{seen_body[name]}])"
+            )
+        seen_body[name] = i
+
+    for kind in ("joint", "spring"):
+        items = getattr(scene, kind)
+        for i, item in enumerate(items):
+            where = _item(scene, kind, i)
+            for k, ref in enumerate(item.bodies):
+                if ref not in known:
+                    raise SceneError(
+                        f"{where}.bodies[{k}]: unknown body {ref!r} (known: {listing})"
+                    )
+            if item.bodies[0] == item.bodies[1]:
+                raise SceneError(f"{where}.bodies: joins body {item.bodies[0]!r} to itself")
+        unique(kind, [str(item.name) for item in items])
+
+    drivers: dict[str, int] = {}
+    for i, driver in enumerate(scene.driver):
+        where = _item(scene, "driver", i)
+        if driver.body == GROUND_NAME:
+            raise SceneError(f"{where}.body: cannot drive the fixed body 'ground'")
+        if driver.body not in known:
+            raise SceneError(f"{where}.body: unknown body {driver.body!r} (known: {listing})")
+        if driver.body in drivers:
+            raise SceneError(
+                f"driver[{i}].body: body {driver.body!r} already driven by "
+                f"driver[{drivers[driver.body]}]"
+            )
+        drivers[driver.body] = i
+
+    for i, force in enumerate(scene.force):
+        where = _item(scene, "force", i)
+        if force.body == GROUND_NAME:
+            raise SceneError(f"{where}.body: a load on the fixed body 'ground' does nothing")
+        if force.body not in known:
+            raise SceneError(f"{where}.body: unknown body {force.body!r} (known: {listing})")
+    unique("force", scene.force_names)
+
+    if scene.sample is not None:
+        targets: dict[str, str] = {}
+        for path, dist in scene.sample.vary.items():
+            where = f"sample.vary.{_quote(path)}"
+            try:
+                ref = parse_path(scene, path, PARAM_SHAPES)
+            except ValueError as exc:
+                raise SceneError(f"{where}: {exc}") from None
+            canonical = ref.canonical()
+            if canonical in targets:
+                raise SceneError(f"{where}: the same parameter as {_quote(targets[canonical])!s}")
+            targets[canonical] = path
+            domain = PARAM_DOMAINS.get((ref.kind, ref.key))
+            bounds = dist.bounds()
+            if domain is not None and bounds is not None and not domain.contains(bounds[0]):
+                raise SceneError(
+                    f"{where}.{dist.kind}: can give {bounds[0]!r}, but {ref.key} must be "
+                    f"{domain.text}"
+                )
+
+    if scene.simulate is not None:
+        sim = scene.simulate
+        for path in sim.perturb:
+            try:
+                parse_path(scene, path, {"body": PERTURB_KEYS})
+            except ValueError as exc:
+                raise SceneError(f"simulate.perturb.{_quote(path)}: {exc}") from None
+        if sim.output_dt is not None:
+            if sim.output_dt < sim.dt:
+                raise SceneError(
+                    f"simulate.output_dt: must be >= dt ({sim.dt!r}), got {sim.output_dt!r}"
+                )
+            ratio = sim.output_dt / sim.dt
+            if sim.method in FIXED_STEP_METHODS and abs(ratio - round(ratio)) > 1e-9 * ratio:
+                raise SceneError(
+                    f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
+                    f"method {sim.method!r}, got {sim.output_dt!r}"
+                )
+
+    if scene.modes is not None and scene.equilibrium is None:
+        raise SceneError("modes: needs an [equilibrium] section (modes are about it)")
+
+
+@dataclass(frozen=True)
+class Domain:
+    """The allowed values of a parameter: ``> low`` (open) or ``>= low``."""
+
+    low: float
+    open_low: bool
+
+    @property
+    def text(self) -> str:
+        return f"{'>' if self.open_low else '>='} {self.low!r}"
+
+    def contains(self, values: Any) -> Any:
+        return values > self.low if self.open_low else values >= self.low
+
+
+PARAM_DOMAINS: dict[tuple[str, str], Domain] = {
+    ("body", "mass"): Domain(0.0, True),
+    ("body", "inertia"): Domain(0.0, True),
+    # A sampled clearance makes a clearance joint: it must stay > 0 (|d| = 0 is singular).
+    ("joint", "clearance"): Domain(0.0, True),
+    ("spring", "stiffness"): Domain(0.0, False),
+    ("spring", "rest_length"): Domain(0.0, False),
+    ("spring", "damping"): Domain(0.0, False),
+}
+"""Lower bounds of sampled parameters, checked on the distribution's support (bounded
+distributions) at load time and on every sampled value at compile time."""
+
+
+# -- loading -------------------------------------------------------------------------------
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read and validate a scene file; raise :class:`SceneError` (one line) if it is bad.
+
+    A missing or unreadable file, malformed TOML (with its line and column), a schema error
+    or a cross-reference error all give ``key.path: reason`` (the file's path as the key for
+    file-level errors).
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise SceneError(f"{path}: is a directory, not a scene file") from None
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read the file ({exc.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    return load_scene_text(text, name=str(path))
+
+
+def load_scene_text(text: str, name: str = "<string>") -> Scene:
+    """Validate a scene given as TOML text; ``name`` labels it in messages.
+
+    When ``[scene] name`` is omitted, the scene is named after ``name``'s stem (so
+    ``configs/paper-bar.toml`` gives ``paper-bar``), or ``scene`` for a ``<label>``.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{name}: malformed TOML: {exc}") from None
+    return scene_from_dict(data, source=name, text=text)
+
+
+def scene_from_dict(data: dict[str, Any], source: str = "<dict>", text: str = "") -> Scene:
+    """Validate a scene given as the dict a TOML parser returns (see :func:`load_scene`)."""
+    try:
+        scene = Scene.model_validate(data)
+    except ValidationError as exc:
+        raise SceneError(format_validation_error(exc, data)) from None
+    scene._text = text
+    scene._source = source
+    if scene.scene.name is None:
+        scene.scene.name = _default_scene_name(source)
+    check_scene(scene)
+    return scene
+
+
+def _default_scene_name(source: str) -> str:
+    if source.startswith("<"):
+        return "scene"
+    stem = Path(source).stem
+    stem = re.sub(r"[\s.\[\]\"'/\\]+", "-", stem).strip("-")
+    return stem or "scene"
+
+
+# -- pydantic errors -> one line ------------------------------------------------------------
+def format_validation_error(exc: ValidationError, data: Any) -> str:
+    """The first error of ``exc`` as ``key.path: reason`` (list items named when they can be)."""
+    err = exc.errors(include_url=False)[0]
+    loc = tuple(err["loc"])
+    path = loc_path(loc, data)
+    return f"{path}: {_reason(err, loc)}"
+
+
+def loc_path(loc: tuple[str | int, ...], data: Any) -> str:
+    """Turn a pydantic location into a scene key path, naming list items by their name.
+
+    ``("body", 0, "mass")`` -> ``body.bar.mass`` when body 0 is named ``bar`` (a driver is
+    named by its ``body``), else ``body[0].mass``; dict keys that are not bare TOML keys are
+    quoted: ``sample.vary."body.bar.mass".normal``.
+    """
+    parts: list[str] = []
+    node: Any = data
+    for i, elem in enumerate(loc):
+        if isinstance(elem, int):
+            parent = loc[i - 1] if i > 0 else None
+            item = node[elem] if isinstance(node, list) and 0 <= elem < len(node) else None
+            if i == 1 and parent in KINDS and parts:
+                key = "body" if parent == "driver" else "name"
+                name = item.get(key) if isinstance(item, dict) else None
+                parts[-1] = item_path(str(parent), elem, name)
+            elif parts:
+                parts[-1] += f"[{elem}]"
+            else:
+                parts.append(f"[{elem}]")
+            node = item
+        else:
+            parts.append(_quote(elem))
+            node = node.get(elem) if isinstance(node, dict) else None
+    return ".".join(parts) if parts else "scene"
+
+
+def _strip(tp: Any) -> Any:
+    while True:
+        origin = get_origin(tp)
+        if origin is Annotated:
+            tp = get_args(tp)[0]
+        elif origin in (Union, types.UnionType):
+            args = [a for a in get_args(tp) if a is not type(None)]
+            if len(args) != 1:
+                return tp
+            tp = args[0]
+        else:
+            return tp
+
+
+def _schema_at(loc: tuple[str | int, ...]) -> Any:
+    """The schema type at a location (a model class, list[...], dict[...], ...) or None."""
+    tp: Any = Scene
+    for elem in loc:
+        tp = _strip(tp)
+        origin = get_origin(tp)
+        if isinstance(elem, int):
+            if origin is not list:
+                return None
+            tp = get_args(tp)[0]
+        elif isinstance(tp, type) and issubclass(tp, BaseModel):
+            field = tp.model_fields.get(elem)
+            if field is None:
+                return None
+            tp = field.annotation
+        elif origin is dict:
+            tp = get_args(tp)[1]
+        else:
+            return None
+    return _strip(tp)
+
+
+def _describe(value: Any) -> str:
+    """A TOML-flavoured description of an input value."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, int | float):
+        return repr(value)
+    return f"a {type(value).__name__}"
+
+
+def _reason(err: Any, loc: tuple[str | int, ...]) -> str:
+    kind = err["type"]
+    ctx = err.get("ctx") or {}
+    value = err.get("input")
+    if kind == "missing":
+        return "missing required key"
+    if kind == "extra_forbidden":
+        parent = _schema_at(loc[:-1])
+        allowed = (
+            list(parent.model_fields)
+            if isinstance(parent, type) and issubclass(parent, BaseModel)
+            else []
+        )
+        if parent is Distribution:
+            return f"unknown distribution (expected one of: {', '.join(allowed)})"
+        what = "section" if parent is Scene else "key"
+        return f"unknown {what} (expected one of: {', '.join(allowed)})"
+    if kind in ("float_type", "float_parsing"):
+        return f"expected a number, got {_describe(value)}"
+    if kind == "finite_number":
+        return f"must be a finite number, got {_describe(value)}"
+    if kind in ("int_type", "int_parsing", "int_from_float"):
+        return f"expected an integer, got {_describe(value)}"
+    if kind in ("string_type",):
+        return f"expected a string, got {_describe(value)}"
+    if kind == "bool_type":
+        return f"expected true or false, got {_describe(value)}"
+    if kind in ("list_type", "tuple_type"):
+        target = loc[-1] if loc else ""
+        if len(loc) == 1 and target in KINDS:
+            return f"expected an array of tables [[{target}]], got {_describe(value)}"
+        return f"expected an array, got {_describe(value)}"
+    if kind in ("model_type", "model_attributes_type", "dict_type"):
+        if _schema_at(loc) is Distribution:
+            return (
+                f"expected a distribution table such as {{ uniform = [low, high] }}, "
+                f"got {_describe(value)}"
+            )
+        return f"expected a table, got {_describe(value)}"
+    if kind in ("too_short", "too_long"):
+        lo = _min_max(loc)
+        n = len(value) if isinstance(value, list | dict) else ctx.get("actual_length")
+        return f"expected {lo}, got {n}"
+    bounds = {
+        "greater_than": (">", "gt"),
+        "greater_than_equal": (">=", "ge"),
+        "less_than": ("<", "lt"),
+        "less_than_equal": ("<=", "le"),
+    }
+    if kind in bounds:
+        op, key = bounds[kind]
+        return f"must be {op} {ctx.get(key)!r}, got {_describe(value)}"
+    if kind == "literal_error":
+        return f"must be one of {ctx.get('expected')}, got {_describe(value)}"
+    if kind in ("value_error", "assertion_error"):
+        return str(ctx.get("error", err["msg"]))
+    return str(err["msg"])
+
+
+def _min_max(loc: tuple[str | int, ...]) -> str:
+    """The length rule of the sequence at ``loc``: "2", "at least 1", ..."""
+    metadata: list[Any] = []
+    parent = _schema_at(loc[:-1])
+    last = loc[-1] if loc else None
+    tp: Any = None
+    if isinstance(parent, type) and issubclass(parent, BaseModel) and isinstance(last, str):
+        field = parent.model_fields.get(last)
+        if field is not None:
+            metadata.extend(field.metadata)
+            tp = field.annotation
+    elif get_origin(parent) is list and isinstance(last, int):
+        tp = get_args(parent)[0]
+    while get_origin(tp) in (Annotated, Union, types.UnionType):
+        args = get_args(tp)
+        if get_origin(tp) is Annotated:
+            metadata.extend(args[1:])
+            tp = args[0]
+        else:
+            tp = next(a for a in args if a is not type(None))
+    lo = hi = None
+    flat: list[Any] = []
+    for meta in metadata:
+        flat.extend(meta.metadata if isinstance(meta, FieldInfo) else [meta])
+    for meta in flat:
+        lo = getattr(meta, "min_length", None) if lo is None else lo
+        hi = getattr(meta, "max_length", None) if hi is None else hi
+    if lo is not None and lo == hi:
+        return f"{lo} item" if lo == 1 else f"{lo} items"
+    if hi is None:
+        return f"at least {lo} item" + ("" if lo == 1 else "s")
+    if lo is None:
+        return f"at most {hi} items"
+    return f"{lo} to {hi} items"
