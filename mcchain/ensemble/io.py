@@ -1,0 +1,495 @@
+"""netCDF I/O of ensembles: atomic part files and their streaming merge.
+
+A run writes each finished chunk of samples as a *part file* ``part-<start>-<stop>.nc``:
+written under a hidden temporary name, fsync'ed, renamed, and the folder fsync'ed, so a
+part file is either complete or absent (a process killed mid-write leaves only a
+``.part-*.tmp`` that no reader lists). Part files are uncompressed and contiguous: cheap to
+write on a thread beside the compute, cheap to read back.
+
+:func:`merge_parts` streams the parts into one ``ensemble.nc``, variable by variable and
+sample block by sample block, so memory stays O(block) whatever the ensemble's size. The
+merged file is compressed (``zlib``, ``zstd`` or none) and chunked along ``sample`` with
+chunk lengths that depend only on the variable's shape, never on how the samples were
+computed, so the same data give a byte-identical file whatever the compute chunk size,
+thread count or scheduler.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import time
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import suppress
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import netCDF4
+    import xarray as xr
+
+log = logging.getLogger(__name__)
+
+PART_PATTERN = re.compile(r"^part-(\d{12})-(\d{12})\.nc$")
+"""Names of finished part files (temporary files never match)."""
+
+CHUNK_TARGET_BYTES = 1 << 20
+"""Uncompressed bytes aimed at per HDF5 chunk of the merged file (≈ 1 MiB)."""
+
+WRITE_TARGET_BYTES = 16 << 20
+"""Uncompressed bytes copied per read/write call during a merge (bounds its memory)."""
+
+MAX_OPEN_PARTS = 256
+"""Part files kept open at once during a merge (least recently used are closed)."""
+
+COMPRESSIONS = ("zlib", "zstd", "none")
+
+
+class MergeError(ValueError):
+    """Part files that do not form one ensemble (gap, overlap, mismatched layout)."""
+
+
+# -- small file-system helpers -------------------------------------------------------------
+
+
+def fsync_file(path: Path) -> None:
+    """Flush a file's data to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_dir(path: Path) -> None:
+    """Flush a directory entry (a rename into it) to disk."""
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def temporary_name(path: Path) -> Path:
+    """The hidden temporary name a file is written under before its rename."""
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def commit_file(tmp: Path, path: Path) -> None:
+    """Make ``tmp`` durable and visible as ``path`` in one atomic rename."""
+    fsync_file(tmp)
+    os.replace(tmp, path)
+    fsync_dir(path.parent)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write a small text file atomically (temporary name, fsync, rename, fsync dir)."""
+    path = Path(path)
+    tmp = temporary_name(path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        commit_file(tmp, path)
+    finally:
+        with suppress(FileNotFoundError):
+            tmp.unlink()
+
+
+# -- compression ---------------------------------------------------------------------------
+
+
+def compression_options(compression: str, complevel: int = 1) -> tuple[dict[str, Any], str]:
+    """netCDF4 ``createVariable`` keywords for a codec, and a note if it had to change.
+
+    ``zstd`` needs a netCDF-C built with it; without, zlib is used and the note says so.
+    """
+    import netCDF4
+
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"storage.compression: must be one of {COMPRESSIONS}, got {compression!r}")
+    note = ""
+    if compression == "zstd" and not getattr(netCDF4, "__has_zstandard_support__", False):
+        note = "zstd is not supported by this netCDF4/netCDF-C build; using zlib instead"
+        compression = "zlib"
+    if compression == "none":
+        return {}, note
+    return {"compression": compression, "complevel": int(complevel), "shuffle": True}, note
+
+
+def sample_chunk_length(per_sample_bytes: int, nsample: int) -> int:
+    """HDF5 chunk length along ``sample``: about :data:`CHUNK_TARGET_BYTES` per chunk.
+
+    Depends only on the variable's shape and the sample count, so the merged file's layout
+    never depends on the compute chunk size.
+    """
+    per_sample_bytes = max(int(per_sample_bytes), 1)
+    return int(min(max(CHUNK_TARGET_BYTES // per_sample_bytes, 1), max(nsample, 1)))
+
+
+# -- writing one Dataset (a part file) -------------------------------------------------------
+
+
+def _nc_dtype(values: np.ndarray) -> Any:
+    if values.dtype.kind in "OUS":
+        return str
+    if values.dtype.kind == "b":
+        return np.dtype(np.int8)
+    return values.dtype
+
+
+def _set_attrs(var: Any, attrs: Mapping[str, Any]) -> None:
+    for key, value in attrs.items():
+        var.setncattr(key, value)
+
+
+def _write_dataset(ds: xr.Dataset, path: Path) -> None:
+    import netCDF4
+
+    nc = netCDF4.Dataset(path, "w", format="NETCDF4")
+    try:
+        nc.set_fill_off()
+        nc.set_auto_maskandscale(False)
+        for dim, size in ds.sizes.items():
+            nc.createDimension(str(dim), size)
+        for name, var in [*ds.coords.items(), *ds.data_vars.items()]:
+            values = np.asarray(var.values)
+            dtype = _nc_dtype(values)
+            contiguous = dtype is not str and 0 not in values.shape
+            out = nc.createVariable(
+                str(name), dtype, tuple(str(d) for d in var.dims), contiguous=contiguous
+            )
+            attrs = dict(var.attrs)
+            if name in ds.data_vars:
+                # Non-dimension coordinates of this variable (CF): param_units.
+                aux = [
+                    str(c)
+                    for c in ds.coords
+                    if c not in ds.dims and set(ds[c].dims) <= set(var.dims)
+                ]
+                if aux:
+                    attrs["coordinates"] = " ".join(aux)
+            if values.dtype.kind == "b":
+                attrs["dtype"] = "bool"
+                values = values.astype(np.int8)
+            _set_attrs(out, attrs)
+            if values.size:
+                if dtype is str:
+                    out[:] = values.astype(object)
+                else:
+                    out[:] = values
+        _set_attrs(nc, ds.attrs)
+    finally:
+        nc.close()
+
+
+def part_name(start: int, stop: int) -> str:
+    """File name of the part holding samples ``start:stop``."""
+    return f"part-{start:012d}-{stop:012d}.nc"
+
+
+@dataclass(frozen=True, order=True)
+class Part:
+    """A finished part file holding samples ``start:stop``."""
+
+    start: int
+    stop: int
+    path: Path
+
+
+def write_part(ds: xr.Dataset, directory: Path, start: int, stop: int) -> Part:
+    """Write one chunk's Dataset atomically as a part file and return it.
+
+    The file becomes visible under its final name only once complete and on disk.
+    """
+    directory = Path(directory)
+    if ds.sizes.get("sample") != stop - start:
+        raise ValueError(f"part {start}:{stop}: dataset has {ds.sizes.get('sample')} samples")
+    path = directory / part_name(start, stop)
+    tmp = temporary_name(path)
+    try:
+        _write_dataset(ds, tmp)
+        commit_file(tmp, path)
+    finally:
+        with suppress(FileNotFoundError):
+            tmp.unlink()
+    return Part(start, stop, path)
+
+
+def list_parts(directory: Path) -> list[Part]:
+    """Finished part files of a folder, by start sample (temporaries are ignored)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    parts = []
+    for entry in os.scandir(directory):
+        match = PART_PATTERN.match(entry.name)
+        if match:
+            parts.append(Part(int(match[1]), int(match[2]), Path(entry.path)))
+    return sorted(parts)
+
+
+def remove_temporaries(directory: Path) -> int:
+    """Delete temporaries a killed writer left in ``directory``; returns how many."""
+    count = 0
+    directory = Path(directory)
+    if directory.is_dir():
+        for entry in os.scandir(directory):
+            if entry.name.startswith(".") and entry.name.endswith(".tmp"):
+                with suppress(FileNotFoundError):
+                    os.unlink(entry.path)
+                    count += 1
+    return count
+
+
+# -- merging ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MergeStats:
+    """What a merge did: uncompressed bytes copied, file size, seconds."""
+
+    nsample: int
+    nparts: int
+    bytes_in: int
+    bytes_out: int
+    seconds: float
+    note: str = ""
+
+    @property
+    def throughput(self) -> float:
+        """Uncompressed MB/s."""
+        return self.bytes_in / 1e6 / self.seconds if self.seconds > 0 else float("inf")
+
+
+class _PartCache:
+    """Open part files, at most :data:`MAX_OPEN_PARTS` at a time (LRU)."""
+
+    def __init__(self, parts: Sequence[Part]) -> None:
+        self._parts = parts
+        self._open: OrderedDict[int, netCDF4.Dataset] = OrderedDict()
+
+    def __call__(self, index: int) -> netCDF4.Dataset:
+        import netCDF4
+
+        nc = self._open.pop(index, None)
+        if nc is None:
+            if len(self._open) >= MAX_OPEN_PARTS:
+                _, oldest = self._open.popitem(last=False)
+                oldest.close()
+            nc = netCDF4.Dataset(self._parts[index].path, "r")
+            nc.set_auto_maskandscale(False)
+        self._open[index] = nc
+        return nc
+
+    def close(self) -> None:
+        for nc in self._open.values():
+            nc.close()
+        self._open.clear()
+
+
+def check_tiling(parts: Sequence[Part], nsample: int | None = None) -> int:
+    """Check that parts cover ``0:nsample`` without gap or overlap; return the count."""
+    if not parts:
+        raise MergeError("no part files to merge")
+    position = 0
+    for part in sorted(parts):
+        if part.start != position or part.stop <= part.start:
+            raise MergeError(f"{part.path.name}: expected a part starting at sample {position}")
+        position = part.stop
+    if nsample is not None and position != nsample:
+        raise MergeError(f"parts cover samples 0:{position}, expected 0:{nsample}")
+    return position
+
+
+def _attrs(obj: Any) -> dict[str, Any]:
+    return {key: obj.getncattr(key) for key in obj.ncattrs()}
+
+
+def _same(a: Any, b: Any) -> bool:
+    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+
+
+def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
+    for b0 in range(0, n, length):
+        yield b0, min(b0 + length, n)
+
+
+def _read_samples(
+    cache: _PartCache, parts: Sequence[Part], starts: np.ndarray, name: str, b0: int, b1: int
+) -> np.ndarray:
+    first = int(np.searchsorted(starts, b0, side="right")) - 1
+    pieces = []
+    i = first
+    while i < len(parts) and parts[i].start < b1:
+        part = parts[i]
+        lo, hi = max(b0, part.start), min(b1, part.stop)
+        pieces.append(np.asarray(cache(i)[name][lo - part.start : hi - part.start]))
+        i += 1
+    return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+
+
+def merge_parts(
+    parts: Sequence[Part],
+    out: Path,
+    *,
+    compression: str = "zlib",
+    complevel: int = 1,
+    nsample: int | None = None,
+) -> MergeStats:
+    """Stream part files into one compressed netCDF file ``out``, atomically.
+
+    Args:
+        parts: finished part files; together they must cover ``0:nsample`` exactly.
+        out: the merged file; written under a temporary name and renamed when complete.
+        compression: ``zlib``, ``zstd`` (zlib if unsupported, see the note) or ``none``.
+        complevel: codec level.
+        nsample: expected sample count (checked), or ``None``.
+
+    The layout (dims, variables, attributes) comes from the first part; every other part
+    must agree, and variables without a ``sample`` dim (names, ``time``) must be equal in
+    all parts. Memory stays O(:data:`WRITE_TARGET_BYTES`).
+
+    Raises:
+        MergeError: parts with a gap, an overlap or mismatched layouts.
+    """
+    import netCDF4
+
+    t0 = time.perf_counter()
+    parts = sorted(parts)
+    total = check_tiling(parts, nsample)
+    options, note = compression_options(compression, complevel)
+    if note:
+        log.warning(note)
+    out = Path(out)
+    tmp = temporary_name(out)
+    starts = np.array([p.start for p in parts], dtype=np.int64)
+    cache = _PartCache(parts)
+    bytes_in = 0
+    try:
+        first = cache(0)
+        layout = {name: (var.dimensions, var.dtype) for name, var in first.variables.items()}
+        global_attrs = _attrs(first)
+        for index in range(1, len(parts)):
+            nc = cache(index)
+            other = {name: (var.dimensions, var.dtype) for name, var in nc.variables.items()}
+            if other != layout:
+                raise MergeError(f"{parts[index].path.name}: variables differ from the first part")
+            for name, var in nc.variables.items():
+                if "sample" not in var.dimensions and not _same(var[:], first[name][:]):
+                    raise MergeError(
+                        f"{parts[index].path.name}: {name} differs from the first part"
+                    )
+            if not all(
+                _same(value, global_attrs.get(key)) for key, value in _attrs(nc).items()
+            ) or set(nc.ncattrs()) != set(global_attrs):
+                raise MergeError(f"{parts[index].path.name}: global attributes differ")
+
+        dst = netCDF4.Dataset(tmp, "w", format="NETCDF4")
+        try:
+            dst.set_fill_off()
+            dst.set_auto_maskandscale(False)
+            for dim, obj in first.dimensions.items():
+                dst.createDimension(dim, total if dim == "sample" else obj.size)
+            for name, var in first.variables.items():
+                dims = var.dimensions
+                if "sample" not in dims:
+                    copy = dst.createVariable(name, var.dtype, dims)
+                    _set_attrs(copy, _attrs(var))
+                    if var.size:
+                        copy[:] = var[:]
+                    continue
+                if dims[0] != "sample":
+                    raise MergeError(f"{name}: sample must be the first dim, got {dims}")
+                inner = [dst.dimensions[d].size for d in dims[1:]]
+                numeric = var.dtype is not str and np.dtype(var.dtype).kind in "biuf"
+                itemsize = np.dtype(var.dtype).itemsize if numeric else 8
+                per_sample = itemsize * int(np.prod(inner))
+                length = sample_chunk_length(per_sample, total)
+                kwargs: dict[str, Any] = dict(options) if numeric else {}
+                if numeric and itemsize == 1:
+                    kwargs.pop("shuffle", None)
+                target = dst.createVariable(
+                    name,
+                    var.dtype,
+                    dims,
+                    chunksizes=(length, *[max(n, 1) for n in inner]),
+                    **kwargs,
+                )
+                if numeric:
+                    # Whole chunks are written: bypass the chunk cache (memory O(block)).
+                    target.set_var_chunk_cache(size=0)
+                _set_attrs(target, _attrs(var))
+                if per_sample == 0 and numeric:
+                    continue
+                step = length * max(WRITE_TARGET_BYTES // max(per_sample * length, 1), 1)
+                for b0, b1 in _blocks(total, step):
+                    block = _read_samples(cache, parts, starts, name, b0, b1)
+                    target[b0:b1] = block
+                    bytes_in += block.nbytes
+            _set_attrs(dst, global_attrs)
+        finally:
+            dst.close()
+        cache.close()
+        commit_file(tmp, out)
+    finally:
+        cache.close()
+        with suppress(FileNotFoundError):
+            tmp.unlink()
+    seconds = time.perf_counter() - t0
+    return MergeStats(total, len(parts), bytes_in, out.stat().st_size, seconds, note)
+
+
+# -- reading -----------------------------------------------------------------------------------
+
+
+def _has_dask() -> bool:
+    try:
+        import dask.array  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def open_ensemble(path: Path) -> xr.Dataset:
+    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks)."""
+    import xarray as xr
+
+    if _has_dask():
+        return xr.open_dataset(path, engine="netcdf4", chunks={})
+    return xr.open_dataset(path, engine="netcdf4")
+
+
+def open_parts(parts: Iterable[Part]) -> xr.Dataset:
+    """Finished part files as one lazy Dataset along ``sample`` (an unfinished run)."""
+    import xarray as xr
+
+    paths = [p.path for p in sorted(parts)]
+    if not paths:
+        raise FileNotFoundError("no finished part files")
+    if _has_dask():
+        return xr.open_mfdataset(
+            paths,
+            engine="netcdf4",
+            combine="nested",
+            concat_dim="sample",
+            data_vars="minimal",
+            coords="minimal",
+            compat="override",
+            join="override",
+            combine_attrs="override",
+            chunks={},
+        )
+    datasets = [xr.open_dataset(p, engine="netcdf4") for p in paths]
+    return xr.concat(
+        datasets,
+        dim="sample",
+        data_vars="minimal",
+        coords="minimal",
+        compat="override",
+        join="override",
+        combine_attrs="override",
+    )

@@ -1,0 +1,442 @@
+"""The ensemble's variables, declared once (DESIGN §5), and Datasets built from them.
+
+Every variable an analysis may store is a :class:`VariableSpec` in :data:`VARIABLES`: its
+name, dims, CF ``units`` and ``long_name``, a dtype rule and the analysis that produces it.
+:func:`build_dataset` turns the dict a solver returns for one chunk of samples
+(``mcchain.solvers.solve_chunk``) into an :class:`xarray.Dataset` with coordinates and
+attributes, checking every array against its declaration; :func:`validate_dataset` checks
+a Dataset read back from disk.
+
+Dtype rules: ``float64`` for parameters, equilibria and eigenpulsations (always);
+``history`` for time histories (the scene's ``[storage] history_dtype``, float32 by
+default); ``uint32`` for ``status``; ``int32`` for counts; ``bool`` for flags (stored as
+int8 with the ``dtype = "bool"`` attribute that xarray decodes).
+
+Dims whose size comes from the model: ``body``, ``dof`` (3), ``joint``, ``xy`` (2),
+``param``, ``driver``; from the solver's arrays: ``mode`` and ``time``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+    from mcchain.model import Model
+
+DOF_NAMES = ("x", "y", "theta")
+XY_NAMES = ("x", "y")
+
+ANALYSES = ("sample", "equilibrium", "modes", "simulate", "always")
+"""Who produces a variable: the sampler, an analysis section of the scene, or every run."""
+
+DTYPE_RULES = ("float64", "history", "uint32", "int32", "bool")
+
+
+@dataclass(frozen=True)
+class VariableSpec:
+    """Declaration of one ensemble variable.
+
+    Attributes:
+        name: netCDF variable name (DESIGN §5).
+        dims: dimension names, ``sample`` first.
+        units: CF units string.
+        long_name: CF long_name.
+        dtype: dtype rule, one of :data:`DTYPE_RULES`.
+        analysis: producing analysis, one of :data:`ANALYSES`.
+        attrs: further CF attributes (flag masks, comments).
+    """
+
+    name: str
+    dims: tuple[str, ...]
+    units: str
+    long_name: str
+    dtype: str
+    analysis: str
+    attrs: Mapping[str, Any] = field(default_factory=dict)
+
+    def storage_dtype(self, history_dtype: str = "float32") -> np.dtype:
+        """The numpy dtype the variable is stored with."""
+        if self.dtype == "history":
+            return np.dtype(history_dtype)
+        if self.dtype == "uint32":
+            return np.dtype(STATUS_DTYPE)
+        return np.dtype(self.dtype)
+
+    def attributes(self) -> dict[str, Any]:
+        """CF attributes: ``units``, ``long_name`` and the extras."""
+        return {"units": self.units, "long_name": self.long_name, **self.attrs}
+
+
+def _v(
+    name: str,
+    dims: tuple[str, ...],
+    units: str,
+    long_name: str,
+    dtype: str,
+    analysis: str,
+    **attrs: Any,
+) -> VariableSpec:
+    return VariableSpec(name, dims, units, long_name, dtype, analysis, attrs)
+
+
+_MIXED_Q = "m (x, y), rad (theta)"
+_MIXED_V = "m s-1 (x, y), rad s-1 (theta)"
+_S = ("sample",)
+_ST = ("sample", "time")
+
+VARIABLES: dict[str, VariableSpec] = {
+    spec.name: spec
+    for spec in (
+        _v(
+            "parameters",
+            ("sample", "param"),
+            "mixed",
+            "sampled parameter values, one column per [sample.vary] path",
+            "float64",
+            "sample",
+            comment="units of each column in coordinate param_units",
+        ),
+        _v("status", _S, "1", "per-sample status flags", "uint32", "always"),
+        _v(
+            "q_eq",
+            ("sample", "body", "dof"),
+            _MIXED_Q,
+            "equilibrium configuration",
+            "float64",
+            "equilibrium",
+        ),
+        _v(
+            "joint_force_eq",
+            ("sample", "joint", "xy"),
+            "N",
+            "force on body b by body a at equilibrium",
+            "float64",
+            "equilibrium",
+        ),
+        _v(
+            "iterations",
+            _S,
+            "1",
+            "Newton iterations of the equilibrium",
+            "int32",
+            "equilibrium",
+        ),
+        _v(
+            "stable",
+            _S,
+            "1",
+            "equilibrium stability (all p^2 >= 0)",
+            "bool",
+            "modes",
+        ),
+        _v(
+            "omega",
+            ("sample", "mode"),
+            "rad s-1",
+            "eigenpulsations p, ascending",
+            "float64",
+            "modes",
+        ),
+        _v(
+            "mode_shape",
+            ("sample", "mode", "body", "dof"),
+            "1",
+            "mode shapes z = N v",
+            "float64",
+            "modes",
+        ),
+        _v("q", ("sample", "time", "body", "dof"), _MIXED_Q, "positions", "history", "simulate"),
+        _v("v", ("sample", "time", "body", "dof"), _MIXED_V, "velocities", "history", "simulate"),
+        _v(
+            "joint_force",
+            ("sample", "time", "joint", "xy"),
+            "N",
+            "force on body b by body a",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "contact_force",
+            ("sample", "time", "joint"),
+            "N",
+            "contact force lambda of clearance joints (NaN for ideal joints)",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "driver_torque",
+            ("sample", "time", "driver"),
+            "N m",
+            "torque the driver applies",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "constraint_error",
+            _ST,
+            "m",
+            "max |Phi| over the constraint rows",
+            "history",
+            "simulate",
+        ),
+        _v("energy", _ST, "J", "kinetic + potential energy", "history", "simulate"),
+        _v(
+            "diverged_time",
+            _S,
+            "s",
+            "first time the diverged flag was raised (NaN if never)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "singular_time",
+            _S,
+            "s",
+            "first time the singular flag was raised (NaN if never)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "contact_lost_time",
+            _S,
+            "s",
+            "first time the contact_lost flag was raised (NaN if never)",
+            "float64",
+            "simulate",
+        ),
+    )
+}
+"""Every ensemble variable, in the order they are written."""
+
+COORDINATES: dict[str, dict[str, str]] = {
+    "sample": {"long_name": "global sample index", "units": "1"},
+    "body": {"long_name": "body name"},
+    "dof": {"long_name": "coordinate of a body (x, y, theta)"},
+    "joint": {"long_name": "joint name"},
+    "xy": {"long_name": "global axis"},
+    "mode": {"long_name": "mode number, ascending p", "units": "1"},
+    "param": {"long_name": "sampled parameter path"},
+    "param_units": {"long_name": "units of each sampled parameter"},
+    "driver": {"long_name": "name of the driven body"},
+    "time": {"long_name": "time", "units": "s", "standard_name": "time", "axis": "T"},
+}
+"""Attributes of the coordinate variables."""
+
+_PARAM_UNITS = {
+    "mass": "kg",
+    "inertia": "kg m2",
+    "position": "m",
+    "angle": "rad",
+    "velocity": "m s-1",
+    "angular_velocity": "rad s-1",
+    "points": "m",
+    "clearance": "m",
+    "eccentricity": "rad",
+    "omega": "rad s-1",
+    "angle0": "rad",
+    "point": "m",
+    "value": "N",
+    "torque": "N m",
+    "stiffness": "N m-1",
+    "rest_length": "m",
+    "damping": "N s m-1",
+    "gravity": "m s-2",
+}
+
+
+def param_units(path: str) -> str:
+    """Units of a sampled parameter path (``body.bar.mass`` -> ``kg``), ``1`` if unknown."""
+    key = path.split("[", 1)[0].rsplit(".", 1)[-1].strip('"')
+    return _PARAM_UNITS.get(key, "1")
+
+
+def by_analysis(analysis: str) -> list[VariableSpec]:
+    """The variables one analysis produces, in registry order."""
+    if analysis not in ANALYSES:
+        raise ValueError(f"analysis: must be one of {ANALYSES}, got {analysis!r}")
+    return [spec for spec in VARIABLES.values() if spec.analysis == analysis]
+
+
+def status_attributes() -> dict[str, Any]:
+    """CF flag attributes of ``status`` (from :mod:`mcchain.status`)."""
+    return {
+        "flag_masks": FLAG_MASKS.copy(),
+        "flag_meanings": FLAG_MEANINGS,
+        "valid_min": STATUS_DTYPE(0),
+        "valid_max": STATUS_DTYPE(int(FLAG_MASKS.sum())),
+    }
+
+
+def variable_attributes(name: str) -> dict[str, Any]:
+    """All attributes written for variable ``name``."""
+    attrs = VARIABLES[name].attributes()
+    if name == "status":
+        attrs.update(status_attributes())
+    return attrs
+
+
+# -- building ----------------------------------------------------------------------------
+
+
+def coerce_outputs(
+    outputs: Mapping[str, Any], history_dtype: str = "float32"
+) -> dict[str, np.ndarray]:
+    """Cast a solver's arrays to their storage dtypes (``time`` stays float64).
+
+    Raises ``ValueError`` for an undeclared name or an array whose kind cannot be stored
+    under its rule (a float for ``status``, a non-integer count).
+    """
+    if history_dtype not in ("float32", "float64"):
+        raise ValueError(f"history_dtype: must be float32 or float64, got {history_dtype!r}")
+    result: dict[str, np.ndarray] = {}
+    for name, value in outputs.items():
+        arr = np.asarray(value)
+        if name == "time":
+            result[name] = np.asarray(arr, dtype=np.float64)
+            continue
+        spec = VARIABLES.get(name)
+        if spec is None:
+            raise ValueError(f"{name}: not a declared ensemble variable")
+        target = spec.storage_dtype(history_dtype)
+        if spec.dtype in ("uint32", "int32"):
+            if arr.dtype.kind not in "iub":
+                raise ValueError(f"{name}: integer array expected, got {arr.dtype}")
+            if arr.size and (arr.min() < np.iinfo(target).min or arr.max() > np.iinfo(target).max):
+                raise ValueError(f"{name}: values out of range of {target}")
+        elif spec.dtype == "bool":
+            if arr.dtype.kind not in "biu":
+                raise ValueError(f"{name}: boolean array expected, got {arr.dtype}")
+        elif arr.dtype.kind not in "fiu":
+            raise ValueError(f"{name}: floating-point array expected, got {arr.dtype}")
+        result[name] = np.asarray(arr, dtype=target)
+    return result
+
+
+def model_coordinates(model: Model) -> dict[str, np.ndarray]:
+    """Name coordinates of a model: body, dof, joint, xy, param, driver."""
+    return {
+        "body": np.array(model.body_names, dtype=object),
+        "dof": np.array(DOF_NAMES, dtype=object),
+        "joint": np.array(model.joint_names, dtype=object),
+        "xy": np.array(XY_NAMES, dtype=object),
+        "param": np.array(model.param_paths, dtype=object),
+        "driver": np.array(model.driver_names, dtype=object),
+    }
+
+
+def build_dataset(
+    outputs: Mapping[str, Any],
+    model: Model,
+    *,
+    start: int = 0,
+    history_dtype: str = "float32",
+    attrs: Mapping[str, Any] | None = None,
+) -> xr.Dataset:
+    """The Dataset of one chunk of samples from a solver's output dict.
+
+    Args:
+        outputs: arrays keyed by variable name, sample axis first, plus ``status`` and,
+            with time histories, a 1-D ``time``. ``parameters`` is taken from
+            ``model.parameters`` when absent.
+        model: the chunk's model (``model.nsample`` samples); gives the name coordinates.
+        start: global index of the chunk's first sample (the ``sample`` coordinate).
+        history_dtype: storage dtype of time histories.
+        attrs: global attributes.
+
+    Raises:
+        ValueError: an undeclared name, a wrong rank, shape or dtype kind, or no ``status``.
+    """
+    import xarray as xr
+
+    outputs = dict(outputs)
+    if "parameters" not in outputs:
+        outputs["parameters"] = np.asarray(model.parameters, dtype=np.float64).reshape(
+            model.nsample, len(model.param_paths)
+        )
+    if "status" not in outputs:
+        raise ValueError("status: missing from the solver output")
+    arrays = coerce_outputs(outputs, history_dtype)
+    names = model_coordinates(model)
+    sizes: dict[str, int] = {"sample": model.nsample}
+    sizes.update({dim: len(values) for dim, values in names.items()})
+    if "time" in arrays:
+        if arrays["time"].ndim != 1:
+            raise ValueError(f"time: must be 1-D, got shape {arrays['time'].shape}")
+        sizes["time"] = arrays["time"].shape[0]
+
+    data_vars: dict[str, Any] = {}
+    used: set[str] = set()
+    for name, spec in VARIABLES.items():
+        if name not in arrays:
+            continue
+        arr = arrays[name]
+        if arr.ndim != len(spec.dims):
+            raise ValueError(
+                f"{name}: expected dims {spec.dims}, got an array of shape {arr.shape}"
+            )
+        for dim, n in zip(spec.dims, arr.shape, strict=True):
+            expected = sizes.setdefault(dim, n)
+            if n != expected:
+                raise ValueError(f"{name}: dim {dim} has size {n}, expected {expected}")
+        used.update(spec.dims)
+        data_vars[name] = (spec.dims, arr, variable_attributes(name))
+
+    coords: dict[str, Any] = {
+        "sample": (
+            "sample",
+            np.arange(start, start + model.nsample, dtype=np.int64),
+            COORDINATES["sample"],
+        )
+    }
+    for dim in ("body", "dof", "joint", "xy", "mode", "param", "driver", "time"):
+        if dim not in used:
+            continue
+        if dim == "mode":
+            values: np.ndarray = np.arange(sizes["mode"], dtype=np.int32)
+        elif dim == "time":
+            values = arrays["time"]
+        else:
+            values = names[dim]
+        coords[dim] = (dim, values, COORDINATES[dim])
+        if dim == "param":
+            units = np.array([param_units(p) for p in model.param_paths], dtype=object)
+            coords["param_units"] = ("param", units, COORDINATES["param_units"])
+    return xr.Dataset(data_vars, coords=coords, attrs=dict(attrs or {}))
+
+
+def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
+    """Check a Dataset against the registry: names, dims, dtypes, units and long_name.
+
+    Args:
+        ds: an ensemble or one chunk of it, as built or as read back by xarray.
+        history_dtype: expected dtype of time histories; ``None`` accepts float32/float64.
+
+    Raises:
+        ValueError: naming the first variable that does not match.
+    """
+    if "status" not in ds.data_vars:
+        raise ValueError("status: missing")
+    for name, var in ds.data_vars.items():
+        spec = VARIABLES.get(str(name))
+        if spec is None:
+            raise ValueError(f"{name}: not a declared ensemble variable")
+        if tuple(var.dims) != spec.dims:
+            raise ValueError(f"{name}: dims {tuple(var.dims)}, expected {spec.dims}")
+        allowed: Sequence[np.dtype]
+        if spec.dtype == "history" and history_dtype is None:
+            allowed = (np.dtype(np.float32), np.dtype(np.float64))
+        else:
+            allowed = (spec.storage_dtype(history_dtype or "float32"),)
+        if var.dtype not in allowed:
+            raise ValueError(f"{name}: dtype {var.dtype}, expected {allowed[0]}")
+        for key in ("units", "long_name"):
+            if var.attrs.get(key) != spec.attributes()[key]:
+                raise ValueError(f"{name}: attribute {key} is {var.attrs.get(key)!r}")
