@@ -1,0 +1,271 @@
+"""``mcchain`` command line: a thin front end over :mod:`mcchain.runs` (DESIGN §6).
+
+Commands: ``run``, ``validate``, ``runs``, and ``report``/``show``/``bench``, which hand the
+rest of the command line to ``mcchain.viz.report:main``, ``mcchain.viz.playback:main`` and
+``mcchain.bench:main``. A bad input (``SceneError``, ``RunError``, a bad flag) prints one
+line ``mcchain: error: <message>`` on stderr and exits with 2, having written nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+from mcchain import __version__
+from mcchain.errors import McchainError
+
+EXIT_USAGE = 2
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+DELEGATED = {
+    "report": ("mcchain.viz.report", "draw a run's plots as PNG"),
+    "show": ("mcchain.viz.playback", "replay samples of a run in the rerun viewer"),
+    "bench": ("mcchain.bench", "run the benchmarks"),
+}
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error in one line, through :func:`main`."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(message)
+
+
+def _fail(message: str, code: int = EXIT_USAGE) -> int:
+    print(f"mcchain: error: {message}", file=sys.stderr)
+    return code
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="mcchain", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"mcchain {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    run = sub.add_parser("run", help="run a scene into a new run folder, or resume a run")
+    run.add_argument("scene", nargs="?", metavar="SCENE.toml", help="scene file")
+    run.add_argument("--samples", type=_positive, metavar="N", help="override [sample] count")
+    run.add_argument("--seed", type=_seed, metavar="S", help="override [sample] seed")
+    run.add_argument(
+        "--chunk-size", type=_positive, metavar="K", help="samples per chunk ([storage])"
+    )
+    run.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
+    run.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
+    run.add_argument(
+        "--dask", metavar="ADDRESS|local", help="run chunks on a Dask cluster ('local' starts one)"
+    )
+    run.add_argument(
+        "--threads",
+        type=_positive,
+        metavar="T",
+        help="numba threads (in-process) or workers (--dask local)",
+    )
+    run.add_argument("--resume", metavar="RUN", help="complete an interrupted run folder")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    validate = sub.add_parser(
+        "validate", help="check a scene; print bodies, joints, constraint rows and dof"
+    )
+    validate.add_argument("scene", metavar="SCENE.toml")
+
+    runs = sub.add_parser("runs", help="list past runs")
+    runs.add_argument("--out", default="runs", metavar="DIR", help="folder of run folders")
+
+    for name, (_, text) in DELEGATED.items():
+        delegated = sub.add_parser(name, help=text, add_help=False)
+        delegated.add_argument("args", nargs=argparse.REMAINDER)
+    return parser
+
+
+# -- commands ----------------------------------------------------------------------------------
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from mcchain import runs
+
+    progress = False if args.quiet else None
+    argv = ["mcchain", *sys.argv[1:]]
+    if args.resume is not None:
+        conflicting = [
+            flag
+            for flag, value in (
+                ("SCENE", args.scene),
+                ("--samples", args.samples),
+                ("--seed", args.seed),
+                ("--chunk-size", args.chunk_size),
+                ("--out", args.out),
+                ("--run-dir", args.run_dir),
+            )
+            if value is not None
+        ]
+        if conflicting:
+            return _fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
+        result = runs.resume_run(
+            args.resume, dask=args.dask, threads=args.threads, argv=argv, progress=progress
+        )
+    else:
+        if args.scene is None:
+            return _fail("run: a SCENE.toml (or --resume RUN) is required")
+        if args.out is not None and args.run_dir is not None:
+            return _fail("--run-dir: cannot be combined with --out")
+        result = runs.start_run(
+            args.scene,
+            samples=args.samples,
+            seed=args.seed,
+            chunk_size=args.chunk_size,
+            out=args.out or runs.DEFAULT_OUT,
+            run_dir=args.run_dir,
+            dask=args.dask,
+            threads=args.threads,
+            argv=argv,
+            progress=progress,
+        )
+    for line in result.summary():
+        print(line)
+    print(result.folder)
+    return 0
+
+
+def _fmt(value: Any) -> str:
+    import numpy as np
+
+    arr = np.asarray(value, dtype=float).reshape(-1)
+    text = ", ".join(f"{v:.6g}" for v in arr)
+    return text if arr.size == 1 else f"[{text}]"
+
+
+def describe_model(model: Any, scene_name: str) -> list[str]:
+    """The lines ``mcchain validate`` prints: bodies, joints, drivers, rows, dof."""
+    from mcchain.model import GROUND, JOINT_CLEARANCE
+
+    def body(index: int) -> str:
+        return "ground" if index == GROUND else str(model.body_names[index])
+
+    def first(arr: Any, *index: int) -> Any:
+        return arr[(0, *index)]
+
+    lines = [
+        f"scene {scene_name}: {model.nbody} bodies, {model.njoint} joints, "
+        f"{model.ndriver} drivers, {model.nsample} samples"
+    ]
+    lines.append("bodies:")
+    for i, name in enumerate(model.body_names):
+        lines.append(
+            f"  {name}: mass {_fmt(first(model.body_mass, i))} kg, "
+            f"inertia {_fmt(first(model.body_inertia, i))} kg m2, "
+            f"position {_fmt(first(model.q0)[3 * i : 3 * i + 2])} m, "
+            f"angle {_fmt(first(model.q0)[3 * i + 2])} rad"
+        )
+    lines.append("joints:")
+    for j, name in enumerate(model.joint_names):
+        clearance = int(model.joint_kind[j]) == JOINT_CLEARANCE
+        nrow = 1 if clearance else 2
+        row = int(model.joint_row[j])
+        rows = f"row {row}" if nrow == 1 else f"rows {row}-{row + 1}"
+        kind = f"clearance {_fmt(first(model.joint_clearance, j))} m" if clearance else "ideal"
+        lines.append(
+            f"  {name}: {body(int(model.joint_body_a[j]))} (bearing) - "
+            f"{body(int(model.joint_body_b[j]))} (journal), {kind}, {rows}"
+        )
+    if model.ndriver:
+        lines.append("drivers:")
+        for k, name in enumerate(model.driver_names):
+            lines.append(
+                f"  {name}: omega {_fmt(first(model.driver_omega, k))} rad/s, "
+                f"angle0 {_fmt(first(model.driver_angle0, k))} rad, "
+                f"row {int(model.driver_row[k])}"
+            )
+    if model.param_paths:
+        lines.append("sampled: " + ", ".join(model.param_paths))
+    lines.append(f"coordinates: {model.ndof}")
+    lines.append(f"constraint rows: {model.ncon}")
+    lines.append(f"degrees of freedom: {model.nmode}")
+    return lines
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from mcchain.runs import default_loader
+
+    scene, model = default_loader(args.scene, None, None)
+    name = getattr(getattr(scene, "scene", None), "name", args.scene)
+    for line in describe_model(model, name):
+        print(line)
+    return 0
+
+
+def _cmd_runs(args: argparse.Namespace) -> int:
+    from mcchain.runs import format_runs, list_runs
+
+    found = list_runs(args.out)
+    if not found:
+        print(f"no runs in {args.out}")
+        return 0
+    print(format_runs(found))
+    return 0
+
+
+def _cmd_delegated(command: str, args: Sequence[str]) -> int:
+    module_name = DELEGATED[command][0]
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and module_name.startswith(exc.name):
+            return _fail(f"{command}: not available ({module_name} is missing)")
+        raise
+    code = module.main(list(args))
+    return int(code or 0)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mcchain`` console script; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if argv and argv[0] in DELEGATED:
+        command, rest = argv[0], argv[1:]
+    else:
+        try:
+            args = parser.parse_args(argv)
+        except _UsageError as exc:
+            return _fail(str(exc))
+        command, rest = args.command, []
+    try:
+        if command in DELEGATED:
+            return _cmd_delegated(command, rest)
+        handler = {"run": _cmd_run, "validate": _cmd_validate, "runs": _cmd_runs}[command]
+        return handler(args)
+    except McchainError as exc:
+        return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    except KeyboardInterrupt:
+        print("mcchain: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,322 @@
+"""Chunked execution of an ensemble: in-process or as Dask tasks.
+
+The samples ``0:nsample`` are cut into chunks (:func:`plan_chunks`). Each chunk is solved
+by ``solve(model.select(start, stop), scene)`` (``mcchain.solvers.solve_chunk`` by
+default) and handed to a *sink* (the run folder's part-file writer). Because the solvers
+are deterministic per sample, the data never depend on the chunking or the scheduler.
+
+* **in-process** (default): chunks one after the other, each solved by the numba kernels on
+  all threads (``threads`` sets ``numba.set_num_threads``); the sink runs on a writer thread
+  apart from the compute, with at most one chunk waiting, so memory is O(chunk).
+* **Dask** (``address="local"`` starts a :class:`~distributed.LocalCluster` of process
+  workers, one thread each, ``NUMBA_NUM_THREADS=1`` in their environment; any other address
+  is an existing scheduler): chunks are tasks, at most two per worker in flight; the kernels
+  are warmed on every worker before the first chunk.
+
+Progress (chunks done, samples/s, ETA) goes to stderr through tqdm, only on a terminal.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from mcchain.model import Model
+
+log = logging.getLogger(__name__)
+
+SolveFn = Callable[["Model", Any], Mapping[str, Any]]
+"""``solve(model_chunk, scene) -> {variable: array}`` (see ``mcchain.solvers.solve_chunk``)."""
+
+SinkFn = Callable[[dict[str, np.ndarray], int, int], None]
+"""``sink(outputs, start, stop)``: store one solved chunk (outputs already coerced)."""
+
+WORKER_ENV = {
+    "NUMBA_NUM_THREADS": "1",
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+"""Environment of LocalCluster worker processes: one compute thread each."""
+
+
+def plan_chunks(nsample: int, chunk_size: int) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``."""
+    if nsample < 1:
+        raise ValueError(f"nsample: must be >= 1, got {nsample}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size: must be >= 1, got {chunk_size}")
+    return [(s, min(s + chunk_size, nsample)) for s in range(0, nsample, chunk_size)]
+
+
+def default_solve() -> SolveFn:
+    """The real solver, ``mcchain.solvers.solve_chunk`` (imported lazily)."""
+    from mcchain.solvers import solve_chunk
+
+    return solve_chunk
+
+
+@dataclass
+class ExecutionStats:
+    """Timings of one execution (seconds) and what it computed."""
+
+    scheduler: str = "in-process"
+    threads: int = 1
+    workers: int = 1
+    chunks: int = 0
+    samples: int = 0
+    warmup: float = 0.0
+    compute: float = 0.0
+    kernel: float = 0.0
+    write: float = 0.0
+    worker_info: list[dict[str, Any]] = field(default_factory=list)
+
+
+def solve_coerced(
+    solve: SolveFn, model: Model, scene: Any, history_dtype: str
+) -> tuple[dict[str, np.ndarray], float]:
+    """Solve one chunk and cast its arrays to storage dtypes; returns (outputs, seconds)."""
+    from mcchain.ensemble.registry import coerce_outputs
+
+    t0 = time.perf_counter()
+    outputs = solve(model, scene)
+    seconds = time.perf_counter() - t0
+    return coerce_outputs(outputs, history_dtype), seconds
+
+
+# -- progress ------------------------------------------------------------------------------
+
+
+class Progress:
+    """Chunks done, samples/s and ETA on stderr (tqdm), silent when stderr is no terminal."""
+
+    def __init__(self, total: int, done: int, enabled: bool | None = None) -> None:
+        if enabled is None:
+            enabled = sys.stderr.isatty()
+        self.samples = 0
+        self.t0 = time.perf_counter()
+        self._bar: Any = None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=total, initial=done, unit="chunk", file=sys.stderr, dynamic_ncols=True
+            )
+
+    def update(self, samples: int) -> None:
+        self.samples += samples
+        if self._bar is not None:
+            rate = self.samples / max(time.perf_counter() - self.t0, 1e-9)
+            self._bar.set_postfix_str(f"{rate:,.0f} samples/s", refresh=False)
+            self._bar.update(1)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+# -- in-process ------------------------------------------------------------------------------
+
+
+def _set_threads(threads: int | None) -> int:
+    import numba
+
+    if threads is not None:
+        numba.set_num_threads(threads)
+    return int(numba.get_num_threads())
+
+
+def run_local(
+    model: Model,
+    scene: Any,
+    chunks: Sequence[tuple[int, int]],
+    sink: SinkFn,
+    *,
+    history_dtype: str = "float32",
+    threads: int | None = None,
+    solve: SolveFn | None = None,
+    progress: Progress | None = None,
+) -> ExecutionStats:
+    """Solve ``chunks`` in this process, writing each on a thread apart from the compute."""
+    solve = solve or default_solve()
+    stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
+    t0 = time.perf_counter()
+    solve(model.select(0, 1), scene)  # compile or load the cached kernels
+    stats.warmup = time.perf_counter() - t0
+    log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)
+
+    def write(outputs: dict[str, np.ndarray], start: int, stop: int) -> float:
+        t = time.perf_counter()
+        sink(outputs, start, stop)
+        return time.perf_counter() - t
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcchain-writer") as writer:
+        pending: tuple[Future[float], tuple[int, int, float]] | None = None
+        for start, stop in chunks:
+            outputs, seconds = solve_coerced(solve, model.select(start, stop), scene, history_dtype)
+            stats.kernel += seconds
+            if pending is not None:  # at most one chunk waits for the writer
+                stats.write += pending[0].result()
+                _chunk_done(stats, progress, pending[1])
+            pending = (writer.submit(write, outputs, start, stop), (start, stop, seconds))
+            del outputs
+        if pending is not None:
+            stats.write += pending[0].result()
+            _chunk_done(stats, progress, pending[1])
+    stats.compute = time.perf_counter() - t0
+    return stats
+
+
+def _chunk_done(
+    stats: ExecutionStats, progress: Progress | None, chunk: tuple[int, int, float]
+) -> None:
+    start, stop, seconds = chunk
+    stats.chunks += 1
+    stats.samples += stop - start
+    log.info("chunk %d:%d solved in %.3f s and written", start, stop, seconds)
+    if progress is not None:
+        progress.update(stop - start)
+
+
+# -- Dask ------------------------------------------------------------------------------------
+
+
+def _worker_setup(solve: SolveFn, model: Model, scene: Any) -> dict[str, Any]:
+    """Run on every worker before the first chunk: one numba thread, warm kernels."""
+    import numba
+
+    t0 = time.perf_counter()
+    solve(model, scene)
+    return {
+        "pid": os.getpid(),
+        "numba_threads": int(numba.config.NUMBA_NUM_THREADS),  # type: ignore[attr-defined]
+        "warmup": time.perf_counter() - t0,
+    }
+
+
+def _dask_task(
+    solve: SolveFn, model: Model, scene: Any, history_dtype: str, start: int, stop: int
+) -> tuple[int, int, dict[str, np.ndarray], float]:
+    import numba
+
+    numba.set_num_threads(1)
+    outputs, seconds = solve_coerced(solve, model, scene, history_dtype)
+    return start, stop, outputs, seconds
+
+
+@contextmanager
+def dask_client(address: str, workers: int | None = None) -> Iterator[Any]:
+    """A Dask client: a fresh LocalCluster for ``"local"``, else the scheduler at ``address``."""
+    from dask.distributed import Client, LocalCluster
+
+    if address == "local":
+        n = workers or os.cpu_count() or 1
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env=dict(WORKER_ENV),
+            silence_logs=logging.ERROR,
+        )
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+    else:
+        client = Client(address, timeout=30)
+        try:
+            yield client
+        finally:
+            client.close()
+
+
+def run_dask(
+    model: Model,
+    scene: Any,
+    chunks: Sequence[tuple[int, int]],
+    sink: SinkFn,
+    *,
+    address: str,
+    workers: int | None = None,
+    history_dtype: str = "float32",
+    solve: SolveFn | None = None,
+    progress: Progress | None = None,
+) -> ExecutionStats:
+    """Solve ``chunks`` as Dask tasks; the results are written here, as they arrive."""
+    from dask.distributed import as_completed
+
+    solve = solve or default_solve()
+    stats = ExecutionStats(scheduler=f"dask {address}")
+    t0 = time.perf_counter()
+    with dask_client(address, workers) as client:
+        info = client.scheduler_info()
+        nthreads = {w: d.get("nthreads", 1) for w, d in info.get("workers", {}).items()}
+        stats.workers = len(nthreads)
+        stats.threads = sum(nthreads.values())
+        if stats.workers == 0:
+            raise RuntimeError(f"dask scheduler {address} has no workers")
+        for worker, n in nthreads.items():
+            if n != 1:
+                log.warning("worker %s has %d threads; mcchain expects 1 per process", worker, n)
+        setup = client.run(_worker_setup, solve, model.select(0, 1), scene)
+        stats.worker_info = [{"worker": w, **d} for w, d in setup.items()]
+        for entry in stats.worker_info:
+            log.info("worker %(worker)s warmed in %(warmup).2f s", entry)
+            if entry["numba_threads"] != 1:
+                log.warning(
+                    "worker %s runs %d numba threads (set NUMBA_NUM_THREADS=1 for its process)",
+                    entry["worker"],
+                    entry["numba_threads"],
+                )
+        stats.warmup = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        scene_future = client.scatter(scene, broadcast=True)
+        queue = deque(chunks)
+        in_flight = as_completed()
+
+        def submit() -> None:
+            start, stop = queue.popleft()
+            in_flight.add(
+                client.submit(
+                    _dask_task,
+                    solve,
+                    model.select(start, stop),
+                    scene_future,
+                    history_dtype,
+                    start,
+                    stop,
+                    pure=False,
+                )
+            )
+
+        for _ in range(min(2 * stats.workers, len(queue))):
+            submit()
+        for future in in_flight:
+            start, stop, outputs, seconds = future.result()
+            future.release()
+            if queue:
+                submit()
+            stats.kernel += seconds
+            t = time.perf_counter()
+            sink(outputs, start, stop)
+            stats.write += time.perf_counter() - t
+            del outputs
+            _chunk_done(stats, progress, (start, stop, seconds))
+        stats.compute = time.perf_counter() - t0
+    return stats
