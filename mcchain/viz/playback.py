@@ -344,7 +344,11 @@ def _part(name: str) -> str:
 
 
 def default_force_scale(
-    ds: xr.Dataset, model: Model, samples: Sequence[int], fraction: float = FORCE_ARROW_FRACTION
+    ds: xr.Dataset,
+    model: Model,
+    samples: Sequence[int],
+    fraction: float = FORCE_ARROW_FRACTION,
+    model_offset: int = 0,
 ) -> float:
     """m per N such that the largest joint force of ``samples`` is ``fraction`` of the
     mechanism size (1 if there is no finite non-zero force)."""
@@ -354,7 +358,7 @@ def default_force_scale(
         mag = np.hypot(jf[..., 0], jf[..., 1])
         if np.isfinite(mag).any():
             fmax = max(fmax, float(np.nanmax(mag)))
-    length = geometry.characteristic_length(model, _positions(ds, samples)[0])
+    length = geometry.characteristic_length(model, int(samples[0]) - model_offset)
     return fraction * length / fmax if fmax > 0.0 else 1.0
 
 
@@ -392,20 +396,22 @@ def log_samples(
     *,
     magnify: float = DEFAULT_MAGNIFY,
     force_scale: float | None = None,
+    model_offset: int = 0,
 ) -> None:
     """Log ``samples`` (global indices) of ``dataset`` to ``recording`` (see the module doc).
 
     Args:
         dataset: an ensemble (DESIGN §5 variables) or the chunk of it being computed; only
             the variables present are logged.
-        model: the model of the same samples, in the same order as ``dataset.sample``
-            (``model.nsample == dataset.sizes["sample"]``, or arrays of sample size 1); it
-            gives the geometry (attachment points, clearances) of each sample.
+        model: a model whose row ``s - model_offset`` is global sample ``s`` (the whole
+            run's model with offset 0, or ``model.select(start, stop)`` with offset
+            ``start``); it gives each sample's geometry (attachment points, clearances).
         samples: global sample indices (values of ``dataset.sample``).
         recording: where to log; ``None``: the current rerun recording.
         magnify: clearance offsets are drawn this many times longer.
         force_scale: force arrows, m per N; ``None``: :func:`default_force_scale` over these
             samples (pass a fixed value when logging chunk by chunk, so arrows compare).
+        model_offset: global index of the model's first row.
     """
     import rerun as rr
 
@@ -413,9 +419,10 @@ def log_samples(
         return
     positions = _positions(dataset, samples)
     if force_scale is None:
-        force_scale = default_force_scale(dataset, model, samples)
+        force_scale = default_force_scale(dataset, model, samples, model_offset=model_offset)
     for sample, pos in zip(samples, positions, strict=True):
-        _log_one(dataset, model, int(sample), pos, recording, rr, magnify, force_scale)
+        row = int(sample) - model_offset
+        _log_one(dataset, model, int(sample), pos, row, recording, rr, magnify, force_scale)
 
 
 def _log_one(
@@ -423,6 +430,7 @@ def _log_one(
     model: Model,
     sample: int,
     pos: int,
+    row: int,
     rec: rr.RecordingStream | None,
     rr: Any,
     magnify: float,
@@ -444,7 +452,7 @@ def _log_one(
     )
     ground = [k for k in range(model.njoint) if model.joint_body_a[k] == geometry.GROUND]
     if ground:
-        jpa = geometry._at(model.joint_point_a, pos)
+        jpa = geometry._at(model.joint_point_a, row)
         rr.log(
             f"{mech}/ground",
             rr.Points2D(
@@ -458,7 +466,7 @@ def _log_one(
         )
 
     # bodies ---------------------------------------------------------------------------------
-    outlines = geometry.body_outlines(model, pos)
+    outlines = geometry.body_outlines(model, row)
     world = [[geometry.to_world(strip, track.q[:, o.body]) for strip in o.strips] for o in outlines]
     per_frame = [strip for strips in world for strip in strips]
     colors = [BODY_COLORS[o.body % len(BODY_COLORS)] for o in outlines for _ in o.strips]
@@ -497,7 +505,7 @@ def _log_one(
 
     # joints, forces, clearances --------------------------------------------------------------
     if model.njoint:
-        jt = geometry.joint_track(model, pos, track.q, magnify)
+        jt = geometry.joint_track(model, row, track.q, magnify)
         rr.log(
             f"{mech}/joints",
             rr.Points2D.from_fields(colors=JOINT_COLOR, radii=-4.0, labels=list(model.joint_names)),
@@ -591,18 +599,23 @@ def _log_one(
 
 # -- blueprint and recording -------------------------------------------------------------------
 def view_bounds(
-    ds: xr.Dataset, model: Model, samples: Sequence[int], magnify: float = DEFAULT_MAGNIFY
+    ds: xr.Dataset,
+    model: Model,
+    samples: Sequence[int],
+    magnify: float = DEFAULT_MAGNIFY,
+    model_offset: int = 0,
 ) -> tuple[list[float], list[float]]:
     """x and y ranges (view coordinates, y down) that hold every drawn point of ``samples``."""
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
-    for pos in _positions(ds, samples):
+    for sample, pos in zip(samples, _positions(ds, samples), strict=True):
+        row = int(sample) - model_offset
         track = _track(ds, pos)
         pts = [track.q[:, :, :2].reshape(-1, 2)]
-        for o in geometry.body_outlines(model, pos):
+        for o in geometry.body_outlines(model, row):
             for strip in o.strips:
                 pts.append(geometry.to_world(strip, track.q[:, o.body]).reshape(-1, 2))
         if model.njoint:
-            jt = geometry.joint_track(model, pos, track.q, magnify)
+            jt = geometry.joint_track(model, row, track.q, magnify)
             pts += [jt.bearing.reshape(-1, 2), jt.drawn.reshape(-1, 2)]
         allpts = _flip(np.concatenate(pts))
         allpts = allpts[np.isfinite(allpts).all(axis=1)]
@@ -619,11 +632,12 @@ def make_blueprint(
     model: Model,
     samples: Sequence[int],
     magnify: float = DEFAULT_MAGNIFY,
+    model_offset: int = 0,
 ) -> rrb.Blueprint:
     """The default layout: mechanism views (one per sample) beside the plots."""
     import rerun.blueprint as rrb
 
-    x_range, y_range = view_bounds(ds, model, samples, magnify)
+    x_range, y_range = view_bounds(ds, model, samples, magnify, model_offset)
     bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
     mechanisms = [
         rrb.Spatial2DView(origin=f"/sample/{s}/mechanism", name=f"sample {s}", visual_bounds=bounds)
@@ -686,31 +700,61 @@ def open_recording(
 
 
 # -- command -----------------------------------------------------------------------------------
+def _attr_int(ds: xr.Dataset, name: str) -> int | None:
+    value = ds.attrs.get(name)
+    try:
+        return None if value is None else int(value)
+    except (TypeError, ValueError):  # "none": a run without [sample]
+        return None
+
+
 def _open_inputs(run: str | Path) -> tuple[xr.Dataset, Model]:
-    """The ensemble of a run folder and the model of its samples (geometry per sample)."""
-    from mcchain.runs import open_run
+    """The ensemble of a run folder and the model of the whole run (row = global sample).
+
+    The model is recompiled from the run's ``scene.toml`` with its ``sample_count`` and
+    ``seed`` attributes; a mismatch with the stored ``parameters`` is logged (the geometry
+    of sampled attachment points would then be the recompiled one).
+    """
+    from mcchain.runs import open_run, resolve_run
     from mcchain.scene import compile_model, load_scene
 
-    ds = open_run(str(run))
-    scene = load_scene(Path(run) / "scene.toml")
-    nparam = ds.sizes.get("param", 0)
-    if nparam:
-        seed = ds.attrs.get("seed")
-        model = compile_model(
-            scene, nsample=ds.sizes["sample"], seed=None if seed is None else int(seed)
+    folder = resolve_run(run)
+    ds = open_run(folder)
+    scene = load_scene(folder / "scene.toml")
+    if not ds.sizes.get("param", 0):
+        return ds, compile_model(scene)
+    count = _attr_int(ds, "sample_count") or int(_sample_ids(ds).max()) + 1
+    seed = _attr_int(ds, "seed")
+    model = compile_model(scene, nsample=count, seed=seed)
+    ids = _sample_ids(ds)
+    stored = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
+    if ids.max() >= model.nsample or not np.allclose(
+        model.parameters[ids], stored, rtol=1e-12, atol=0.0, equal_nan=True
+    ):
+        log.warning(
+            "%s: the scene recompiled (%d samples, seed %s) does not reproduce the stored "
+            "parameters; sampled geometry is drawn from the recompiled model",
+            run,
+            count,
+            seed,
         )
-        stored = np.asarray(ds["parameters"].values, dtype=np.float64)
-        if model.parameters.shape != stored.shape or not np.allclose(
-            model.parameters, stored, rtol=1e-12, atol=0.0, equal_nan=True
-        ):
-            log.warning(
-                "the scene recompiled with seed %s does not reproduce the run's parameters; "
-                "sampled geometry is drawn from the recompiled model",
-                seed,
-            )
-    else:
-        model = compile_model(scene)
     return ds, model
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    """Usage errors as :class:`RunError` (one line through the CLI), not ``SystemExit``."""
+
+    def error(self, message: str) -> Any:
+        raise RunError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``mcchain show`` parser (see :func:`add_arguments`)."""
+    parser = _ArgumentParser(
+        prog="mcchain show", description="replay samples of a run in the rerun viewer"
+    )
+    add_arguments(parser)
+    return parser
 
 
 def show(
@@ -742,9 +786,15 @@ def show(
     rr.script_teardown(rr_args)
 
 
-def main(args: argparse.Namespace) -> int:
-    """``mcchain show RUN ...`` (arguments of :func:`add_arguments`); prints the samples shown
-    and, with ``--save``, the file."""
+def main(argv: Sequence[str] | argparse.Namespace | None = None) -> int:
+    """``mcchain show RUN ...``: the command-line words after ``show`` (or parsed arguments
+    of :func:`add_arguments`); prints the samples shown and, with ``--save``, the file."""
+    import sys
+
+    if isinstance(argv, argparse.Namespace):
+        args = argv
+    else:
+        args = build_parser().parse_args(sys.argv[2:] if argv is None else list(argv))
     ds, model = _open_inputs(args.run)
     samples = select_samples(
         ds,

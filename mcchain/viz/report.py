@@ -1,0 +1,622 @@
+"""Plots of an ensemble as PNG files (``mcchain report RUN [--out DIR]``).
+
+Each figure is drawn only when the run holds what it needs; otherwise it is skipped and the
+reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, default
+``RUN/report``):
+
+==============================  ==========================================================
+``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``)
+``scatter_<result>.png``        each result against each sampled parameter, with a
+                                least-squares trend line and Pearson's r; results are
+                                ``omega`` (modes), ``q_eq`` (body, dof),
+                                ``joint_force_eq`` (magnitude per joint) and
+                                ``peak_contact_force`` (max |λ| over time per clearance
+                                joint)
+``reaction_envelopes.png``      per joint |f| over time (and λ of clearance joints, driver
+                                torques): median and 5–95 % band over the samples
+``contact_loss.png``            which samples lost contact, and when
+                                (``contact_lost_time``), with the fraction lost by time t
+``status_counts.png``           how many samples carry each status flag
+``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and peak |λ|,
+                                for a ``design = "sobol"`` run only: first- and
+                                total-order (``SALib.analyze.sobol``) when the samples
+                                have Saltelli's layout (rows A, AB_1..AB_D[, BA_1..BA_D],
+                                B per base point, as ``SALib.sample.sobol.sample`` makes
+                                them); for plain scrambled Sobol' points, first-order
+                                only (``SALib.analyze.rbd_fast``, given data)
+==============================  ==========================================================
+
+Figures are made with :class:`matplotlib.figure.Figure` and the Agg canvas (no pyplot, no
+global backend switch). A lazy ensemble is read in blocks, never whole.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import logging
+import tomllib
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mcchain.status import Status, counts
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.figure import Figure
+
+log = logging.getLogger(__name__)
+
+MAX_SCATTER_POINTS = 4000
+"""Points drawn per scatter panel (a fixed random subset; trends use every sample)."""
+MAX_ENVELOPE_TIMES = 400
+"""Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
+BLOCK_BYTES = 64 * 2**20
+"""Memory budget of one block read from the ensemble."""
+SOBOL_RESAMPLES = 200
+"""Bootstrap resamples of SALib's confidence intervals."""
+MIN_RBD_SAMPLES = 64
+"""Fewest samples for RBD-FAST first-order indices (its harmonics need a few per period)."""
+SOBOL_SEED = 12345
+"""Seed of SALib's bootstrap, so reports are reproducible."""
+DPI = 100
+
+
+@dataclass
+class Report:
+    """What :func:`make_report` wrote and what it skipped (figure name -> reason)."""
+
+    written: list[Path] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Result:
+    """One family of per-sample results: ``values`` (nsample, ncomponent), labelled."""
+
+    name: str
+    labels: tuple[str, ...]
+    values: np.ndarray
+    units: str
+
+
+@dataclass(frozen=True)
+class SobolIndices:
+    """Sobol indices of one output over the sampled parameters (arrays of length nparam)."""
+
+    output: str
+    S1: np.ndarray
+    S1_conf: np.ndarray
+    ST: np.ndarray
+    ST_conf: np.ndarray
+    method: str = "sobol"
+    """``"sobol"`` (Saltelli layout: S1 and ST) or ``"rbd_fast"`` (S1 only, ST NaN)."""
+
+
+# -- reading -----------------------------------------------------------------------------------
+def _block(ds: xr.Dataset, name: str, axis: str) -> int:
+    """How many entries along ``axis`` fit in :data:`BLOCK_BYTES` of float64."""
+    da = ds[name]
+    per = 8 * int(np.prod([da.sizes[d] for d in da.dims if d != axis], dtype=np.int64))
+    return max(1, BLOCK_BYTES // max(per, 1))
+
+
+def _names(ds: xr.Dataset, dim: str) -> list[str]:
+    if dim in ds.coords:
+        return [str(v) for v in ds[dim].values]
+    return [str(i) for i in range(ds.sizes.get(dim, 0))]
+
+
+def _peak_abs_over_time(ds: xr.Dataset, name: str) -> np.ndarray:
+    """max over time of |name| per sample and trailing component: (nsample, ...)."""
+    da = ds[name].transpose("sample", "time", ...)
+    n, step = ds.sizes["sample"], _block(ds, name, "sample")
+    out = None
+    for start in range(0, n, step):
+        a = np.abs(np.asarray(da.isel(sample=slice(start, start + step)).values, float))
+        finite = np.isfinite(a)
+        peak = np.where(finite, a, -np.inf).max(axis=1, initial=-np.inf)
+        peak = np.where(finite.any(axis=1), peak, np.nan)
+        if out is None:
+            out = np.full((n, *peak.shape[1:]), np.nan)
+        out[start : start + len(peak)] = peak
+    return out if out is not None else np.empty((0,))
+
+
+def results(ds: xr.Dataset) -> list[Result]:
+    """The per-sample results present in the ensemble (see the module docstring)."""
+    out: list[Result] = []
+    if "omega" in ds.data_vars and ds.sizes.get("mode", 0):
+        omega = np.asarray(ds["omega"].transpose("sample", "mode").values, float)
+        out.append(Result("omega", tuple(f"ω{k}" for k in range(omega.shape[1])), omega, "rad/s"))
+    if "q_eq" in ds.data_vars:
+        q = np.asarray(ds["q_eq"].transpose("sample", "body", "dof").values, float)
+        labels = tuple(f"{b}.{d}" for b in _names(ds, "body") for d in _names(ds, "dof"))
+        out.append(Result("q_eq", labels, q.reshape(q.shape[0], -1), "m, rad"))
+    if "joint_force_eq" in ds.data_vars and ds.sizes.get("joint", 0):
+        f = np.asarray(ds["joint_force_eq"].transpose("sample", "joint", "xy").values, float)
+        out.append(
+            Result(
+                "joint_force_eq",
+                tuple(f"|f {j}|" for j in _names(ds, "joint")),
+                np.hypot(f[..., 0], f[..., 1]),
+                "N",
+            )
+        )
+    if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
+        peak = _peak_abs_over_time(ds, "contact_force")
+        keep = np.isfinite(peak).any(axis=0) if peak.ndim == 2 else np.zeros(0, bool)
+        if keep.any():
+            names = [j for j, k in zip(_names(ds, "joint"), keep, strict=True) if k]
+            out.append(
+                Result(
+                    "peak_contact_force",
+                    tuple(f"peak |λ {j}|" for j in names),
+                    peak[:, keep],
+                    "N",
+                )
+            )
+    return out
+
+
+def run_design(run: str | Path, ds: xr.Dataset | None = None) -> str | None:
+    """The ``[sample] design`` of a run: from ``RUN/scene.toml``, else the ensemble's scene
+    text attribute; ``"random"`` when the scene samples without naming a design; ``None`` if
+    there is no scene or no ``[sample]``."""
+    texts = []
+    path = Path(run) / "scene.toml"
+    if path.is_file():
+        texts.append(path.read_text())
+    if ds is not None:
+        texts += [v for k, v in ds.attrs.items() if "scene" in str(k) and isinstance(v, str)]
+    for text in texts:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError:
+            continue
+        sample = data.get("sample")
+        if isinstance(sample, dict):
+            return str(sample.get("design", "random"))
+        return None
+    return None
+
+
+# -- figures -----------------------------------------------------------------------------------
+def _figure(nrow: int, ncol: int, w: float = 3.2, h: float = 2.5) -> tuple[Figure, np.ndarray]:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(max(4.0, w * ncol), max(3.0, h * nrow)), dpi=DPI, layout="constrained")
+    axes = np.asarray(fig.subplots(nrow, ncol, squeeze=False))
+    return fig, axes
+
+
+def _grid(n: int, max_col: int = 4) -> tuple[int, int]:
+    ncol = min(n, max_col)
+    return (n + ncol - 1) // ncol, ncol
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def omega_histogram(ds: xr.Dataset, path: Path) -> Path | str:
+    """Histogram of each eigenpulsation."""
+    if "omega" not in ds.data_vars or not ds.sizes.get("mode", 0):
+        return "the run has no eigenpulsations ([modes] absent)"
+    omega = np.asarray(ds["omega"].transpose("sample", "mode").values, float)
+    nrow, ncol = _grid(omega.shape[1])
+    fig, axes = _figure(nrow, ncol)
+    for k, ax in enumerate(axes.flat):
+        if k >= omega.shape[1]:
+            ax.set_visible(False)
+            continue
+        w = omega[:, k][np.isfinite(omega[:, k])]
+        if len(w):
+            ax.hist(w, bins=min(60, max(5, int(np.sqrt(len(w))))), color="C0", alpha=0.85)
+            ax.set_title(f"ω{k}: mean {w.mean():.4g}, sd {w.std():.3g}", fontsize=9)
+        else:
+            ax.text(0.5, 0.5, "no finite value", ha="center", transform=ax.transAxes)
+            ax.set_title(f"ω{k}", fontsize=9)
+        ax.set_xlabel("rad/s")
+        ax.set_ylabel("samples")
+    fig.suptitle(f"eigenpulsations, {omega.shape[0]} samples")
+    return _save(fig, path)
+
+
+def _trend(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float] | None:
+    """Least-squares line y = a + b x and Pearson's r over the finite pairs."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 3 or np.ptp(x[ok]) == 0.0:
+        return None
+    b, a = np.polyfit(x[ok], y[ok], 1)
+    r = float(np.corrcoef(x[ok], y[ok])[0, 1]) if np.ptp(y[ok]) > 0 else 0.0
+    return float(a), float(b), r
+
+
+def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
+    """Each component of ``result`` against each sampled parameter, with a trend line."""
+    nparam = ds.sizes.get("param", 0)
+    if "parameters" not in ds.data_vars or not nparam:
+        return "the run samples no parameter ([sample] absent)"
+    params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
+    paths = _names(ds, "param")
+    rows = [k for k in range(result.values.shape[1]) if np.isfinite(result.values[:, k]).any()]
+    if not rows:
+        return f"{result.name} has no finite value"
+    n = params.shape[0]
+    shown = np.arange(n)
+    if n > MAX_SCATTER_POINTS:
+        shown = np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER_POINTS, replace=False))
+    fig, axes = _figure(len(rows), nparam, w=2.8, h=2.2)
+    alpha = float(np.clip(200.0 / max(len(shown), 1), 0.08, 0.8))
+    for i, k in enumerate(rows):
+        y = result.values[:, k]
+        for j in range(nparam):
+            ax = axes[i, j]
+            x = params[:, j]
+            ax.scatter(x[shown], y[shown], s=6, alpha=alpha, color="C0", linewidths=0)
+            fit = _trend(x, y)
+            if fit is not None:
+                a, b, r = fit
+                xs = np.array([np.nanmin(x), np.nanmax(x)])
+                ax.plot(xs, a + b * xs, color="C3", lw=1.5, label=f"r = {r:+.2f}")
+                ax.legend(loc="best", fontsize=7, frameon=False)
+            if i == len(rows) - 1:
+                ax.set_xlabel(paths[j], fontsize=8)
+            if j == 0:
+                ax.set_ylabel(result.labels[k], fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(f"{result.name} ({result.units}) against the sampled parameters, {n} samples")
+    return _save(fig, path)
+
+
+def _envelope(ds: xr.Dataset, name: str, reduce: Callable[[np.ndarray], np.ndarray]) -> Any:
+    """Quantiles (3, ntime_shown, ncomp) of ``reduce(block)`` over samples, and the times."""
+    da = ds[name].transpose("time", "sample", ...)
+    nt = ds.sizes["time"]
+    idx = np.unique(np.linspace(0, nt - 1, min(nt, MAX_ENVELOPE_TIMES)).round().astype(int))
+    step = _block(ds, name, "time")
+    parts = []
+    for start in range(0, len(idx), step):
+        a = reduce(np.asarray(da.isel(time=idx[start : start + step]).values, float))
+        a = a.reshape(a.shape[0], a.shape[1], -1)  # (time, sample, comp)
+        with warnings.catch_warnings():  # all-NaN columns (failed samples) give NaN quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            parts.append(np.nanquantile(a, [0.05, 0.5, 0.95], axis=1))
+    time = np.asarray(ds["time"].values, float)[idx]
+    return np.concatenate(parts, axis=1), time
+
+
+def reaction_envelopes(ds: xr.Dataset, path: Path) -> Path | str:
+    """Median and 5–95 % band over the samples of every reaction over time."""
+    if "time" not in ds.dims or "joint_force" not in ds.data_vars:
+        return "the run has no time history of joint forces ([simulate] absent)"
+    panels: list[tuple[str, np.ndarray, np.ndarray, str]] = []
+    q, time = _envelope(ds, "joint_force", lambda a: np.hypot(a[..., 0], a[..., 1]))
+    for k, j in enumerate(_names(ds, "joint")):
+        panels.append((f"|f {j}|", q[..., k], time, "N"))
+    if "contact_force" in ds.data_vars:
+        q, time = _envelope(ds, "contact_force", lambda a: a)
+        for k, j in enumerate(_names(ds, "joint")):
+            if np.isfinite(q[..., k]).any():
+                panels.append((f"λ {j} (contact)", q[..., k], time, "N"))
+    if "driver_torque" in ds.data_vars and ds.sizes.get("driver", 0):
+        q, time = _envelope(ds, "driver_torque", lambda a: a)
+        for k, d in enumerate(_names(ds, "driver")):
+            panels.append((f"driver torque {d}", q[..., k], time, "N m"))
+    nrow, ncol = _grid(len(panels), 2)
+    fig, axes = _figure(nrow, ncol, w=4.5, h=2.6)
+    for ax, (title, quant, t, units) in zip(axes.flat, panels, strict=False):
+        ax.fill_between(t, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
+        ax.plot(t, quant[1], color="C0", lw=1.2, label="median")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel(units)
+        ax.legend(fontsize=7, frameon=False)
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
+    fig.suptitle(f"reactions over time, {ds.sizes['sample']} samples")
+    return _save(fig, path)
+
+
+def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
+    """Which samples lost contact at a clearance joint, and when."""
+    if "contact_lost_time" not in ds.data_vars:
+        return "the run has no contact_lost_time (no clearance joint or no [simulate])"
+    t_lost = np.asarray(ds["contact_lost_time"].values, float)
+    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(len(t_lost))
+    lost = np.isfinite(t_lost)
+    fig, axes = _figure(1, 2, w=4.5, h=3.2)
+    ax = axes[0, 0]
+    ax.scatter(t_lost[lost], ids[lost], s=8, color="C3")
+    ax.set_xlabel("contact_lost_time (s)")
+    ax.set_ylabel("sample")
+    if len(ids):
+        ax.set_ylim(float(ids.min()) - 0.5, float(ids.max()) + 0.5)
+    ax.set_title(f"{int(lost.sum())} of {len(t_lost)} samples lost contact", fontsize=9)
+    if "time" in ds.coords and ds.sizes.get("time", 0):
+        time = np.asarray(ds["time"].values, float)
+        ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
+    else:
+        time = np.sort(t_lost[lost]) if lost.any() else np.zeros(1)
+    ax = axes[0, 1]
+    frac = np.searchsorted(np.sort(t_lost[lost]), time, side="right") / max(len(t_lost), 1)
+    ax.step(time, 100.0 * frac, where="post", color="C3")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("% of samples")
+    ax.set_ylim(-2, 102)
+    ax.set_title("samples that lost contact by time t", fontsize=9)
+    return _save(fig, path)
+
+
+def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
+    """Bar chart of how many samples carry each status flag."""
+    if "status" not in ds.data_vars:
+        return "the run has no status variable"
+    c = counts(np.asarray(ds["status"].values))
+    names = ["ok", *(flag.meaning for flag in Status)]
+    values = [c[n] for n in names]
+    fig, axes = _figure(1, 1, w=7.0, h=3.6)
+    ax = axes[0, 0]
+    colors = ["C2"] + ["C3" if f.value & 0b1111 else "C1" for f in Status]
+    bars = ax.bar(range(len(names)), values, color=colors)
+    ax.bar_label(bars, fontsize=8)
+    ax.set_xticks(range(len(names)), [n.replace("_", "\n") for n in names], fontsize=8)
+    ax.set_ylabel("samples")
+    ax.set_title(f"status of {len(np.asarray(ds['status'].values))} samples (flags may overlap)")
+    return _save(fig, path)
+
+
+# -- Sobol -------------------------------------------------------------------------------------
+def saltelli_layout(params: np.ndarray) -> tuple[int, bool] | None:
+    """``(N, calc_second_order)`` if the rows of ``params`` (n, D) have Saltelli's layout
+    (``SALib.sample.sobol.sample``: per base point the rows A, AB_1..AB_D, [BA_1..BA_D,] B,
+    where AB_j is A with column j from B), else ``None``."""
+    params = np.asarray(params, dtype=np.float64)
+    n, d = params.shape
+    if d == 0 or n == 0:
+        return None
+    for second in (True, False):
+        step = 2 * d + 2 if second else d + 2
+        if n % step:
+            continue
+        groups = params.reshape(n // step, step, d)
+        a, b = groups[:, 0], groups[:, -1]
+        ok = True
+        for j in range(d):
+            ab = a.copy()
+            ab[:, j] = b[:, j]
+            ok &= bool(np.array_equal(groups[:, 1 + j], ab, equal_nan=True))
+            if second:
+                ba = b.copy()
+                ba[:, j] = a[:, j]
+                ok &= bool(np.array_equal(groups[:, 1 + d + j], ba, equal_nan=True))
+        if ok and not np.array_equal(a, b, equal_nan=True):
+            return n // step, second
+    return None
+
+
+def sobol_indices(
+    params: np.ndarray,
+    outputs: dict[str, np.ndarray],
+    names: list[str],
+    skipped: dict[str, str] | None = None,
+) -> list[SobolIndices] | str:
+    """Sobol indices of each output over the sampled parameters, with SALib.
+
+    * Samples in Saltelli's layout (:func:`saltelli_layout`): first- and total-order indices
+      by ``SALib.analyze.sobol`` (Saltelli 2010 / Jansen estimators).
+    * Any other sample (e.g. plain scrambled Sobol' points, as the ``"sobol"`` design draws
+      them): first-order indices only, by ``SALib.analyze.rbd_fast`` (a given-data estimator
+      valid for any sample of independent inputs); ``ST`` is NaN, since total-order indices
+      need the A/B/AB_j rows.
+
+    Args:
+        params: (n, D) sampled parameters.
+        outputs: output label -> (n,) values; outputs with a non-finite value or no variance
+            are left out (their reason goes into ``skipped``).
+        names: the D parameter names.
+
+    Returns:
+        The indices, or the reason why none could be computed.
+    """
+    from SALib.analyze import rbd_fast, sobol
+
+    params = np.asarray(params, dtype=np.float64)
+    layout = saltelli_layout(params)
+    d = len(names)
+    problem = {"num_vars": d, "names": list(names), "bounds": [[0.0, 1.0]] * d}
+    if layout is None:
+        if params.shape[0] < MIN_RBD_SAMPLES:
+            return (
+                f"{params.shape[0]} samples without Saltelli's layout: too few for first-order "
+                f"indices by RBD-FAST (at least {MIN_RBD_SAMPLES})"
+            )
+        log.info(
+            "sobol: the samples do not have Saltelli's layout (A, AB_j[, BA_j], B rows): "
+            "first-order indices by RBD-FAST only, no total-order indices"
+        )
+    found: list[SobolIndices] = []
+    for label, y in outputs.items():
+        y = np.asarray(y, dtype=np.float64)
+        finite = np.isfinite(y)
+        reason = None
+        if layout is not None and not finite.all():
+            reason = f"{int((~finite).sum())} samples have no finite value (Saltelli rows)"
+        elif layout is None and finite.sum() < MIN_RBD_SAMPLES:
+            reason = f"only {int(finite.sum())} samples have a finite value"
+        elif np.ptp(y[finite]) == 0.0:
+            reason = "constant over the samples"
+        if reason is not None:
+            log.info("sobol: %s left out: %s", label, reason)
+            if skipped is not None:
+                skipped[f"sobol {label}"] = reason
+            continue
+        if layout is not None:
+            si = sobol.analyze(
+                problem,
+                y,
+                calc_second_order=layout[1],
+                num_resamples=SOBOL_RESAMPLES,
+                seed=SOBOL_SEED,
+            )
+            st, st_conf = np.asarray(si["ST"], float), np.asarray(si["ST_conf"], float)
+        else:
+            if not finite.all():
+                log.info("sobol: %s: %d failed samples left out", label, (~finite).sum())
+            si = rbd_fast.analyze(
+                problem,
+                params[finite],
+                y[finite],
+                num_resamples=SOBOL_RESAMPLES,
+                seed=SOBOL_SEED,
+            )
+            st, st_conf = np.full(d, np.nan), np.full(d, np.nan)
+        found.append(
+            SobolIndices(
+                label,
+                np.asarray(si["S1"], float),
+                np.asarray(si["S1_conf"], float),
+                st,
+                st_conf,
+                "sobol" if layout is not None else "rbd_fast",
+            )
+        )
+    if not found:
+        return "no output with finite, varying values to analyse"
+    return found
+
+
+def sobol_figure(
+    ds: xr.Dataset,
+    design: str | None,
+    path: Path,
+    csv_path: Path,
+    skipped: dict[str, str] | None = None,
+) -> Path | str:
+    """``sobol.png`` (grouped bars S1/ST with confidence intervals) and ``sobol.csv``."""
+    if design != "sobol":
+        return f'the sample design is {design!r}, not "sobol"'
+    if "parameters" not in ds.data_vars or not ds.sizes.get("param", 0):
+        return "the run samples no parameter"
+    params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
+    names = _names(ds, "param")
+    outputs: dict[str, np.ndarray] = {}
+    for result in results(ds):
+        if result.name == "q_eq":
+            continue
+        for k, label in enumerate(result.labels):
+            outputs[label] = result.values[:, k]
+    if not outputs:
+        return "the run has no scalar result to analyse"
+    found = sobol_indices(params, outputs, names, skipped)
+    if isinstance(found, str):
+        return found
+    with open(csv_path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["output", "parameter", "method", "S1", "S1_conf", "ST", "ST_conf"])
+        for s in found:
+            for j, name in enumerate(names):
+                values = (f"{v[j]:.6g}" for v in (s.S1, s.S1_conf, s.ST, s.ST_conf))
+                writer.writerow([s.output, name, s.method, *values])
+    nrow, ncol = _grid(len(found), 3)
+    fig, axes = _figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
+    x = np.arange(len(names))
+    for ax, s in zip(axes.flat, found, strict=False):
+        ax.bar(x - 0.2, s.S1, 0.4, yerr=s.S1_conf, capsize=2, label="first order S1")
+        if np.isfinite(s.ST).any():
+            ax.bar(x + 0.2, s.ST, 0.4, yerr=s.ST_conf, capsize=2, label="total order ST")
+        ax.set_xticks(x, names, rotation=30, ha="right", fontsize=7)
+        ax.set_ylim(min(0.0, float(np.nanmin(s.S1 - s.S1_conf))) - 0.02, 1.05)
+        ax.set_title(s.output, fontsize=9)
+        ax.legend(fontsize=7, frameon=False)
+    for ax in list(axes.flat)[len(found) :]:
+        ax.set_visible(False)
+    how = (
+        "SALib sobol on Saltelli's layout"
+        if found[0].method == "sobol"
+        else "first order only (RBD-FAST):\nthe samples lack Saltelli's layout"
+    )
+    fig.suptitle(f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}", fontsize=10)
+    return _save(fig, path)
+
+
+# -- command -----------------------------------------------------------------------------------
+def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = None) -> Report:
+    """Write every figure the ensemble allows into ``out_dir`` (created if needed)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = Report()
+
+    def record(name: str, produced: Path | str) -> None:
+        if isinstance(produced, Path):
+            report.written.append(produced)
+        else:
+            log.info("report: %s skipped: %s", name, produced)
+            report.skipped[name] = produced
+
+    record("omega_histogram.png", omega_histogram(ds, out / "omega_histogram.png"))
+    found = results(ds)
+    if not found:
+        record("scatter_*.png", "the run has no equilibrium, mode or contact result")
+    for result in found:
+        name = f"scatter_{result.name}.png"
+        record(name, scatter(ds, result, out / name))
+    record("reaction_envelopes.png", reaction_envelopes(ds, out / "reaction_envelopes.png"))
+    record("contact_loss.png", contact_loss(ds, out / "contact_loss.png"))
+    record("status_counts.png", status_counts(ds, out / "status_counts.png"))
+    record(
+        "sobol.png",
+        sobol_figure(ds, design, out / "sobol.png", out / "sobol.csv", report.skipped),
+    )
+    return report
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``mcchain report`` arguments to ``parser``."""
+    parser.add_argument("run", help="run folder (or its id under runs/)")
+    parser.add_argument("--out", metavar="DIR", help="folder of the PNG files (default RUN/report)")
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    """Usage errors as :class:`RunError` (one line through the CLI), not ``SystemExit``."""
+
+    def error(self, message: str) -> Any:
+        from mcchain.errors import RunError
+
+        raise RunError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``mcchain report`` parser."""
+    parser = _ArgumentParser(prog="mcchain report", description="draw a run's plots as PNG")
+    add_arguments(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | argparse.Namespace | None = None) -> int:
+    """``mcchain report RUN [--out DIR]``: the command-line words after ``report`` (or parsed
+    arguments); prints each figure skipped (with why) and each file written."""
+    import sys
+
+    from mcchain.runs import open_run, resolve_run
+
+    if isinstance(argv, argparse.Namespace):
+        args = argv
+    else:
+        args = build_parser().parse_args(sys.argv[2:] if argv is None else list(argv))
+    folder = resolve_run(args.run)
+    ds = open_run(folder)
+    out = Path(args.out) if getattr(args, "out", None) else folder / "report"
+    report = make_report(ds, out, design=run_design(folder, ds))
+    for name, reason in report.skipped.items():
+        print(f"skipped {name}: {reason}")
+    for path in report.written:
+        print(path)
+    return 0
