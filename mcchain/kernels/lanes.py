@@ -1,0 +1,735 @@
+"""Lane-form evaluation of the equations of motion, generated per scene topology.
+
+PERFORMANCE.md: a group of ``lanes`` instances is advanced in lockstep with the instance index
+innermost (``x[..., lane]``), the lane count is a run-time argument, the step is one fused
+function body, and sin/cos are a branch-free polynomial. To get a fused body without paying
+for what a scene does not have, the straight-line code for one lane is *generated* from the
+scene's topology (which bodies each joint, driver, force and spring connects, and the joint
+kinds) — never from parameter values, which are read per lane from the packed array ``P``.
+The generated module is written once to a cache folder under a name that is the hash of its
+text (and of these generator sources), so numba's ``cache=True`` works for it as for any file.
+
+What this module provides:
+
+* :class:`Topology`: the hashable structure of a :class:`~mcchain.model.Model`.
+* :func:`pack_parameters`: the per-sample parameters as ``P`` (nslot, nsample), float64,
+  sample innermost; the slot of each named quantity is fixed by :class:`Topology`.
+* :class:`Emitter`: straight-line code for one lane — the index-1 acceleration (Schur
+  complement S = B M⁻¹ Bᵀ, sparse LDLᵀ in a bandwidth-reducing row order), the constraint
+  projection, the outputs (joint forces, energy, max |Φ|). Integrators (``integrators.py``)
+  put these blocks into their time-stepping templates.
+* :func:`load_module`: write a generated source to the cache and import it.
+* :func:`sincos`: the polynomial sine/cosine (also emitted inline into generated code).
+
+Formulation: DESIGN §2 (and ``mcchain/kernels/joints.py``, whose conventions are mirrored:
+rotated point p = A(θ) s, d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+from numba import njit
+
+from mcchain.kernels.config import JIT
+from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model
+
+# ---------------------------------------------------------------------------------------------
+# sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
+# (quadrant chosen by selects), so the lane loop vectorises; ≤ 1 ulp-ish for |x| < 1e6 rad.
+
+_SINCOS_TEMPLATE = "\n".join(
+    [
+        "{k} = math.floor({x} * 0.6366197723675814 + 0.5)",
+        "{r} = (({x} - {k} * 1.5707963267341256) - {k} * 6.077100506303966e-11)"
+        " - {k} * 2.0222662487111665e-21",
+        "{z} = {r} * {r}",
+        "{ps} = {r} + ({z} * {r}) * (-0.16666666666666632 + {z} * (0.008333333333322489"
+        " + {z} * (-0.00019841269829857949 + {z} * (2.755731370707007e-06"
+        " + {z} * (-2.5050760253406863e-08 + {z} * 1.5896909952115501e-10)))))",
+        "{hz} = 0.5 * {z}",
+        "{w} = 1.0 - {hz}",
+        "{pc} = {w} + (((1.0 - {w}) - {hz}) + {z} * ({z} * (0.0416666666666666"
+        " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
+        " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
+        " + {z} * -1.1359647557788195e-11)))))))",
+        "{j} = {k} - 4.0 * math.floor({k} * 0.25)",
+        "{sw} = ({j} == 1.0) or ({j} == 3.0)",
+        "{sa} = {pc} if {sw} else {ps}",
+        "{ca} = {ps} if {sw} else {pc}",
+        "{sin} = -{sa} if {j} >= 2.0 else {sa}",
+        "{cos} = -{ca} if ({j} == 1.0 or {j} == 2.0) else {ca}",
+    ]
+)
+
+
+def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
+    """Lines computing ``sin``/``cos`` of the expression ``x`` (temporaries suffixed ``tag``)."""
+    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "sw", "sa", "ca")
+    names = {n: f"_{n}{tag}" for n in temps}
+    return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
+
+
+def _sincos_function() -> str:
+    body = "\n".join("    " + line for line in sincos_code("x", "s", "c", ""))
+    return f"def sincos(x):\n{body}\n    return s, c\n"
+
+
+_namespace: dict[str, object] = {"math": __import__("math")}
+exec(_sincos_function(), _namespace)
+# exec'd code has no file for numba's cache: compiled uncached (it serves tests and tools).
+sincos = njit(**dict(JIT, cache=False))(_namespace["sincos"])
+sincos.__doc__ = "(sin x, cos x) by the branch-free polynomial that generated kernels inline."
+
+
+# ---------------------------------------------------------------------------------------------
+# Topology and parameter packing
+
+
+@dataclass(frozen=True)
+class Topology:
+    """The structure of a model that generated code depends on (never parameter values).
+
+    Constraint rows follow :func:`mcchain.model.constraint_rows`: joints in order (2 rows
+    ideal, 1 clearance), then drivers.
+    """
+
+    nbody: int
+    joint_a: tuple[int, ...]
+    joint_b: tuple[int, ...]
+    joint_kind: tuple[int, ...]
+    driver_body: tuple[int, ...]
+    force_body: tuple[int, ...]
+    spring_a: tuple[int, ...]
+    spring_b: tuple[int, ...]
+
+    @classmethod
+    def from_model(cls, model: Model) -> Topology:
+        def t(a: np.ndarray) -> tuple[int, ...]:
+            return tuple(int(x) for x in np.asarray(a).reshape(-1))
+
+        return cls(
+            nbody=model.nbody,
+            joint_a=t(model.joint_body_a),
+            joint_b=t(model.joint_body_b),
+            joint_kind=t(model.joint_kind),
+            driver_body=t(model.driver_body),
+            force_body=t(model.force_body),
+            spring_a=t(model.spring_body_a),
+            spring_b=t(model.spring_body_b),
+        )
+
+    @property
+    def ndof(self) -> int:
+        return 3 * self.nbody
+
+    @property
+    def njoint(self) -> int:
+        return len(self.joint_kind)
+
+    @property
+    def ndriver(self) -> int:
+        return len(self.driver_body)
+
+    @property
+    def joint_row(self) -> tuple[int, ...]:
+        rows, r = [], 0
+        for kind in self.joint_kind:
+            rows.append(r)
+            r += 2 if kind == JOINT_IDEAL else 1
+        return tuple(rows)
+
+    @property
+    def driver_row(self) -> tuple[int, ...]:
+        first = sum(2 if k == JOINT_IDEAL else 1 for k in self.joint_kind)
+        return tuple(first + i for i in range(self.ndriver))
+
+    @property
+    def ncon(self) -> int:
+        return sum(2 if k == JOINT_IDEAL else 1 for k in self.joint_kind) + self.ndriver
+
+    @property
+    def clearance_rows(self) -> tuple[int, ...]:
+        return tuple(
+            r
+            for r, kind in zip(self.joint_row, self.joint_kind, strict=True)
+            if kind == JOINT_CLEARANCE
+        )
+
+    def slots(self) -> dict[str, int]:
+        """Row of ``P`` holding each named per-sample quantity."""
+        names = ["gx", "gy"]
+        for b in range(self.nbody):
+            names += [f"m{b}", f"J{b}", f"im{b}", f"iJ{b}"]
+        for k, kind in enumerate(self.joint_kind):
+            names += [f"sax{k}", f"say{k}", f"sbx{k}", f"sby{k}"]
+            if kind == JOINT_CLEARANCE:
+                names.append(f"cl{k}")
+        for d in range(self.ndriver):
+            names += [f"th0_{d}", f"om{d}"]
+        for f in range(len(self.force_body)):
+            names += [f"fpx{f}", f"fpy{f}", f"fx{f}", f"fy{f}", f"tq{f}"]
+        for s in range(len(self.spring_a)):
+            names += [f"spax{s}", f"spay{s}", f"spbx{s}", f"spby{s}", f"k{s}", f"l0{s}", f"cd{s}"]
+        return {n: i for i, n in enumerate(names)}
+
+
+def pack_parameters(model: Model, topology: Topology | None = None) -> np.ndarray:
+    """The parameters of every sample as ``P`` (nslot, nsample), sample innermost."""
+    topo = topology or Topology.from_model(model)
+    slots = topo.slots()
+    n = model.nsample
+    P = np.empty((len(slots), n), dtype=np.float64)
+
+    def put(name: str, column: np.ndarray) -> None:
+        P[slots[name]] = np.broadcast_to(np.asarray(column, dtype=np.float64), (n,))
+
+    def col(arr: np.ndarray, *index: int) -> np.ndarray:
+        a = np.asarray(arr, dtype=np.float64)
+        return a[(slice(None), *index)]
+
+    put("gx", col(model.gravity, 0))
+    put("gy", col(model.gravity, 1))
+    for b in range(topo.nbody):
+        m = col(model.body_mass, b)
+        J = col(model.body_inertia, b)
+        put(f"m{b}", m)
+        put(f"J{b}", J)
+        put(f"im{b}", 1.0 / m)
+        put(f"iJ{b}", 1.0 / J)
+    for k, kind in enumerate(topo.joint_kind):
+        put(f"sax{k}", col(model.joint_point_a, k, 0))
+        put(f"say{k}", col(model.joint_point_a, k, 1))
+        put(f"sbx{k}", col(model.joint_point_b, k, 0))
+        put(f"sby{k}", col(model.joint_point_b, k, 1))
+        if kind == JOINT_CLEARANCE:
+            put(f"cl{k}", col(model.joint_clearance, k))
+    for d in range(topo.ndriver):
+        put(f"th0_{d}", col(model.driver_angle0, d))
+        put(f"om{d}", col(model.driver_omega, d))
+    for f in range(len(topo.force_body)):
+        put(f"fpx{f}", col(model.force_point, f, 0))
+        put(f"fpy{f}", col(model.force_point, f, 1))
+        put(f"fx{f}", col(model.force_value, f, 0))
+        put(f"fy{f}", col(model.force_value, f, 1))
+        put(f"tq{f}", col(model.force_torque, f))
+    for s in range(len(topo.spring_a)):
+        put(f"spax{s}", col(model.spring_point_a, s, 0))
+        put(f"spay{s}", col(model.spring_point_a, s, 1))
+        put(f"spbx{s}", col(model.spring_point_b, s, 0))
+        put(f"spby{s}", col(model.spring_point_b, s, 1))
+        put(f"k{s}", col(model.spring_stiffness, s))
+        put(f"l0{s}", col(model.spring_rest_length, s))
+        put(f"cd{s}", col(model.spring_damping, s))
+    return P
+
+
+# ---------------------------------------------------------------------------------------------
+# Symbolic helpers: a coefficient is a float constant or the name of a scalar variable.
+
+Coef = float | str
+
+
+def _mul(*factors: Coef) -> Coef:
+    const = 1.0
+    names = []
+    for f in factors:
+        if isinstance(f, str):
+            names.append(f)
+        else:
+            const *= f
+    if const == 0.0:
+        return 0.0
+    if not names:
+        return const
+    expr = " * ".join(names)
+    if const == 1.0:
+        return expr
+    if const == -1.0:
+        return f"(-{expr})" if len(names) == 1 else f"(-({expr}))"
+    return f"({const!r} * {expr})"
+
+
+def _sum(terms: list[Coef]) -> Coef:
+    const = sum(t for t in terms if not isinstance(t, str))
+    names = [t for t in terms if isinstance(t, str)]
+    if not names:
+        return float(const)
+    expr = " + ".join(names)
+    if const != 0.0:
+        expr = f"{expr} + {const!r}"
+    return f"({expr})" if len(names) > 1 or const != 0.0 else expr
+
+
+def _row_order(pattern: list[set[int]]) -> list[int]:
+    """A bandwidth-reducing order of the rows of S (reverse Cuthill–McKee on its graph)."""
+    n = len(pattern)
+    if n == 0:
+        return []
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    rows, cols = [], []
+    for i, nbrs in enumerate(pattern):
+        for j in nbrs:
+            rows.append(i)
+            cols.append(j)
+    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    order = [int(i) for i in reverse_cuthill_mckee(graph, symmetric_mode=True)]
+
+    # Keep the natural order when it is at least as narrow (chains are already banded).
+    def bandwidth(perm: list[int]) -> int:
+        pos = {r: i for i, r in enumerate(perm)}
+        return max((abs(pos[i] - pos[j]) for i in range(n) for j in pattern[i]), default=0)
+
+    natural = list(range(n))
+    return natural if bandwidth(natural) <= bandwidth(order) else order
+
+
+class Emitter:
+    """Generates the straight-line code of one lane for a :class:`Topology`.
+
+    Names in the generated code: ``q{i}``, ``v{i}`` the lane's coordinates and velocities,
+    ``t`` the time, ``p_<slot>`` the parameters (loaded by :meth:`load_params`), ``lam{r}``
+    the multipliers, ``qdd{i}`` the accelerations. Methods append lines to a list and return
+    nothing; :meth:`code` returns them indented.
+    """
+
+    def __init__(self, topo: Topology):
+        self.topo = topo
+        self.slots = topo.slots()
+        self.lines: list[str] = []
+        self._rows_cache: list[dict[int, Coef]] | None = None
+
+    # -- plumbing --------------------------------------------------------------------------
+    def emit(self, *lines: str) -> None:
+        self.lines.extend(lines)
+
+    def take(self, indent: int) -> str:
+        pad = " " * indent
+        text = "\n".join(pad + line if line else "" for line in self.lines)
+        self.lines = []
+        return text
+
+    def load_params(self, lane: str = "s0 + l") -> None:
+        for name, i in self.slots.items():
+            self.emit(f"p_{name} = P[{i}, {lane}]")
+
+    # -- kinematics ------------------------------------------------------------------------
+    def bodies(self, q: str = "q", tag: str = "") -> None:
+        """sin/cos of every body angle: ``s{b}``, ``c{b}``."""
+        for b in range(self.topo.nbody):
+            self.emit(*sincos_code(f"{q}{3 * b + 2}", f"sn{b}{tag}", f"cs{b}{tag}", f"{b}{tag}"))
+
+    def _point(self, body: int, sx: str, sy: str, name: str, q: str = "q", tag: str = "") -> None:
+        """Rotated point ``{name}x/y`` = A s and absolute point ``{name}X/Y`` = r + A s."""
+        if body == GROUND:
+            self.emit(f"{name}x = {sx}", f"{name}y = {sy}", f"{name}X = {sx}", f"{name}Y = {sy}")
+            return
+        c, s = f"cs{body}{tag}", f"sn{body}{tag}"
+        self.emit(
+            f"{name}x = {c} * {sx} - {s} * {sy}",
+            f"{name}y = {s} * {sx} + {c} * {sy}",
+            f"{name}X = {q}{3 * body} + {name}x",
+            f"{name}Y = {q}{3 * body + 1} + {name}y",
+        )
+
+    def _point_velocity(self, body: int, name: str, v: str = "v") -> None:
+        """Velocity ``{name}vx/vy`` of point ``name`` (zero on the ground)."""
+        if body == GROUND:
+            self.emit(f"{name}vx = 0.0", f"{name}vy = 0.0")
+            return
+        w = f"{v}{3 * body + 2}"
+        self.emit(
+            f"{name}vx = {v}{3 * body} - {w} * {name}y",
+            f"{name}vy = {v}{3 * body + 1} + {w} * {name}x",
+        )
+
+    def joints(self, q: str = "q", tag: str = "") -> None:
+        """Points ``pa{k}``, ``pb{k}`` and separation ``dx{k}``, ``dy{k}`` of every joint."""
+        topo = self.topo
+        for k in range(topo.njoint):
+            a, b = topo.joint_a[k], topo.joint_b[k]
+            self._point(a, f"p_sax{k}", f"p_say{k}", f"pa{k}", q, tag)
+            self._point(b, f"p_sbx{k}", f"p_sby{k}", f"pb{k}", q, tag)
+            self.emit(f"dx{k} = pb{k}X - pa{k}X", f"dy{k} = pb{k}Y - pa{k}Y")
+            if topo.joint_kind[k] == JOINT_CLEARANCE:
+                self.emit(
+                    f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
+                    f"ex{k} = dx{k} / rho{k}",
+                    f"ey{k} = dy{k} / rho{k}",
+                )
+
+    def rows(self) -> list[dict[int, Coef]]:
+        """Non-zeros of each row of B as {column: coefficient} (after :meth:`joints`)."""
+        if self._rows_cache is not None:
+            return self._rows_cache
+        topo = self.topo
+        rows: list[dict[int, Coef]] = []
+
+        def point_row(body: int, sign: float, wx: Coef, wy: Coef, px: str, py: str) -> dict:
+            if body == GROUND:
+                return {}
+            # sign · w·∂(r + p)/∂q = sign · (wx, wy, −wx py + wy px)
+            return {
+                3 * body: _mul(sign, wx),
+                3 * body + 1: _mul(sign, wy),
+                3 * body + 2: _sum([_mul(-sign, wx, py), _mul(sign, wy, px)]),
+            }
+
+        for k in range(topo.njoint):
+            a, b = topo.joint_a[k], topo.joint_b[k]
+            pa, pb = (f"pa{k}x", f"pa{k}y"), (f"pb{k}x", f"pb{k}y")
+            if topo.joint_kind[k] == JOINT_IDEAL:
+                for wx, wy in ((1.0, 0.0), (0.0, 1.0)):
+                    row = point_row(b, 1.0, wx, wy, *pb)
+                    for col, val in point_row(a, -1.0, wx, wy, *pa).items():
+                        row[col] = val
+                    rows.append({c: v for c, v in row.items() if v != 0.0})
+            else:
+                ex, ey = f"ex{k}", f"ey{k}"
+                row = point_row(b, 1.0, ex, ey, *pb)
+                row.update(point_row(a, -1.0, ex, ey, *pa))
+                rows.append(row)
+        for d in range(topo.ndriver):
+            rows.append({3 * topo.driver_body[d] + 2: 1.0})
+        self._rows_cache = rows
+        return rows
+
+    def constraint_values(self, t: str = "t", q: str = "q", v: str | None = "v") -> None:
+        """``phi{r}`` (and ``phid{r}`` = Φ̇ if ``v``) and ``phimax`` = max |Φ|."""
+        topo = self.topo
+        for k in range(topo.njoint):
+            r = topo.joint_row[k]
+            if v is not None:
+                self._point_velocity(topo.joint_a[k], f"pa{k}", v)
+                self._point_velocity(topo.joint_b[k], f"pb{k}", v)
+                self.emit(f"ddx{k} = pb{k}vx - pa{k}vx", f"ddy{k} = pb{k}vy - pa{k}vy")
+            if topo.joint_kind[k] == JOINT_IDEAL:
+                self.emit(f"phi{r} = dx{k}", f"phi{r + 1} = dy{k}")
+                if v is not None:
+                    self.emit(f"phid{r} = ddx{k}", f"phid{r + 1} = ddy{k}")
+            else:
+                self.emit(f"phi{r} = rho{k} - p_cl{k}")
+                if v is not None:
+                    self.emit(f"phid{r} = ex{k} * ddx{k} + ey{k} * ddy{k}")
+        for d in range(topo.ndriver):
+            r = topo.driver_row[d]
+            i = 3 * topo.driver_body[d] + 2
+            self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}")
+            if v is not None:
+                self.emit(f"phid{r} = {v}{i} - p_om{d}")
+        self.emit("phimax = 0.0")
+        for r in range(topo.ncon):
+            self.emit(f"phimax = max(phimax, abs(phi{r}))")
+
+    def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
+        """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
+        topo = self.topo
+        for k in range(topo.njoint):
+            r = topo.joint_row[k]
+            a, b = topo.joint_a[k], topo.joint_b[k]
+            wa2 = f"{v}{3 * a + 2} * {v}{3 * a + 2}" if a != GROUND else None
+            wb2 = f"{v}{3 * b + 2} * {v}{3 * b + 2}" if b != GROUND else None
+            for ax in ("x", "y"):
+                parts = []
+                if wb2:
+                    parts.append(f"pb{k}{ax} * {wb2}")
+                if wa2:
+                    parts.append(f"- pa{k}{ax} * {wa2}")
+                expr = " ".join(parts) if parts else "0.0"
+                if expr.startswith("- "):
+                    expr = "-" + expr[2:]
+                self.emit(f"cq{ax}{k} = {expr}")
+            if topo.joint_kind[k] == JOINT_IDEAL:
+                self.emit(f"gam{r} = cqx{k}", f"gam{r + 1} = cqy{k}")
+            else:
+                self.emit(
+                    f"gam{r} = ex{k} * cqx{k} + ey{k} * cqy{k} - (ddx{k} * ddx{k} + ddy{k} * ddy{k}"
+                    f" - phid{r} * phid{r}) / rho{k}"
+                )
+        for d in range(topo.ndriver):
+            self.emit(f"gam{topo.driver_row[d]} = 0.0")
+        if baumgarte:
+            for r in range(topo.ncon):
+                self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")
+
+    def forces(self, q: str = "q", v: str = "v", tag: str = "") -> None:
+        """Generalised applied forces ``F{i}`` (gravity, constant loads, springs)."""
+        topo = self.topo
+        for b in range(topo.nbody):
+            self.emit(
+                f"F{3 * b} = p_m{b} * p_gx", f"F{3 * b + 1} = p_m{b} * p_gy", f"F{3 * b + 2} = 0.0"
+            )
+        for f, b in enumerate(topo.force_body):
+            if b == GROUND:
+                continue
+            self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", q, tag)
+            self.emit(
+                f"F{3 * b} += p_fx{f}",
+                f"F{3 * b + 1} += p_fy{f}",
+                f"F{3 * b + 2} += fp{f}x * p_fy{f} - fp{f}y * p_fx{f} + p_tq{f}",
+            )
+        for s in range(len(topo.spring_a)):
+            a, b = topo.spring_a[s], topo.spring_b[s]
+            self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}", q, tag)
+            self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}", q, tag)
+            self._point_velocity(a, f"sa{s}", v)
+            self._point_velocity(b, f"sb{s}", v)
+            self.emit(
+                f"ux{s} = sb{s}X - sa{s}X",
+                f"uy{s} = sb{s}Y - sa{s}Y",
+                f"dux{s} = sb{s}vx - sa{s}vx",
+                f"duy{s} = sb{s}vy - sa{s}vy",
+                f"len{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s})",
+                f"iso{s} = p_l0{s} == 0.0",
+                f"nx{s} = 0.0 if iso{s} else ux{s} / len{s}",
+                f"ny{s} = 0.0 if iso{s} else uy{s} / len{s}",
+                f"ten{s} = p_k{s} * (len{s} - p_l0{s})"
+                f" + p_cd{s} * (nx{s} * dux{s} + ny{s} * duy{s})",
+                f"sfx{s} = -p_k{s} * ux{s} - p_cd{s} * dux{s} if iso{s} else -ten{s} * nx{s}",
+                f"sfy{s} = -p_k{s} * uy{s} - p_cd{s} * duy{s} if iso{s} else -ten{s} * ny{s}",
+            )
+            for body, sign, pt in ((b, "+", f"sb{s}"), (a, "-", f"sa{s}")):
+                if body == GROUND:
+                    continue
+                self.emit(
+                    f"F{3 * body} {sign}= sfx{s}",
+                    f"F{3 * body + 1} {sign}= sfy{s}",
+                    f"F{3 * body + 2} {sign}= {pt}x * sfy{s} - {pt}y * sfx{s}",
+                )
+
+    # -- Schur complement and its sparse LDLᵀ ---------------------------------------------
+    def _minv(self, col: int) -> str:
+        b, k = divmod(col, 3)
+        return f"p_iJ{b}" if k == 2 else f"p_im{b}"
+
+    def schur_factor(self) -> None:
+        """``Wt{r}_{c}`` = (M⁻¹Bᵀ)ᵀ, S = B M⁻¹ Bᵀ and its LDLᵀ; ``sing`` counts dropped pivots.
+
+        A pivot ``d_j ≤ tau · S_jj`` is dropped (its inverse set to 0: the row is treated as
+        dependent on the previous ones, λ_j = 0) and counted in ``sing``; integrators either
+        flag the sample SINGULAR or, on the robust path, carry on with the basic solution.
+        """
+        rows = self.rows()
+        n = len(rows)
+        for r, row in enumerate(rows):
+            for col, val in row.items():
+                self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
+        pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
+        order = _row_order(pattern)
+        self.order = order
+        # Entries of S in the permuted numbering (i, j: positions), lower part.
+        pos = {r: i for i, r in enumerate(order)}
+        S: dict[tuple[int, int], str] = {}
+        for ri in range(n):
+            for rj in pattern[ri]:
+                i, j = pos[ri], pos[rj]
+                if j > i:
+                    continue
+                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
+                self.emit(f"S{i}_{j} = {_sum(terms)}")
+                S[i, j] = f"S{i}_{j}"
+        # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
+        L: set[tuple[int, int]] = set()
+        lower = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
+        for j in range(n):
+            for i in range(j + 1, n):
+                if (i, j) in S or (lower[i] & lower[j]):
+                    L.add((i, j))
+                    lower[i].add(j)
+        self.emit("sing = 0.0")
+        for j in range(n):
+            terms = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
+            dj = S[j, j] + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(
+                f"D{j} = {dj}",
+                f"okp{j} = D{j} > tau * {S[j, j]}",
+                f"sing = sing if okp{j} else sing + 1.0",
+                f"Di{j} = 1.0 / D{j} if okp{j} else 0.0",
+            )
+            for i in range(j + 1, n):
+                if (i, j) not in L:
+                    continue
+                common = sorted(lower[i] & lower[j])
+                sij = S.get((i, j), "0.0")
+                terms = [f"L{i}_{k} * E{j}_{k}" for k in common]
+                num = sij + ("" if not terms else " - (" + " + ".join(terms) + ")")
+                self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
+            # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
+        self._L = L
+        self._lower = lower
+
+    def schur_solve(self, rhs: str, out: str) -> None:
+        """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
+        n = len(self.order)
+        order = self.order
+        for i in range(n):
+            terms = [f"L{i}_{k} * y{out}{k}" for k in sorted(self._lower[i])]
+            expr = f"{rhs}{order[i]}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(f"y{out}{i} = {expr}")
+        upper = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
+        for i, k in self._L:
+            upper[k].append(i)
+        for k in reversed(range(n)):
+            terms = [f"L{i}_{k} * x{out}{i}" for i in sorted(upper[k])]
+            expr = f"y{out}{k} * Di{k}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(f"x{out}{k} = {expr}")
+        for i in range(n):
+            self.emit(f"{out}{order[i]} = x{out}{i}")
+
+    def apply_wt(self, x: str, out: str, base: str | None) -> None:
+        """``{out}{c}`` = base_c − Σ_r Wt{r}_{c} x_r  (base None: 0)."""
+        rows = self.rows()
+        for c in range(self.topo.ndof):
+            terms = [f"Wt{r}_{c} * {x}{r}" for r, row in enumerate(rows) if c in row]
+            head = f"{base}{c}" if base else "0.0"
+            expr = head + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(f"{out}{c} = {expr}")
+
+    # -- whole blocks ----------------------------------------------------------------------
+    def acceleration(self, t: str = "t", baumgarte: bool = True) -> None:
+        """Index-1 accelerations ``qdd{i}``, multipliers ``lam{r}``, ``phimax``, ``sing``.
+
+        Needs ``q{i}``, ``v{i}``, ``t`` and the parameters in scope; names ``balpha2`` (2α),
+        ``bbeta2`` (β²) and ``tau`` (pivot tolerance) too.
+        """
+        topo = self.topo
+        self.bodies()
+        self.joints()
+        self.constraint_values(t=t)
+        self.gamma(baumgarte=baumgarte)
+        self.forces()
+        for c in range(topo.ndof):
+            self.emit(f"a0_{c} = F{c} * {self._minv(c)}")
+        rows = self.rows()
+        for r, row in enumerate(rows):
+            terms = [_mul(val, f"a0_{c}") for c, val in row.items()]
+            self.emit(f"rhs{r} = {_sum(terms)} - gam{r}")
+        self.schur_factor()
+        self.schur_solve("rhs", "lam")
+        self.apply_wt("lam", "qdd", "a0_")
+
+    def projection_terms(self, t: str = "t") -> None:
+        """Position and velocity corrections of a projection step at (q, v, t).
+
+        ``dq{i}`` = −M⁻¹Bᵀ S⁻¹ Φ (Gauss–Newton in the M metric), ``dv{i}`` = −M⁻¹Bᵀ S⁻¹ Φ̇,
+        plus ``phimax`` and ``sing`` (see :meth:`schur_factor`).
+        """
+        self.bodies()
+        self.joints()
+        self.constraint_values(t=t)
+        self.schur_factor()
+        self.schur_solve("phi", "mu")
+        self.schur_solve("phid", "nu")
+        self.apply_wt("mu", "dq", None)
+        self.apply_wt("nu", "dv", None)
+
+    def outputs(self, t: str = "t") -> None:
+        """Output quantities at (q, v, λ): ``jfx{k}``, ``jfy{k}``, ``cf{k}``, ``dtq{d}``,
+        ``energy``, ``phimax``. Needs ``lam{r}`` in scope."""
+        topo = self.topo
+        self.bodies()
+        self.joints()
+        self.constraint_values(t=t, v=None)
+        for k in range(topo.njoint):
+            r = topo.joint_row[k]
+            if topo.joint_kind[k] == JOINT_IDEAL:
+                self.emit(f"jfx{k} = -lam{r}", f"jfy{k} = -lam{r + 1}", f"cf{k} = math.nan")
+            else:
+                self.emit(
+                    f"jfx{k} = -lam{r} * ex{k}", f"jfy{k} = -lam{r} * ey{k}", f"cf{k} = lam{r}"
+                )
+        for d in range(topo.ndriver):
+            self.emit(f"dtq{d} = -lam{topo.driver_row[d]}")
+        self.emit("energy = 0.0")
+        for b in range(topo.nbody):
+            x, y, th = 3 * b, 3 * b + 1, 3 * b + 2
+            self.emit(
+                f"energy += 0.5 * (p_m{b} * (v{x} * v{x} + v{y} * v{y}) + p_J{b} * v{th} * v{th})",
+                f"energy -= p_m{b} * (p_gx * q{x} + p_gy * q{y})",
+            )
+        for f, b in enumerate(topo.force_body):
+            if b == GROUND:
+                continue
+            self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}")
+            self.emit(f"energy -= p_fx{f} * fp{f}X + p_fy{f} * fp{f}Y + p_tq{f} * q{3 * b + 2}")
+        for s in range(len(topo.spring_a)):
+            a, b = topo.spring_a[s], topo.spring_b[s]
+            self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}")
+            self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}")
+            self.emit(
+                f"ux{s} = sb{s}X - sa{s}X",
+                f"uy{s} = sb{s}Y - sa{s}Y",
+                f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
+                f"energy += 0.5 * p_k{s} * st{s} * st{s}",
+            )
+
+
+# ---------------------------------------------------------------------------------------------
+# Generated modules: written once under a content hash, imported like any file.
+
+_GENERATOR_FILES = ("lanes.py", "integrators.py")
+
+
+def generator_hash() -> str:
+    """Hash of the generator sources: generated files change name when the generator does."""
+    h = hashlib.sha256()
+    here = Path(__file__).parent
+    for name in _GENERATOR_FILES:
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``."""
+    root = os.environ.get("MCCHAIN_CACHE_DIR")
+    if root:
+        path = Path(root)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        path = Path(base) / "mcchain"
+    path = path / "generated"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        if not os.access(path, os.W_OK):
+            raise PermissionError(path)
+    except OSError:
+        path = Path(tempfile.gettempdir()) / f"mcchain-generated-{os.getuid()}"
+        path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:
+    """Write ``source`` to the cache (atomically, once) and import it.
+
+    The file name is the hash of the text, so two processes generating the same module write
+    the same file, and numba finds its cached machine code beside it.
+    """
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    name = f"{prefix}_{digest}"
+    if name in sys.modules:
+        return sys.modules[name]
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    if not path.exists() or path.read_text() != source:
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            fh.write(source)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -1,0 +1,590 @@
+"""Time histories of a batch of samples: the paper's nonlinear vibrations (§2.1).
+
+Contract of :func:`simulate`:
+
+1. Equations (DESIGN §2): M q̈ + Bᵀλ = F(q, q̇, t), Φ(q, t) = 0, with M diagonal, in
+   absolute coordinates. Index-1 methods solve B q̈ = γ − 2αΦ̇ − β²Φ (Baumgarte, α and β
+   from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
+   method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.
+2. Methods are the rows of :data:`METHODS`; all share the start state, the output times and
+   the outputs below. Fixed-step methods need ``output_dt`` to be a whole multiple of
+   ``dt``; adaptive ones land exactly on every output time.
+3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
+   ``q_start``/``v_start`` (e.g. the equilibrium with zero velocity); ``perturb`` adds to
+   named coordinates, and the other coordinates are then projected back onto the position
+   and velocity constraints (the perturbed ones held fixed), so "the equilibrium plus 0.1 rad
+   on the bar" is a consistent start.
+4. Outputs at ``time`` (ntime,): ``q``, ``v`` (sample, time, body, dof); ``joint_force``
+   (sample, time, joint, xy) = force on body b by body a (−λ ideal, −λ e clearance);
+   ``contact_force`` (sample, time, joint) = λ of clearance joints (NaN for ideal ones);
+   ``driver_torque`` (sample, time, driver) = −λ of the driver row; ``constraint_error``
+   (sample, time) = max |Φ|; ``energy`` (sample, time) = kinetic + potential (gravity, springs,
+   constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them).
+5. Status (per sample, :mod:`mcchain.status`): DIVERGED when the state is non-finite or
+   max |Φ| exceeds ``constraint_tolerance`` (or an implicit/adaptive step fails), SINGULAR
+   when S (or the KKT matrix) loses rank — a pivot ≤ ``SINGULAR_PIVOT`` × its diagonal —
+   except on the robust path (``rk4-projection``), which drops the dependent rows and goes
+   on; both are failures: the values from that time on are NaN, and ``diverged_time`` /
+   ``singular_time`` say when. CONTACT_LOST (a warning) when λ ≤ 0 at a clearance joint at
+   a step's start, with ``contact_lost_time``. Nothing raises for a bad sample.
+6. Deterministic: a sample's history is bit-identical whatever the chunk of samples it is
+   run in and the numba thread count (no reduction across samples).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mcchain.errors import SceneError
+from mcchain.model import Model
+from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
+
+DEFAULT_BAUMGARTE = (10.0, 10.0)
+"""(α, β) of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s: critically damped, drift decays in ~0.1–0.5 s, far
+below any step-size limit (|hα| ≪ 1); see benchmarks/bench_simulate.py (drift chart)."""
+
+LANES = 32
+"""Instances advanced in lockstep per lane group (PERFORMANCE.md: 32–64)."""
+
+SINGULAR_PIVOT = 1e-8
+"""Relative LDLᵀ pivot of S below which the constraints count as rank-deficient."""
+
+PROJECTION_TOLERANCE = 1e-13
+"""max |Φ| (m, rad) at which the projection of ``rk4-projection`` stops iterating."""
+
+ADAPTIVE_MIN_STEP = 1e-12
+"""Smallest step of ``rk45`` relative to t_end; below it the sample counts as diverged."""
+
+ADAPTIVE_MAX_STEPS = 10_000_000
+"""Step attempts of ``rk45`` per sample before it counts as diverged."""
+
+DEFAULTS: dict[str, Any] = {
+    "method": "rk4",
+    "output_dt": None,
+    "start": "scene",
+    "perturb": {},
+    "rtol": 1e-8,
+    "atol": 1e-10,
+    "rho_inf": 0.8,
+    "baumgarte": None,
+    "constraint_tolerance": 1e-6,
+    "max_newton": 20,
+}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The ``[simulate]`` section resolved (defaults filled in)."""
+
+    t_end: float
+    dt: float
+    method: str
+    output_dt: float
+    start: str
+    perturb: dict[str, float]
+    rtol: float
+    atol: float
+    rho_inf: float
+    baumgarte: tuple[float, float]
+    constraint_tolerance: float
+    max_newton: int
+
+    @classmethod
+    def resolve(cls, sim: Any) -> Settings:
+        def get(name: str) -> Any:
+            if isinstance(sim, dict):
+                value = sim.get(name, DEFAULTS.get(name))
+            else:
+                value = getattr(sim, name, DEFAULTS.get(name))
+            if name not in DEFAULTS and value is None:
+                raise SceneError(f"simulate.{name}: required")
+            return value
+
+        dt = float(get("dt"))
+        output_dt = get("output_dt")
+        baumgarte = get("baumgarte")
+        settings = cls(
+            t_end=float(get("t_end")),
+            dt=dt,
+            method=str(get("method")),
+            output_dt=dt if output_dt is None else float(output_dt),
+            start=str(get("start")),
+            perturb={str(k): float(v) for k, v in dict(get("perturb") or {}).items()},
+            rtol=float(get("rtol")),
+            atol=float(get("atol")),
+            rho_inf=float(get("rho_inf")),
+            baumgarte=DEFAULT_BAUMGARTE if baumgarte is None else tuple(map(float, baumgarte)),
+            constraint_tolerance=float(get("constraint_tolerance")),
+            max_newton=int(get("max_newton")),
+        )
+        for name in ("t_end", "dt", "output_dt", "rtol", "atol", "constraint_tolerance"):
+            value = getattr(settings, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise SceneError(f"simulate.{name}: must be a positive number, got {value!r}")
+        if settings.method not in METHODS:
+            raise SceneError(
+                f"simulate.method: unknown method {settings.method!r}; one of {', '.join(METHODS)}"
+            )
+        if not 0.0 <= settings.rho_inf <= 1.0:
+            raise SceneError(f"simulate.rho_inf: must be in [0, 1], got {settings.rho_inf}")
+        return settings
+
+
+@dataclass(frozen=True)
+class Method:
+    """One row of :data:`METHODS`."""
+
+    name: str
+    run: Callable[..., None]
+    fixed_step: bool
+    description: str
+
+
+# ---------------------------------------------------------------------------------------------
+# Output times and the start state
+
+
+def output_times(settings: Settings) -> tuple[np.ndarray, int]:
+    """Output times (0, output_dt, …, ≤ t_end) and, for fixed steps, steps per output."""
+    ratio = settings.output_dt / settings.dt
+    every = round(ratio)
+    if METHODS[settings.method].fixed_step and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
+        raise SceneError(
+            f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
+            f"{settings.method!r}, got {settings.output_dt:g}"
+        )
+    ntime = math.floor(settings.t_end / settings.output_dt * (1 + 1e-12)) + 1
+    return np.arange(ntime) * settings.output_dt, max(every, 1)
+
+
+_PERTURB = re.compile(
+    r"^body\.(?P<name>[^.\[\]]+)\."
+    r"(?P<key>position\[[01]\]|angle|velocity\[[01]\]|angular_velocity)$"
+)
+
+
+def perturbation_index(model: Model, path: str) -> tuple[str, int]:
+    """``("q" | "v", coordinate index)`` of a ``perturb`` path."""
+    m = _PERTURB.match(path)
+    if not m:
+        raise SceneError(
+            f"simulate.perturb.{path}: not a coordinate; use body.<name>.position[0|1], "
+            "body.<name>.angle, body.<name>.velocity[0|1] or body.<name>.angular_velocity"
+        )
+    name, key = m.group("name"), m.group("key")
+    if name not in model.body_names:
+        raise SceneError(f"simulate.perturb.{path}: no body named {name!r}")
+    b = model.body_names.index(name)
+    table = {
+        "position[0]": ("q", 0),
+        "position[1]": ("q", 1),
+        "angle": ("q", 2),
+        "velocity[0]": ("v", 0),
+        "velocity[1]": ("v", 1),
+        "angular_velocity": ("v", 2),
+    }
+    which, k = table[key]
+    return which, 3 * b + k
+
+
+def start_state(
+    model: Model,
+    settings: Settings,
+    q_start: np.ndarray | None = None,
+    v_start: np.ndarray | None = None,
+    status: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Start positions and velocities (nsample, ndof) and the status after perturbation."""
+    n, ndof = model.nsample, model.ndof
+    q = np.array(np.broadcast_to(model.q0 if q_start is None else q_start, (n, ndof)), float)
+    v = np.array(np.broadcast_to(model.v0 if v_start is None else v_start, (n, ndof)), float)
+    status = np.zeros(n, np.uint32) if status is None else status.astype(np.uint32).copy()
+    if not settings.perturb:
+        return q, v, status
+    fixed_q, fixed_v = [], []
+    for path, value in settings.perturb.items():
+        which, i = perturbation_index(model, path)
+        (q if which == "q" else v)[:, i] += value
+        (fixed_q if which == "q" else fixed_v).append(i)
+    return (*_project_start(model, q, v, fixed_q, fixed_v, status),)
+
+
+def _project_start(
+    model: Model,
+    q: np.ndarray,
+    v: np.ndarray,
+    fixed_q: list[int],
+    fixed_v: list[int],
+    status: np.ndarray,
+    tol: float = 1e-13,
+    iterations: int = 30,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project q then v onto Φ = 0, B v = ν at t = 0 holding the given coordinates fixed.
+
+    Gauss–Newton with minimum-norm (M-weighted) corrections of the free coordinates; a
+    sample that does not converge gets ASSEMBLY_FAILED and NaN.
+    """
+    from mcchain.kernels.forces import mass_diagonal
+    from mcchain.kernels.joints import (
+        constraint_jacobian,
+        constraint_residual,
+        constraint_velocity_rhs,
+    )
+
+    km = model.kernel_arrays()
+    ncon, ndof = model.ncon, model.ndof
+    phi = np.zeros(ncon)
+    B = np.zeros((ncon, ndof))
+    nu = np.zeros(ncon)
+    m = np.zeros(ndof)
+    free_q = np.ones(ndof, bool)
+    free_q[fixed_q] = False
+    free_v = np.ones(ndof, bool)
+    free_v[fixed_v] = False
+    for s in range(model.nsample):
+        if status[s] & FAILURE_BITS:
+            continue
+        mass_diagonal(km, s, m)
+        ok = False
+        for _ in range(iterations):
+            constraint_residual(km, s, q[s], 0.0, phi)
+            if np.max(np.abs(phi), initial=0.0) <= tol:
+                ok = True
+                break
+            constraint_jacobian(km, s, q[s], B)
+            W = B[:, free_q] / m[free_q]
+            dq = -W.T @ np.linalg.lstsq(W * m[free_q] @ W.T, phi, rcond=1e-12)[0]
+            q[s, free_q] += dq
+        if not ok or not np.all(np.isfinite(q[s])):
+            status[s] |= ASSEMBLY_FAILED
+            q[s] = np.nan
+            v[s] = np.nan
+            continue
+        constraint_jacobian(km, s, q[s], B)
+        constraint_velocity_rhs(km, s, nu)
+        W = B[:, free_v] / m[free_v]
+        res = B @ v[s] - nu
+        v[s, free_v] -= W.T @ np.linalg.lstsq(W * m[free_v] @ W.T, res, rcond=1e-12)[0]
+    return q, v, status
+
+
+# ---------------------------------------------------------------------------------------------
+# Output arrays
+
+
+def _allocate(model: Model, ntime: int, dtype: Any) -> dict[str, np.ndarray]:
+    n = model.nsample
+
+    def full(*shape: int) -> np.ndarray:
+        return np.full(shape, np.nan, dtype=dtype)
+
+    return {
+        "q": full(n, ntime, model.nbody, 3),
+        "v": full(n, ntime, model.nbody, 3),
+        "joint_force": full(n, ntime, model.njoint, 2),
+        "contact_force": full(n, ntime, model.njoint),
+        "driver_torque": full(n, ntime, model.ndriver),
+        "constraint_error": full(n, ntime),
+        "energy": full(n, ntime),
+    }
+
+
+def _flat_outputs(out: dict[str, np.ndarray], n: int, ntime: int) -> tuple[np.ndarray, ...]:
+    """Views of the history arrays in the layout the kernels write: (sample, time, k)."""
+    return (
+        out["q"].reshape(n, ntime, -1),
+        out["v"].reshape(n, ntime, -1),
+        out["joint_force"].reshape(n, ntime, -1),
+        out["contact_force"],
+        out["driver_torque"],
+        out["constraint_error"],
+        out["energy"],
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Method runners: (model, settings, q, v, time, every, out, status, times) -> None
+
+
+@dataclass
+class _Run:
+    model: Model
+    settings: Settings
+    q: np.ndarray  # (nsample, ndof) start
+    v: np.ndarray
+    time: np.ndarray
+    every: int
+    out: dict[str, np.ndarray]
+    status: np.ndarray
+    t_div: np.ndarray
+    t_sing: np.ndarray
+    t_cl: np.ndarray
+    lanes: int = LANES
+
+
+def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    from mcchain.kernels.integrators import lane_kernels
+    from mcchain.kernels.lanes import Topology, pack_parameters
+
+    topo = Topology.from_model(run.model)
+    module = lane_kernels(topo)
+    P = pack_parameters(run.model, topo)
+    Q0 = np.ascontiguousarray(run.q.T)
+    V0 = np.ascontiguousarray(run.v.T)
+    return module, P, Q0, V0
+
+
+def _run_erk(run: _Run, project: bool) -> None:
+    from mcchain.kernels.integrators import RK4
+
+    module, P, Q0, V0 = _lane_setup(run)
+    s = run.settings
+    alpha, beta = (0.0, 0.0) if project else s.baumgarte
+    nstep = (len(run.time) - 1) * run.every
+    module.erk_run(
+        P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
+        2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
+        project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.status, run.t_div, run.t_sing, run.t_cl,
+    )  # fmt: skip
+
+
+def _run_rk4(run: _Run) -> None:
+    _run_erk(run, project=False)
+
+
+def _run_rk4_projection(run: _Run) -> None:
+    _run_erk(run, project=True)
+
+
+def _run_rk45(run: _Run) -> None:
+    from mcchain.kernels.integrators import DOPRI5
+
+    module, P, Q0, V0 = _lane_setup(run)
+    s = run.settings
+    alpha, beta = s.baumgarte
+    nsteps = np.zeros(run.model.nsample, np.int64)
+    module.adaptive_run(
+        P, Q0, V0, 0.0, run.time, min(s.dt, s.output_dt), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
+        DOPRI5.c, float(DOPRI5.error_order), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
+        ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
+        run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.status, run.t_div, run.t_sing, run.t_cl, nsteps,
+    )  # fmt: skip
+    run.out["_steps"] = nsteps
+
+
+class _Singular(Exception):
+    pass
+
+
+def _run_radau(run: _Run) -> None:
+    """scipy's Radau on the index-1 equations, one sample at a time (the slow reference)."""
+    from scipy.integrate import solve_ivp
+
+    module, P_all, _, _ = _lane_setup(run)
+    s = run.settings
+    alpha, beta = s.baumgarte
+    model = run.model
+    ndof, ncon, n = model.ndof, max(model.ncon, 1), model.nsample
+    flat = _flat_outputs(run.out, n, len(run.time))
+    qdd = np.zeros((ndof, 1))
+    lam = np.zeros((ncon, 1))
+    chk = np.zeros(1)
+    sing = np.zeros(1)
+    for i in range(n):
+        if run.status[i] & FAILURE_BITS:
+            continue
+        P = np.ascontiguousarray(P_all[:, i : i + 1])
+
+        def rhs(t: float, y: np.ndarray, P: np.ndarray = P) -> np.ndarray:
+            Q = np.ascontiguousarray(y[:ndof, None])
+            V = np.ascontiguousarray(y[ndof:, None])
+            module.accel(P, Q, V, t, 2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
+            if sing[0] > 0.0:
+                raise _Singular(t)
+            return np.concatenate([y[ndof:], qdd[:, 0]])
+
+        y0 = np.concatenate([run.q[i], run.v[i]])
+        try:
+            sol = solve_ivp(
+                rhs, (0.0, float(run.time[-1])), y0, method="Radau", t_eval=run.time,
+                rtol=s.rtol, atol=s.atol,
+            )  # fmt: skip
+            ys, ok = sol.y, sol.status == 0
+            fail_bit, fail_time = DIVERGED, (sol.t[-1] if len(sol.t) else 0.0)
+        except _Singular as exc:
+            ys, ok = np.zeros((2 * ndof, 0)), False
+            fail_bit, fail_time = SINGULAR, float(exc.args[0])
+        nt = ys.shape[1]
+        Q = np.ascontiguousarray(ys[:ndof])
+        V = np.ascontiguousarray(ys[ndof:])
+        LAM = np.zeros((ncon, nt))
+        qdd_all = np.zeros((ndof, nt))
+        chk_all = np.zeros(nt)
+        sing_all = np.zeros(nt)
+        Pn = np.ascontiguousarray(np.repeat(P, nt, axis=1))
+        jf = np.zeros((2 * model.njoint, nt))
+        cf = np.zeros((model.njoint, nt))
+        dtq = np.zeros((model.ndriver, nt))
+        cerr = np.zeros(nt)
+        en = np.zeros(nt)
+        for j in range(nt):
+            module.accel(
+                Pn[:, j : j + 1], Q[:, j : j + 1], V[:, j : j + 1], float(run.time[j]),
+                2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd_all[:, j : j + 1],
+                LAM[:, j : j + 1], chk_all[j : j + 1], sing_all[j : j + 1],
+            )  # fmt: skip
+            module.outputs(
+                Pn[:, j : j + 1], Q[:, j : j + 1], V[:, j : j + 1], LAM[:, j : j + 1],
+                float(run.time[j]), jf[:, j : j + 1], cf[:, j : j + 1], dtq[:, j : j + 1],
+                cerr[j : j + 1], en[j : j + 1],
+            )  # fmt: skip
+        # Failures at output times: constraint error past tolerance or non-finite.
+        bad = ~(chk_all <= s.constraint_tolerance)
+        if bad.any():
+            first = int(np.argmax(bad))
+            if ok or run.time[first] < fail_time:
+                ok, fail_bit, fail_time = False, DIVERGED, float(run.time[first])
+            nt = first
+        if not ok:
+            nt = min(nt, int(np.searchsorted(run.time, fail_time, side="left")))
+            run.status[i] |= fail_bit
+            (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
+        flat[0][i, :nt] = Q[:, :nt].T
+        flat[1][i, :nt] = V[:, :nt].T
+        flat[2][i, :nt] = jf[:, :nt].T
+        flat[3][i, :nt] = cf[:, :nt].T
+        flat[4][i, :nt] = dtq[:, :nt].T
+        flat[5][i, :nt] = cerr[:nt]
+        flat[6][i, :nt] = en[:nt]
+        rows = [model.joint_row[k] for k in range(model.njoint) if model.joint_kind[k] == 1]
+        if rows:
+            lost = np.any(LAM[rows, :nt] <= 0.0, axis=0)
+            if lost.any():
+                run.status[i] |= CONTACT_LOST
+                run.t_cl[i] = run.time[int(np.argmax(lost))]
+
+
+def _run_generalized_alpha(run: _Run) -> None:
+    from mcchain.kernels.integrators import GeneralizedAlpha, generalized_alpha_run
+
+    s = run.settings
+    coef = GeneralizedAlpha.from_rho(s.rho_inf)
+    km = run.model.kernel_arrays()
+    nstep = (len(run.time) - 1) * run.every
+    generalized_alpha_run(
+        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, s.dt, nstep,
+        run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
+        s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.status, run.t_div, run.t_sing, run.t_cl,
+    )  # fmt: skip
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("rk4", _run_rk4, True, "classical RK4 on the index-1 form with Baumgarte"),
+        Method(
+            "rk4-projection",
+            _run_rk4_projection,
+            True,
+            "RK4 on the index-1 form, then q and v projected onto the constraints each step; "
+            "robust at rank loss (dependent rows dropped instead of flagged)",
+        ),
+        Method(
+            "generalized-alpha",
+            _run_generalized_alpha,
+            True,
+            "index-3 generalized-α (Arnold & Brüls), Newton on the KKT system, ρ∞ settable",
+        ),
+        Method(
+            "rk45",
+            _run_rk45,
+            False,
+            "Dormand–Prince 5(4) with per-sample step control on the index-1 form (Baumgarte)",
+        ),
+        Method("radau", _run_radau, False, "scipy Radau, one sample at a time (reference)"),
+    )
+}
+"""Every integration method by its ``[simulate] method`` name."""
+
+
+def simulate(
+    model: Model,
+    sim: Any,
+    q_start: np.ndarray | None = None,
+    v_start: np.ndarray | None = None,
+    history_dtype: Any = np.float32,
+    status: np.ndarray | None = None,
+    lanes: int = LANES,
+) -> dict[str, np.ndarray]:
+    """Integrate every sample of ``model`` as ``sim`` (the ``[simulate]`` section) says.
+
+    Args:
+        model: the compiled model (a chunk of samples).
+        sim: the ``[simulate]`` settings (pydantic model, dict or any object with the keys).
+        q_start, v_start: (nsample or 1, 3 nbody) start state overriding ``model.q0/v0``.
+        history_dtype: dtype of the histories (float32 or float64).
+        status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
+            not integrated.
+        lanes: instances per lane group of the lane kernels.
+
+    Returns:
+        Arrays by ensemble variable name (see the module docstring), plus ``status``,
+        ``diverged_time``, ``singular_time``, ``contact_lost_time``.
+    """
+    settings = Settings.resolve(sim)
+    time, every = output_times(settings)
+    q, v, status = start_state(model, settings, q_start, v_start, status)
+    out = _allocate(model, len(time), history_dtype)
+    n = model.nsample
+    run = _Run(
+        model=model,
+        settings=settings,
+        q=q,
+        v=v,
+        time=time,
+        every=every,
+        out=out,
+        status=status,
+        t_div=np.full(n, np.nan),
+        t_sing=np.full(n, np.nan),
+        t_cl=np.full(n, np.nan),
+        lanes=int(lanes),
+    )
+    if n:
+        METHODS[settings.method].run(run)
+    steps = out.pop("_steps", None)
+    result = {"time": time, **out}
+    result["status"] = run.status
+    result["diverged_time"] = run.t_div
+    result["singular_time"] = run.t_sing
+    result["contact_lost_time"] = run.t_cl
+    if steps is not None:
+        result["steps"] = steps
+    _nan_after_failure(result)
+    return result
+
+
+def _nan_after_failure(result: dict[str, np.ndarray]) -> None:
+    """Histories at and after a failure time are NaN (kernels already do; this is a guard)."""
+    fail = np.fmin(result["diverged_time"], result["singular_time"])
+    bad = np.nonzero(np.isfinite(fail))[0]
+    if not len(bad):
+        return
+    time = result["time"]
+    for s in bad:
+        first = int(np.searchsorted(time, fail[s], side="left"))
+        for key in ("q", "v", "joint_force", "contact_force", "driver_torque"):
+            result[key][s, first:] = np.nan
+        result["constraint_error"][s, first:] = np.nan
+        result["energy"][s, first:] = np.nan
