@@ -35,7 +35,9 @@ design = "{design}"
 """
 
 
-def pulsations(c: np.ndarray, m: np.ndarray, l: float = HALF, J: float = J_BAR) -> np.ndarray:
+def pulsations(
+    c: np.ndarray | float, m: np.ndarray | float, l: float = HALF, J: float = J_BAR
+) -> np.ndarray:
     """Both roots p (ascending) of the clearance bar's quartic (DESIGN §3),
     c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0, in a form stable as c -> 0."""
     c, m = np.broadcast_arrays(np.asarray(c, float), np.asarray(m, float))

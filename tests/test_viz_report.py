@@ -1,0 +1,201 @@
+"""``mcchain report``: every PNG from a run folder, and Sobol indices on an analytic case."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import xarray as xr
+from PIL import Image
+from SALib.sample import sobol as salib_sobol
+from scipy.stats import qmc
+from test_viz_synthetic import SCENE_TEXT, make_dataset, pulsations, random_params
+
+from mcchain.viz import report
+
+SALTELLI_ATOL = 0.01  # Saltelli/Jansen estimators on 2^11 scrambled-Sobol base points: observed
+#                       error <= 0.004 against the quadrature for this smooth 2-input model
+RBD_FAST_ATOL = 0.03  # RBD-FAST (M = 10 harmonics) on 2^12 given points, for the near-linear ω0
+QUADRATURE_NODES = 96  # Gauss-Legendre nodes per input: the direct estimate is exact to ~1e-12
+
+CLEARANCE = (1e-3, 0.3)  # m: wide enough that c moves the pendulum pulsation, not only rolling
+MASS = (1.0, 3.0)  # kg
+PROBLEM: dict[str, Any] = {
+    "num_vars": 2,
+    "names": ["joint.O.clearance", "body.bar.mass"],
+    "bounds": [CLEARANCE, MASS],
+}
+
+EVERY_PNG = {
+    "omega_histogram.png",
+    "scatter_omega.png",
+    "scatter_q_eq.png",
+    "scatter_joint_force_eq.png",
+    "scatter_peak_contact_force.png",
+    "reaction_envelopes.png",
+    "contact_loss.png",
+    "status_counts.png",
+    "sobol.png",
+}
+
+
+def assert_real_picture(path: Path, min_size: tuple[int, int] = (300, 200)) -> None:
+    """A PNG of a reasonable size that is not blank: its pixels vary, and not only a few."""
+    with Image.open(path) as img:
+        assert img.format == "PNG"
+        assert img.size[0] >= min_size[0] and img.size[1] >= min_size[1], img.size
+        pixels = np.asarray(img.convert("RGB"), dtype=np.float64)
+    assert pixels.var() > 0.0, f"{path.name} is blank"
+    background = (pixels == pixels[0, 0]).all(axis=-1).mean()
+    assert background < 0.995, f"{path.name} is {background:.1%} background"
+
+
+def make_run(folder: Path, params: np.ndarray, design: str, **kwargs: object) -> Path:
+    """A run folder as ``mcchain run`` leaves it (ensemble.nc, scene.toml, run.json)."""
+    folder.mkdir(parents=True)
+    make_dataset(params, design=design, **kwargs).to_netcdf(folder / "ensemble.nc")  # type: ignore[arg-type]
+    (folder / "scene.toml").write_text(SCENE_TEXT.format(count=len(params), design=design))
+    (folder / "run.json").write_text("{}")
+    return folder
+
+
+# -- every figure ---------------------------------------------------------------------------------
+def test_report__writes_every_png_from_a_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 16 base points in Saltelli's layout (2 inputs, second order: 6 rows each)
+    params = salib_sobol.sample(
+        {"num_vars": 2, "names": ["c", "m"], "bounds": [[1e-4, 1e-3], [1.5, 2.5]]}, 16, seed=5
+    )
+    run = make_run(tmp_path / "run", params, "sobol", ntime=30)
+    assert report.main([str(run)]) == 0
+    out = run / "report"
+    assert {p.name for p in out.glob("*.png")} == EVERY_PNG
+    for name in sorted(EVERY_PNG):
+        assert_real_picture(out / name)
+    printed = capsys.readouterr().out
+    assert str(out / "sobol.png") in printed
+    # sample 2's equilibrium failed: ω and |f| have a NaN in the Saltelli rows, so only the
+    # peak contact force is analysed, and the others say why
+    with open(out / "sobol.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["output"] for r in rows} == {"peak |λ O|"}
+    assert {r["method"] for r in rows} == {"sobol"}
+    assert "skipped sobol ω0: 1 samples have no finite value" in printed
+
+
+def test_report__skips_what_the_run_lacks_and_says_why(tmp_path: Path) -> None:
+    ds = make_dataset(random_params(20), history=False)
+    ds = ds.drop_vars(["omega"]).drop_dims("mode")
+    result = report.make_report(ds, tmp_path / "out", design="random")
+    assert {p.name for p in result.written} == {
+        "scatter_q_eq.png",
+        "scatter_joint_force_eq.png",
+        "status_counts.png",
+    }
+    assert set(result.skipped) == {
+        "omega_histogram.png",
+        "reaction_envelopes.png",
+        "contact_loss.png",
+        "sobol.png",
+    }
+    assert "[simulate]" in result.skipped["reaction_envelopes.png"]
+    assert result.skipped["sobol.png"] == "the sample design is 'random', not \"sobol\""
+    for path in result.written:
+        assert_real_picture(path)
+
+
+def test_run_design__from_the_scene_copy_or_the_attribute(tmp_path: Path) -> None:
+    run = make_run(tmp_path / "run", random_params(4), "lhs", history=False)
+    assert report.run_design(run) == "lhs"
+    ds = xr.Dataset(attrs={"scene": SCENE_TEXT.format(count=4, design="sobol")})
+    assert report.run_design(tmp_path / "elsewhere", ds) == "sobol"
+    assert report.run_design(tmp_path / "elsewhere", xr.Dataset(attrs={"scene": "[scene]"})) is None
+
+
+# -- Sobol indices ---------------------------------------------------------------------------------
+def direct_indices(mode: int) -> tuple[np.ndarray, np.ndarray]:
+    """S1 and ST of (c, m) for pulsation ``mode`` of the clearance bar, by the double loop
+    Var_c(E_m[Y | c]) / Var(Y) and E_m[Var_c(Y | m)] / Var(Y) over a tensor Gauss-Legendre
+    grid of the two uniform inputs."""
+    x, w = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
+    w = w / w.sum()
+    c = CLEARANCE[0] + (x + 1) / 2 * (CLEARANCE[1] - CLEARANCE[0])
+    m = MASS[0] + (x + 1) / 2 * (MASS[1] - MASS[0])
+    y = pulsations(c[:, None], m[None, :])[..., mode]  # y[i, j] = Y(c_i, m_j)
+    mean = w @ y @ w
+    var = w @ (y - mean) ** 2 @ w
+    given_c, given_m = y @ w, w @ y  # E[Y | c_i], E[Y | m_j]
+    s1 = np.array([w @ (given_c - mean) ** 2, w @ (given_m - mean) ** 2]) / var
+    st = np.array([w @ ((y - given_m) ** 2).T @ w, w @ ((y - given_c[:, None]) ** 2) @ w]) / var
+    return s1, st
+
+
+def _read_csv(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for output in dict.fromkeys(r["output"] for r in rows):
+        mine = [r for r in rows if r["output"] == output]
+        assert [r["parameter"] for r in mine] == PROBLEM["names"]
+        out[output] = {k: np.array([float(r[k]) for r in mine]) for k in ("S1", "ST")}
+        out[output]["method"] = np.array([r["method"] for r in mine])
+    return out
+
+
+def _pulsation_dataset(params: np.ndarray) -> xr.Dataset:
+    omega = pulsations(params[:, 0], params[:, 1])
+    return xr.Dataset(
+        {
+            "parameters": (("sample", "param"), params),
+            "omega": (("sample", "mode"), omega),
+        },
+        coords={"sample": np.arange(len(params)), "param": PROBLEM["names"], "mode": [0, 1]},
+    )
+
+
+def test_sobol__clearance_bar_pulsations_agree_with_a_direct_estimate(tmp_path: Path) -> None:
+    params = salib_sobol.sample(PROBLEM, 2**11, calc_second_order=True, seed=3)
+    ds = _pulsation_dataset(params)
+    produced = report.sobol_figure(ds, "sobol", tmp_path / "sobol.png", tmp_path / "sobol.csv")
+    assert produced == tmp_path / "sobol.png"
+    assert_real_picture(produced)
+    found = _read_csv(tmp_path / "sobol.csv")
+    for mode in (0, 1):
+        s1, st = direct_indices(mode)
+        got = found[f"ω{mode}"]
+        assert set(got["method"]) == {"sobol"}
+        np.testing.assert_allclose(got["S1"], s1, atol=SALTELLI_ATOL, err_msg=f"S1 of ω{mode}")
+        np.testing.assert_allclose(got["ST"], st, atol=SALTELLI_ATOL, err_msg=f"ST of ω{mode}")
+    # the analytic picture: the pendulum (ω0) depends on both, the rolling mode (ω1) on c
+    s1_pendulum, _ = direct_indices(0)
+    assert s1_pendulum.min() > 0.3
+    assert direct_indices(1)[0][0] > 0.9
+
+
+def test_sobol__plain_sobol_points_give_first_order_by_rbd_fast() -> None:
+    """The scene's "sobol" design draws plain scrambled Sobol' points (no Saltelli rows)."""
+    u = qmc.Sobol(2, scramble=True, rng=np.random.default_rng(1)).random(2**12)
+    params = np.column_stack(
+        [CLEARANCE[0] + u[:, 0] * np.ptp(CLEARANCE), MASS[0] + u[:, 1] * np.ptp(MASS)]
+    )
+    assert report.saltelli_layout(params) is None
+    y = pulsations(params[:, 0], params[:, 1])[:, 0]
+    result = report.sobol_indices(params, {"ω0": y}, ["joint.O.clearance", "body.bar.mass"])
+    assert not isinstance(result, str), result
+    (found,) = result
+    assert found.method == "rbd_fast" and np.isnan(found.ST).all()
+    np.testing.assert_allclose(found.S1, direct_indices(0)[0], atol=RBD_FAST_ATOL)
+
+
+def test_saltelli_layout__recognises_salib_samples_only() -> None:
+    for second in (True, False):
+        params = salib_sobol.sample(PROBLEM, 8, calc_second_order=second, seed=1)
+        assert report.saltelli_layout(params) == (8, second)
+        shuffled = params[np.random.default_rng(0).permutation(len(params))]
+        assert report.saltelli_layout(shuffled) is None
+    assert report.saltelli_layout(np.random.default_rng(0).random((48, 2))) is None
+    assert report.saltelli_layout(np.zeros((0, 2))) is None
