@@ -212,7 +212,7 @@ def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
         i = int(np.argmin(ok))
         rule = f"{ref.key} must be {domain.text}" if domain is not None else "not finite"
         raise SceneError(
-            f"sample.vary.{_quote(path)}: sampled value {column[i]!r} at sample {i}: {rule} "
+            f"sample.vary.{_quote(path)}: sampled value {float(column[i])!r} at sample {i}: {rule} "
             "(bound the distribution, e.g. with truncnormal)"
         )
 

@@ -14,7 +14,8 @@ mapped through its distribution's inverse CDF (:func:`ppf`). Designs:
 * ``"lhs"``: ``scipy.stats.qmc.LatinHypercube`` with ``default_rng(seed)``: one point in each
   of ``count`` strata per column, so a sample's values depend on the count (not on chunking).
 
-Everything here is vectorised over samples: 10⁵ samples take milliseconds.
+Everything here is vectorised over samples: 10⁵ samples take milliseconds. SciPy is imported
+on first use, so that loading a scene stays light.
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy import special, stats
-from scipy.stats import qmc
 
 from mcchain.scene.schema import Distribution, Sample
 
@@ -110,6 +109,8 @@ def unit_design(
     ``count``; for ``lhs`` they do (the strata are 1/count wide).
     """
     stop = count if stop is None else stop
+    if design not in DESIGNS:
+        raise ValueError(f"unknown design {design!r} (expected one of: {', '.join(DESIGNS)})")
     if not 0 <= start <= stop:
         raise ValueError(f"bad sample range {start}:{stop}")
     n = stop - start
@@ -117,6 +118,8 @@ def unit_design(
         return philox_uniform(seed, start, stop, ncol)
     if ncol == 0 or n == 0:
         return np.empty((n, ncol), dtype=np.float64)
+    from scipy.stats import qmc
+
     rng = np.random.default_rng(seed)
     if design == "sobol":
         if stop > 2**_SOBOL_BITS:
@@ -129,10 +132,8 @@ def unit_design(
             u = sobol.random(n)
         # Scrambled points are multiples of 2**-30 in [0, 1): use the cell centres.
         return u + 2.0 ** -(_SOBOL_BITS + 1)
-    if design == "lhs":
-        u = qmc.LatinHypercube(ncol, rng=rng).random(count)[start:stop]
-        return np.clip(u, 2.0**-54, 1.0 - 2.0**-53)
-    raise ValueError(f"unknown design {design!r} (expected one of: {', '.join(DESIGNS)})")
+    u = qmc.LatinHypercube(ncol, rng=rng).random(count)[start:stop]
+    return np.clip(u, 2.0**-54, 1.0 - 2.0**-53)
 
 
 def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
@@ -142,6 +143,8 @@ def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
     [mu, sigma]: exp(mu + sigma Φ⁻¹(u)); truncnormal [mean, std, lo, hi]: scipy.stats.truncnorm
     (clipped to [lo, hi] against rounding); choice [v...]: v[floor(u n)].
     """
+    from scipy import special, stats
+
     u = np.asarray(u, dtype=np.float64)
     a = dist.args
     kind = dist.kind

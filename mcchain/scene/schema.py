@@ -312,6 +312,8 @@ def _flatten_dotted(value: Any, is_leaf: Any) -> Any:
         if isinstance(node, dict) and node and not is_leaf(node):
             for key, sub in node.items():
                 walk(f"{prefix}.{key}" if prefix else key, sub)
+        elif prefix in out:
+            raise ValueError(f"path {prefix!r} given twice (as a quoted key and as dotted keys)")
         else:
             out[prefix] = node
 
