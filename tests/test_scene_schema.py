@@ -393,7 +393,6 @@ BAD = [
     ),
     ("sample-count", BASE + "[sample]\ncount = 0\n", "sample.count", "must be >= 1, got 0"),
     ("sample-seed", BASE + "[sample]\nseed = -1\n", "sample.seed", "must be >= 0"),
-    ("modes-without-equilibrium", BASE + "[modes]\n", "modes", "needs an [equilibrium] section"),
     (
         "simulate-missing",
         BASE + "[simulate]\ndt = 1e-3\n",
@@ -546,6 +545,11 @@ def test_load_scene__name_from_file_stem(tmp_path: Path) -> None:
     assert scene.name == "my-bar"
     assert scene.source == str(path)
     assert scene.text == path.read_text()
+
+
+def test_load_scene__modes_alone_is_allowed() -> None:
+    scene = load_scene_text(BASE + "[modes]\nshapes = true\n")
+    assert scene.equilibrium is None and scene.modes is not None and scene.modes.shapes
 
 
 def test_load_scene__dotted_bare_vary_keys_are_paths() -> None:

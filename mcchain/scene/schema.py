@@ -381,7 +381,8 @@ class Equilibrium(_Section):
 
 
 class Modes(_Section):
-    """``[modes]``: eigenpulsations about the equilibrium (needs ``[equilibrium]``)."""
+    """``[modes]``: eigenpulsations about the equilibrium. The equilibrium is computed for
+    them even without ``[equilibrium]`` (which then only sets the Newton settings)."""
 
     shapes: bool = Field(default=False, description="store the mode shapes; default false.")
 
@@ -427,7 +428,8 @@ class Simulate(_Section):
     )
     baumgarte: Vec2 | None = Field(
         default=None,
-        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0 (rk4); default: the solver's.",
+        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s (rk4, rk45); default: the "
+        "solver's, [10, 10] (critically damped; mcchain.solvers.simulate.DEFAULT_BAUMGARTE).",
     )
     constraint_tolerance: Num = Field(
         default=1e-6, gt=0, description="max |Φ| past which a sample diverged; default 1e-6."
@@ -697,8 +699,8 @@ def check_scene(scene: Scene) -> None:
 
     Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
     drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
-    distributions' supports against the parameter's domain, ``[modes]`` without
-    ``[equilibrium]``, ``output_dt`` against ``dt``. Kinematics are not checked.
+    distributions' supports against the parameter's domain, ``output_dt`` against ``dt``.
+    Kinematics are not checked.
     """
     bodies = scene.body_names
     known = {GROUND_NAME, *bodies}
@@ -800,9 +802,6 @@ def check_scene(scene: Scene) -> None:
                     f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
                     f"method {sim.method!r}, got {sim.output_dt!r}"
                 )
-
-    if scene.modes is not None and scene.equilibrium is None:
-        raise SceneError("modes: needs an [equilibrium] section (modes are about it)")
 
 
 @dataclass(frozen=True)
