@@ -288,7 +288,8 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     Args:
         q: (3 nbody,) start in, equilibrium out.
         lam: (ncon,) multipliers out.
-        history: (max_iter + 1,) scaled residual norm before each iteration (NaN after).
+        history: (max_iter + 1, 2) per iteration: the scaled residual norm before it and the
+            scaled max norm of its Newton step (x, y / L scale; θ; λ / F scale). NaN after.
 
     Returns:
         (status bits, iterations taken to reach ``tol``).
@@ -335,7 +336,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     polished = False
     for it in range(max_iter + 1):
         if not converged:
-            history[it] = norm
+            history[it, 0] = norm
             if norm <= tol:
                 converged = True
                 iterations = it
@@ -356,6 +357,17 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
         for i in range(size):
             step[i] = -R[i]
         lu_solve(J, size, piv, step)
+        if not converged:
+            step_norm = 0.0
+            for k in range(size):
+                if k >= n:
+                    scale = fscale
+                elif k % 3 == 2:
+                    scale = 1.0
+                else:
+                    scale = lscale
+                step_norm = max(step_norm, abs(step[k]) / scale)
+            history[it, 1] = step_norm
         if converged:
             # polishing step: full Newton, no line search
             for k in range(n):
@@ -403,7 +415,8 @@ def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history
         q_out: (nsample, 3 nbody) start in (assembled), equilibrium out.
         lam_out: (nsample, ncon) multipliers out.
         iterations_out: (nsample,) int64 Newton iterations to reach ``tol``.
-        history_out: (nsample, max_iter + 1) scaled residual norms, NaN-filled by the caller.
+        history_out: (nsample, max_iter + 1, 2) scaled residual and Newton step norms per
+            iteration (see :func:`equilibrium_one`), NaN-filled by the caller.
         status_out: (nsample,) uint32; samples already flagged are skipped (NaN).
     """
     for s in prange(q_out.shape[0]):

@@ -46,7 +46,8 @@ class Equilibrium:
         joint_force: (nsample, njoint, 2) force on body b by body a, N.
         contact_force: (nsample, njoint) λ of clearance joints, NaN for ideal ones, N.
         iterations: (nsample,) Newton iterations to reach the tolerance.
-        history: (nsample, max_iterations + 1) scaled residual norm per iteration (NaN after).
+        history: (nsample, max_iterations + 1, 2) per iteration the scaled residual norm
+            and the scaled Newton step norm (NaN after the last).
         status: (nsample,) uint32 status bits (including those of assembly).
     """
 
@@ -101,7 +102,7 @@ def solve_equilibrium(
     q = np.array(q_start, dtype=np.float64, copy=True)
     lam = np.full((nsample, model.ncon), np.nan)
     iterations = np.zeros(nsample, dtype=np.int64)
-    history = np.full((nsample, max_iterations + 1), np.nan)
+    history = np.full((nsample, max_iterations + 1, 2), np.nan)
     status = _status_or_new(status, nsample).copy()
     km = model.kernel_arrays()
     kernels.equilibrium_batch(km, tolerance, max_iterations, q, lam, iterations, history, status)

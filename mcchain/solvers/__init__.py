@@ -1,0 +1,76 @@
+"""Python drivers of the analyses: allocate arrays, call kernels, decode status bits.
+
+:func:`solve_chunk` is the one entry point the run machinery calls for a chunk of samples:
+it runs exactly the analyses the scene's sections ask for (DESIGN §4) and returns arrays
+keyed by ensemble variable name (DESIGN §5), sample axis first.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mcchain.model import Model
+from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
+
+if TYPE_CHECKING:
+    from mcchain.scene.schema import Scene
+
+
+def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
+    """Run the scene's analyses on every sample of ``model``.
+
+    1. Assembly of the initial state (always).
+    2. ``[equilibrium]`` or ``[modes]``: Newton equilibrium, then the eigen step, which
+       also decides ``stable``; ``omega`` (and ``mode_shape``) are stored only with
+       ``[modes]``.
+    3. ``[simulate]``: time integration from the assembled state or the equilibrium.
+
+    Returns:
+        Arrays keyed by ensemble variable name, sample axis first, plus ``status`` (uint32,
+        every analysis' bits OR-ed) and, with ``[simulate]``, ``time``.
+    """
+    nsample = model.nsample
+    out: dict[str, np.ndarray] = {"parameters": np.asarray(model.parameters, dtype=np.float64)}
+    assembled = assemble(model)
+    status = assembled.status.copy()
+    equilibrium = None
+    if scene.equilibrium is not None or scene.modes is not None:
+        settings = scene.equilibrium
+        kwargs = {}
+        if settings is not None:
+            kwargs = {"tolerance": settings.tolerance, "max_iterations": settings.max_iterations}
+        equilibrium = solve_equilibrium(model, assembled.q, assembled.status, **kwargs)
+        want_shapes = scene.modes is not None and scene.modes.shapes
+        modes = solve_modes(model, equilibrium, shapes=want_shapes)
+        status |= modes.status
+        out["q_eq"] = equilibrium.q.reshape(nsample, model.nbody, 3)
+        out["joint_force_eq"] = equilibrium.joint_force
+        out["stable"] = modes.stable
+        out["iterations"] = equilibrium.iterations
+        if scene.modes is not None:
+            out["omega"] = modes.omega
+            if modes.shapes is not None:
+                out["mode_shape"] = modes.shapes.reshape(nsample, model.nmode, model.nbody, 3)
+    if scene.simulate is not None:
+        from mcchain.solvers.simulate import simulate
+
+        if scene.simulate.start == "equilibrium":
+            if equilibrium is None:
+                equilibrium = solve_equilibrium(model, assembled.q, assembled.status)
+                status |= equilibrium.status
+            q_start, v_start = equilibrium.q, np.zeros_like(equilibrium.q)
+        else:
+            q_start, v_start = assembled.q, assembled.v
+        history = simulate(
+            model,
+            scene.simulate,
+            q_start=q_start,
+            v_start=v_start,
+            history_dtype=np.dtype(scene.storage.history_dtype),
+        )
+        status |= history.pop("status")
+        out.update(history)
+    out["status"] = status
+    return out
