@@ -22,7 +22,7 @@ import re
 import time
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from contextlib import suppress
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -41,11 +41,15 @@ PART_PATTERN = re.compile(r"^part-(\d{12})-(\d{12})\.nc$")
 CHUNK_TARGET_BYTES = 1 << 20
 """Uncompressed bytes aimed at per HDF5 chunk of the merged file (≈ 1 MiB)."""
 
+WINDOW_SAMPLES = 1 << 13
+"""Samples merged per window; every chunk length along ``sample`` is a power of two that
+divides it (or the whole, shorter ensemble), so windows never split a chunk."""
+
 WRITE_TARGET_BYTES = 16 << 20
 """Uncompressed bytes copied per read/write call during a merge (bounds its memory)."""
 
-MAX_OPEN_PARTS = 256
-"""Part files kept open at once during a merge (least recently used are closed)."""
+MAX_OPEN_PARTS = 16
+"""Part files kept open at once during a merge (≈ 1-2 MB of HDF5 metadata each)."""
 
 COMPRESSIONS = ("zlib", "zstd", "none")
 
@@ -117,17 +121,22 @@ def compression_options(compression: str, complevel: int = 1) -> tuple[dict[str,
         compression = "zlib"
     if compression == "none":
         return {}, note
-    return {"compression": compression, "complevel": int(complevel), "shuffle": True}, note
+    # netCDF4-python applies the HDF5 shuffle filter with zlib only.
+    options = {"compression": compression, "complevel": int(complevel)}
+    return options | ({"shuffle": True} if compression == "zlib" else {}), note
 
 
 def sample_chunk_length(per_sample_bytes: int, nsample: int) -> int:
     """HDF5 chunk length along ``sample``: about :data:`CHUNK_TARGET_BYTES` per chunk.
 
-    Depends only on the variable's shape and the sample count, so the merged file's layout
-    never depends on the compute chunk size.
+    A power of two at most :data:`WINDOW_SAMPLES` (or ``nsample`` when that is shorter).
+    It depends only on the variable's shape and the sample count, so the merged file's
+    layout never depends on the compute chunk size.
     """
     per_sample_bytes = max(int(per_sample_bytes), 1)
-    return int(min(max(CHUNK_TARGET_BYTES // per_sample_bytes, 1), max(nsample, 1)))
+    length = max(CHUNK_TARGET_BYTES // per_sample_bytes, 1)
+    length = min(1 << (length.bit_length() - 1), WINDOW_SAMPLES)
+    return int(min(length, max(nsample, 1)))
 
 
 # -- writing one Dataset (a part file) -------------------------------------------------------
@@ -266,11 +275,16 @@ class MergeStats:
 
 
 class _PartCache:
-    """Open part files, at most :data:`MAX_OPEN_PARTS` at a time (LRU)."""
+    """Open part files, at most :data:`MAX_OPEN_PARTS` at a time (least recently used
+    closed), each checked against the first part when first opened."""
 
     def __init__(self, parts: Sequence[Part]) -> None:
         self._parts = parts
         self._open: OrderedDict[int, netCDF4.Dataset] = OrderedDict()
+        self._checked: set[int] = {0}
+        self._layout: dict[str, Any] = {}
+        self._fixed: dict[str, np.ndarray] = {}
+        self.attrs: dict[str, Any] = {}
 
     def __call__(self, index: int) -> netCDF4.Dataset:
         import netCDF4
@@ -282,13 +296,40 @@ class _PartCache:
                 oldest.close()
             nc = netCDF4.Dataset(self._parts[index].path, "r")
             nc.set_auto_maskandscale(False)
+            if index == 0 and not self._layout:
+                self._layout = _layout(nc)
+                self._fixed = {
+                    name: var[:]
+                    for name, var in nc.variables.items()
+                    if "sample" not in var.dimensions
+                }
+                self.attrs = _attrs(nc)
+            elif index not in self._checked:
+                self._check(nc, self._parts[index].path.name)
+                self._checked.add(index)
         self._open[index] = nc
         return nc
+
+    def _check(self, nc: netCDF4.Dataset, name_of: str) -> None:
+        if _layout(nc) != self._layout:
+            raise MergeError(f"{name_of}: variables differ from the first part")
+        for name, value in self._fixed.items():
+            if not _same(nc[name][:], value):
+                raise MergeError(f"{name_of}: {name} differs from the first part")
+        attrs = _attrs(nc)
+        if set(attrs) != set(self.attrs) or not all(
+            _same(value, self.attrs[key]) for key, value in attrs.items()
+        ):
+            raise MergeError(f"{name_of}: global attributes differ")
 
     def close(self) -> None:
         for nc in self._open.values():
             nc.close()
         self._open.clear()
+
+
+def _layout(nc: netCDF4.Dataset) -> dict[str, Any]:
+    return {name: (var.dimensions, var.dtype) for name, var in nc.variables.items()}
 
 
 def check_tiling(parts: Sequence[Part], nsample: int | None = None) -> int:
@@ -321,6 +362,7 @@ def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
 def _read_samples(
     cache: _PartCache, parts: Sequence[Part], starts: np.ndarray, name: str, b0: int, b1: int
 ) -> np.ndarray:
+    """Samples ``b0:b1`` of variable ``name``, gathered from the parts that hold them."""
     first = int(np.searchsorted(starts, b0, side="right")) - 1
     pieces = []
     i = first
@@ -330,6 +372,69 @@ def _read_samples(
         pieces.append(np.asarray(cache(i)[name][lo - part.start : hi - part.start]))
         i += 1
     return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+
+
+@dataclass
+class _Target:
+    """A sample-dimension variable of the merged file and how it is copied."""
+
+    name: str
+    var: Any
+    per_sample: int
+    length: int
+    step: int
+
+
+def _create_variables(
+    dst: netCDF4.Dataset, first: netCDF4.Dataset, options: Mapping[str, Any]
+) -> list[_Target]:
+    """Create every variable of ``dst`` like the first part's; copy the fixed ones."""
+    total = dst.dimensions["sample"].size
+    targets = []
+    for name, var in first.variables.items():
+        dims = var.dimensions
+        if "sample" not in dims:
+            copy = dst.createVariable(name, var.dtype, dims)
+            _set_attrs(copy, _attrs(var))
+            if var.size:
+                copy[:] = var[:]
+            continue
+        if dims[0] != "sample":
+            raise MergeError(f"{name}: sample must be the first dim, got {dims}")
+        inner = [dst.dimensions[d].size for d in dims[1:]]
+        numeric = var.dtype is not str and np.dtype(var.dtype).kind in "biuf"
+        itemsize = np.dtype(var.dtype).itemsize if numeric else 8
+        per_sample = itemsize * int(np.prod(inner))
+        length = sample_chunk_length(per_sample, total)
+        kwargs: dict[str, Any] = dict(options) if numeric else {}
+        if itemsize == 1:
+            kwargs.pop("shuffle", None)
+        chunks = (length, *[max(n, 1) for n in inner])
+        target = dst.createVariable(name, var.dtype, dims, chunksizes=chunks, **kwargs)
+        _set_attrs(target, _attrs(var))
+        if per_sample == 0 and numeric:
+            continue
+        step = length * max(WRITE_TARGET_BYTES // max(per_sample * length, 1), 1)
+        targets.append(_Target(name, target, per_sample, length, step))
+    return targets
+
+
+@contextmanager
+def _no_chunk_cache() -> Iterator[None]:
+    """Open and create datasets without an HDF5 chunk cache.
+
+    netCDF's default cache is 64 MiB per variable and stays allocated while the file is
+    open, so a merge of many variables would grow by that much per variable. The merge
+    reads contiguous parts and writes whole chunks: it needs no cache.
+    """
+    import netCDF4
+
+    size, nelems, preemption = netCDF4.get_chunk_cache()
+    netCDF4.set_chunk_cache(0, nelems, preemption)
+    try:
+        yield
+    finally:
+        netCDF4.set_chunk_cache(size, nelems, preemption)
 
 
 def merge_parts(
@@ -370,69 +475,25 @@ def merge_parts(
     cache = _PartCache(parts)
     bytes_in = 0
     try:
-        first = cache(0)
-        layout = {name: (var.dimensions, var.dtype) for name, var in first.variables.items()}
-        global_attrs = _attrs(first)
-        for index in range(1, len(parts)):
-            nc = cache(index)
-            other = {name: (var.dimensions, var.dtype) for name, var in nc.variables.items()}
-            if other != layout:
-                raise MergeError(f"{parts[index].path.name}: variables differ from the first part")
-            for name, var in nc.variables.items():
-                if "sample" not in var.dimensions and not _same(var[:], first[name][:]):
-                    raise MergeError(
-                        f"{parts[index].path.name}: {name} differs from the first part"
-                    )
-            if not all(
-                _same(value, global_attrs.get(key)) for key, value in _attrs(nc).items()
-            ) or set(nc.ncattrs()) != set(global_attrs):
-                raise MergeError(f"{parts[index].path.name}: global attributes differ")
-
-        dst = netCDF4.Dataset(tmp, "w", format="NETCDF4")
-        try:
-            dst.set_fill_off()
-            dst.set_auto_maskandscale(False)
-            for dim, obj in first.dimensions.items():
-                dst.createDimension(dim, total if dim == "sample" else obj.size)
-            for name, var in first.variables.items():
-                dims = var.dimensions
-                if "sample" not in dims:
-                    copy = dst.createVariable(name, var.dtype, dims)
-                    _set_attrs(copy, _attrs(var))
-                    if var.size:
-                        copy[:] = var[:]
-                    continue
-                if dims[0] != "sample":
-                    raise MergeError(f"{name}: sample must be the first dim, got {dims}")
-                inner = [dst.dimensions[d].size for d in dims[1:]]
-                numeric = var.dtype is not str and np.dtype(var.dtype).kind in "biuf"
-                itemsize = np.dtype(var.dtype).itemsize if numeric else 8
-                per_sample = itemsize * int(np.prod(inner))
-                length = sample_chunk_length(per_sample, total)
-                kwargs: dict[str, Any] = dict(options) if numeric else {}
-                if numeric and itemsize == 1:
-                    kwargs.pop("shuffle", None)
-                target = dst.createVariable(
-                    name,
-                    var.dtype,
-                    dims,
-                    chunksizes=(length, *[max(n, 1) for n in inner]),
-                    **kwargs,
-                )
-                if numeric:
-                    # Whole chunks are written: bypass the chunk cache (memory O(block)).
-                    target.set_var_chunk_cache(size=0)
-                _set_attrs(target, _attrs(var))
-                if per_sample == 0 and numeric:
-                    continue
-                step = length * max(WRITE_TARGET_BYTES // max(per_sample * length, 1), 1)
-                for b0, b1 in _blocks(total, step):
-                    block = _read_samples(cache, parts, starts, name, b0, b1)
-                    target[b0:b1] = block
-                    bytes_in += block.nbytes
-            _set_attrs(dst, global_attrs)
-        finally:
-            dst.close()
+        with _no_chunk_cache():
+            first = cache(0)
+            with netCDF4.Dataset(tmp, "w", format="NETCDF4") as dst:
+                dst.set_fill_off()
+                dst.set_auto_maskandscale(False)
+                for dim, obj in first.dimensions.items():
+                    dst.createDimension(dim, total if dim == "sample" else obj.size)
+                targets = _create_variables(dst, first, options)
+                # Window by window, variable by variable: the order chunks are written in
+                # (hence the file's bytes) depends only on the layout and sample count.
+                window = max(WINDOW_SAMPLES, max((t.length for t in targets), default=1))
+                for w0, w1 in _blocks(total, window):
+                    for t in targets:
+                        for b0 in range(w0, w1, min(t.step, window)):
+                            b1 = min(b0 + t.step, w1)
+                            block = _read_samples(cache, parts, starts, t.name, b0, b1)
+                            t.var[b0:b1] = block
+                            bytes_in += block.nbytes
+                _set_attrs(dst, cache.attrs)
         cache.close()
         commit_file(tmp, out)
     finally:
