@@ -7,7 +7,8 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
 ==============================  ==========================================================
 ``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``)
 ``scatter_<result>.png``        each result against each sampled parameter, with a
-                                least-squares trend line and Pearson's r; results are
+                                least-squares trend line and Pearson's r (components
+                                constant over the samples are named, not drawn); results are
                                 ``omega`` (modes), ``q_eq`` (body, dof),
                                 ``joint_force_eq`` (magnitude per joint) and
                                 ``peak_contact_force`` (max |λ| over time per clearance
@@ -54,6 +55,8 @@ log = logging.getLogger(__name__)
 
 MAX_SCATTER_POINTS = 4000
 """Points drawn per scatter panel (a fixed random subset; trends use every sample)."""
+CONSTANT_RTOL = 1e-9
+"""A result component whose spread is below this (relative, floor 1) is constant: not drawn."""
 MAX_ENVELOPE_TIMES = 400
 """Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
 BLOCK_BYTES = 64 * 2**20
@@ -246,9 +249,15 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
         return "the run samples no parameter ([sample] absent)"
     params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
     paths = _names(ds, "param")
-    rows = [k for k in range(result.values.shape[1]) if np.isfinite(result.values[:, k]).any()]
+    rows, constant = [], []
+    for k in range(result.values.shape[1]):
+        y = result.values[:, k][np.isfinite(result.values[:, k])]
+        if len(y) and np.ptp(y) > CONSTANT_RTOL * max(1.0, float(np.abs(y).max())):
+            rows.append(k)
+        elif len(y):
+            constant.append(result.labels[k])
     if not rows:
-        return f"{result.name} has no finite value"
+        return f"{result.name} has no finite, varying component"
     n = params.shape[0]
     shown = np.arange(n)
     if n > MAX_SCATTER_POINTS:
@@ -272,7 +281,10 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
             if j == 0:
                 ax.set_ylabel(result.labels[k], fontsize=8)
             ax.tick_params(labelsize=7)
-    fig.suptitle(f"{result.name} ({result.units}) against the sampled parameters, {n} samples")
+    title = f"{result.name} ({result.units}) against the sampled parameters, {n} samples"
+    if constant:
+        title += "\nconstant (not drawn): " + ", ".join(constant)
+    fig.suptitle(title, fontsize=10)
     return _save(fig, path)
 
 
