@@ -272,3 +272,34 @@ def test_add_arguments__covers_rerun_script_flags() -> None:
     args = ours.parse_args(["RUN", "--samples", "0,17", "--magnify", "50"])
     assert args.magnify == 50.0 and args.samples == "0,17" and not args.spawn
     assert ours.parse_args(["RUN"]).magnify == playback.DEFAULT_MAGNIFY == 100.0
+
+
+# -- live streaming ------------------------------------------------------------------------------
+def test_live_stream__chunks_built_by_the_registry_are_logged_as_show_logs_them(
+    synthetic: Any, tmp_path: Path
+) -> None:
+    """``mcchain run --rerun 1,3``: each chunk's Dataset (``build_dataset``) and model."""
+    from mcchain.ensemble.registry import build_dataset
+
+    ds, model = synthetic
+    whole = ds.load()
+    out = tmp_path / "live.rrd"
+    with playback.LiveStream([3, 1], save=out, force_scale=0.01) as stream:
+        for start, stop in ((0, 2), (2, 4), (4, NSAMPLE)):
+            part = whole.isel(sample=slice(start, stop))
+            outputs = {name: part[name].values for name in part.data_vars}
+            outputs["time"] = part["time"].values
+            chunk = build_dataset(outputs, model.select(start, stop), start=start)
+            logged = stream.log_chunk(chunk, model.select(start, stop), start)
+            assert logged == [s for s in (1, 3) if start <= s < stop]
+    rrd = read_rrd(out)
+    assert {p.split("/")[2] for p in rrd if p.startswith("/sample/")} == {"1", "3"}
+    from rerun.chunk import RrdReader
+
+    assert RrdReader(out).blueprints()
+    for s in (1, 3):
+        got = _arr(rrd[f"/sample/{s}/joint_force/O"]["Scalars:scalars"])
+        np.testing.assert_array_equal(got, whole["joint_force"].values[s, :, 0])
+        jt = geometry.joint_track(model, s, whole["q"].values[s].astype(float), 100.0)
+        offset = _arr(rrd[f"/sample/{s}/mechanism/clearance/offset"]["Arrows2D:vectors"])[:, 0]
+        np.testing.assert_allclose(offset, (jt.drawn - jt.bearing)[:, 0] * [1, -1], rtol=FLOAT32)

@@ -634,10 +634,17 @@ def make_blueprint(
     magnify: float = DEFAULT_MAGNIFY,
     model_offset: int = 0,
 ) -> rrb.Blueprint:
-    """The default layout: mechanism views (one per sample) beside the plots."""
+    """The default layout: mechanism views (one per sample) beside the plots.
+
+    ``samples`` not (yet) in ``ds`` get their views too (live streaming); the view bounds
+    cover the drawn points of those that are.
+    """
     import rerun.blueprint as rrb
 
-    x_range, y_range = view_bounds(ds, model, samples, magnify, model_offset)
+    present = set(_sample_ids(ds).tolist())
+    x_range, y_range = view_bounds(
+        ds, model, [s for s in samples if s in present], magnify, model_offset
+    )
     bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
     mechanisms = [
         rrb.Spatial2DView(origin=f"/sample/{s}/mechanism", name=f"sample {s}", visual_bounds=bounds)
@@ -700,6 +707,78 @@ def open_recording(
 
 
 # -- command -----------------------------------------------------------------------------------
+class LiveStream:
+    """Stream chosen samples to rerun while a run computes them (``mcchain run --rerun 0,1``).
+
+    Call :meth:`log_chunk` with each finished chunk (the Dataset the runs module builds with
+    ``mcchain.ensemble.registry.build_dataset(outputs, chunk_model, start=start)``); the
+    samples of interest it holds are logged with :func:`log_samples`. The default blueprint is
+    sent with the first chunk that holds one of them; the force scale is fixed then too, so
+    arrows compare across chunks. :meth:`close` (or leaving a ``with`` block) flushes and
+    closes the sink, completing a saved file.
+
+    Args:
+        samples: global sample indices to stream.
+        save, serve, url, spawn: the sink, as :func:`open_recording`.
+        magnify: clearance offsets are drawn this many times longer.
+        force_scale: force arrows, m per N (default: from the first chunk logged).
+    """
+
+    def __init__(
+        self,
+        samples: Sequence[int],
+        *,
+        save: str | Path | None = None,
+        serve: bool = False,
+        url: str | None = None,
+        spawn: bool = True,
+        magnify: float = DEFAULT_MAGNIFY,
+        force_scale: float | None = None,
+    ) -> None:
+        self.samples = list(dict.fromkeys(int(s) for s in samples))
+        self.magnify = magnify
+        self.force_scale = force_scale
+        self.logged: list[int] = []
+        self.recording = open_recording(save=save, serve=serve, url=url, spawn=spawn)
+        self._blueprint_sent = False
+
+    def log_chunk(self, dataset: xr.Dataset, model: Model, start: int = 0) -> list[int]:
+        """Log the samples of interest in this chunk; ``model`` is the chunk's model (row 0 =
+        global sample ``start``) or the whole run's with ``start=0``. Returns those logged."""
+        present = set(_sample_ids(dataset).tolist())
+        wanted = [s for s in self.samples if s in present and s not in self.logged]
+        if not wanted:
+            return []
+        if self.force_scale is None:
+            self.force_scale = default_force_scale(dataset, model, wanted, model_offset=start)
+        if not self._blueprint_sent:
+            blueprint = make_blueprint(dataset, model, self.samples, self.magnify, start)
+            self.recording.send_blueprint(blueprint)
+            self._blueprint_sent = True
+        log_samples(
+            dataset,
+            model,
+            wanted,
+            self.recording,
+            magnify=self.magnify,
+            force_scale=self.force_scale,
+            model_offset=start,
+        )
+        self.logged += wanted
+        return wanted
+
+    def close(self) -> None:
+        """Flush everything logged and close the sink (a saved file is then complete)."""
+        self.recording.flush()
+        self.recording.disconnect()
+
+    def __enter__(self) -> LiveStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def _attr_int(ds: xr.Dataset, name: str) -> int | None:
     value = ds.attrs.get(name)
     try:
