@@ -152,15 +152,11 @@ class ReferenceStatics:
 
 
 def statics(model: Model, s: int, q_start: np.ndarray, xtol: float = 1e-13) -> ReferenceStatics:
-    """Equilibrium by ``scipy.optimize.root`` (hybr) and eigenpulsations by ``scipy.linalg.eigh``.
-
-    K = ∂(Bᵀλ − F)/∂q by central differences of the complex-step residual (relative
-    accuracy ~1e-8); the null space from ``scipy.linalg.null_space``.
-    """
+    """Equilibrium by ``scipy.optimize.root`` (hybr) and eigenpulsations by ``scipy.linalg.eigh``
+    (K by the complex step, the null space from ``scipy.linalg.null_space``)."""
     n = model.ndof
     q_start = np.asarray(q_start, dtype=float)
     B0 = constraint_jacobian(model, s, q_start)
-    minv = 1.0 / mass_diagonal(model, s)
     F0 = applied_forces(model, s, q_start)
     lam0 = np.linalg.lstsq(B0.T, F0, rcond=None)[0]
     sol = scipy.optimize.root(
@@ -170,29 +166,51 @@ def statics(model: Model, s: int, q_start: np.ndarray, xtol: float = 1e-13) -> R
         options={"xtol": xtol},
     )
     q, lam = sol.x[:n], sol.x[n:]
-    K = stiffness_fd(model, s, q, lam)
-    B = constraint_jacobian(model, s, q)
-    N = scipy.linalg.null_space(B)
-    M = np.diag(1.0 / minv)
+    return ReferenceStatics(q=q, lam=lam, omega=modes(model, s, q, lam), success=bool(sol.success))
+
+
+def modes(model: Model, s: int, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Signed eigenpulsations about (q, λ) by ``scipy.linalg.eigh`` on the null space of B."""
+    K = stiffness(model, s, q, lam)
+    N = scipy.linalg.null_space(constraint_jacobian(model, s, q))
+    M = np.diag(mass_diagonal(model, s))
     p2 = scipy.linalg.eigh(N.T @ K @ N, N.T @ M @ N, eigvals_only=True)
-    omega = np.sign(p2) * np.sqrt(np.abs(p2))
-    return ReferenceStatics(q=q, lam=lam, omega=np.sort(omega), success=bool(sol.success))
+    return np.sort(np.sign(p2) * np.sqrt(np.abs(p2)))
 
 
-def stiffness_fd(
-    model: Model, s: int, q: np.ndarray, lam: np.ndarray, h: float = 1e-6
-) -> np.ndarray:
-    """K = ∂(Bᵀλ − F)/∂q at fixed λ by central differences, symmetrised."""
-    n = model.ndof
-    K = np.empty((n, n))
+def constraint_jacobian_formula(model: Model, s: int, q: np.ndarray) -> np.ndarray:
+    """B written out from DESIGN §2 (rows [I, Ω A_b s_b] / [−I, −Ω A_a s_a], e·∂d/∂q for
+    clearance joints, 1 on θ for drivers); complex-safe so that K can be complex-stepped."""
+    B = np.zeros((model.ncon, model.ndof), dtype=np.result_type(q, float))
+    omega = np.array([[0.0, -1.0], [1.0, 0.0]])
+    pa_all = _param(model, "joint_point_a", s)
+    pb_all = _param(model, "joint_point_b", s)
+    for k in range(model.njoint):
+        a, b = model.joint_body_a[k], model.joint_body_b[k]
+        d = _point(q, b, pb_all[k]) - _point(q, a, pa_all[k])
+        rows = np.zeros((2, model.ndof), dtype=B.dtype)
+        for body, local, sign in ((b, pb_all[k], 1.0), (a, pa_all[k], -1.0)):
+            if body == GROUND:
+                continue
+            _, A = _pose(q, body)
+            rows[:, 3 * body : 3 * body + 2] = sign * np.eye(2)
+            rows[:, 3 * body + 2] = sign * (omega @ A @ local)
+        row = model.joint_row[k]
+        if model.joint_kind[k] == JOINT_IDEAL:
+            B[row : row + 2] = rows
+        else:
+            B[row] = d @ rows / np.sqrt(d[0] * d[0] + d[1] * d[1])
+    for j in range(model.ndriver):
+        B[model.driver_row[j], 3 * model.driver_body[j] + 2] = 1.0
+    return B
 
-    def g(x: np.ndarray) -> np.ndarray:
-        return constraint_jacobian(model, s, x).T @ lam - applied_forces(model, s, x)
 
-    for k in range(n):
-        step = np.zeros(n)
-        step[k] = h
-        K[:, k] = (g(q + step) - g(q - step)) / (2 * h)
+def stiffness(model: Model, s: int, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """K = ∂(Bᵀλ − F)/∂q at fixed λ by the complex step of the written-out B and F."""
+    K = complex_step_jacobian(
+        lambda x: constraint_jacobian_formula(model, s, x).T @ lam - applied_forces(model, s, x),
+        q,
+    )
     return 0.5 * (K + K.T)
 
 

@@ -14,7 +14,12 @@ import numpy as np
 from numba import njit, prange
 
 from mcchain.kernels.config import JIT, PJIT
-from mcchain.kernels.forces import applied_forces, applied_stiffness_add, mass_diagonal
+from mcchain.kernels.forces import (
+    applied_forces,
+    applied_stiffness_add,
+    mass_diagonal,
+    potential_energy,
+)
 from mcchain.kernels.joints import (
     JOINT_IDEAL,
     _add_point_rows,
@@ -51,6 +56,9 @@ RANK_RTOL = 1e-9
 ZERO_MODE_RTOL = 1e3 * EPS
 """|p²| below this × the eigen problem's scale is an exact zero mode (not noise)."""
 ASSEMBLY_MAX_ITER = 50
+PROJECTION_MAX_ITER = 20
+MAX_ROTATION_STEP = 0.5
+"""Largest body rotation of one Newton step, rad (the step is shortened to it)."""
 
 
 # --------------------------------------------------------------------------------------
@@ -112,6 +120,27 @@ def project_onto_rows(B, minv, m, n, S, residual, x):
         for i in range(m):
             acc += B[i, k] * residual[i]
         x[k] -= minv[k] * acc
+
+
+@njit(**JIT)
+def project_positions(km, s, q, t, minv, m, n, lscale, B, S, phi):
+    """Gauss–Newton projection of q onto Φ(q, t) = 0 (M-smallest corrections), in place.
+
+    ``B``, ``S``, ``phi`` are scratch of shapes (m, n), (m, m), (m,).
+
+    Returns:
+        ``True`` if |Φ| ≤ 1e-14 × ``lscale`` was reached within PROJECTION_MAX_ITER steps.
+    """
+    for _it in range(PROJECTION_MAX_ITER):
+        constraint_residual(km, s, q, t, phi)
+        if max_abs(phi, m) <= 1e-14 * lscale:
+            return True
+        constraint_jacobian(km, s, q, B)
+        if not schur_factor(B, minv, m, n, S):
+            return False
+        project_onto_rows(B, minv, m, n, S, phi, q)
+    constraint_residual(km, s, q, t, phi)
+    return max_abs(phi, m) <= 1e-14 * lscale
 
 
 # --------------------------------------------------------------------------------------
@@ -252,9 +281,14 @@ def assemble_batch(km, q_out, v_out, status_out):
 # --------------------------------------------------------------------------------------
 @njit(**JIT)
 def _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R_out):
-    """R = [Bᵀλ − F; Φ] into ``R_out`` and its scaled max norm (force rows / F scale, moment
-    rows / (F scale × L scale), constraint rows / L scale). F is evaluated at rest (``v_rest`` = 0);
-    B and F are overwritten for q."""
+    """R = [Bᵀλ − F; Φ] into ``R_out``; B and F are overwritten for q (F at rest, v_rest = 0).
+
+    Returns:
+        (max norm, sum of squares) of the scaled residual: force rows / F scale, moment rows
+        / (F scale × L scale), constraint rows / L scale. The max norm decides convergence,
+        the smooth sum of squares is the line-search merit (the Newton direction always
+        descends it).
+    """
     constraint_jacobian(km, s, q, B)
     applied_forces(km, s, q, v_rest, F)
     for k in range(n):
@@ -264,16 +298,68 @@ def _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R_o
         R_out[k] = acc
     constraint_residual(km, s, q, 0.0, R_out[n:])
     norm = 0.0
-    for k in range(n):
-        scale = fscale * lscale if k % 3 == 2 else fscale
+    merit = 0.0
+    for k in range(n + m):
+        if k >= n:
+            scale = lscale
+        elif k % 3 == 2:
+            scale = fscale * lscale
+        else:
+            scale = fscale
         a = abs(R_out[k]) / scale
+        merit += a * a
         if a > norm or a != a:
             norm = a
+    return norm, merit
+
+
+@njit(**JIT)
+def _flip_pulled_journals(km, s, q, lam):
+    """Move every clearance journal with λ ≤ 0 to the mirror side of its bearing (d → −d)
+    by translating its body (the bearing's if the journal is the ground). True if any."""
+    flipped = False
+    for k in range(km.joint_kind.shape[0]):
+        if km.joint_kind[k] == JOINT_IDEAL or lam[km.joint_row[k]] > 0.0:
+            continue
+        _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+        b = km.joint_body_b[k]
+        sign = -2.0
+        if b < 0:
+            b = km.joint_body_a[k]
+            sign = 2.0
+        q[3 * b] += sign * dx
+        q[3 * b + 1] += sign * dy
+        flipped = True
+    return flipped
+
+
+@njit(**JIT)
+def _kkt_matrix(K, B, minv, mu, n, m, J_out):
+    """J = [[K + μ M, Bᵀ], [B, 0]] into ``J_out`` (n + m, n + m)."""
+    J_out[:, :] = 0.0
+    for i in range(n):
+        for k in range(n):
+            J_out[i, k] = K[i, k]
+        J_out[i, i] += mu / minv[i]
     for i in range(m):
-        a = abs(R_out[n + i]) / lscale
-        if a > norm or a != a:
-            norm = a
-    return norm
+        for k in range(n):
+            J_out[n + i, k] = B[i, k]
+            J_out[k, n + i] = B[i, k]
+
+
+@njit(**JIT)
+def _scaled_step_norm(step, n, size, fscale, lscale):
+    """max |step| with x, y / L scale, θ as is, λ / F scale."""
+    result = 0.0
+    for k in range(size):
+        if k >= n:
+            scale = fscale
+        elif k % 3 == 2:
+            scale = 1.0
+        else:
+            scale = lscale
+        result = max(result, abs(step[k]) / scale)
+    return result
 
 
 @njit(**JIT)
@@ -281,9 +367,15 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     """Newton on (q, λ) for Φ(q) = 0, Bᵀλ = F(q) (DESIGN §2), from q, in place.
 
     Jacobian [[K, Bᵀ], [B, 0]] with K = ∂(Bᵀλ)/∂q − ∂F/∂q (exact). λ starts from the least
-    squares fit of Bᵀλ = F. A backtracking line search on the scaled residual globalises
-    the step. Once the residual is ≤ ``tol`` one more (polishing) step is taken unless it
-    is already at round-off level.
+    squares fit of Bᵀλ = F. Globalisation: the step is capped (MAX_ROTATION_STEP, one length
+    scale) and each trial point is projected back onto Φ = 0; a step is accepted if it
+    lowers the scaled residual's sum of squares (Armijo). Otherwise K is shifted to K + μ M
+    (Levenberg–Marquardt, μ ×4 per try): such a damped step is also accepted if it lowers
+    the potential energy, with λ refitted, so a far start slides down to a stable
+    equilibrium; μ shrinks ×4 per success and returns to 0 (pure Newton, quadratic).
+    Once the residual is ≤ ``tol``, one more (polishing) step is taken unless it is
+    already at round-off level. If a clearance joint then needs λ ≤ 0, its journal is moved
+    to the mirror side of the bearing and Newton restarts once (the contact equilibrium).
 
     Args:
         q: (3 nbody,) start in, equilibrium out.
@@ -330,10 +422,17 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     q_trial = np.empty(n)
     lam_trial = np.empty(m)
     R_trial = np.empty(size)
-    norm = _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+    B_work = np.empty((m, n))
+    phi_work = np.empty(m)
+    K = np.empty((n, n))
+    norm, merit = _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+    energy = potential_energy(km, s, q)
     iterations = 0
     converged = False
     polished = False
+    flipped = False
+    mu = 0.0  # Levenberg–Marquardt shift, 1/s²: 0 is plain Newton
+    mu_unit = 0.0
     for it in range(max_iter + 1):
         if not converged:
             history[it, 0] = norm
@@ -341,64 +440,116 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
                 converged = True
                 iterations = it
         if converged and (polished or norm <= 16.0 * EPS):
-            break
+            if flipped or not _flip_pulled_journals(km, s, q, lam):
+                break
+            # a journal held by λ < 0 sits on the wrong side of its bearing: the mirror
+            # position (d → −d) is the contact equilibrium; restart Newton from there once
+            flipped = True
+            converged = False
+            polished = False
+            project_positions(km, s, q, 0.0, minv, m, n, lscale, B_work, S, phi_work)
+            _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
+            if not schur_factor(B, minv, m, n, S):
+                return SINGULAR, it
+            for i in range(m):
+                acc = 0.0
+                for k in range(n):
+                    acc += B[i, k] * minv[k] * F[k]
+                lam[i] = acc
+            cholesky_solve(S, m, lam)
+            norm, merit = _equilibrium_residual(
+                km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R
+            )
+            energy = potential_energy(km, s, q)
+            mu = 0.0
+            continue
         if it == max_iter:
             break
-        # KKT Jacobian
-        J[:, :] = 0.0
-        constraint_hessian_add(km, s, q, lam, J)
-        applied_stiffness_add(km, s, q, J)
-        for i in range(m):
+        K[:, :] = 0.0
+        constraint_hessian_add(km, s, q, lam, K)
+        applied_stiffness_add(km, s, q, K)
+        if mu_unit == 0.0:
+            # the shift's natural unit: the largest stiffness over mass ratio, ≈ p_max²
             for k in range(n):
-                J[n + i, k] = B[i, k]
-                J[k, n + i] = B[i, k]
-        if not lu_factor(J, size, piv, KKT_PIVOT_RTOL):
-            return SINGULAR, it
-        for i in range(size):
-            step[i] = -R[i]
-        lu_solve(J, size, piv, step)
-        if not converged:
-            step_norm = 0.0
-            for k in range(size):
-                if k >= n:
-                    scale = fscale
-                elif k % 3 == 2:
-                    scale = 1.0
-                else:
-                    scale = lscale
-                step_norm = max(step_norm, abs(step[k]) / scale)
-            history[it, 1] = step_norm
-        if converged:
-            # polishing step: full Newton, no line search
-            for k in range(n):
-                q[k] += step[k]
-            for i in range(m):
-                lam[i] += step[n + i]
-            norm = _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
-            polished = True
-            continue
-        alpha = 1.0
+                mu_unit = max(mu_unit, abs(K[k, k]) * minv[k])
+            if not mu_unit > 0.0:
+                mu_unit = 1.0
         accepted = False
-        for _ls in range(30):
+        for _try in range(60):
+            _kkt_matrix(K, B, minv, mu, n, m, J)
+            if not lu_factor(J, size, piv, KKT_PIVOT_RTOL):
+                if mu == 0.0 and converged:
+                    return SINGULAR, it
+                if mu > 1e12 * mu_unit:
+                    return SINGULAR, it
+                mu = 1e-2 * mu_unit if mu == 0.0 else 4.0 * mu
+                continue
+            for i in range(size):
+                step[i] = -R[i]
+            lu_solve(J, size, piv, step)
+            if mu == 0.0 and not converged:
+                history[it, 1] = _scaled_step_norm(step, n, size, fscale, lscale)
+            if converged:
+                # polishing step: full Newton
+                for k in range(n):
+                    q[k] += step[k]
+                for i in range(m):
+                    lam[i] += step[n + i]
+                norm, merit = _equilibrium_residual(
+                    km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R
+                )
+                polished = True
+                accepted = True
+                break
+            # cap the step (MAX_ROTATION_STEP rad, one length scale) so that a far start
+            # creeps towards an equilibrium instead of jumping branches
+            alpha = 1.0
+            for k in range(n):
+                limit = MAX_ROTATION_STEP if k % 3 == 2 else lscale
+                if abs(step[k]) * alpha > limit:
+                    alpha = limit / abs(step[k])
             for k in range(n):
                 q_trial[k] = q[k] + alpha * step[k]
             for i in range(m):
                 lam_trial[i] = lam[i] + alpha * step[n + i]
-            trial = _equilibrium_residual(
-                km, s, q_trial, lam_trial, n, m, fscale, lscale, v_rest, B, F, R_trial
-            )
-            if trial <= (1.0 - 1e-4 * alpha) * norm:
-                accepted = True
+            # back onto Φ = 0: removes the linearisation error of long steps (a clearance
+            # journal must stay on its circle of radius c); second order near the solution
+            if project_positions(km, s, q_trial, 0.0, minv, m, n, lscale, B_work, S, phi_work):
+                trial, trial_merit = _equilibrium_residual(
+                    km, s, q_trial, lam_trial, n, m, fscale, lscale, v_rest, B, F, R_trial
+                )
+                if trial_merit <= (1.0 - 2e-4 * alpha) * merit:
+                    accepted = True
+                elif mu > 0.0:
+                    # a damped step that lowers the potential is progress towards a stable
+                    # equilibrium even where the residual must first grow; λ is refitted
+                    trial_energy = potential_energy(km, s, q_trial)
+                    if trial_energy < energy and schur_factor(B, minv, m, n, S):
+                        for i in range(m):
+                            acc = 0.0
+                            for k in range(n):
+                                acc += B[i, k] * minv[k] * F[k]
+                            lam_trial[i] = acc
+                        cholesky_solve(S, m, lam_trial)
+                        trial, trial_merit = _equilibrium_residual(
+                            km, s, q_trial, lam_trial, n, m, fscale, lscale, v_rest, B, F, R_trial
+                        )
+                        accepted = True
+            if accepted:
+                mu = 0.25 * mu if mu > 1e-6 * mu_unit else 0.0
                 break
-            alpha *= 0.5
+            mu = 1e-2 * mu_unit if mu == 0.0 else 4.0 * mu
         if not accepted:
-            # no decrease along the Newton direction: stop here, not converged
             _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
             return EQUILIBRIUM_NOT_CONVERGED, it + 1
+        if polished:
+            continue
         q[:] = q_trial
         lam[:] = lam_trial
         R[:] = R_trial
         norm = trial
+        merit = trial_merit
+        energy = potential_energy(km, s, q)
     if not converged:
         return EQUILIBRIUM_NOT_CONVERGED, max_iter
     return 0, iterations
