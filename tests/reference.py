@@ -139,7 +139,7 @@ def equilibrium_residual(model: Model, s: int, x: np.ndarray) -> np.ndarray:
     """[Bᵀλ − F; Φ] for x = [q; λ] (real)."""
     n = model.ndof
     q, lam = x[:n], x[n:]
-    B = constraint_jacobian(model, s, q)
+    B = constraint_jacobian_formula(model, s, q)
     return np.concatenate([B.T @ lam - applied_forces(model, s, q), constraints(model, s, q)])
 
 
@@ -156,7 +156,7 @@ def statics(model: Model, s: int, q_start: np.ndarray, xtol: float = 1e-13) -> R
     (K by the complex step, the null space from ``scipy.linalg.null_space``)."""
     n = model.ndof
     q_start = np.asarray(q_start, dtype=float)
-    B0 = constraint_jacobian(model, s, q_start)
+    B0 = constraint_jacobian_formula(model, s, q_start)
     F0 = applied_forces(model, s, q_start)
     lam0 = np.linalg.lstsq(B0.T, F0, rcond=None)[0]
     sol = scipy.optimize.root(
@@ -172,7 +172,7 @@ def statics(model: Model, s: int, q_start: np.ndarray, xtol: float = 1e-13) -> R
 def modes(model: Model, s: int, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Signed eigenpulsations about (q, λ) by ``scipy.linalg.eigh`` on the null space of B."""
     K = stiffness(model, s, q, lam)
-    N = scipy.linalg.null_space(constraint_jacobian(model, s, q))
+    N = scipy.linalg.null_space(constraint_jacobian_formula(model, s, q))
     M = np.diag(mass_diagonal(model, s))
     p2 = scipy.linalg.eigh(N.T @ K @ N, N.T @ M @ N, eigvals_only=True)
     return np.sort(np.sign(p2) * np.sqrt(np.abs(p2)))
