@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.model import Model
+from mcchain.scene.schema import Equilibrium
 from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
 
 if TYPE_CHECKING:
@@ -37,11 +38,14 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
     status = assembled.status.copy()
     equilibrium = None
     if scene.equilibrium is not None or scene.modes is not None:
-        settings = scene.equilibrium
-        kwargs = {}
-        if settings is not None:
-            kwargs = {"tolerance": settings.tolerance, "max_iterations": settings.max_iterations}
-        equilibrium = solve_equilibrium(model, assembled.q, assembled.status, **kwargs)
+        settings = scene.equilibrium if scene.equilibrium is not None else Equilibrium()
+        equilibrium = solve_equilibrium(
+            model,
+            assembled.q,
+            assembled.status,
+            tolerance=settings.tolerance,
+            max_iterations=settings.max_iterations,
+        )
         want_shapes = scene.modes is not None and scene.modes.shapes
         modes = solve_modes(model, equilibrium, shapes=want_shapes)
         status |= modes.status
