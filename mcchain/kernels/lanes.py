@@ -32,6 +32,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -48,7 +49,7 @@ from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model
 
 _SINCOS_TEMPLATE = "\n".join(
     [
-        "{k} = math.floor({x} * 0.6366197723675814 + 0.5)",
+        "{k} = np.floor({x} * 0.6366197723675814 + 0.5)",
         "{r} = (({x} - {k} * 1.5707963267341256) - {k} * 6.077100506303966e-11)"
         " - {k} * 2.0222662487111665e-21",
         "{z} = {r} * {r}",
@@ -61,7 +62,7 @@ _SINCOS_TEMPLATE = "\n".join(
         " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
         " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
         " + {z} * -1.1359647557788195e-11)))))))",
-        "{j} = {k} - 4.0 * math.floor({k} * 0.25)",
+        "{j} = {k} - 4.0 * np.floor({k} * 0.25)",
         "{sw} = ({j} == 1.0) or ({j} == 3.0)",
         "{sa} = {pc} if {sw} else {ps}",
         "{ca} = {ps} if {sw} else {pc}",
@@ -83,7 +84,7 @@ def _sincos_function() -> str:
     return f"def sincos(x):\n{body}\n    return s, c\n"
 
 
-_namespace: dict[str, object] = {"math": __import__("math")}
+_namespace: dict[str, object] = {"math": __import__("math"), "np": np}
 exec(_sincos_function(), _namespace)
 # exec'd code has no file for numba's cache: compiled uncached (it serves tests and tools).
 sincos = njit(**dict(JIT, cache=False))(_namespace["sincos"])
@@ -319,9 +320,10 @@ class Emitter:
         self.lines = []
         return text
 
-    def load_params(self, lane: str = "s0 + l") -> None:
+    def load_params(self, where: Callable[[int], str]) -> None:
+        """``p_<slot> = where(slot index)`` for every parameter slot."""
         for name, i in self.slots.items():
-            self.emit(f"p_{name} = P[{i}, {lane}]")
+            self.emit(f"p_{name} = {where(i)}")
 
     # -- kinematics ------------------------------------------------------------------------
     def bodies(self, q: str = "q", tag: str = "") -> None:
