@@ -60,6 +60,15 @@ def plan_chunks(nsample: int, chunk_size: int) -> list[tuple[int, int]]:
     return [(s, min(s + chunk_size, nsample)) for s in range(0, nsample, chunk_size)]
 
 
+WARM_SAMPLES = 2
+"""Samples solved to warm the kernels (compile or load them from numba's cache)."""
+
+
+def warm_model(model: Model) -> Model:
+    """The first few samples: enough to take every code path of a real chunk."""
+    return model.select(0, min(WARM_SAMPLES, model.nsample))
+
+
 def default_solve() -> SolveFn:
     """The real solver, ``mcchain.solvers.solve_chunk`` (imported lazily)."""
     from mcchain.solvers import solve_chunk
@@ -152,7 +161,7 @@ def run_local(
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
     t0 = time.perf_counter()
-    solve(model.select(0, 1), scene)  # compile or load the cached kernels
+    solve(warm_model(model), scene)  # compile or load the cached kernels
     stats.warmup = time.perf_counter() - t0
     log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)
 
@@ -273,7 +282,7 @@ def run_dask(
         for worker, n in nthreads.items():
             if n != 1:
                 log.warning("worker %s has %d threads; mcchain expects 1 per process", worker, n)
-        setup = client.run(_worker_setup, solve, model.select(0, 1), scene)
+        setup = client.run(_worker_setup, solve, warm_model(model), scene)
         stats.worker_info = [{"worker": w, **d} for w, d in setup.items()]
         for entry in stats.worker_info:
             log.info("worker %(worker)s warmed in %(warmup).2f s", entry)

@@ -22,9 +22,10 @@ import xarray as xr
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
 
 from mcchain import runs
-from mcchain.errors import RunError, SceneError
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
+from mcchain.errors import RunError, SceneError
+from mcchain.parallel import Progress
 
 RUN_JSON_FIELDS = {
     "id",
@@ -141,7 +142,7 @@ def test_start_run__existing_run_dir_is_refused_before_anything(tmp_path: Path) 
     target = tmp_path / "mine"
     target.mkdir()
     (target / "keep").write_text("x")
-    with pytest.raises(RunError, match="--run-dir: .* already exists"):
+    with pytest.raises(RunError, match=r"--run-dir: .* already exists"):
         run(scene, tmp_path / "runs", run_dir=target)
     assert sorted(p.name for p in target.iterdir()) == ["keep"]
     assert not (tmp_path / "runs").exists()
@@ -172,7 +173,7 @@ def test_start_run__scene_error_writes_nothing(tmp_path: Path) -> None:
         raise SceneError("body.bar.mass: must be > 0, got -1.0")
 
     scene = write_fake_scene(tmp_path / "s.toml")
-    with pytest.raises(SceneError, match="body.bar.mass"):
+    with pytest.raises(SceneError, match=r"body\.bar\.mass"):
         runs.start_run(scene, out=tmp_path / "runs", loader=loader, solve=fake_solve)
     assert not (tmp_path / "runs").exists()
 
@@ -189,9 +190,7 @@ def test_start_run__failing_solver_marks_the_run_failed(tmp_path: Path) -> None:
 
     scene = write_fake_scene(tmp_path / "s.toml", count=30)
     with pytest.raises(FloatingPointError):
-        runs.start_run(
-            scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve
-        )
+        runs.start_run(scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve)
     (folder,) = (tmp_path / "runs").iterdir()
     record = runs.read_record(folder)
     assert record["status"] == "FAILED" and record["error"] == "boom in chunk 1"
@@ -302,8 +301,23 @@ def test_open_run__by_id_under_runs_and_errors(tmp_path: Path, monkeypatch) -> N
         assert ds.sizes["sample"] == 5
         assert ds.q_eq.chunks is not None  # lazy
     (tmp_path / "runs" / "bare").mkdir()
-    with pytest.raises(RunError, match="no ensemble.nc and no finished chunks"):
+    with pytest.raises(RunError, match=r"no ensemble\.nc and no finished chunks"):
         runs.open_run("bare")
+
+
+def test_progress__chunks_rate_and_eta_on_a_terminal_only(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    bar = Progress(total=4, done=1, enabled=True)
+    for _ in range(3):
+        bar.update(10)
+    bar.close()
+    err = capsys.readouterr().err
+    assert "4/4" in err and "samples/s" in err and "chunk" in err
+    quiet = Progress(total=4, done=0)  # stderr is captured: not a terminal
+    quiet.update(10)
+    quiet.close()
+    assert capsys.readouterr().err == ""
 
 
 MEMORY_SCRIPT = """

@@ -1,0 +1,190 @@
+"""The ``mcchain`` command line: errors, validate, runs, delegated commands."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
+
+from mcchain import cli, runs
+
+CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
+
+REDUNDANT = """
+[scene]
+name = "redundant"
+[[body]]
+name = "bar"
+mass = 1.0
+inertia = 0.1
+position = [0.5, 0.0]
+angle = 0.0
+[[joint]]
+name = "A"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["ground", "bar"]
+points = [[1.0, 0.0], [0.5, 0.0]]
+[equilibrium]
+"""
+
+NEGATIVE_MASS = """
+[scene]
+name = "x"
+[[body]]
+name = "bar"
+mass = -1.0
+inertia = 0.1
+position = [0.0, 0.0]
+angle = 0.0
+"""
+
+
+def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
+    return subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", *map(str, args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("mcchain: error: ")
+    for fragment in fragments:
+        assert fragment in lines[0]
+    assert proc.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("files", "args", "fragments"),
+    [
+        ({}, ["run", "missing.toml"], ["missing.toml: no such file"]),
+        ({"bad.toml": "[scene\nname = 1"}, ["run", "bad.toml"], ["bad.toml: malformed TOML"]),
+        ({"neg.toml": NEGATIVE_MASS}, ["run", "neg.toml"], ["body.bar.mass: must be > 0"]),
+        ({"red.toml": REDUNDANT}, ["run", "red.toml"], ["negative degrees of freedom"]),
+        ({}, ["run", CLEARANCE_BAR, "--samples", "0"], ["--samples: must be >= 1"]),
+        ({}, ["run", CLEARANCE_BAR, "--chunk-size", "x"], ["--chunk-size: expected an integer"]),
+        ({}, ["run", CLEARANCE_BAR, "--seed", "-4"], ["--seed: must be >= 0"]),
+        ({}, ["run", CLEARANCE_BAR, "--threads", "100000"], ["--threads: at most"]),
+        ({}, ["run", CLEARANCE_BAR, "--dask", "nowhere"], ["--dask: expected 'local'"]),
+        ({}, ["run", CLEARANCE_BAR, "--bogus"], ["unrecognized arguments: --bogus"]),
+        ({}, ["run"], ["a SCENE.toml (or --resume RUN) is required"]),
+        ({}, ["run", CLEARANCE_BAR, "--resume", "r"], ["--resume: cannot be combined with SCENE"]),
+        ({}, ["run", "--resume", "nope"], ["nope: no such run folder"]),
+        ({"r": None}, ["run", CLEARANCE_BAR, "--run-dir", "r"], ["--run-dir: r already exists"]),
+        ({}, ["frobnicate"], ["invalid choice: 'frobnicate'"]),
+        ({}, [], ["required: command"]),
+        ({}, ["validate", "missing.toml"], ["missing.toml: no such file"]),
+    ],
+)
+def test_cli__bad_input_is_one_line_exit_2_and_writes_nothing(
+    tmp_path: Path, files: dict[str, str | None], args: list[str], fragments: list[str]
+) -> None:
+    for name, text in files.items():
+        if text is None:
+            (tmp_path / name).mkdir()
+        else:
+            (tmp_path / name).write_text(text)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert_usage_error(mcchain(*args, cwd=tmp_path), *fragments)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no runs/ folder
+
+
+def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None:
+    proc = mcchain("validate", CLEARANCE_BAR, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert "scene clearance-bar: 1 bodies, 1 joints, 0 drivers" in out
+    assert "  bar: mass 2 kg, inertia 0.166667 kg m2, position [0, -0.501] m" in out
+    assert "  O: ground (bearing) - bar (journal), clearance 0.001 m, row 0" in out
+    assert "constraint rows: 1\n" in out and "degrees of freedom: 2\n" in out
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
+    proc = mcchain("validate", REPO / "configs" / "fourbar-clearance.toml", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert any(line.startswith("drivers:") for line in lines)
+    assert any("ideal, rows 0-1" in line for line in lines)
+    rows = int(next(x for x in lines if x.startswith("constraint rows:")).split(":")[1])
+    dof = int(next(x for x in lines if x.startswith("degrees of freedom:")).split(":")[1])
+    coords = int(next(x for x in lines if x.startswith("coordinates:")).split(":")[1])
+    assert coords - rows == dof
+
+
+def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
+    scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
+    made = [
+        runs.start_run(
+            scene, out=tmp_path / "out", loader=fake_loader, solve=fake_solve, progress=False
+        ).folder
+        for _ in range(2)
+    ]
+    proc = mcchain("runs", "--out", tmp_path / "out", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].split() == ["id", "scene", "samples", "status", "wall", "state"]
+    for folder, line in zip(made, lines[1:], strict=True):
+        cells = line.split()
+        assert cells[0] == folder.name and cells[1] == "listed" and cells[2] == "9"
+        assert cells[-1] == "COMPLETED" and cells[-2].endswith("s")
+        assert any(c.startswith("ok=") for c in cells)
+    empty = mcchain("runs", "--out", tmp_path / "none", cwd=tmp_path)
+    assert empty.returncode == 0 and "no runs" in empty.stdout
+
+
+def test_cli_runs__does_not_import_numba_or_xarray() -> None:
+    code = (
+        "import sys; from mcchain import cli; cli.main(['runs', '--out', '/nonexistent']);"
+        "print(sorted(m for m in ('numba', 'xarray', 'netCDF4', 'dask') if m in sys.modules))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert proc.stdout.splitlines()[-1] == "[]"
+
+
+@pytest.mark.parametrize(
+    ("command", "module"),
+    [
+        ("report", "mcchain.viz.report"),
+        ("show", "mcchain.viz.playback"),
+        ("bench", "mcchain.bench"),
+    ],
+)
+def test_cli__delegated_commands_get_the_rest_of_the_argv(
+    monkeypatch: pytest.MonkeyPatch, command: str, module: str
+) -> None:
+    seen: list[list[str]] = []
+    fake = types.ModuleType(module)
+    fake.main = lambda argv: seen.append(argv) or 3  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, module, fake)
+    assert cli.main([command, "RUN", "--samples", "0,3", "--help"]) == 3
+    assert seen == [["RUN", "--samples", "0,3", "--help"]]
+
+
+def test_cli__delegated_command_missing_is_a_usage_error(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "mcchain.bench", None)  # import fails
+    assert cli.main(["bench"]) == 2
+    assert (
+        capsys.readouterr().err
+        == "mcchain: error: bench: not available (mcchain.bench is missing)\n"
+    )

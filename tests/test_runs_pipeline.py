@@ -1,0 +1,163 @@
+"""End to end with the real scene loader and solvers, through the command line.
+
+``configs/clearance-bar.toml`` (equilibrium + modes) checks the stored values against the
+clearance-bar quartic; ``configs/clearance-sweep.toml`` (the same bar, clearance and mass
+sampled) makes every sample different, so a misplaced chunk could not go unnoticed when
+runs are compared bit for bit.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from test_runs_support import REPO
+
+from mcchain import open_run, runs
+from mcchain.ensemble.io import list_parts
+from mcchain.ensemble.registry import validate_dataset
+
+CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
+SWEEP = REPO / "configs" / "clearance-sweep.toml"
+
+QUARTIC_RTOL = 1e-8
+"""Stored eigenpulsations vs the closed form (the solver tests hold them to 1e-10)."""
+
+
+def command(*args: str | Path) -> list[str]:
+    return [sys.executable, "-m", "mcchain.cli", *map(str, args)]
+
+
+def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        command(*args), cwd=cwd, env=env, capture_output=True, text=True, timeout=900
+    )
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def last_line(proc: subprocess.CompletedProcess[str]) -> Path:
+    return Path(proc.stdout.splitlines()[-1])
+
+
+def quartic_omega(mass: np.ndarray, clearance: np.ndarray) -> np.ndarray:
+    """c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0 (DESIGN §3), roots p ascending."""
+    g, inertia, half = 9.81, 1.0 / 6.0, 0.5
+    a = clearance * inertia
+    b = -g * (mass * half**2 + inertia + mass * clearance * half)
+    c = mass * g**2 * half
+    disc = np.sqrt(b * b - 4 * a * c)
+    p2 = np.stack([(-b - disc) / (2 * a), (-b + disc) / (2 * a)], axis=-1)
+    return np.sqrt(p2)
+
+
+def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> None:
+    proc = mcchain("run", CLEARANCE_BAR, "--samples", "300", "--chunk-size", "64", cwd=tmp_path)
+    folder = tmp_path / last_line(proc)
+    assert proc.stderr == ""  # no progress bar when stderr is not a terminal
+    assert folder.parent == tmp_path / "runs" and folder.name.endswith("-clearance-bar")
+    record = json.loads((folder / "run.json").read_text())
+    assert record["status"] == "COMPLETED" and record["chunks"] == 5
+    assert record["status_counts"]["ok"] == 300
+    assert (folder / "scene.toml").read_bytes() == CLEARANCE_BAR.read_bytes()
+    with open_run(folder) as ds:
+        validate_dataset(ds)
+        assert set(ds.data_vars) >= {"q_eq", "joint_force_eq", "stable", "omega", "status"}
+        assert "q" not in ds and "time" not in ds.dims  # no [simulate]: no histories
+        expected = quartic_omega(np.float64(2.0), np.float64(1e-3))
+        np.testing.assert_allclose(
+            ds.omega.values, np.broadcast_to(expected, (300, 2)), rtol=QUARTIC_RTOL
+        )
+        assert bool(ds.stable.all())
+        # The journal hangs straight below the pin: d along -y, |d| = c.
+        np.testing.assert_allclose(ds.q_eq.sel(dof="theta").values, -np.pi / 2, atol=1e-9)
+        assert ds.attrs["scene"] == CLEARANCE_BAR.read_text()
+    listing = mcchain("runs", cwd=tmp_path).stdout
+    assert folder.name in listing and "ok=300" in listing
+
+
+def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_path: Path) -> None:
+    variants = {
+        "one-chunk": ["--chunk-size", "1000", "--threads", "1"],
+        "small-chunks": ["--chunk-size", "96", "--threads", "2"],
+        "dask-local": ["--chunk-size", "128", "--dask", "local", "--threads", "2"],
+    }
+    files = {}
+    for name, extra in variants.items():
+        folder = tmp_path / name
+        proc = mcchain("run", SWEEP, "--samples", "1000", "--run-dir", folder, *extra, cwd=tmp_path)
+        assert last_line(proc) == folder
+        files[name] = folder / "ensemble.nc"
+    record = runs.read_record(tmp_path / "dask-local")
+    assert record["scheduler"] == "dask local" and record["threads"] == 2
+    assert len(record["workers"]) == 2
+    assert all(w["numba_threads"] == 1 for w in record["workers"])
+    assert len({w["pid"] for w in record["workers"]}) == 2
+    assert runs.read_record(tmp_path / "small-chunks")["threads"] == 2
+    for name in ("small-chunks", "dask-local"):
+        assert filecmp.cmp(files["one-chunk"], files[name], shallow=False), name
+    with open_run(tmp_path / "one-chunk") as ds:
+        params = ds.parameters.values
+        assert len(np.unique(params[:, 0])) == 1000  # every sample differs
+        clearance, mass = params[:, 0], params[:, 1]
+        np.testing.assert_allclose(
+            ds.omega.values, quartic_omega(mass, clearance), rtol=QUARTIC_RTOL
+        )
+
+
+def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Path) -> None:
+    target = tmp_path / "killed"
+    args = ["run", SWEEP, "--samples", "600", "--chunk-size", "4"]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    child = subprocess.Popen(
+        command(*args, "--run-dir", target),
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 300
+    while not list_parts(target / "parts"):
+        assert child.poll() is None, "the run ended before its first part file"
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+
+    assert runs.read_record(target)["status"] == "RUNNING"
+    listing = mcchain("runs", "--out", tmp_path, cwd=tmp_path).stdout
+    assert "killed" in listing and "INTERRUPTED" in listing
+    assert not (target / "ensemble.nc").exists()
+    done = list_parts(target / "parts")
+    assert 0 < len(done) < 150
+    for part in done:  # every visible part is complete
+        with xr.open_dataset(part.path) as ds:
+            validate_dataset(ds)
+            assert ds.sizes["sample"] == 4 and int(ds.sample[0]) == part.start
+    with open_run(target) as partial:
+        finished = sorted(i for p in done for i in range(p.start, p.stop))
+        assert list(partial.sample.values) == finished
+        partial_values = partial.load()
+
+    resumed = mcchain("run", "--resume", target, cwd=tmp_path)
+    assert last_line(resumed) == target
+    record = runs.read_record(target)
+    assert record["status"] == "COMPLETED" and len(record["sessions"]) == 2
+    assert record["sessions"][1]["chunks_computed"] == 150 - len(done)
+    assert record["sessions"][1]["argv"][-2:] == ["--resume", str(target)]
+
+    reference = tmp_path / "reference"
+    mcchain(*args, "--run-dir", reference, "--chunk-size", "600", cwd=tmp_path)
+    assert filecmp.cmp(target / "ensemble.nc", reference / "ensemble.nc", shallow=False)
+    with open_run(target) as a, open_run(reference) as b:
+        xr.testing.assert_identical(a.load(), b.load())
+        xr.testing.assert_identical(partial_values, b.sel(sample=finished).load())
