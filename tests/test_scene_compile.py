@@ -203,6 +203,33 @@ def test_compile_model__sample_rows_independent_of_count(design: str) -> None:
     np.testing.assert_array_equal(chunk.joint_clearance, big.joint_clearance[500:600])
 
 
+def test_compile_model__saltelli_rows_independent_of_count_and_count_checked() -> None:
+    vary = {
+        "body.b1.mass": {"uniform": [0.5, 1.5]},
+        "joint.J0.clearance": {"uniform": [1e-4, 1e-3]},
+    }
+    text = chain_scene_text(2, [0], seed=7, sample=400, design="saltelli", vary=vary)
+    scene = load_scene_text(text)
+    big = compile_model(scene)
+    assert big.meta["design"] == "saltelli" and big.parameters.shape == (400, 2)
+    small = compile_model(scene, nsample=12)
+    np.testing.assert_array_equal(small.parameters, big.parameters[:12])
+    np.testing.assert_array_equal(small.joint_clearance, big.joint_clearance[:12])
+    groups = big.parameters.reshape(100, 4, 2)  # A, AB_1, AB_2, B per base point
+    np.testing.assert_array_equal(groups[:, 1, 1], groups[:, 0, 1])
+    np.testing.assert_array_equal(groups[:, 1, 0], groups[:, 3, 0])
+    np.testing.assert_array_equal(big.body_mass[:, 1], big.parameters[:, 0])
+    with pytest.raises(
+        SceneError,
+        match=r"^nsample: must be a multiple of 4 \(= number of varied paths \+ 2\) for design "
+        r'"saltelli", got 1001$',
+    ):
+        compile_model(scene, nsample=1001)
+    scene.sample.count = 10  # type: ignore[union-attr]
+    with pytest.raises(SceneError, match=r"^sample\.count: must be a multiple of 4 .* got 10$"):
+        compile_model(scene)
+
+
 def test_compile_model__reproducible_from_seed() -> None:
     scene = load_scene_text(chain_scene_text(2, [1], seed=7, sample=50, design="lhs"))
     a, b = compile_model(scene), compile_model(scene)

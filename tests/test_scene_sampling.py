@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from SALib.sample import sobol as salib_sobol
 from scipy import stats
 
 from mcchain.scene import Distribution, Sample, ppf, sample_parameters, unit_design
@@ -124,7 +125,7 @@ def test_ppf__choice_edges() -> None:
 
 
 # -- designs -------------------------------------------------------------------------------
-@pytest.mark.parametrize("design", ["random", "sobol"])
+@pytest.mark.parametrize("design", ["random", "sobol", "saltelli"])
 def test_unit_design__rows_do_not_depend_on_count(design: str) -> None:
     big = unit_design(design, 3, 1000, seed=5)
     small = unit_design(design, 3, 10, seed=5)
@@ -134,7 +135,7 @@ def test_unit_design__rows_do_not_depend_on_count(design: str) -> None:
     )
 
 
-@pytest.mark.parametrize("design", ["random", "sobol", "lhs"])
+@pytest.mark.parametrize("design", ["random", "sobol", "lhs", "saltelli"])
 def test_unit_design__reproducible_from_seed(design: str) -> None:
     a = unit_design(design, 2, 256, seed=42)
     np.testing.assert_array_equal(a, unit_design(design, 2, 256, seed=42))
@@ -163,6 +164,67 @@ def test_unit_design__lhs_slices_match_full_draw() -> None:
     np.testing.assert_array_equal(
         unit_design("lhs", 2, 100, seed=1, start=20, stop=30), full[20:30]
     )
+
+
+@pytest.mark.parametrize("d", [1, 2, 5])
+def test_unit_design__saltelli_is_salibs_first_and_total_order_layout(d: int) -> None:
+    ngroup, seed = 32, 11
+    u = unit_design("saltelli", d, ngroup * (d + 2), seed=seed)
+    # the structure: per base point A, AB_1 .. AB_d, B with AB_j = A but column j from B
+    groups = u.reshape(ngroup, d + 2, d)
+    a, b = groups[:, 0], groups[:, d + 1]
+    assert np.all(a != b)
+    for j in range(d):
+        ab = a.copy()
+        ab[:, j] = b[:, j]
+        np.testing.assert_array_equal(groups[:, 1 + j], ab)
+    # A and B are the halves of the "sobol" design's points in 2d columns
+    np.testing.assert_array_equal(np.hstack([a, b]), unit_design("sobol", 2 * d, ngroup, seed))
+    # and the whole is SALib's own sampler with the same scrambling, up to the cell centring
+    problem = {"num_vars": d, "names": [f"x{j}" for j in range(d)], "bounds": [[0.0, 1.0]] * d}
+    salib = salib_sobol.sample(
+        problem, ngroup, calc_second_order=False, seed=np.random.default_rng(seed)
+    )
+    np.testing.assert_array_equal(u - 2.0**-31, salib)
+
+
+def test_unit_design__saltelli_slices_and_counts() -> None:
+    d, step = 3, 5
+    big = unit_design("saltelli", d, 200 * step, seed=2)
+    for count in (step, 7 * step, 64 * step):
+        np.testing.assert_array_equal(unit_design("saltelli", d, count, seed=2), big[:count])
+    for start, stop in ((0, 1), (3, 4), (4, 13), (17, 17), (998, 1000)):
+        np.testing.assert_array_equal(
+            unit_design("saltelli", d, 200 * step, seed=2, start=start, stop=stop),
+            big[start:stop],
+        )
+    assert np.all((big > 0) & (big < 1))
+    assert unit_design("saltelli", 0, 4, seed=0).shape == (4, 0)
+
+
+def test_unit_design__saltelli_count_must_be_a_multiple_of_d_plus_2() -> None:
+    with pytest.raises(ValueError, match=r"must be a multiple of 4 .* got 1001"):
+        unit_design("saltelli", 2, 1001, seed=0)
+
+
+def test_sample_parameters__saltelli_maps_through_the_distributions() -> None:
+    sample = Sample.model_validate(
+        {
+            "count": 40,
+            "seed": 3,
+            "design": "saltelli",
+            "vary": {"body.a.mass": {"normal": [2.0, 0.1]}, "body.a.angle": {"uniform": [0, 1]}},
+        }
+    )
+    values = sample_parameters(sample)
+    u = unit_design("saltelli", 2, 40, seed=3)
+    np.testing.assert_array_equal(values[:, 0], ppf(sample.vary["body.a.mass"], u[:, 0]))
+    np.testing.assert_array_equal(values[:, 1], u[:, 1])
+    groups = values.reshape(10, 4, 2)  # rows A, AB_1, AB_2, B: the layout survives the ppf
+    np.testing.assert_array_equal(groups[:, 1, 0], groups[:, 3, 0])
+    np.testing.assert_array_equal(groups[:, 1, 1], groups[:, 0, 1])
+    np.testing.assert_array_equal(groups[:, 2, 0], groups[:, 0, 0])
+    np.testing.assert_array_equal(groups[:, 2, 1], groups[:, 3, 1])
 
 
 def test_unit_design__no_columns() -> None:

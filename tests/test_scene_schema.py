@@ -102,6 +102,14 @@ BAD = [
     ),
     ("int-expected", BASE + "[sample]\ncount = 10.0\n", "sample.count", "expected an integer"),
     ("bad-literal", BASE + '[sample]\ndesign = "grid"\n', "sample.design", "must be one of"),
+    (
+        "saltelli-count",
+        BASE
+        + '[sample]\ncount = 1001\ndesign = "saltelli"\n[sample.vary]\n'
+        + '"body.bar.mass" = { uniform = [1, 3] }\n"body.bar.inertia" = { uniform = [0.1, 0.2] }\n',
+        "sample.count",
+        'must be a multiple of 4 (= number of varied paths + 2) for design "saltelli", got 1001',
+    ),
     ("bad-name", _with('name = "bar"', 'name = "my bar"'), "body[0].name", "invalid name"),
     ("dotted-name", _with('name = "bar"', 'name = "a.b"'), "body[0].name", "invalid name"),
     ("ground-body", _with('name = "bar"', 'name = "ground"'), "body[0].name", "reserved"),

@@ -39,6 +39,7 @@ from mcchain.scene.schema import (
     Scene,
     _quote,
     parse_path,
+    saltelli_count_error,
 )
 
 Slot = tuple[str, tuple[int, ...]]
@@ -89,16 +90,23 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``.
 
     Raises:
-        SceneError: a bad ``nsample``/``seed``, or a sampled value outside its parameter's
-            domain (e.g. a normal mass draw <= 0), naming the path and the sample.
+        SceneError: a bad ``nsample``/``seed`` (for design ``"saltelli"``, a count that is not
+            a multiple of the number of varied paths + 2), or a sampled value outside its
+            parameter's domain (e.g. a normal mass draw <= 0), naming the path and the sample.
     """
     sample = scene.sample
+    count_name = "nsample"
     if nsample is None:
         nsample = sample.count if sample is not None else 1
+        count_name = "sample.count"
     if seed is None:
         seed = sample.seed if sample is not None else 0
-    nsample = _check_count("nsample", nsample, 1)
+    nsample = _check_count(count_name, nsample, 1)
     seed = _check_count("seed", seed, 0, MAX_SEED)
+    if sample is not None and sample.design == "saltelli":
+        reason = saltelli_count_error(len(sample.vary), nsample)
+        if reason is not None:
+            raise SceneError(f"{count_name}: {reason}")
 
     arrays = _base_arrays(scene)
     varied: set[Slot] = set()

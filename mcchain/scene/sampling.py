@@ -13,6 +13,14 @@ mapped through its distribution's inverse CDF (:func:`ppf`). Designs:
   Points are moved to the centre of their 2⁻³⁰ cell so that none is exactly 0.
 * ``"lhs"``: ``scipy.stats.qmc.LatinHypercube`` with ``default_rng(seed)``: one point in each
   of ``count`` strata per column, so a sample's values depend on the count (not on chunking).
+* ``"saltelli"``: Saltelli's layout for Sobol' indices (first and total order), as
+  ``SALib.sample.sobol.sample(problem, N, calc_second_order=False)`` lays it out. With d
+  columns, point g of the ``"sobol"`` design in 2d columns (same seed) gives the base points
+  A_g (its first d values) and B_g (its last d); rows come in groups of d + 2 per base point:
+  A_g, AB_g1 .. AB_gd (AB_gj is A_g with column j taken from B_g), B_g. Row i belongs to group
+  i // (d + 2) whatever the count, which must be a multiple of d + 2
+  (:func:`saltelli_count_error`). ``SALib.analyze.sobol.analyze(problem, Y,
+  calc_second_order=False)`` accepts the outputs of all the rows in order.
 
 Everything here is vectorised over samples: 10⁵ samples take milliseconds. SciPy is imported
 on first use, so that loading a scene stays light.
@@ -24,9 +32,9 @@ import warnings
 
 import numpy as np
 
-from mcchain.scene.schema import Distribution, Sample
+from mcchain.scene.schema import Distribution, Sample, saltelli_count_error
 
-DESIGNS = ("random", "sobol", "lhs")
+DESIGNS = ("random", "sobol", "lhs", "saltelli")
 
 STREAM_DESIGN = 0
 """The Philox stream (4th counter word) of the ``random`` design; other uses take others."""
@@ -100,13 +108,29 @@ def philox_uniform(
     return out
 
 
+def saltelli_rows(base: np.ndarray) -> np.ndarray:
+    """Saltelli's rows (first and total order) from base points ``base`` (ngroup, 2d):
+    (ngroup (d + 2), d), per base point A, AB_1 .. AB_d, B with A = ``base[:, :d]``,
+    B = ``base[:, d:]`` and AB_j = A with column j from B (``SALib.sample.sobol.sample``)."""
+    ngroup, d = base.shape[0], base.shape[1] // 2
+    a, b = base[:, :d], base[:, d:]
+    rows = np.empty((ngroup, d + 2, d), dtype=np.float64)
+    rows[:, 0] = a
+    rows[:, 1 : d + 1] = a[:, None, :]
+    j = np.arange(d)
+    rows[:, 1 + j, j] = b[:, j]
+    rows[:, d + 1] = b
+    return rows.reshape(ngroup * (d + 2), d)
+
+
 def unit_design(
     design: str, ncol: int, count: int, seed: int, start: int = 0, stop: int | None = None
 ) -> np.ndarray:
     """Rows ``start:stop`` (default ``0:count``) of a design's (count, ncol) unit hypercube.
 
-    All values lie strictly inside (0, 1). For ``random`` and ``sobol`` rows do not depend on
-    ``count``; for ``lhs`` they do (the strata are 1/count wide).
+    All values lie strictly inside (0, 1). For ``random``, ``sobol`` and ``saltelli`` rows do
+    not depend on ``count``; for ``lhs`` they do (the strata are 1/count wide). For
+    ``saltelli`` the count must be a multiple of ``ncol + 2`` (ValueError otherwise).
     """
     stop = count if stop is None else stop
     if design not in DESIGNS:
@@ -116,6 +140,14 @@ def unit_design(
     n = stop - start
     if design == "random":
         return philox_uniform(seed, start, stop, ncol)
+    if design == "saltelli":
+        reason = saltelli_count_error(ncol, count)
+        if reason is not None:
+            raise ValueError(f"count: {reason}")
+        step = ncol + 2
+        first, last = start // step, -(-stop // step)  # the groups rows start:stop fall in
+        base = unit_design("sobol", 2 * ncol, last, seed, first, last)
+        return saltelli_rows(base)[start - first * step : stop - first * step]
     if ncol == 0 or n == 0:
         return np.empty((n, ncol), dtype=np.float64)
     from scipy.stats import qmc

@@ -342,6 +342,12 @@ class Sample(_Section):
       keep the balance properties.
     * ``"lhs"``: Latin hypercube (scipy.stats.qmc.LatinHypercube) stratified over the whole
       count: sample i's values depend on the count (not on the chunking).
+    * ``"saltelli"``: Saltelli's layout for first- and total-order Sobol' indices (what
+      ``SALib.sample.sobol.sample(..., calc_second_order=False)`` makes): with d varied paths,
+      groups of d + 2 rows A, AB_1 .. AB_d, B per base point, A and B being the two halves of
+      point g of a scrambled Sobol' sequence in 2d dimensions (scrambling drawn from the seed);
+      AB_j is A with path j taken from B. The count must be a multiple of d + 2; row i never
+      depends on the count. ``mcchain report`` then gives first- and total-order indices.
     """
 
     count: Int = Field(
@@ -355,8 +361,10 @@ class Sample(_Section):
         le=MAX_SEED,
         description="random seed, 0 <= seed < 2**64; default 0 (CLI --seed).",
     )
-    design: Literal["random", "sobol", "lhs"] = Field(
-        default="random", description='"random" (default), "sobol" or "lhs".'
+    design: Literal["random", "sobol", "lhs", "saltelli"] = Field(
+        default="random",
+        description='"random" (default), "sobol", "lhs" or "saltelli" (count a multiple of the '
+        "number of varied paths + 2).",
     )
     vary: dict[str, Distribution] = Field(
         default_factory=dict,
@@ -368,6 +376,18 @@ class Sample(_Section):
     @classmethod
     def _flatten(cls, v: Any) -> Any:
         return _flatten_dotted(v, _is_distribution_table)
+
+
+def saltelli_count_error(nparam: int, count: int) -> str | None:
+    """Why ``count`` samples cannot have Saltelli's layout over ``nparam`` varied paths (the
+    count must be a multiple of ``nparam + 2``), or ``None`` if they can."""
+    step = nparam + 2
+    if count % step:
+        return (
+            f"must be a multiple of {step} (= number of varied paths + 2) for design "
+            f'"saltelli", got {count}'
+        )
+    return None
 
 
 # -- analyses -----------------------------------------------------------------------------
@@ -699,8 +719,8 @@ def check_scene(scene: Scene) -> None:
 
     Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
     drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
-    distributions' supports against the parameter's domain, ``output_dt`` against ``dt``.
-    Kinematics are not checked.
+    distributions' supports against the parameter's domain, a ``"saltelli"`` count against
+    the number of varied paths, ``output_dt`` against ``dt``. Kinematics are not checked.
     """
     bodies = scene.body_names
     known = {GROUND_NAME, *bodies}
@@ -783,6 +803,10 @@ def check_scene(scene: Scene) -> None:
                     f"{where}.{dist.kind}: can give {bounds[0]!r}, but {ref.key} must be "
                     f"{domain.text}"
                 )
+        if scene.sample.design == "saltelli":
+            reason = saltelli_count_error(len(scene.sample.vary), scene.sample.count)
+            if reason is not None:
+                raise SceneError(f"sample.count: {reason}")
 
     if scene.simulate is not None:
         sim = scene.simulate
