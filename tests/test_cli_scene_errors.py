@@ -1,0 +1,96 @@
+"""Every kind of bad scene named by issue #2, through ``mcchain run``: one line naming the key
+and the reason, exit code 2, and no run folder."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from factory import chain_scene_text
+
+REPO = Path(__file__).resolve().parents[1]
+
+BAR = """
+[scene]
+name = "bar"
+[[body]]
+name = "bar"
+mass = 2.0
+inertia = 0.16666666666666666
+position = [0.0, -0.5]
+angle = -1.5707963267948966
+[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+clearance = 1e-3
+[equilibrium]
+[modes]
+"""
+
+SAMPLE = '\n[sample]\ncount = 10\n[sample.vary]\n"{path}" = {{ {dist} }}\n'
+
+
+def _chain_with_extra_joint(points: str, bodies: str = '["ground", "b1"]') -> str:
+    text = chain_scene_text(2, (), seed=2)
+    if points == "same as J1":  # J1 again: two rows that repeat J1's
+        block = text[text.index('name = "J1"') :]
+        points = next(x for x in block.splitlines() if x.startswith("points")).split("=", 1)[1]
+    return text + f'\n[[joint]]\nname = "extra"\nbodies = {bodies}\npoints = {points}\n'
+
+
+CASES = {
+    "malformed": ("[scene\nname = 1", "malformed TOML"),
+    "unknown key": (BAR.replace("mass = 2.0", "mass = 2.0\ncolour = 1"), "body.bar.colour"),
+    "missing key": (BAR.replace("mass = 2.0\n", ""), "body.bar.mass"),
+    "unknown body": (BAR.replace('["ground", "bar"]', '["ground", "beam"]'), "beam"),
+    "duplicate": (BAR + '[[body]]\nname = "bar"\nmass = 1.0\ninertia = 1.0\n', "duplicate"),
+    "self joint": (BAR.replace('["ground", "bar"]', '["bar", "bar"]'), "joint.O.bodies"),
+    "mass": (BAR.replace("mass = 2.0", "mass = 0.0"), "body.bar.mass"),
+    "inertia nan": (BAR.replace("inertia = 0.16666666666666666", "inertia = nan"), "inertia"),
+    "clearance": (BAR.replace("clearance = 1e-3", "clearance = -1e-3"), "joint.O.clearance"),
+    "unknown path": (BAR + SAMPLE.format(path="body.beam.mass", dist="uniform = [1, 2]"), "beam"),
+    "low > high": (BAR + SAMPLE.format(path="body.bar.mass", dist="uniform = [2, 1]"), "uniform"),
+    "negative std": (BAR + SAMPLE.format(path="body.bar.mass", dist="normal = [2, -1]"), "normal"),
+    "driver body": (BAR + '[[driver]]\nbody = "crank"\nomega = 1.0\n', "crank"),
+    "force body": (BAR + '[[force]]\nbody = "tip"\nvalue = [1.0, 0.0]\n', "tip"),
+    "spring body": (
+        BAR + '[[spring]]\nbodies = ["ground", "x"]\npoints = [[0, 0], [0, 0]]\nstiffness = 1.0\n',
+        "unknown body 'x'",
+    ),
+    "redundant": (
+        _chain_with_extra_joint("same as J1", bodies='["b0", "b1"]'),
+        "redundant constraints: rank of B is 4 < 6",
+    ),
+    "negative dof": (
+        BAR.replace("clearance = 1e-3", "")
+        + '[[joint]]\nbodies = ["ground", "bar"]\npoints = [[0.0, -1.0], [0.5, 0.0]]\n'
+        + '[[joint]]\nname = "C"\nbodies = ["ground", "bar"]\npoints = [[0.0, 0.0], [0.0, 0.0]]\n',
+        "negative degrees of freedom",
+    ),
+    "unassemblable": (_chain_with_extra_joint("[[5.0, 0.0], [0.0, 0.0]]"), "cannot be assembled"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_cli_run__bad_scene_is_one_line_exit_2_no_folder(tmp_path: Path, case: str) -> None:
+    text, fragment = CASES[case]
+    (tmp_path / "scene.toml").write_text(text)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "run", "scene.toml", "--out", "runs"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("mcchain: error: ")
+    assert fragment in lines[0], lines[0]
+    assert proc.stdout == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
