@@ -19,12 +19,14 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
                                 (``contact_lost_time``), with the fraction lost by time t
 ``status_counts.png``           how many samples carry each status flag
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and peak |λ|,
-                                for a ``design = "sobol"`` run only: first- and
-                                total-order (``SALib.analyze.sobol``) when the samples
-                                have Saltelli's layout (rows A, AB_1..AB_D[, BA_1..BA_D],
-                                B per base point, as ``SALib.sample.sobol.sample`` makes
-                                them); for plain scrambled Sobol' points, first-order
-                                only (``SALib.analyze.rbd_fast``, given data)
+                                for a ``design = "saltelli"`` or ``"sobol"`` run only:
+                                first- and total-order (``SALib.analyze.sobol``) when the
+                                samples have Saltelli's layout (rows A, AB_1..AB_D[,
+                                BA_1..BA_D], B per base point, as
+                                ``SALib.sample.sobol.sample`` makes them, and as
+                                ``design = "saltelli"`` makes them without the BA rows);
+                                for plain scrambled Sobol' points, first-order only
+                                (``SALib.analyze.rbd_fast``, given data)
 ==============================  ==========================================================
 
 Figures are made with :class:`matplotlib.figure.Figure` and the Agg canvas (no pyplot, no
@@ -386,15 +388,18 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
 
 
 # -- Sobol -------------------------------------------------------------------------------------
-def saltelli_layout(params: np.ndarray) -> tuple[int, bool] | None:
+def saltelli_layout(
+    params: np.ndarray, second_order: bool | None = None
+) -> tuple[int, bool] | None:
     """``(N, calc_second_order)`` if the rows of ``params`` (n, D) have Saltelli's layout
     (``SALib.sample.sobol.sample``: per base point the rows A, AB_1..AB_D, [BA_1..BA_D,] B,
-    where AB_j is A with column j from B), else ``None``."""
+    where AB_j is A with column j from B), else ``None``. ``second_order`` True/False looks
+    for that layout only (the scene's ``"saltelli"`` design has no BA rows: False)."""
     params = np.asarray(params, dtype=np.float64)
     n, d = params.shape
     if d == 0 or n == 0:
         return None
-    for second in (True, False):
+    for second in (True, False) if second_order is None else (second_order,):
         step = 2 * d + 2 if second else d + 2
         if n % step:
             continue
@@ -419,11 +424,14 @@ def sobol_indices(
     outputs: dict[str, np.ndarray],
     names: list[str],
     skipped: dict[str, str] | None = None,
+    design: str | None = None,
 ) -> list[SobolIndices] | str:
     """Sobol indices of each output over the sampled parameters, with SALib.
 
     * Samples in Saltelli's layout (:func:`saltelli_layout`): first- and total-order indices
-      by ``SALib.analyze.sobol`` (Saltelli 2010 / Jansen estimators).
+      by ``SALib.analyze.sobol`` (Saltelli 2010 / Jansen estimators). With ``design =
+      "saltelli"`` (the scene's design: D + 2 rows per base point, no second order) that
+      layout is required (``calc_second_order=False``); without it there is no fallback.
     * Any other sample (e.g. plain scrambled Sobol' points, as the ``"sobol"`` design draws
       them): first-order indices only, by ``SALib.analyze.rbd_fast`` (a given-data estimator
       valid for any sample of independent inputs); ``ST`` is NaN, since total-order indices
@@ -434,6 +442,7 @@ def sobol_indices(
         outputs: output label -> (n,) values; outputs with a non-finite value or no variance
             are left out (their reason goes into ``skipped``).
         names: the D parameter names.
+        design: the run's ``[sample] design``; ``"saltelli"`` requires its layout.
 
     Returns:
         The indices, or the reason why none could be computed.
@@ -441,8 +450,16 @@ def sobol_indices(
     from SALib.analyze import rbd_fast, sobol
 
     params = np.asarray(params, dtype=np.float64)
-    layout = saltelli_layout(params)
     d = len(names)
+    if design == "saltelli":
+        layout = saltelli_layout(params, second_order=False)
+        if layout is None:
+            return (
+                f'{params.shape[0]} samples of design "saltelli" without its layout (groups of '
+                f"{d + 2} rows A, AB_1..AB_{d}, B per base point, in sample order)"
+            )
+    else:
+        layout = saltelli_layout(params)
     problem = {"num_vars": d, "names": list(names), "bounds": [[0.0, 1.0]] * d}
     if layout is None:
         if params.shape[0] < MIN_RBD_SAMPLES:
@@ -512,9 +529,10 @@ def sobol_figure(
     csv_path: Path,
     skipped: dict[str, str] | None = None,
 ) -> Path | str:
-    """``sobol.png`` (grouped bars S1/ST with confidence intervals) and ``sobol.csv``."""
-    if design != "sobol":
-        return f'the sample design is {design!r}, not "sobol"'
+    """``sobol.png`` (grouped bars S1/ST with confidence intervals) and ``sobol.csv``, for
+    the designs ``"saltelli"`` (S1 and ST) and ``"sobol"`` (see :func:`sobol_indices`)."""
+    if design not in ("saltelli", "sobol"):
+        return f'the sample design is {design!r}, not "saltelli" or "sobol"'
     if "parameters" not in ds.data_vars or not ds.sizes.get("param", 0):
         return "the run samples no parameter"
     params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
@@ -527,7 +545,7 @@ def sobol_figure(
             outputs[label] = result.values[:, k]
     if not outputs:
         return "the run has no scalar result to analyse"
-    found = sobol_indices(params, outputs, names, skipped)
+    found = sobol_indices(params, outputs, names, skipped, design)
     if isinstance(found, str):
         return found
     with open(csv_path, "w", newline="") as fh:
@@ -550,11 +568,12 @@ def sobol_figure(
         ax.legend(fontsize=7, frameon=False)
     for ax in list(axes.flat)[len(found) :]:
         ax.set_visible(False)
-    how = (
-        "SALib sobol on Saltelli's layout"
-        if found[0].method == "sobol"
-        else "first order only (RBD-FAST):\nthe samples lack Saltelli's layout"
-    )
+    if found[0].method != "sobol":
+        how = "first order only (RBD-FAST):\nthe samples lack Saltelli's layout"
+    elif design == "saltelli":
+        how = 'SALib sobol (S1, ST) on the "saltelli" design'
+    else:
+        how = "SALib sobol on Saltelli's layout"
     fig.suptitle(f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}", fontsize=10)
     return _save(fig, path)
 
