@@ -25,6 +25,7 @@ EXPECTED = {
     "clearance-bar",
     "clearance-bar-tip-load",
     "clearance-sweep",
+    "clearance-sweep-sobol",
     "double-pendulum",
     "double-pendulum-clearance",
     "fourbar-clearance",
@@ -101,6 +102,21 @@ def test_config__clearance_sweep_settings() -> None:
     assert model.parameters.shape == (10000, 2)
     assert model.joint_clearance.shape == (10000, 1) and model.body_mass.shape == (10000, 1)
     assert model.body_inertia.shape == (1, 1)
+
+
+def test_config__clearance_sweep_sobol_is_the_sweep_in_saltellis_layout() -> None:
+    scene = load_scene(CONFIGS[NAMES.index("clearance-sweep-sobol")])
+    sweep = load_scene(CONFIGS[NAMES.index("clearance-sweep")])
+    assert scene.sample is not None and sweep.sample is not None
+    assert (scene.sample.count, scene.sample.seed, scene.sample.design) == (4096, 7, "saltelli")
+    assert scene.sample.vary == sweep.sample.vary
+    assert scene.equilibrium is not None and scene.modes is not None
+    assert scene.body == sweep.body and scene.joint == sweep.joint
+    model = compile_model(scene)
+    assert model.meta["design"] == "saltelli" and model.parameters.shape == (4096, 2)
+    groups = model.parameters.reshape(1024, 4, 2)  # A, AB_1, AB_2, B per base point
+    np.testing.assert_array_equal(groups[:, 1], np.column_stack([groups[:, 3, 0], groups[:, 0, 1]]))
+    np.testing.assert_array_equal(groups[:, 2], np.column_stack([groups[:, 0, 0], groups[:, 3, 1]]))
 
 
 def test_config__double_pendulums() -> None:
