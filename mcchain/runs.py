@@ -507,6 +507,12 @@ def execute(
     (load, compile, check), ``warmup`` (kernel compile/cache load, cluster start),
     ``compute`` (the chunk loop, writes overlapping), ``kernel`` (time inside the solver),
     ``write`` (part files), ``merge``, ``total``.
+
+    Throughput (this session): ``samples_per_s`` = samples computed / ``compute``;
+    ``instance_steps_per_s`` = that × integration steps per sample (``[simulate]`` only);
+    ``outside_kernel_share`` = 1 − ``kernel`` / (workers × (``compute`` + ``merge``)), the
+    share of the chunk loop and merge spent outside the solver (I/O, merge, Python; compile
+    excluded). With Dask, ``kernel`` sums the workers' solver time and workers is their count.
     """
     from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries, write_part
     from mcchain.ensemble.registry import build_dataset
@@ -653,7 +659,11 @@ def execute(
                 "samples_per_s": samples_per_s,
                 "steps_per_sample": steps,
                 "instance_steps_per_s": samples_per_s * steps if samples_per_s and steps else None,
-                "outside_kernel_share": 1.0 - stats.kernel / total if total > 0 else None,
+                "outside_kernel_share": (
+                    1.0 - stats.kernel / (stats.workers * (stats.compute + merge_seconds))
+                    if stats.compute + merge_seconds > 0
+                    else None
+                ),
             },
             merge={
                 "bytes_in": merged.bytes_in,
