@@ -262,8 +262,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return handler(args)
     except McchainError as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
-    except KeyboardInterrupt:
-        print("mcchain: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        notes = getattr(exc, "__notes__", [])
+        print("; ".join(["mcchain: interrupted", *notes]), file=sys.stderr)
         return EXIT_INTERRUPTED
 
 

@@ -622,6 +622,7 @@ def execute(
             session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
             log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
             write_record(folder, record)
+            exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
 
         total = time.perf_counter() - t_start + prepare_seconds

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import xarray as xr
 from test_runs_support import REPO
 
@@ -161,3 +162,125 @@ def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
     with open_run(target) as a, open_run(reference) as b:
         xr.testing.assert_identical(a.load(), b.load())
         xr.testing.assert_identical(partial_values, b.sel(sample=finished).load())
+
+
+SWING = """
+[scene]
+name = "clearance-bar-swing"
+gravity = [0.0, -9.81]
+
+[[body]]
+name = "bar"
+mass = 2.0
+inertia = 0.16666666666666666
+position = [0.0, -0.501]
+angle = -1.5707963267948966
+
+[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+clearance = 1e-3
+eccentricity = -1.5707963267948966
+
+[sample]
+count = 100000
+seed = 7
+[sample.vary]
+"joint.O.clearance" = { uniform = [1e-4, 1e-3] }
+"body.bar.angular_velocity" = { uniform = [0.5, 1.0] }
+
+[simulate]
+t_end = 0.2
+dt = 1e-4
+output_dt = 1e-3
+method = "rk4"
+
+[storage]
+compression = "zstd"
+"""
+
+REAL_MEMORY_SCRIPT = """
+import json, resource, sys
+from pathlib import Path
+import netCDF4, numpy, xarray, tqdm
+from mcchain import runs
+def peak():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+tmp, scene, chunk = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+peaks = {"imports": peak()}
+for name, n in (("warm", 2 * chunk), ("medium", 20_000), ("big", 100_000)):
+    result = runs.start_run(scene, samples=n, chunk_size=chunk, out=tmp / name, progress=False)
+    peaks[name] = peak()
+with runs.open_run(result.folder) as ds:
+    sizes = {"time": ds.sizes["time"], "nbytes": int(ds.nbytes)}
+print(json.dumps({**peaks, **sizes, "merge": result.record["merge"]}))
+"""
+
+
+@pytest.mark.slow
+def test_memory__real_1e5_sample_run_with_histories_is_bounded_by_the_chunk(
+    tmp_path: Path,
+) -> None:
+    """10⁵ samples of the swinging clearance bar (RK4, 200 output times, float32): the
+    peak RSS grows with the chunk, not with the ensemble (measured in a subprocess)."""
+    scene = tmp_path / "swing.toml"
+    scene.write_text(SWING)
+    chunk = 500
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", REAL_MEMORY_SCRIPT, str(tmp_path), str(scene), str(chunk)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
+    assert proc.returncode == 0, proc.stderr
+    m = json.loads(proc.stdout.strip().splitlines()[-1])
+    ensemble_bytes = m["nbytes"]
+    chunk_bytes = ensemble_bytes * chunk // 100_000
+    # Past the compile (the "warm" run): solver work arrays and float64 outputs of a chunk,
+    # one chunk waiting for the writer, the merge's 16 MiB blocks and <= 16 open parts.
+    bound = 28 * chunk_bytes + 96 * 2**20
+    print(
+        f"peak above the warm run {(m['big'] - m['warm']) / 2**20:.0f} MiB "
+        f"(bound {bound / 2**20:.0f} MiB), ensemble {ensemble_bytes / 2**20:.0f} MiB, "
+        f"compile etc. {(m['warm'] - m['imports']) / 2**20:.0f} MiB, "
+        f"merge {m['merge']['mb_per_s']:.0f} MB/s"
+    )
+    assert bound < ensemble_bytes / 3
+    assert m["big"] - m["warm"] < bound
+    assert m["big"] - m["medium"] < 8 * 2**20 + 128 * 80_000
+
+
+def test_pipeline__ctrl_c_keeps_finished_chunks_and_resumes(tmp_path: Path) -> None:
+    target = tmp_path / "interrupted"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    child = subprocess.Popen(
+        command("run", SWEEP, "--samples", "400", "--chunk-size", "4", "--run-dir", target),
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 300
+    while not list_parts(target / "parts"):
+        assert child.poll() is None, "the run ended before its first part file"
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    child.send_signal(signal.SIGINT)
+    _, stderr = child.communicate(timeout=120)
+    assert child.returncode == 130, stderr
+    assert stderr.strip().splitlines()[-1] == (
+        f"mcchain: interrupted; run folder: {target} "
+        f"(complete it with: mcchain run --resume {target})"
+    )
+    record = runs.read_record(target)
+    assert record["status"] == "FAILED" and record["error"] == "interrupted"
+    done = list_parts(target / "parts")
+    assert done and not (target / "ensemble.nc").exists()
+    assert "FAILED" in mcchain("runs", "--out", tmp_path, cwd=tmp_path).stdout
+    mcchain("run", "--resume", target, cwd=tmp_path)
+    record = runs.read_record(target)
+    assert record["status"] == "COMPLETED" and record["status_counts"]["samples"] == 400
