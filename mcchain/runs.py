@@ -286,6 +286,7 @@ def prepare_job(
 
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+_PART_NAME = re.compile(r"^part-\d{12}-\d{12}\.nc$")  # as mcchain.ensemble.io.PART_PATTERN
 
 
 def _folder_name(stamp: str, scene_name: str, attempt: int) -> str:
@@ -522,13 +523,19 @@ def execute(
     session: dict[str, Any] = {"argv": list(argv), "start": _now(), "end": None, "pid": os.getpid()}
     record.update(status=RUNNING, end=None, error=None, pid=os.getpid())
     record["sessions"].append(session)
-    versions = record.get("versions") or software_versions()
+    versions = software_versions()
+    if record.get("versions") and record["versions"] != versions:
+        # The ensemble records the versions of the run's first session.
+        session["versions"] = versions
+        versions = record["versions"]
     attrs = job.attributes(versions)
     parts_dir = folder / PARTS
     parts_dir.mkdir(exist_ok=True)
     with run_lock(folder), _run_log(folder):
         write_record(folder, record)
         try:
+            if "versions" in session:
+                log.warning("resumed with other software versions: %s", session["versions"])
             removed = remove_temporaries(parts_dir) + remove_temporaries(folder)
             if removed:
                 log.info("removed %d temporary files left by an interrupted run", removed)
@@ -827,6 +834,8 @@ class RunInfo:
     wall_time: float | None
     state: str
     start: str
+    chunks_done: int | None = None
+    chunks: int | None = None
 
 
 def list_runs(out: str | Path = DEFAULT_OUT) -> list[RunInfo]:
@@ -845,6 +854,9 @@ def list_runs(out: str | Path = DEFAULT_OUT) -> list[RunInfo]:
         state = str(r.get("status", "?"))
         if state == RUNNING and not is_locked(entry):
             state = INTERRUPTED
+        done = None
+        if state != COMPLETED and (entry / PARTS).is_dir():
+            done = sum(1 for name in os.listdir(entry / PARTS) if _PART_NAME.match(name))
         runs.append(
             RunInfo(
                 id=entry.name,
@@ -855,6 +867,8 @@ def list_runs(out: str | Path = DEFAULT_OUT) -> list[RunInfo]:
                 wall_time=r.get("wall_time"),
                 state=state,
                 start=str(r.get("start", "")),
+                chunks_done=done,
+                chunks=r.get("chunks"),
             )
         )
     return sorted(runs, key=lambda info: (info.start, info.id))
@@ -869,6 +883,8 @@ def format_runs(runs: Sequence[RunInfo]) -> str:
         flags = " ".join(
             f"{k}={v}" for k, v in counts.items() if k not in ("samples",) and (v or k == "ok")
         )
+        if info.chunks_done is not None:
+            flags = f"chunks {info.chunks_done}/{info.chunks}"
         wall = "-" if info.wall_time is None else f"{info.wall_time:.1f}s"
         samples = "-" if info.samples is None else str(info.samples)
         rows.append((info.id, info.scene, samples, flags or "-", wall, info.state))

@@ -238,6 +238,8 @@ def test_resume__after_sigkill_equals_an_uninterrupted_run(tmp_path: Path) -> No
     (target / "parts" / ".part-000000000056-000000000064.nc.99.tmp").write_bytes(b"\x89HDF")
     done = list_parts(target / "parts")
     assert 1 <= len(done) < 8 and not (target / "ensemble.nc").exists()
+    table = runs.format_runs(runs.list_runs(tmp_path / "runs"))
+    assert f"chunks {len(done)}/8" in table and "INTERRUPTED" in table
     with runs.open_run(target) as partial:
         finished = sorted(i for p in done for i in range(p.start, p.stop))
         assert list(partial.sample.values) == finished

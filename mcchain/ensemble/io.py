@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.errors import RunError
+
 if TYPE_CHECKING:
     import netCDF4
     import xarray as xr
@@ -54,7 +56,7 @@ MAX_OPEN_PARTS = 16
 COMPRESSIONS = ("zlib", "zstd", "none")
 
 
-class MergeError(ValueError):
+class MergeError(RunError, ValueError):
     """Part files that do not form one ensemble (gap, overlap, mismatched layout)."""
 
 
