@@ -46,8 +46,9 @@ from mcchain.errors import RunError
 if TYPE_CHECKING:
     import xarray as xr
 
+    from mcchain.ensemble.io import MergeStats
     from mcchain.model import Model
-    from mcchain.parallel import SolveFn
+    from mcchain.parallel import ExecutionStats, SolveFn
 
 log = logging.getLogger("mcchain")
 
@@ -489,6 +490,135 @@ def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -
     }
 
 
+def _compute(
+    job: Job,
+    parts_dir: Path,
+    attrs: Mapping[str, Any],
+    *,
+    dask: str | None,
+    threads: int | None,
+    solve: SolveFn | None,
+    progress: bool | None,
+) -> ExecutionStats:
+    """Solve the chunks that have no part file yet, writing each as a part file."""
+    from mcchain.ensemble.io import list_parts, write_part
+    from mcchain.ensemble.registry import build_dataset
+    from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
+
+    chunks = plan_chunks(job.nsample, job.chunk_size)
+    done = {(p.start, p.stop) for p in list_parts(parts_dir)}
+    if done - set(chunks):
+        raise RunError(f"{parts_dir}: part files do not match chunk size {job.chunk_size}")
+    missing = [c for c in chunks if c not in done]
+    log.info(
+        "scene %s: %d samples, %d chunks of %d, %d to compute",
+        job.scene_name,
+        job.nsample,
+        len(chunks),
+        job.chunk_size,
+        len(missing),
+    )
+    if not missing:
+        return ExecutionStats(scheduler="none (all chunks present)")
+
+    def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
+        chunk = job.model.select(start, stop)
+        ds = build_dataset(
+            outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
+        )
+        write_part(ds, parts_dir, start, stop)
+
+    bar = Progress(len(chunks), len(done), enabled=progress)
+    try:
+        if dask:
+            return run_dask(
+                job.model,
+                job.scene,
+                missing,
+                sink,
+                address=dask,
+                workers=threads,
+                history_dtype=job.history_dtype,
+                solve=solve,
+                progress=bar,
+            )
+        return run_local(
+            job.model,
+            job.scene,
+            missing,
+            sink,
+            history_dtype=job.history_dtype,
+            threads=threads,
+            solve=solve,
+            progress=bar,
+        )
+    finally:
+        bar.close()
+
+
+def _complete(
+    job: Job,
+    record: dict[str, Any],
+    session: dict[str, Any],
+    stats: ExecutionStats,
+    merged: MergeStats,
+    counts: dict[str, int],
+    total: float,
+    prepare_seconds: float,
+) -> None:
+    """Fill ``run.json``'s timings, throughput, merge figures and status counts."""
+    timings = {
+        "prepare": prepare_seconds,
+        "warmup": stats.warmup,
+        "compute": stats.compute,
+        "kernel": stats.kernel,
+        "write": stats.write,
+        "merge": merged.seconds,
+        "total": total,
+    }
+    session.update(
+        end=_now(),
+        status=COMPLETED,
+        chunks_computed=stats.chunks,
+        samples_computed=stats.samples,
+        scheduler=stats.scheduler,
+        threads=stats.threads,
+        timings=timings,
+    )
+    summed: dict[str, float] = {}
+    for s in record["sessions"]:
+        for key, value in (s.get("timings") or {}).items():
+            summed[key] = summed.get(key, 0.0) + float(value)
+    samples_per_s = stats.samples / stats.compute if stats.compute > 0 else None
+    steps = job.steps_per_sample
+    busy = stats.workers * (stats.compute + merged.seconds)
+    record.update(
+        status=COMPLETED,
+        end=session["end"],
+        threads=stats.threads,
+        scheduler=stats.scheduler,
+        timings=summed,
+        wall_time=summed.get("total"),
+        status_counts=counts,
+        throughput={
+            "samples_per_s": samples_per_s,
+            "steps_per_sample": steps,
+            "instance_steps_per_s": samples_per_s * steps if samples_per_s and steps else None,
+            "outside_kernel_share": 1.0 - stats.kernel / busy if busy > 0 else None,
+        },
+        merge={
+            "bytes_in": merged.bytes_in,
+            "bytes_out": merged.bytes_out,
+            "seconds": merged.seconds,
+            "mb_per_s": merged.throughput,
+            "compression": job.compression,
+            "note": merged.note or None,
+        },
+    )
+    if stats.worker_info:
+        record["workers"] = stats.worker_info
+
+
 def execute(
     job: Job,
     folder: Path,
@@ -514,10 +644,11 @@ def execute(
     ``outside_kernel_share`` = 1 − ``kernel`` / (workers × (``compute`` + ``merge``)), the
     share of the chunk loop and merge spent outside the solver (I/O, merge, Python; compile
     excluded). With Dask, ``kernel`` sums the workers' solver time and workers is their count.
+
+    A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
+    with a note naming the folder to resume.
     """
-    from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries, write_part
-    from mcchain.ensemble.registry import build_dataset
-    from mcchain.parallel import Progress, plan_chunks, run_dask, run_local
+    from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries
 
     t_start = time.perf_counter()
     session: dict[str, Any] = {"argv": list(argv), "start": _now(), "end": None, "pid": os.getpid()}
@@ -528,7 +659,6 @@ def execute(
         # The ensemble records the versions of the run's first session.
         session["versions"] = versions
         versions = record["versions"]
-    attrs = job.attributes(versions)
     parts_dir = folder / PARTS
     parts_dir.mkdir(exist_ok=True)
     with run_lock(folder), _run_log(folder):
@@ -539,68 +669,15 @@ def execute(
             removed = remove_temporaries(parts_dir) + remove_temporaries(folder)
             if removed:
                 log.info("removed %d temporary files left by an interrupted run", removed)
-            chunks = plan_chunks(job.nsample, job.chunk_size)
-            done = {(p.start, p.stop) for p in list_parts(parts_dir)}
-            unknown = done - set(chunks)
-            if unknown:
-                raise RunError(f"{parts_dir}: part files do not match chunk size {job.chunk_size}")
-            missing = [c for c in chunks if c not in done]
-            log.info(
-                "scene %s: %d samples, %d chunks of %d, %d to compute",
-                job.scene_name,
-                job.nsample,
-                len(chunks),
-                job.chunk_size,
-                len(missing),
+            stats = _compute(
+                job,
+                parts_dir,
+                job.attributes(versions),
+                dask=dask,
+                threads=threads,
+                solve=solve,
+                progress=progress,
             )
-
-            def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
-                ds = build_dataset(
-                    outputs,
-                    job.model.select(start, stop),
-                    start=start,
-                    history_dtype=job.history_dtype,
-                    attrs=attrs,
-                )
-                write_part(ds, parts_dir, start, stop)
-
-            bar = Progress(len(chunks), len(done), enabled=progress)
-            try:
-                if not missing:
-                    from mcchain.parallel import ExecutionStats
-
-                    stats = ExecutionStats(scheduler="none (all chunks present)")
-                elif dask:
-                    stats = run_dask(
-                        job.model,
-                        job.scene,
-                        missing,
-                        sink,
-                        address=dask,
-                        workers=threads,
-                        history_dtype=job.history_dtype,
-                        solve=solve,
-                        progress=bar,
-                    )
-                else:
-                    stats = run_local(
-                        job.model,
-                        job.scene,
-                        missing,
-                        sink,
-                        history_dtype=job.history_dtype,
-                        threads=threads,
-                        solve=solve,
-                        progress=bar,
-                    )
-            finally:
-                bar.close()
-            record["threads"] = stats.threads
-            record["scheduler"] = stats.scheduler
-            if stats.worker_info:
-                record["workers"] = stats.worker_info
-
-            t0 = time.perf_counter()
             merged = merge_parts(
                 list_parts(parts_dir),
                 folder / ENSEMBLE,
@@ -608,7 +685,6 @@ def execute(
                 complevel=job.complevel,
                 nsample=job.nsample,
             )
-            merge_seconds = time.perf_counter() - t0
             log.info(
                 "merged %d parts into %s: %.1f MB -> %.1f MB in %.2f s (%.0f MB/s)",
                 merged.nparts,
@@ -621,67 +697,16 @@ def execute(
             counts = _status_counts(folder / ENSEMBLE)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
-            record["status"] = FAILED
-            record["error"] = (
-                "interrupted" if isinstance(exc, KeyboardInterrupt) else f"{exc}".strip()
-            ) or type(exc).__name__
-            session["status"] = FAILED
+            record["status"] = session["status"] = FAILED
+            message = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).strip()
+            record["error"] = message or type(exc).__name__
             session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
             log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
             write_record(folder, record)
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
-
         total = time.perf_counter() - t_start + prepare_seconds
-        timings = {
-            "prepare": prepare_seconds,
-            "warmup": stats.warmup,
-            "compute": stats.compute,
-            "kernel": stats.kernel,
-            "write": stats.write,
-            "merge": merge_seconds,
-            "total": total,
-        }
-        session.update(
-            end=_now(),
-            status=COMPLETED,
-            chunks_computed=stats.chunks,
-            samples_computed=stats.samples,
-            scheduler=stats.scheduler,
-            threads=stats.threads,
-            timings=timings,
-        )
-        summed: dict[str, float] = {}
-        for s in record["sessions"]:
-            for key, value in (s.get("timings") or {}).items():
-                summed[key] = summed.get(key, 0.0) + float(value)
-        samples_per_s = stats.samples / stats.compute if stats.compute > 0 else None
-        steps = job.steps_per_sample
-        record.update(
-            status=COMPLETED,
-            end=session["end"],
-            timings=summed,
-            wall_time=summed.get("total"),
-            status_counts=counts,
-            throughput={
-                "samples_per_s": samples_per_s,
-                "steps_per_sample": steps,
-                "instance_steps_per_s": samples_per_s * steps if samples_per_s and steps else None,
-                "outside_kernel_share": (
-                    1.0 - stats.kernel / (stats.workers * (stats.compute + merge_seconds))
-                    if stats.compute + merge_seconds > 0
-                    else None
-                ),
-            },
-            merge={
-                "bytes_in": merged.bytes_in,
-                "bytes_out": merged.bytes_out,
-                "seconds": merged.seconds,
-                "mb_per_s": merged.throughput,
-                "compression": job.compression,
-                "note": merged.note or None,
-            },
-        )
+        _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
         write_record(folder, record)
         log.info("run completed: %s", json.dumps(counts))
         if not keep_parts:
