@@ -20,11 +20,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from dask.distributed import LocalCluster
 from test_runs_support import REPO
 
 from mcchain import open_run, runs
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
+from mcchain.parallel import WORKER_ENV
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 SWEEP = REPO / "configs" / "clearance-sweep.toml"
@@ -93,18 +95,31 @@ def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_pa
         "dask-local": ["--chunk-size", "128", "--dask", "local", "--threads", "2"],
     }
     files = {}
-    for name, extra in variants.items():
-        folder = tmp_path / name
-        proc = mcchain("run", SWEEP, "--samples", "1000", "--run-dir", folder, *extra, cwd=tmp_path)
-        assert last_line(proc) == folder
-        files[name] = folder / "ensemble.nc"
+    with LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        env=dict(WORKER_ENV),
+    ) as cluster:  # an "existing" scheduler, reached by its tcp:// address
+        assert cluster.scheduler_address.startswith("tcp://")
+        variants["dask-tcp"] = ["--chunk-size", "200", "--dask", cluster.scheduler_address]
+        for name, extra in variants.items():
+            folder = tmp_path / name
+            proc = mcchain(
+                "run", SWEEP, "--samples", "1000", "--run-dir", folder, *extra, cwd=tmp_path
+            )
+            assert last_line(proc) == folder
+            files[name] = folder / "ensemble.nc"
     record = runs.read_record(tmp_path / "dask-local")
     assert record["scheduler"] == "dask local" and record["threads"] == 2
     assert len(record["workers"]) == 2
     assert all(w["numba_threads"] == 1 for w in record["workers"])
     assert len({w["pid"] for w in record["workers"]}) == 2
     assert runs.read_record(tmp_path / "small-chunks")["threads"] == 2
-    for name in ("small-chunks", "dask-local"):
+    tcp = runs.read_record(tmp_path / "dask-tcp")
+    assert tcp["scheduler"].startswith("dask tcp://") and len(tcp["workers"]) == 2
+    for name in ("small-chunks", "dask-local", "dask-tcp"):
         assert filecmp.cmp(files["one-chunk"], files[name], shallow=False), name
     with open_run(tmp_path / "one-chunk") as ds:
         params = ds.parameters.values
