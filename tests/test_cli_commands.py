@@ -173,7 +173,12 @@ def test_cli__delegated_commands_get_the_rest_of_the_argv(
 ) -> None:
     seen: list[list[str]] = []
     fake = types.ModuleType(module)
-    fake.main = lambda argv: seen.append(argv) or 3  # type: ignore[attr-defined]
+
+    def main(argv: list[str]) -> int:
+        seen.append(argv)
+        return 3
+
+    fake.main = main  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, module, fake)
     assert cli.main([command, "RUN", "--samples", "0,3", "--help"]) == 3
     assert seen == [["RUN", "--samples", "0,3", "--help"]]

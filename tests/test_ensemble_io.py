@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import filecmp
+import itertools
 from pathlib import Path
 
 import netCDF4
-import numpy as np
 import pytest
 import xarray as xr
 from test_runs_support import FakeScene, FakeSection, FakeSimulate, FakeStorage, fake_model
@@ -35,7 +35,7 @@ def write_parts(directory: Path, bounds: list[int], steps: int = 7) -> list[io.P
     directory.mkdir(parents=True, exist_ok=True)
     model = fake_model(bounds[-1])
     parts = []
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         chunk = model.select(a, b)
         ds = build_dataset(solve(chunk, scene(steps)), chunk, start=a, attrs=ATTRS)
         parts.append(write_part(ds, directory, a, b))
@@ -169,7 +169,7 @@ def test_compression_options__zstd_falls_back_to_zlib_with_a_note(
     options, note = io.compression_options("zstd", 2)
     assert options == {"compression": "zlib", "complevel": 2, "shuffle": True}
     assert "zstd is not supported" in note
-    with pytest.raises(ValueError, match="storage.compression"):
+    with pytest.raises(ValueError, match=r"storage\.compression"):
         io.compression_options("lz4")
 
 

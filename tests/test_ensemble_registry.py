@@ -33,7 +33,15 @@ EXTRAS = {
     "singular_time": ("sample",),
     "contact_lost_time": ("sample",),
 }
-HISTORIES = {"q", "v", "joint_force", "contact_force", "driver_torque", "constraint_error", "energy"}
+HISTORIES = {
+    "q",
+    "v",
+    "joint_force",
+    "contact_force",
+    "driver_torque",
+    "constraint_error",
+    "energy",
+}
 
 
 def scene(steps: int = 5) -> FakeScene:

@@ -72,11 +72,11 @@ def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> No
     assert record["status"] == "COMPLETED" and record["chunks"] == 5
     assert record["status_counts"]["ok"] == 300
     assert (folder / "scene.toml").read_bytes() == CLEARANCE_BAR.read_bytes()
-    with open_run(folder) as ds:
+    with open_run(str(folder)) as ds:
         validate_dataset(ds)
         assert set(ds.data_vars) >= {"q_eq", "joint_force_eq", "stable", "omega", "status"}
         assert "q" not in ds and "time" not in ds.dims  # no [simulate]: no histories
-        expected = quartic_omega(np.float64(2.0), np.float64(1e-3))
+        expected = quartic_omega(np.array(2.0), np.array(1e-3))
         np.testing.assert_allclose(
             ds.omega.values, np.broadcast_to(expected, (300, 2)), rtol=QUARTIC_RTOL
         )
@@ -121,7 +121,7 @@ def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_pa
     assert tcp["scheduler"].startswith("dask tcp://") and len(tcp["workers"]) == 2
     for name in ("small-chunks", "dask-local", "dask-tcp"):
         assert filecmp.cmp(files["one-chunk"], files[name], shallow=False), name
-    with open_run(tmp_path / "one-chunk") as ds:
+    with open_run(str(tmp_path / "one-chunk")) as ds:
         params = ds.parameters.values
         assert len(np.unique(params[:, 0])) == 1000  # every sample differs
         clearance, mass = params[:, 0], params[:, 1]
@@ -132,7 +132,7 @@ def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_pa
 
 def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Path) -> None:
     target = tmp_path / "killed"
-    args = ["run", SWEEP, "--samples", "600", "--chunk-size", "4"]
+    args: list[str | Path] = ["run", SWEEP, "--samples", "600", "--chunk-size", "4"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     child = subprocess.Popen(
         command(*args, "--run-dir", target),
@@ -159,7 +159,7 @@ def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
         with xr.open_dataset(part.path) as ds:
             validate_dataset(ds)
             assert ds.sizes["sample"] == 4 and int(ds.sample[0]) == part.start
-    with open_run(target) as partial:
+    with open_run(str(target)) as partial:
         finished = sorted(i for p in done for i in range(p.start, p.stop))
         assert list(partial.sample.values) == finished
         partial_values = partial.load()
@@ -174,7 +174,7 @@ def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
     reference = tmp_path / "reference"
     mcchain(*args, "--run-dir", reference, "--chunk-size", "600", cwd=tmp_path)
     assert filecmp.cmp(target / "ensemble.nc", reference / "ensemble.nc", shallow=False)
-    with open_run(target) as a, open_run(reference) as b:
+    with open_run(str(target)) as a, open_run(str(reference)) as b:
         xr.testing.assert_identical(a.load(), b.load())
         xr.testing.assert_identical(partial_values, b.sel(sample=finished).load())
 
