@@ -209,18 +209,28 @@ _GROUP_FINISH = """
             t_cl[s0 + l] = tcl[l]
 """
 
-_ERK_KERNEL = (
-    '''
-@njit(**PJIT)
-def erk_run(P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
+_ERK_ARGS = """P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
             out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-            status, t_div, t_sing, t_cl):
+            status, t_div, t_sing, t_cl"""
+
+_ERK_KERNEL = (
+    f'''
+@njit(**PJIT)
+def erk_run({_ERK_ARGS}):
     """Fixed-step explicit Runge–Kutta (NSTAGE stages) over lane groups; see integrators.py."""
-    nsample = Q0.shape[1]
     lanes = max(1, min(lanes, LMAXV))
-    ngroup = (nsample + lanes - 1) // lanes
-    for g in prange(ngroup):'''
+    ngroup = (Q0.shape[1] + lanes - 1) // lanes
+    for g in prange(ngroup):
+        erk_group(g, {_ERK_ARGS})
+
+
+@njit(**JIT)
+def erk_group(g, {_ERK_ARGS}):
+    """One lane group of :func:`erk_run` (kept out of the prange body: numba's parallel
+    passes copy the loop body's IR many times, which is slow for generated code)."""
+    nsample = Q0.shape[1]
+    if True:'''
     + _GROUP_SETUP
     + """
         for n in range(nstep + 1):
@@ -261,57 +271,47 @@ def erk_run(P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                 if n % out_every == 0:
-                    it = n // out_every
-                    t_now = t
-                    for l in range(nl):
-                        @@load_params
-                        @@load_state
-                        @@load_lamc
-                        @@outputs
-                        @@store_outputs
+                    group_outputs_SUFFIX(
+                        W, 0, nl, s0, n // out_every, t, LAMCROW, out_q, out_v, out_jf, out_cf,
+                        out_dtq, out_cerr, out_en,
+                    )
             if n == nstep:
                 break
             for l in range(nl):
                 @@combine
             if project:
-                tp = t + h
-                for l in range(nl):
-                    @[act] = 1.0
-                    @[pmax] = np.inf
-                for itn in range(max_newton + 1):
-                    last = 1.0 if itn == max_newton else 0.0
-                    for l in range(nl):
-                        @@load_params
-                        @@load_state
-                        @@projection
-                        @@apply_projection
-                    nact = 0
-                    for l in range(nl):
-                        nact += 1 if @[act] > 0.0 else 0
-                    if nact == 0:
-                        break"""
+                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)"""
     + _GROUP_FINISH
 )
 
-_ADAPTIVE_KERNEL = (
-    '''
-@njit(**PJIT)
-def adaptive_run(P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
+_ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
                  out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-                 status, t_div, t_sing, t_cl, nsteps_out):
+                 status, t_div, t_sing, t_cl, nsteps_out"""
+
+_ADAPTIVE_KERNEL = (
+    f'''
+@njit(**PJIT)
+def adaptive_run({_ADAPTIVE_ARGS}):
     """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control.
 
     Every lane has its own time and step; a step never crosses the lane's next output time
     and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
     ``max_steps`` attempts is flagged DIVERGED.
     """
-    nsample = Q0.shape[1]
     lanes = max(1, min(lanes, LMAXV))
-    ngroup = (nsample + lanes - 1) // lanes
+    ngroup = (Q0.shape[1] + lanes - 1) // lanes
+    for g in prange(ngroup):
+        adaptive_group(g, {_ADAPTIVE_ARGS})
+
+
+@njit(**JIT)
+def adaptive_group(g, {_ADAPTIVE_ARGS}):
+    """One lane group of :func:`adaptive_run`."""
+    nsample = Q0.shape[1]
     nout = t_out.shape[0]
     expo = -1.0 / (order_err + 1.0)
-    for g in prange(ngroup):'''
+    if True:'''
     + _GROUP_SETUP
     + """
         iout = np.zeros(lanes, np.int64)
@@ -324,15 +324,7 @@ def adaptive_run(P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol,
             hl[l] = h0
             run[l] = True
         # First stage at the start; later steps reuse the last stage (FSAL).
-        s = 0
-        @@stage_coefs_zero
-        for l in range(nl):
-            ts = @[tl]
-            @@load_params
-            @@load_stage
-            @@accel_stage
-            @@store_stage
-            @@accept_zero
+        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
         while True:
             # Failures, contact and outputs at each lane's current (accepted) state.
             nrun = 0
@@ -354,13 +346,10 @@ def adaptive_run(P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol,
                     ts = @[tl]
                     @@contact_check
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
-                    it = iout[l]
-                    t_now = @[tl]
-                    @@load_params
-                    @@load_state
-                    @@load_lam
-                    @@outputs
-                    @@store_outputs
+                    group_outputs_SUFFIX(
+                        W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,
+                        out_dtq, out_cerr, out_en,
+                    )
                     iout[l] += 1
                 if iout[l] >= nout or not alive:
                     # Finished or dead: the rest of a dead lane's history stays NaN.
@@ -421,6 +410,56 @@ def adaptive_run(P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol,
 )
 
 
+_HELPERS = '''
+@njit(**JIT)
+def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
+                         out_dtq, out_cerr, out_en):
+    """Outputs of lanes lo..hi-1 at time t_now into history index ``it``."""
+    for l in range(lo, hi):
+        @@load_params
+        @@load_state
+        @@load_lam_dyn
+        @@outputs
+        @@store_outputs
+
+
+@njit(**JIT)
+def group_project_SUFFIX(W, nl, tp, ptol, max_newton, tau):
+    """Project q onto Φ(q, tp) = 0 (Newton, M-weighted minimum-norm steps; stops at
+    ``ptol``, on stagnation or after ``max_newton``), then v onto Φ̇ = 0, at the projected q."""
+    for l in range(nl):
+        @[act] = 1.0
+        @[pmax] = np.inf
+    for itn in range(max_newton + 1):
+        last = 1.0 if itn == max_newton else 0.0
+        for l in range(nl):
+            @@load_params
+            @@load_state
+            @@projection
+            @@apply_projection
+        nact = 0
+        for l in range(nl):
+            nact += 1 if @[act] > 0.0 else 0
+        if nact == 0:
+            break
+
+
+@njit(**JIT)
+def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
+    """Stage 0 at each lane's start (adaptive methods: later steps reuse their last stage)."""
+    s = 0
+    @@stage_coefs_zero
+    for l in range(nl):
+        ts = @[tl]
+        @@stage_coefs_per_lane
+        @@load_params
+        @@load_stage
+        @@accel_stage
+        @@store_stage
+        @@accept_zero
+'''
+
+
 class _Layout:
     """Rows of the flat work array W (each LMAX long) of one lane group."""
 
@@ -469,6 +508,7 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: _L
     )
     for key, value in tokens.items():
         text = re.sub(rf"\b{key}\b", value, text)
+        text = text.replace(f"_{key}(", f"_{value}(")
     return text
 
 
@@ -521,8 +561,8 @@ def _blocks(topo: Topology, nstage: int, lay: _Layout) -> dict[str, str]:
     block("load_state")
     em.emit(*(f"lam{r} = {at('lam', r)}" for r in range(ncon)))
     block("load_lam")
-    em.emit(*(f"lam{r} = {at('lamc', r)}" for r in range(ncon)))
-    block("load_lamc")
+    em.emit(*(f"lam{r} = W[(lamrow + {r}) * {LMAX} + l]" for r in range(ncon)))
+    block("load_lam_dyn")
     em.emit(*(f"ah{j} = A[s, {j}] * h" for j in range(nstage)))
     block("stage_coefs")
     em.emit("cs = cc[s]", *(f"aa{j} = A[s, {j}]" for j in range(nstage)))
@@ -602,14 +642,16 @@ def _blocks(topo: Topology, nstage: int, lay: _Layout) -> dict[str, str]:
     block("load_stage_sub")
     em.projection_terms(t="tp")
     block("projection")
+    # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).
     em.emit(
-        f"act = {at('act')} > 0.0",
-        f"conv = (phimax <= ptol) or last > 0.0 or not (phimax < 0.5 * {at('pmax')})",
-        "upd_q = act and not conv",
-        "upd_v = act and conv",
-        *(f"{at('q', i)} = q{i} + (dq{i} if upd_q else 0.0)" for i in range(ndof)),
-        *(f"{at('v', i)} = v{i} + (dv{i} if upd_v else 0.0)" for i in range(ndof)),
-        f"{at('act')} = 1.0 if upd_q else 0.0",
+        f"act = {at('act')}",
+        f"conv = ((phimax <= ptol) | (last > 0.0) | (phimax >= 0.5 * {at('pmax')})"
+        " | (phimax != phimax)) * 1.0",
+        "upd_q = act * (1.0 - conv)",
+        "upd_v = act * conv",
+        *(f"{at('q', i)} = q{i} + upd_q * dq{i}" for i in range(ndof)),
+        *(f"{at('v', i)} = v{i} + upd_v * dv{i}" for i in range(ndof)),
+        f"{at('act')} = upd_q",
         f"{at('pmax')} = phimax",
     )
     block("apply_projection")
@@ -648,6 +690,8 @@ def _tokens(topo: Topology, nstage: int, lay: _Layout) -> dict[str, str]:
         "PROW": str(lay.rows["P"]),
         "QROW": str(lay.rows["q"]),
         "VROW": str(lay.rows["v"]),
+        "LAMROW": str(lay.rows["lam"]),
+        "LAMCROW": str(lay.rows["lamc"]),
         "K0ROW": str(lay.rows["kq0"]),
         "KCROW": str(lay.rows["kqc"]),
         "FAILBITS": str(FAILURE_BITS),
@@ -662,15 +706,16 @@ def generate_source(topo: Topology) -> str:
     parts = [_HEADER, f"# topology: {topo!r}\n"]
     sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
     assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    for template, tableau in (
-        (_ACCEL_KERNEL, RK4),
-        (_OUTPUT_KERNEL, RK4),
-        (_ERK_KERNEL, RK4),
-        (_ADAPTIVE_KERNEL, DOPRI5),
+    for template, tableau, suffix in (
+        (_ACCEL_KERNEL, RK4, ""),
+        (_OUTPUT_KERNEL, RK4, ""),
+        (_ERK_KERNEL + _HELPERS, RK4, "erk"),
+        (_ADAPTIVE_KERNEL + _HELPERS, DOPRI5, "dp"),
     ):
         lay = _Layout(topo, tableau.nstage)
         blocks = _blocks(topo, tableau.nstage, lay)
-        parts.append(_fill(template, blocks, _tokens(topo, tableau.nstage, lay), lay))
+        tokens = {**_tokens(topo, tableau.nstage, lay), "SUFFIX": suffix}
+        parts.append(_fill(template, blocks, tokens, lay))
     return "\n".join(parts)
 
 

@@ -63,11 +63,14 @@ _SINCOS_TEMPLATE = "\n".join(
         " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
         " + {z} * -1.1359647557788195e-11)))))))",
         "{j} = {k} - 4.0 * np.floor({k} * 0.25)",
-        "{sw} = ({j} == 1.0) or ({j} == 3.0)",
-        "{sa} = {pc} if {sw} else {ps}",
-        "{ca} = {ps} if {sw} else {pc}",
-        "{sin} = -{sa} if {j} >= 2.0 else {sa}",
-        "{cos} = -{ca} if ({j} == 1.0 or {j} == 2.0) else {ca}",
+        # Quadrant j ∈ {0, 1, 2, 3} by exact 0/1 and ±1 factors (no branches: numba turns
+        # conditional expressions into blocks, which vectorise but compile slowly).
+        "{sw} = {j} - 2.0 * np.floor({j} * 0.5)",
+        "{sa} = {sw} * {pc} + (1.0 - {sw}) * {ps}",
+        "{ca} = {sw} * {ps} + (1.0 - {sw}) * {pc}",
+        "{sin} = (1.0 - 2.0 * np.floor({j} * 0.5)) * {sa}",
+        "{cos} = (1.0 - 2.0 * np.floor((({j} + 1.0) - 4.0 * np.floor(({j} + 1.0) * 0.25))"
+        " * 0.5)) * {ca}",
     ]
 )
 
@@ -429,9 +432,8 @@ class Emitter:
             self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}")
             if v is not None:
                 self.emit(f"phid{r} = {v}{i} - p_om{d}")
-        self.emit("phimax = 0.0")
-        for r in range(topo.ncon):
-            self.emit(f"phimax = max(phimax, abs(phi{r}))")
+        terms = ["0.0"] + [f"abs(phi{r})" for r in range(topo.ncon)]
+        self.emit(f"phimax = max({', '.join(terms)})")
 
     def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
         """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
@@ -492,13 +494,15 @@ class Emitter:
                 f"dux{s} = sb{s}vx - sa{s}vx",
                 f"duy{s} = sb{s}vy - sa{s}vy",
                 f"len{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s})",
-                f"iso{s} = p_l0{s} == 0.0",
-                f"nx{s} = 0.0 if iso{s} else ux{s} / len{s}",
-                f"ny{s} = 0.0 if iso{s} else uy{s} / len{s}",
+                # iso: rest length 0, an isotropic spring −k u − c u̇ (as forces.py).
+                f"iso{s} = (p_l0{s} == 0.0) * 1.0",
+                f"ilen{s} = (1.0 - iso{s}) / (len{s} + iso{s})",
+                f"nx{s} = ux{s} * ilen{s}",
+                f"ny{s} = uy{s} * ilen{s}",
                 f"ten{s} = p_k{s} * (len{s} - p_l0{s})"
                 f" + p_cd{s} * (nx{s} * dux{s} + ny{s} * duy{s})",
-                f"sfx{s} = -p_k{s} * ux{s} - p_cd{s} * dux{s} if iso{s} else -ten{s} * nx{s}",
-                f"sfy{s} = -p_k{s} * uy{s} - p_cd{s} * duy{s} if iso{s} else -ten{s} * ny{s}",
+                f"sfx{s} = iso{s} * (-p_k{s} * ux{s} - p_cd{s} * dux{s}) - ten{s} * nx{s}",
+                f"sfy{s} = iso{s} * (-p_k{s} * uy{s} - p_cd{s} * duy{s}) - ten{s} * ny{s}",
             )
             for body, sign, pt in ((b, "+", f"sb{s}"), (a, "-", f"sa{s}")):
                 if body == GROUND:
@@ -548,15 +552,14 @@ class Emitter:
                 if (i, j) in S or (lower[i] & lower[j]):
                     L.add((i, j))
                     lower[i].add(j)
-        self.emit("sing = 0.0")
+
         for j in range(n):
             terms = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
             dj = S[j, j] + ("" if not terms else " - (" + " + ".join(terms) + ")")
             self.emit(
                 f"D{j} = {dj}",
-                f"okp{j} = D{j} > tau * {S[j, j]}",
-                f"sing = sing if okp{j} else sing + 1.0",
-                f"Di{j} = 1.0 / D{j} if okp{j} else 0.0",
+                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
+                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
             )
             for i in range(j + 1, n):
                 if (i, j) not in L:
@@ -567,6 +570,7 @@ class Emitter:
                 num = sij + ("" if not terms else " - (" + " + ".join(terms) + ")")
                 self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
             # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
+        self.emit("sing = " + " + ".join(["0.0"] + [f"(1.0 - okp{j})" for j in range(n)]))
         self._L = L
         self._lower = lower
 
