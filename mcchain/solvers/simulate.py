@@ -160,6 +160,9 @@ def output_times(settings: Settings) -> tuple[np.ndarray, int]:
             f"{settings.method!r}, got {settings.output_dt:g}"
         )
     ntime = math.floor(settings.t_end / settings.output_dt * (1 + 1e-12)) + 1
+    if METHODS[settings.method].fixed_step:
+        # (i · every) · dt: the very float the kernels compute as the time of step i · every.
+        return (np.arange(ntime) * every) * settings.dt, every
     return np.arange(ntime) * settings.output_dt, max(every, 1)
 
 

@@ -1,0 +1,143 @@
+"""simulate: method coefficients, generated evaluation vs the dense reference, settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from reference_dynamics import energy, equations, kkt_acceleration, scene_model
+
+from mcchain.errors import SceneError
+from mcchain.kernels.integrators import DOPRI5, RK4, GeneralizedAlpha, lane_kernels
+from mcchain.kernels.lanes import Topology, pack_parameters, sincos
+from mcchain.solvers.simulate import METHODS, simulate
+
+COEF_TOL = 1e-15  # tableau identities hold to rounding of the fractions
+SINCOS_TOL = 2.3e-16  # the fdlibm kernels: about one ulp of a value ≤ 1
+ACCEL_RTOL = 1e-10  # generated Schur/LDLᵀ vs dense LU of the full KKT, conditioning ~1e4
+FORCE_RTOL = 1e-10
+
+
+@pytest.mark.parametrize("tab", [RK4, DOPRI5], ids=lambda t: t.name)
+def test_tableau__order_conditions(tab):
+    A, b, c = tab.A, tab.b, tab.c
+    assert np.allclose(A.sum(axis=1), c, atol=COEF_TOL, rtol=0)
+    assert np.allclose(np.triu(A), 0.0)  # explicit
+    conditions = {
+        1: [(b.sum(), 1.0)],
+        2: [(b @ c, 1 / 2)],
+        3: [(b @ c**2, 1 / 3), (b @ A @ c, 1 / 6)],
+        4: [
+            (b @ c**3, 1 / 4),
+            (b @ (c * (A @ c)), 1 / 8),
+            (b @ A @ c**2, 1 / 12),
+            (b @ A @ A @ c, 1 / 24),
+        ],
+        5: [(b @ c**4, 1 / 5), (b @ A @ A @ A @ c, 1 / 120), (b @ (c**2 * (A @ c)), 1 / 10)],
+    }
+    for order in range(1, tab.order + 1):
+        for value, expected in conditions[order]:
+            assert value == pytest.approx(expected, abs=COEF_TOL * 10)
+
+
+def test_tableau__dopri5_embedded_pair_and_fsal():
+    bhat = DOPRI5.b - DOPRI5.b_error
+    assert DOPRI5.b_error.sum() == pytest.approx(0.0, abs=COEF_TOL)
+    c, A = DOPRI5.c, DOPRI5.A
+    for value, expected in [
+        (bhat.sum(), 1), (bhat @ c, 1 / 2), (bhat @ c**2, 1 / 3), (bhat @ A @ c, 1 / 6),
+        (bhat @ c**3, 1 / 4), (bhat @ A @ A @ c, 1 / 24),
+    ]:  # fmt: skip
+        assert value == pytest.approx(expected, abs=10 * COEF_TOL)
+    np.testing.assert_array_equal(A[-1], DOPRI5.b)  # first same as last
+
+
+def test_generalized_alpha__coefficients():
+    undamped = GeneralizedAlpha.from_rho(1.0)
+    assert (undamped.alpha_m, undamped.alpha_f, undamped.gamma, undamped.beta) == (
+        0.5, 0.5, 0.5, 0.25,
+    )  # fmt: skip
+    for rho in (0.0, 0.3, 0.8):
+        c = GeneralizedAlpha.from_rho(rho)
+        assert c.gamma == pytest.approx(0.5 + c.alpha_f - c.alpha_m)
+        assert c.beta == pytest.approx(0.25 * (c.gamma + 0.5) ** 2)
+        assert c.alpha_m <= c.alpha_f <= 0.5  # second order, unconditionally stable
+
+
+def test_sincos__matches_numpy():
+    rng = np.random.default_rng(1)
+    for x in np.concatenate([rng.uniform(-60, 60, 2000), np.arange(-8, 9) * np.pi / 4]):
+        s, c = sincos(x)
+        assert abs(s - np.sin(x)) <= SINCOS_TOL and abs(c - np.cos(x)) <= SINCOS_TOL
+
+
+@pytest.mark.parametrize("name", ["loaded", "fourbar", "clearance_bar"])
+def test_accel__matches_dense_kkt(name):
+    """Generated lane evaluation == dense KKT solve, with Baumgarte, at random states."""
+    model = scene_model(name)
+    topo = Topology.from_model(model)
+    module = lane_kernels(topo)
+    rng = np.random.default_rng(7)
+    n = 5
+    Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
+    V = rng.normal(0.0, 1.0, (model.ndof, n))
+    P = np.repeat(pack_parameters(model, topo), n, axis=1)
+    qdd, lam = np.zeros((model.ndof, n)), np.zeros((model.ncon, n))
+    chk, sing = np.zeros(n), np.zeros(n)
+    alpha, beta = 3.0, 7.0
+    t = 0.3
+    module.accel(P, Q, V, t, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
+    for j in range(n):
+        ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], t, (alpha, beta))
+        np.testing.assert_allclose(qdd[:, j], ref_qdd, rtol=ACCEL_RTOL, atol=ACCEL_RTOL)
+        np.testing.assert_allclose(lam[:, j], ref_lam, rtol=ACCEL_RTOL, atol=ACCEL_RTOL)
+        phi = equations(model, 0, Q[:, j], V[:, j], t)[3]
+        assert chk[j] == pytest.approx(np.abs(phi).max(), rel=1e-12)
+        assert sing[j] == 0.0
+    jf, cf = np.zeros((2 * model.njoint, n)), np.zeros((model.njoint, n))
+    dtq, cerr, en = np.zeros((model.ndriver, n)), np.zeros(n), np.zeros(n)
+    module.outputs(P, Q, V, lam, t, jf, cf, dtq, cerr, en)
+    for j in range(n):
+        assert en[j] == pytest.approx(energy(model, 0, Q[:, j], V[:, j]), rel=FORCE_RTOL)
+    for k in range(model.njoint):
+        row = model.joint_row[k]
+        if model.joint_kind[k] == 0:
+            np.testing.assert_allclose(jf[2 * k : 2 * k + 2], -lam[row : row + 2], rtol=1e-15)
+            assert np.isnan(cf[k]).all()
+        else:
+            np.testing.assert_allclose(cf[k], lam[row], rtol=1e-15)
+            np.testing.assert_allclose(np.hypot(*jf[2 * k : 2 * k + 2]), np.abs(lam[row]))
+    np.testing.assert_allclose(dtq, -lam[model.driver_row], rtol=1e-15)
+
+
+def test_methods__table_lists_every_method():
+    assert set(METHODS) == {"rk4", "rk4-projection", "generalized-alpha", "rk45", "radau"}
+
+
+def test_simulate__output_dt_not_a_multiple_of_dt_is_a_scene_error():
+    model = scene_model("clearance_bar")
+    with pytest.raises(SceneError, match=r"^simulate\.output_dt: .*multiple of dt"):
+        simulate(model, dict(t_end=0.01, dt=1e-4, output_dt=2.5e-4))
+
+
+def test_simulate__bad_perturb_path_is_a_scene_error():
+    model = scene_model("clearance_bar")
+    with pytest.raises(SceneError, match=r"^simulate\.perturb\.body\.nope\.angle: no body"):
+        simulate(model, dict(t_end=0.01, dt=1e-4, perturb={"body.nope.angle": 0.1}))
+
+
+def test_simulate__perturbed_start_is_projected_onto_the_constraints():
+    model = scene_model("double_pendulum")
+    out = simulate(
+        model,
+        dict(
+            t_end=1e-3, dt=1e-4, perturb={"body.bar2.angle": 0.1, "body.bar1.angular_velocity": 2.0}
+        ),
+        history_dtype=np.float64,
+    )
+    q0, v0 = out["q"][0, 0], out["v"][0, 0]
+    assert q0[1, 2] == model.q0[0, 5] + 0.1  # the perturbed coordinate is kept
+    assert v0[0, 2] == 2.0
+    assert out["constraint_error"][0, 0] < 1e-12
+    _, B, *_ = equations(model, 0, q0.ravel(), v0.ravel(), 0.0)
+    assert np.abs(B @ v0.ravel()).max() < 1e-12
+    assert out["status"][0] == 0
