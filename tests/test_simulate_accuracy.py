@@ -1,0 +1,110 @@
+"""simulate: convergence orders, agreement with radau and with minimal coordinates, energy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from reference_dynamics import (
+    clearance_angle,
+    clearance_bar_minimal,
+    double_pendulum_minimal,
+    scene_model,
+)
+
+from mcchain.solvers.simulate import simulate
+
+ORDER_SLACK = 0.3  # fitted slope within ±0.3 of the theoretical order
+POSITION_TOL = 1e-8  # m, issue 3: rk4 (dt 1e-5) vs radau at rtol 1e-12
+FORCE_TOL = 1e-6  # joint force error relative to its peak, issue 3
+MINIMAL_TOL = 1e-9  # m: radau (index 1, absolute coordinates) vs a minimal-coordinate Radau
+ENERGY_TOL = 1e-9  # relative drift over 2 s, rk4 at dt 1e-5 (issue 3)
+RADAU = dict(method="radau", rtol=1e-12, atol=1e-13)
+
+
+def _run(model, **sim):
+    return simulate(model, sim, history_dtype=np.float64)
+
+
+def _order(method: str, steps, t_end=0.2) -> float:
+    """Slope of log(error at t_end) against log(dt), errors against radau (rtol 1e-12)."""
+    model = scene_model("clearance_bar")
+    ref = _run(model, t_end=t_end, dt=t_end / 10, output_dt=t_end / 10, **RADAU)["q"][0, -1]
+    errors = []
+    for dt in steps:
+        q = _run(model, t_end=t_end, dt=dt, output_dt=t_end / 10, method=method)["q"][0, -1]
+        errors.append(np.abs(q - ref).max())
+    return float(np.polyfit(np.log(steps), np.log(errors), 1)[0])
+
+
+@pytest.mark.parametrize(
+    ("method", "order", "steps"),
+    [
+        ("rk4", 4, [1e-3, 5e-4, 2.5e-4, 1.25e-4]),
+        ("rk4-projection", 4, [1e-3, 5e-4, 2.5e-4, 1.25e-4]),
+        ("generalized-alpha", 2, [1e-3, 5e-4, 2.5e-4, 1.25e-4]),
+    ],
+)
+def test_simulate__measured_order_on_the_clearance_bar(method, order, steps):
+    assert abs(_order(method, steps) - order) <= ORDER_SLACK
+
+
+@pytest.mark.parametrize(
+    ("name", "t_end"), [("clearance_bar", 0.3), ("double_pendulum", 0.2), ("fourbar", 0.1)]
+)
+def test_rk4__matches_radau(name, t_end):
+    model = scene_model(name)
+    ref = _run(model, t_end=t_end, dt=1e-3, output_dt=1e-3, **RADAU)
+    out = _run(model, t_end=t_end, dt=1e-5, output_dt=1e-3, method="rk4")
+    assert out["status"][0] & ~np.uint32(16) == 0 and ref["status"][0] & ~np.uint32(16) == 0
+    assert np.abs(out["q"][..., :2] - ref["q"][..., :2]).max() <= POSITION_TOL
+    peak = np.abs(ref["joint_force"]).max()
+    assert np.abs(out["joint_force"] - ref["joint_force"]).max() <= FORCE_TOL * peak
+
+
+def _minimal_start(model, q, v, joints):
+    """(p, ṗ) of a minimal model from absolute q, v: body angles and clearance angles."""
+    from reference_dynamics import _body, _p
+
+    pa, pb = _p(model, "joint_point_a", 0), _p(model, "joint_point_b", 0)
+    p, pd = [], []
+    for kind, index in joints:
+        if kind == "body":
+            p.append(q[3 * index + 2])
+            pd.append(v[3 * index + 2])
+        else:
+            a, b = int(model.joint_body_a[index]), int(model.joint_body_b[index])
+            ra, Aa, va, wa = _body(q, v, a)
+            rb, Ab, vb, wb = _body(q, v, b)
+            ua, ub = Aa @ pa[index], Ab @ pb[index]
+            d = rb + ub - ra - ua
+            om = np.array([[0.0, -1.0], [1.0, 0.0]])
+            dd = vb + wb * om @ ub - va - wa * om @ ua
+            angle, rate = clearance_angle(d, dd)
+            p.append(angle)
+            pd.append(rate)
+    return np.array(p), np.array(pd)
+
+
+@pytest.mark.parametrize(
+    ("name", "builder", "joints"),
+    [
+        ("clearance_bar", clearance_bar_minimal, [("joint", 0), ("body", 0)]),
+        ("double_pendulum", double_pendulum_minimal, [("body", 0), ("joint", 1), ("body", 1)]),
+    ],
+)
+def test_radau__matches_minimal_coordinates(name, builder, joints):
+    """The index-1 formulation (incl. the clearance Φ̈ term) against a Lagrangian in (θ, α)."""
+    model = scene_model(name)
+    out = _run(model, t_end=0.2, dt=0.01, output_dt=0.01, **RADAU)
+    p0, pd0 = _minimal_start(model, model.q0[0], model.v0[0], joints)
+    q_ref, _ = builder(model).integrate(p0, pd0, out["time"])
+    q = out["q"][0].reshape(len(out["time"]), -1)
+    assert np.abs(q - q_ref).max() <= MINIMAL_TOL
+
+
+def test_rk4__conserves_energy_of_the_clearance_bar():
+    model = scene_model("clearance_bar")
+    out = _run(model, t_end=2.0, dt=1e-5, output_dt=1e-2, method="rk4")
+    e = out["energy"][0]
+    assert out["status"][0] == 0
+    assert np.abs(e - e[0]).max() <= ENERGY_TOL * np.abs(e[0])
