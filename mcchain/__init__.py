@@ -6,6 +6,7 @@ commands such as ``mcchain runs`` start fast.
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -14,11 +15,11 @@ if TYPE_CHECKING:
     import xarray
 
 
-def open_run(run: str) -> xarray.Dataset:
-    """The ensemble of a run folder as a lazy :class:`xarray.Dataset`."""
+def open_run(run: str | os.PathLike[str]) -> xarray.Dataset:
+    """The ensemble of a run folder (path, or id under ``runs/``) as a lazy Dataset."""
     from mcchain.runs import open_run as _open_run
 
-    return _open_run(run)
+    return _open_run(os.fspath(run))
 
 
 def __getattr__(name: str) -> Any:
