@@ -1,0 +1,571 @@
+"""``mcchain bench``: what the time integrators cost for the accuracy they give.
+
+Sections (each prints a markdown table and saves a PNG chart into the output folder, plus
+``bench.md`` with every table):
+
+* ``work-precision``: error against ``radau`` at rtol 1e-12 versus CPU time per instance, for
+  every method over a range of steps/tolerances, on the clearance bar, the double pendulum
+  with a clearance joint and the driven four-bar with a clearance joint.
+* ``stability``: the largest stable step versus clearance (1e-6 … 1e-2 m) per method on the
+  clearance bar, with RK4's linear limit 2√2/p_max (p_max from the eigen step).
+* ``drift``: max |Φ| over time for rk4 with and without Baumgarte, and rk4-projection.
+* ``speed``: ns per instance-step of every method on the double pendulum with a clearance
+  joint and the driven four-bar with a clearance joint, 10⁴ samples, 1 and 2 threads.
+* ``chains``: rk4 on chains of N = 2 … 32 bars against MuJoCo's ``mujoco.rollout`` (RK4,
+  same step; optional dependency) and against scipy ``solve_ivp`` per instance.
+
+Timings are wall-clock minima over repeats, measured side by side in one run; on a busy
+machine the CPU time is printed beside them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mcchain.model import Model
+
+SECTIONS = ("work-precision", "stability", "drift", "speed", "chains")
+
+# ---------------------------------------------------------------------------------------------
+# Scenes
+
+
+def _rot(th: float) -> np.ndarray:
+    return np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+
+
+def _f(x: float) -> str:
+    return repr(float(x))
+
+
+def clearance_bar_text(clearance: float = 1e-3, tilt: float = 0.3) -> str:
+    """A 1 m, 2 kg bar hanging from a clearance pin, released ``tilt`` rad from the vertical."""
+    th = -math.pi / 2 + tilt
+    com = np.array([0.0, -clearance]) - _rot(th) @ np.array([-0.5, 0.0])
+    return f"""
+[scene]
+name = "clearance-bar"
+gravity = [0.0, -9.81]
+[[body]]
+name = "bar"
+mass = 2.0
+inertia = {_f(2.0 / 12)}
+position = [{_f(com[0])}, {_f(com[1])}]
+angle = {_f(th)}
+[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+clearance = {_f(clearance)}
+"""
+
+
+def chain_text(
+    lengths: list[float], masses: list[float], angle: float = -math.pi / 3,
+    clearance: dict[int, float] | None = None,
+) -> str:  # fmt: skip
+    """Bars pinned end to end from the origin, all at ``angle`` (rad from +x), at rest.
+
+    ``clearance`` maps a joint index (0: the ground pin) to a radial clearance; the journal
+    then sits along the bar, so the start is consistent.
+    """
+    clearance = clearance or {}
+    parts = ['[scene]\nname = "chain"\ngravity = [0.0, -9.81]\n']
+    tip = np.zeros(2)
+    u = np.array([math.cos(angle), math.sin(angle)])
+    for i, (length, mass) in enumerate(zip(lengths, masses, strict=True)):
+        tip = tip + clearance.get(i, 0.0) * u
+        com = tip + 0.5 * length * u
+        parts.append(
+            f'[[body]]\nname = "b{i}"\nmass = {_f(mass)}\ninertia = {_f(mass * length**2 / 12)}\n'
+            f"position = [{_f(com[0])}, {_f(com[1])}]\nangle = {_f(angle)}\n"
+        )
+        tip = com + 0.5 * length * u
+    for i, length in enumerate(lengths):
+        a = '"ground"' if i == 0 else f'"b{i - 1}"'
+        pa = "[0.0, 0.0]" if i == 0 else f"[{_f(lengths[i - 1] / 2)}, 0.0]"
+        extra = f"clearance = {_f(clearance[i])}\n" if i in clearance else ""
+        parts.append(
+            f'[[joint]]\nname = "j{i}"\nbodies = [{a}, "b{i}"]\n'
+            f"points = [{pa}, [{_f(-length / 2)}, 0.0]]\n{extra}"
+        )
+    return "\n".join(parts)
+
+
+DOUBLE_PENDULUM = dict(lengths=[0.6, 0.4], masses=[1.5, 1.0])
+
+
+def fourbar_text() -> str:
+    """The driven four-bar of ``configs/fourbar-clearance.toml`` (clearance 1e-4 m at B)."""
+    return """
+[scene]
+name = "fourbar-clearance"
+gravity = [0.0, -9.81]
+[[body]]
+name = "crank"
+mass = 0.1
+inertia = 8.333333333333333e-05
+position = [0.02500000000000001, 0.04330127018922193]
+angle = 1.0471975511965976
+velocity = [-0.8660254037844386, 0.5000000000000002]
+angular_velocity = 20.0
+[[body]]
+name = "coupler"
+mass = 0.3
+inertia = 0.00225
+position = [0.17582706516355487, 0.16825760557544506]
+angle = 0.5756344435187036
+velocity = [-1.4099950572949895, 0.5037254605303013]
+angular_velocity = -3.9441000934466874
+[[body]]
+name = "rocker"
+mass = 0.25
+inertia = 0.0013020833333333333
+position = [0.30085606180870794, 0.12499706859834622]
+angle = 1.5639477787895628
+velocity = [-0.5439696535105508, 0.0037254605303010955]
+angular_velocity = 4.351859284464434
+[[joint]]
+name = "O2"
+bodies = ["ground", "crank"]
+points = [[0.0, 0.0], [-0.05, 0.0]]
+[[joint]]
+name = "A"
+bodies = ["crank", "coupler"]
+points = [[0.05, 0.0], [-0.15, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["coupler", "rocker"]
+points = [[0.15, 0.0], [0.125, 0.0]]
+clearance = 1e-4
+[[joint]]
+name = "O4"
+bodies = ["ground", "rocker"]
+points = [[0.3, 0.0], [-0.125, 0.0]]
+[[driver]]
+body = "crank"
+omega = 20.0
+"""
+
+
+def model_of(text: str, nsample: int | None = None) -> Model:
+    from mcchain.scene import compile_model, load_scene_text
+
+    return compile_model(load_scene_text(text), nsample=nsample)
+
+
+SCENES: dict[str, Callable[[], str]] = {
+    "clearance bar": clearance_bar_text,
+    "double pendulum, clearance": lambda: chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4}),
+    "four-bar, clearance": fourbar_text,
+}
+T_END = {"clearance bar": 0.2, "double pendulum, clearance": 0.2, "four-bar, clearance": 0.1}
+
+# ---------------------------------------------------------------------------------------------
+# Helpers
+
+
+def _simulate(model: Model, **sim: Any) -> dict[str, np.ndarray]:
+    from mcchain.solvers.simulate import simulate
+
+    return simulate(model, sim, history_dtype=np.float64)
+
+
+def _timed(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, float, Any]:
+    """(best wall s, best CPU s, last result) over ``repeat`` calls."""
+    wall, cpu, result = math.inf, math.inf, None
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = fn()
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+    return wall, cpu, result
+
+
+def _table(header: list[str], rows: list[list[Any]]) -> str:
+    def cell(x: Any) -> str:
+        if isinstance(x, float):
+            return "–" if not math.isfinite(x) else f"{x:.3g}"
+        return str(x)
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cell(x) for x in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _figure(ncols: int = 1):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, ncols, figsize=(5.2 * ncols, 4.2), squeeze=False)
+    return fig, axes[0]
+
+
+def _threads(n: int) -> None:
+    import numba
+
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Sections
+
+
+def work_precision(out: Path, quick: bool) -> str:
+    """Error vs radau (rtol 1e-12) against CPU time per instance, every method, 3 scenes."""
+    nbatch = 64
+    fixed = [2e-3, 1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5, 2e-5, 1e-5]
+    tols = [1e-4, 1e-6, 1e-8, 1e-10]
+    if quick:
+        fixed, tols = fixed[1::2], tols[::2]
+    rows = []
+    fig, axes = _figure(len(SCENES))
+    _threads(1)
+    for ax, (scene, text) in zip(axes, SCENES.items(), strict=True):
+        t_end = T_END[scene]
+        model = model_of(text())
+        batch = model_of(text(), nsample=nbatch)
+        out_dt = t_end / 20
+        ref = _simulate(model, t_end=t_end, dt=out_dt, output_dt=out_dt, method="radau",
+                        rtol=1e-12, atol=1e-13)["q"][0]  # fmt: skip
+        for method in ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau"):
+            xs, ys = [], []
+            sweep = fixed if method in ("rk4", "rk4-projection", "generalized-alpha") else tols
+            for value in sweep:
+                if method in ("rk45", "radau"):
+                    sim = dict(t_end=t_end, dt=out_dt, output_dt=out_dt, method=method,
+                               rtol=value, atol=value * 1e-2)  # fmt: skip
+                else:
+                    sim = dict(t_end=t_end, dt=value, output_dt=out_dt, method=method)
+                m, n = (model, 1) if method == "radau" else (batch, nbatch)
+                _simulate(m.select(0, 1), **dict(sim, t_end=out_dt))  # compile outside timing
+                wall, _, res = _timed(lambda m=m, sim=sim: _simulate(m, **sim), repeat=1 if
+                                      method == "radau" else 2)  # fmt: skip
+                err = float(np.nanmax(np.abs(res["q"][0] - ref)))
+                if not np.all(np.isfinite(res["q"][0])):
+                    err = math.inf
+                per = wall / n
+                rows.append([scene, method, value, err, per * 1e6])
+                if math.isfinite(err):
+                    xs.append(per)
+                    ys.append(max(err, 1e-16))
+            ax.loglog(xs, ys, "o-", label=method)
+        ax.set_title(scene)
+        ax.set_xlabel("time per instance, s (1 thread)")
+        ax.set_ylabel("max position error vs radau 1e-12, m")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "work_precision.png", dpi=110)
+    return _table(["scene", "method", "dt or rtol", "error (m)", "µs / instance"], rows)
+
+
+def stability(out: Path, quick: bool) -> str:
+    """Largest stable step vs clearance on the clearance bar, per fixed-step method."""
+    clearances = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2] if not quick else [1e-5, 1e-3]
+    methods = ["rk4", "rk4-projection", "generalized-alpha"]
+    rows, lines = [], {m: [] for m in methods}
+    limits = []
+    for c in clearances:
+        text = clearance_bar_text(clearance=c, tilt=0.0)
+        model = model_of(text)
+        p_max = _p_max(model)
+        limits.append(2 * math.sqrt(2) / p_max)
+        for method in methods:
+            best = _largest_stable_step(model, method, 1e-6, 0.05)
+            lines[method].append(best)
+            rows.append([c, method, p_max, 2 * math.sqrt(2) / p_max, best])
+    fig, axes = _figure()
+    ax = axes[0]
+    for method, steps in lines.items():
+        ax.loglog(clearances, steps, "o-", label=method)
+    ax.loglog(clearances, limits, "k--", label="2√2 / p_max")
+    ax.set_xlabel("clearance, m")
+    ax.set_ylabel("largest stable step, s")
+    ax.set_title("clearance bar: stability")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "stability.png", dpi=110)
+    return _table(
+        ["clearance (m)", "method", "p_max (rad/s)", "2√2/p_max (s)", "stable dt (s)"], rows
+    )
+
+
+def _p_max(model: Model) -> float:
+    """Largest eigenpulsation at the equilibrium (mcchain.solvers.statics)."""
+    from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
+
+    eq = solve_equilibrium(model, assemble(model))
+    return float(np.nanmax(solve_modes(model, eq).omega))
+
+
+def _largest_stable_step(
+    model: Model, method: str, lo: float, hi: float, steps: int = 400
+) -> float:
+    """Bisection (in log dt) on 'not flagged over ``steps`` steps from the equilibrium + 1e-8
+    rad'; generalized-α also needs the energy not to grow."""
+
+    def stable(dt: float) -> bool:
+        sim = dict(t_end=steps * dt, dt=dt, method=method, perturb={"body.bar.angle": 1e-8})
+        res = _simulate(model, **sim)
+        e = res["energy"][0]
+        return res["status"][0] == 0 and bool(np.all(e <= e[0] + 1e-9 * abs(e[0]) + 1e-12))
+
+    if stable(hi):
+        return hi
+    if not stable(lo):
+        return math.nan
+    for _ in range(12):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def drift(out: Path, quick: bool) -> str:
+    """max |Φ| over 2 s of the double pendulum with clearance (dt 1e-4)."""
+    model = model_of(SCENES["double pendulum, clearance"]())
+    t_end = 0.5 if quick else 2.0
+    cases = {
+        "rk4, Baumgarte (default)": dict(method="rk4"),
+        "rk4, no Baumgarte": dict(method="rk4", baumgarte=[0.0, 0.0]),
+        "rk4-projection": dict(method="rk4-projection"),
+    }
+    fig, axes = _figure()
+    rows = []
+    for label, extra in cases.items():
+        res = _simulate(model, t_end=t_end, dt=1e-4, output_dt=1e-3, constraint_tolerance=1.0,
+                        **extra)  # fmt: skip
+        err = res["constraint_error"][0]
+        axes[0].semilogy(res["time"], np.maximum(err, 1e-18), label=label)
+        rows.append([label, float(err[len(err) // 2]), float(err[-1]), float(np.nanmax(err))])
+    axes[0].set_xlabel("time, s")
+    axes[0].set_ylabel("max |Φ|, m")
+    axes[0].set_title("double pendulum with clearance, dt = 1e-4 s")
+    axes[0].grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "drift.png", dpi=110)
+    return _table(["case", "max abs Φ at t/2 (m)", "at the end (m)", "overall (m)"], rows)
+
+
+def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
+    """ns per instance-step of every method (dt 1e-4), 1 and 2 threads."""
+    from mcchain.solvers.simulate import LANES
+
+    nsample = min(nsample, 1000) if quick else nsample
+    scenes = {k: v for k, v in SCENES.items() if k != "clearance bar"}
+    rows = []
+    fig, axes = _figure()
+    labels, values = [], {th: [] for th in threads}
+    for scene, text in scenes.items():
+        for method in ("rk4", "rk4-projection", "rk45", "generalized-alpha", "radau"):
+            n = (
+                1
+                if method == "radau"
+                else (nsample if method != "generalized-alpha" else nsample // 4)
+            )
+            model = model_of(text(), nsample=n)
+            t_end = 0.01 if method in ("generalized-alpha", "radau") else 0.05
+            sim = dict(t_end=t_end, dt=1e-4, output_dt=1e-2, method=method, rtol=1e-8, atol=1e-10)
+            if method == "radau":
+                sim["output_dt"] = sim["dt"] = t_end
+            _simulate(model.select(0, 1), **dict(sim, t_end=sim["output_dt"]))
+            for th in threads:
+                _threads(th)
+                wall, cpu, res = _timed(lambda m=model, s=sim: _simulate(m, **s), repeat=2)
+                if method in ("rk45", "radau"):
+                    steps = (
+                        float(np.sum(res.get("steps", [np.nan]))) if method == "rk45" else math.nan
+                    )
+                else:
+                    steps = n * round(t_end / 1e-4)
+                ns = wall / steps * 1e9 if steps == steps else wall / n * 1e9
+                unit = "ns / instance-step" if steps == steps else "ns / instance (0.01 s)"
+                rows.append([scene, method, th, n, ns, cpu / (steps if steps == steps else n) * 1e9,
+                             unit])  # fmt: skip
+                if method in ("rk4", "rk4-projection", "rk45"):
+                    values[th].append(ns)
+            if method in ("rk4", "rk4-projection", "rk45"):
+                labels.append(f"{method}\n{scene.split(',')[0]}")
+    x = np.arange(len(labels))
+    for i, th in enumerate(threads):
+        axes[0].bar(x + 0.4 * i, values[th], width=0.4, label=f"{th} thread(s)")
+    axes[0].set_xticks(x + 0.2, labels, fontsize=7)
+    axes[0].set_ylabel(f"ns per instance-step (lanes = {LANES})")
+    axes[0].axhline(50, color="k", ls="--", lw=0.8)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "speed.png", dpi=110)
+    _threads(max(threads))
+    return _table(["scene", "method", "threads", "samples", "wall ns", "CPU ns", "unit"], rows)
+
+
+def chains(out: Path, quick: bool, nsample: int = 10_000, threads: int = 2) -> str:
+    """rk4 on chains of N bars vs MuJoCo rollout (RK4) and scipy solve_ivp, per instance-step."""
+    sizes = [2, 4, 8, 16, 32] if not quick else [2, 4, 8]
+    dt, nstep = 1e-4, 200 if not quick else 50
+    nsample = min(nsample, 2000) if quick else nsample
+    rows = []
+    ours, mj, sp = [], [], []
+    _threads(threads)
+    for n_bar in sizes:
+        lengths = [0.6, 0.4] if n_bar == 2 else [1.0 / n_bar] * n_bar
+        masses = [1.5, 1.0] if n_bar == 2 else [1.0 / n_bar] * n_bar
+        model = model_of(chain_text(lengths, masses), nsample=nsample)
+        sim = dict(t_end=nstep * dt, dt=dt, output_dt=nstep * dt / 2, method="rk4")
+        t0 = time.perf_counter()
+        _simulate(model.select(0, 1), **dict(sim, t_end=dt, output_dt=dt))
+        compile_s = time.perf_counter() - t0
+        wall, _, _ = _timed(lambda m=model, s=sim: _simulate(m, **s), repeat=3)
+        a = wall / (nsample * nstep) * 1e9
+        b = _mujoco_chain(lengths, masses, dt, nstep, nsample, threads)
+        c = _scipy_chain(model, dt)
+        ours.append(a)
+        mj.append(b)
+        sp.append(c)
+        rows.append([n_bar, a, b, b / a, c, c / a, compile_s])
+    fig, axes = _figure()
+    ax = axes[0]
+    ax.loglog(sizes, ours, "o-", label="mcchain rk4 (lanes)")
+    if np.isfinite(mj).any():
+        ax.loglog(sizes, mj, "s-", label="MuJoCo rollout, RK4")
+    ax.loglog(sizes, sp, "^-", label="scipy solve_ivp, dense KKT")
+    slope = float(np.polyfit(np.log(sizes), np.log(ours), 1)[0])
+    ax.set_title(f"chains, dt = {dt:g} s, {threads} threads (mcchain ∝ N^{slope:.2f})")
+    ax.set_xlabel("bars N")
+    ax.set_ylabel("ns per instance-step")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "chains.png", dpi=110)
+    table = _table(["N", "mcchain ns", "MuJoCo ns", "MuJoCo/mcchain", "scipy ns", "scipy/mcchain",
+                    "compile s"], rows)  # fmt: skip
+    return table + f"\n\nmcchain cost ∝ N^{slope:.2f} (fit over N = {sizes[0]}…{sizes[-1]})."
+
+
+def _mujoco_chain(lengths, masses, dt, nstep, nsample, threads) -> float:
+    """ns per instance-step of ``mujoco.rollout`` on the same chain (hinges, RK4); NaN if
+    mujoco is not installed (``pip install mujoco``)."""
+    try:
+        import mujoco
+        from mujoco import rollout
+    except ImportError:
+        return math.nan
+
+    def nest(i: int) -> str:
+        if i == len(lengths):
+            return ""
+        length, mass = lengths[i], masses[i]
+        inertia = mass * length**2 / 12
+        pos = "0 0 0" if i == 0 else f"{lengths[i - 1]} 0 0"
+        return (
+            f'<body pos="{pos}"><joint type="hinge" axis="0 1 0"/>'
+            f'<inertial pos="{length / 2} 0 0" mass="{mass}" '
+            f'diaginertia="{inertia} {inertia} {inertia}"/>'
+            f'<geom type="capsule" fromto="0 0 0 {length} 0 0" size="0.01" contype="0" '
+            f'conaffinity="0"/>{nest(i + 1)}</body>'
+        )
+
+    body = nest(0)
+    xml = (
+        f'<mujoco><option timestep="{dt}" integrator="RK4" gravity="0 0 -9.81"/>'
+        f"<worldbody>{body}</worldbody></mujoco>"
+    )
+    model = mujoco.MjModel.from_xml_string(xml)
+    datas = [mujoco.MjData(model) for _ in range(threads)]
+    state0 = np.zeros(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    data = mujoco.MjData(model)
+    data.qpos[0] = math.pi / 3
+    mujoco.mj_getState(model, data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    initial = np.tile(state0, (nsample, 1))
+    rollout.rollout(model, datas, initial[:8], nstep=2)
+    wall, _, _ = _timed(lambda: rollout.rollout(model, datas, initial, nstep=nstep), repeat=2)
+    return wall / (nsample * nstep) * 1e9
+
+
+def _scipy_chain(model: Model, dt: float, nstep: int = 20) -> float:
+    """ns per step of scipy ``solve_ivp`` (RK45 held at dt) with a dense NumPy KKT right-hand
+    side, one instance (the plain 'loop over instances' baseline)."""
+    from scipy.integrate import solve_ivp
+
+    from mcchain.kernels.forces import applied_forces, mass_diagonal
+    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian
+
+    km = model.kernel_arrays()
+    n, m = model.ndof, model.ncon
+    M, F, B, g = np.zeros(n), np.zeros(n), np.zeros((m, n)), np.zeros(m)
+    mass_diagonal(km, 0, M)
+    K = np.zeros((n + m, n + m))
+
+    def rhs(t, y):
+        q, v = y[:n], y[n:]
+        applied_forces(km, 0, q, v, F)
+        constraint_jacobian(km, 0, q, B)
+        constraint_gamma(km, 0, q, v, g)
+        K[:n, :n] = np.diag(M)
+        K[:n, n:] = B.T
+        K[n:, :n] = B
+        x = np.linalg.solve(K, np.concatenate([F, g]))
+        return np.concatenate([v, x[:n]])
+
+    y0 = np.concatenate([model.q0[0], model.v0[0]])
+    rhs(0.0, y0)
+    t0 = time.perf_counter()
+    sol = solve_ivp(rhs, (0, nstep * dt), y0, method="RK45", first_step=dt, max_step=dt,
+                    rtol=1e3, atol=1e3)  # fmt: skip
+    wall = time.perf_counter() - t0
+    return wall / max(len(sol.t) - 1, 1) * 1e9
+
+
+# ---------------------------------------------------------------------------------------------
+
+_RUNNERS = {
+    "work-precision": work_precision,
+    "stability": stability,
+    "drift": drift,
+    "speed": speed,
+    "chains": chains,
+}
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the benchmark sections; write PNGs and ``bench.md`` into ``--out``."""
+    parser = argparse.ArgumentParser(prog="mcchain bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="bench", help="output folder (default ./bench)")
+    parser.add_argument(
+        "--only",
+        default=",".join(SECTIONS),
+        help=f"comma-separated sections: {', '.join(SECTIONS)}",
+    )
+    parser.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
+    ns = parser.parse_args(args)
+    chosen = [s.strip() for s in ns.only.split(",") if s.strip()]
+    unknown = [s for s in chosen if s not in _RUNNERS]
+    if unknown:
+        parser.error(f"--only: unknown section {unknown[0]!r}; one of {', '.join(SECTIONS)}")
+    out = Path(ns.out)
+    out.mkdir(parents=True, exist_ok=True)
+    report = ["# mcchain bench\n"]
+    for name in chosen:
+        t0 = time.perf_counter()
+        table = _RUNNERS[name](out, ns.quick)
+        text = f"## {name}\n\n{table}\n\n![{name}]({name.replace('-', '_')}.png)\n"
+        print(text, f"({time.perf_counter() - t0:.0f} s)\n", flush=True)
+        report.append(text)
+    (out / "bench.md").write_text("\n".join(report))
+    print(out / "bench.md")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
