@@ -108,3 +108,22 @@ def test_rk4__conserves_energy_of_the_clearance_bar():
     e = out["energy"][0]
     assert out["status"][0] == 0
     assert np.abs(e - e[0]).max() <= ENERGY_TOL * np.abs(e[0])
+
+
+@pytest.mark.parametrize(
+    ("method", "dt", "q_tol", "torque_tol"),
+    [
+        ("rk4", 1e-5, 1e-10, 1e-8),  # 4th order at dt 1e-5: ~1e-13 m measured
+        ("rk4-projection", 1e-5, 1e-10, 1e-8),
+        ("generalized-alpha", 1e-5, 1e-7, 1e-4),  # 2nd order: ~2e-9 m, 2e-6 relative torque
+        ("rk45", 1e-3, 1e-9, 1e-6),  # rtol 1e-10: ~2e-11 m
+    ],
+)
+def test_every_method__drives_the_four_bar(method, dt, q_tol, torque_tol):
+    model = scene_model("fourbar")
+    ref = _run(model, t_end=0.05, dt=1e-3, output_dt=1e-3, **RADAU)
+    out = _run(model, t_end=0.05, dt=dt, output_dt=1e-3, method=method, rtol=1e-10, atol=1e-12)
+    assert out["status"][0] == 0
+    assert np.abs(out["q"] - ref["q"]).max() <= q_tol
+    peak = np.abs(ref["driver_torque"]).max()
+    assert np.abs(out["driver_torque"] - ref["driver_torque"]).max() <= torque_tol * peak

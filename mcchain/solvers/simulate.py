@@ -546,6 +546,8 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = Settings.resolve(sim)
+    if not 1 <= int(lanes) <= 64:
+        raise ValueError(f"lanes: must be in 1..64 (the lane kernels' work rows), got {lanes}")
     time, every = output_times(settings)
     q, v, status = start_state(model, settings, q_start, v_start, status)
     out = _allocate(model, len(time), history_dtype)
