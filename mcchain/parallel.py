@@ -2,8 +2,11 @@
 
 The samples ``0:nsample`` are cut into chunks (:func:`plan_chunks`). Each chunk is solved
 by ``solve(model.select(start, stop), scene)`` (``mcchain.solvers.solve_chunk`` by
-default) and handed to a *sink* (the run folder's part-file writer). Because the solvers
-are deterministic per sample, the data never depend on the chunking or the scheduler.
+default) and handed to a *sink* (the run folder's part-file writer) and, when given, to an
+*observer* (``mcchain run --rerun``: a live rerun stream), which is always called on the
+thread that called :func:`run_local`/:func:`run_dask`, where the chunk's results arrive —
+never on the writer thread, a numba thread or a Dask worker. Because the solvers are
+deterministic per sample, the data never depend on the chunking or the scheduler.
 
 * **in-process** (default): chunks one after the other, each solved by the numba kernels on
   all threads (``threads`` sets ``numba.set_num_threads``); the sink runs on a writer thread
@@ -41,6 +44,10 @@ SolveFn = Callable[["Model", Any], Mapping[str, Any]]
 
 SinkFn = Callable[[dict[str, np.ndarray], int, int], None]
 """``sink(outputs, start, stop)``: store one solved chunk (outputs already coerced)."""
+
+ObserverFn = Callable[[dict[str, np.ndarray], int, int], None]
+"""``observe(outputs, start, stop)``: look at one solved chunk (read only: the same arrays go
+to the sink, possibly at the same time on the writer thread)."""
 
 WORKER_ENV = {
     "NUMBA_NUM_THREADS": "1",
@@ -156,8 +163,14 @@ def run_local(
     threads: int | None = None,
     solve: SolveFn | None = None,
     progress: Progress | None = None,
+    observe: ObserverFn | None = None,
 ) -> ExecutionStats:
-    """Solve ``chunks`` in this process, writing each on a thread apart from the compute."""
+    """Solve ``chunks`` in this process, writing each on a thread apart from the compute.
+
+    ``observe`` (optional) gets each solved chunk on this thread, after the chunk is handed
+    to the writer, so that writing and observing overlap; the next chunk is solved after it
+    returns.
+    """
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
     t0 = time.perf_counter()
@@ -180,6 +193,8 @@ def run_local(
                 stats.write += pending[0].result()
                 _chunk_done(stats, progress, pending[1])
             pending = (writer.submit(write, outputs, start, stop), (start, stop, seconds))
+            if observe is not None:
+                observe(outputs, start, stop)
             del outputs
         if pending is not None:
             stats.write += pending[0].result()
@@ -265,8 +280,10 @@ def run_dask(
     history_dtype: str = "float32",
     solve: SolveFn | None = None,
     progress: Progress | None = None,
+    observe: ObserverFn | None = None,
 ) -> ExecutionStats:
-    """Solve ``chunks`` as Dask tasks; the results are written here, as they arrive."""
+    """Solve ``chunks`` as Dask tasks; the results are written here, as they arrive, and
+    handed to ``observe`` (optional) here too, after the write."""
     from dask.distributed import as_completed
 
     solve = solve or default_solve()
@@ -325,6 +342,8 @@ def run_dask(
             t = time.perf_counter()
             sink(outputs, start, stop)
             stats.write += time.perf_counter() - t
+            if observe is not None:
+                observe(outputs, start, stop)
             del outputs
             _chunk_done(stats, progress, (start, stop, seconds))
         stats.compute = time.perf_counter() - t0

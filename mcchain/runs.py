@@ -9,7 +9,10 @@ A run folder ``runs/<timestamp>-<scene>/`` holds:
 * ``run.log`` — the log (one line per chunk, warnings, the traceback of a failure);
 * ``parts/part-<start>-<stop>.nc`` — finished chunks, each written atomically; deleted once
   merged;
-* ``ensemble.nc`` — the merged ensemble, written atomically at the end.
+* ``ensemble.nc`` — the merged ensemble, written atomically at the end;
+* ``live.rrd`` — with ``--rerun SAMPLES`` and no other sink: the rerun recording of those
+  samples, streamed chunk by chunk while the run goes (``live-2.rrd``, ... on a resume);
+  it never changes ``ensemble.nc``.
 
 Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host names, so the
 same scene and seed give a byte-identical file whatever the chunk size, thread count or
@@ -62,6 +65,7 @@ ENSEMBLE = "ensemble.nc"
 LOG_FILE = "run.log"
 PARTS = "parts"
 LOCK = ".lock"
+LIVE_RRD = "live.rrd"
 
 DEFAULT_OUT = "runs"
 DEFAULT_CHUNK_SIZE = 1024
@@ -71,6 +75,64 @@ DEPENDENCIES = ("numpy", "numba", "scipy", "xarray", "netCDF4", "pydantic")
 
 Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
 """``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
+
+
+# -- live streaming options --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """``mcchain run --rerun SAMPLES [--rerun-save FILE.rrd | --rerun-spawn]``.
+
+    Attributes:
+        samples: global sample indices to stream (distinct, >= 0).
+        save: write the recording to this file (overwritten if it exists).
+        spawn: spawn a rerun viewer instead.
+        With neither sink: ``<run folder>/live.rrd`` (:data:`LIVE_RRD`; on a resume the first
+        free of ``live-2.rrd``, ``live-3.rrd``, ..., so an earlier session's file stays).
+    """
+
+    samples: tuple[int, ...]
+    save: Path | None = None
+    spawn: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.samples:
+            raise RunError("--rerun: no sample index given")
+        if any(not isinstance(s, int) or s < 0 for s in self.samples):
+            raise RunError(f"--rerun: sample indices are integers >= 0, got {list(self.samples)}")
+        if self.save is not None and self.spawn:
+            raise RunError("--rerun-spawn: cannot be combined with --rerun-save (one sink)")
+        if self.save is not None and Path(self.save).is_dir():
+            raise RunError(f"--rerun-save: {self.save} is a directory")
+
+
+def parse_rerun_samples(text: str) -> tuple[int, ...]:
+    """``"0,3"`` -> ``(0, 3)`` (duplicates dropped); raises :class:`RunError` naming ``--rerun``."""
+    parts = [part.strip() for part in text.split(",")]
+    try:
+        values = [int(part) for part in parts if part]
+    except ValueError:
+        raise RunError(
+            f"--rerun: expected comma-separated sample indices like 0,3, got {text!r}"
+        ) from None
+    if not values:
+        raise RunError(f"--rerun: expected comma-separated sample indices like 0,3, got {text!r}")
+    if any(v < 0 for v in values):
+        raise RunError(f"--rerun: sample indices are >= 0, got {text!r}")
+    return tuple(dict.fromkeys(values))
+
+
+def check_live(live: LiveOptions | None, nsample: int) -> None:
+    """Every ``--rerun`` index is a sample of the run (checked before anything is written)."""
+    if live is None:
+        return
+    outside = [s for s in live.samples if s >= nsample]
+    if outside:
+        raise RunError(
+            f"--rerun: sample {outside[0]} is not in the run "
+            f"({nsample} sample{'s' if nsample != 1 else ''}: 0..{nsample - 1})"
+        )
 
 
 # -- environment -------------------------------------------------------------------------------
@@ -432,7 +494,132 @@ class RunResult:
         ]
         if tp.get("instance_steps_per_s"):
             lines.append(f"{tp['instance_steps_per_s']:.3g} instance-steps/s")
+        live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
+        if live:
+            lines.append(_live_summary(live))
         return lines
+
+
+def _live_summary(live: Mapping[str, Any]) -> str:
+    streamed = ", ".join(map(str, live.get("streamed") or [])) or "none"
+    line = f"rerun: samples {streamed} streamed to {live.get('sink')}"
+    if live.get("computed_before"):
+        before = ", ".join(map(str, live["computed_before"]))
+        line += f"; {before} computed before this session (replay with mcchain show)"
+    if live.get("error"):
+        line += f"; stream stopped: {live['error']}"
+    return line
+
+
+class _LiveRun:
+    """The rerun stream of one session (``--rerun``).
+
+    :meth:`open` creates the sink before the first chunk (a spawned viewer shows up at once);
+    :meth:`observe` is handed each solved chunk on the thread where the results arrive (the
+    main thread: rerun recording and the chunk loop share it, never a numba thread or a Dask
+    worker), builds the chunk's Dataset with the registry as the part writer does, and logs
+    the chunk's selected samples with :class:`mcchain.viz.playback.LiveStream`; :meth:`close`
+    completes the file, also after a failure or Ctrl-C. The stream only reads the outputs: it
+    never changes ``ensemble.nc``. A stream that fails (no viewer, a full disk) is a warning
+    in ``run.log`` and ``run.json`` and the run goes on without it. rerun is imported here
+    only, when ``--rerun`` is used.
+
+    ``info`` (the session's ``run.json["sessions"][-1]["rerun"]``) is kept up to date:
+    samples, sink, streamed, computed_before, seconds, error.
+    """
+
+    def __init__(self, options: LiveOptions, job: Job, folder: Path, info: dict[str, Any]):
+        self.options = options
+        self.job = job
+        self.folder = folder
+        self.info = info
+        self.stream: Any = None
+        info.update(
+            samples=list(options.samples),
+            sink=None,
+            streamed=[],
+            computed_before=[],
+            seconds=0.0,
+            error=None,
+        )
+
+    def _default_path(self) -> Path:
+        path = self.folder / LIVE_RRD
+        k = 2
+        while path.exists():
+            path = self.folder / f"{Path(LIVE_RRD).stem}-{k}.rrd"
+            k += 1
+        return path
+
+    def open(self, chunks: Sequence[tuple[int, int]]) -> None:
+        """Open the sink for the selected samples in ``chunks`` (those this session computes)."""
+        todo = [s for s in self.options.samples if any(a <= s < b for a, b in chunks)]
+        before = [s for s in self.options.samples if s not in todo]
+        self.info["computed_before"] = before
+        if before:
+            log.warning(
+                "--rerun: samples %s were computed before this session (replay them with "
+                "mcchain show)",
+                ", ".join(map(str, before)),
+            )
+        if not todo:
+            self.info["sink"] = "nothing (no selected sample left to compute)"
+            return
+        if self.options.spawn:
+            save, sink = None, "a spawned viewer"
+        else:
+            save = Path(self.options.save) if self.options.save else self._default_path()
+            sink = str(save)
+        self.info["sink"] = sink
+        t0 = time.perf_counter()
+        try:
+            from mcchain.viz.playback import LiveStream
+
+            if save is not None:
+                save.parent.mkdir(parents=True, exist_ok=True)
+            self.stream = LiveStream(todo, save=save, spawn=self.options.spawn)
+            log.info("--rerun: streaming samples %s to %s", ", ".join(map(str, todo)), sink)
+        except Exception as exc:
+            self._fail(exc)
+        self.info["seconds"] += time.perf_counter() - t0
+
+    def observe(self, outputs: dict[str, Any], start: int, stop: int) -> None:
+        """Log the selected samples of the solved chunk ``start:stop`` (if it holds any)."""
+        stream = self.stream
+        if stream is None or not any(start <= s < stop for s in stream.samples):
+            return
+        from mcchain.ensemble.registry import build_dataset
+
+        t0 = time.perf_counter()
+        try:
+            chunk = self.job.model.select(start, stop)
+            ds = build_dataset(outputs, chunk, start=start, history_dtype=self.job.history_dtype)
+            logged = stream.log_chunk(ds, chunk, start)
+            self.info["streamed"] = self.info["streamed"] + [int(s) for s in logged]
+        except Exception as exc:
+            self._fail(exc)
+        self.info["seconds"] += time.perf_counter() - t0
+
+    def close(self) -> None:
+        """Flush and close the sink (a saved file is then complete)."""
+        stream, self.stream = self.stream, None
+        if stream is None:
+            return
+        t0 = time.perf_counter()
+        try:
+            stream.close()
+        except Exception as exc:
+            self._fail(exc)
+        self.info["seconds"] += time.perf_counter() - t0
+
+    def _fail(self, exc: Exception) -> None:
+        message = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        self.info["error"] = message
+        log.warning("--rerun: the live stream stopped (the run goes on): %s", message, exc_info=exc)
+        stream, self.stream = self.stream, None
+        if stream is not None:
+            with contextlib.suppress(Exception):
+                stream.close()
 
 
 def _status_counts(path: Path) -> dict[str, int]:
@@ -499,8 +686,10 @@ def _compute(
     threads: int | None,
     solve: SolveFn | None,
     progress: bool | None,
+    live: _LiveRun | None = None,
 ) -> ExecutionStats:
-    """Solve the chunks that have no part file yet, writing each as a part file."""
+    """Solve the chunks that have no part file yet, writing each as a part file (and
+    streaming the ``--rerun`` samples they hold to ``live``)."""
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import build_dataset
     from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
@@ -518,6 +707,8 @@ def _compute(
         job.chunk_size,
         len(missing),
     )
+    if live is not None:
+        live.open(missing)
     if not missing:
         return ExecutionStats(scheduler="none (all chunks present)")
 
@@ -528,6 +719,7 @@ def _compute(
         )
         write_part(ds, parts_dir, start, stop)
 
+    observe = live.observe if live is not None else None
     bar = Progress(len(chunks), len(done), enabled=progress)
     try:
         if dask:
@@ -541,6 +733,7 @@ def _compute(
                 history_dtype=job.history_dtype,
                 solve=solve,
                 progress=bar,
+                observe=observe,
             )
         return run_local(
             job.model,
@@ -551,6 +744,7 @@ def _compute(
             threads=threads,
             solve=solve,
             progress=bar,
+            observe=observe,
         )
     finally:
         bar.close()
@@ -631,6 +825,7 @@ def execute(
     progress: bool | None = None,
     keep_parts: bool = False,
     prepare_seconds: float = 0.0,
+    rerun: LiveOptions | None = None,
 ) -> RunResult:
     """Compute the missing chunks of a run folder, merge them, and complete ``run.json``.
 
@@ -644,6 +839,10 @@ def execute(
     ``outside_kernel_share`` = 1 − ``kernel`` / (workers × (``compute`` + ``merge``)), the
     share of the chunk loop and merge spent outside the solver (I/O, merge, Python; compile
     excluded). With Dask, ``kernel`` sums the workers' solver time and workers is their count.
+
+    With ``rerun``, the selected samples of the chunks this session computes are streamed
+    to rerun as their chunks arrive (see :class:`_LiveRun`; ``run.json`` records it in the
+    session's ``rerun`` entry). The stream is closed before the merge.
 
     A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
     with a note naming the folder to resume.
@@ -669,15 +868,23 @@ def execute(
             removed = remove_temporaries(parts_dir) + remove_temporaries(folder)
             if removed:
                 log.info("removed %d temporary files left by an interrupted run", removed)
-            stats = _compute(
-                job,
-                parts_dir,
-                job.attributes(versions),
-                dask=dask,
-                threads=threads,
-                solve=solve,
-                progress=progress,
-            )
+            live = None
+            if rerun is not None:
+                live = _LiveRun(rerun, job, folder, session.setdefault("rerun", {}))
+            try:
+                stats = _compute(
+                    job,
+                    parts_dir,
+                    job.attributes(versions),
+                    dask=dask,
+                    threads=threads,
+                    solve=solve,
+                    progress=progress,
+                    live=live,
+                )
+            finally:
+                if live is not None:
+                    live.close()
             merged = merge_parts(
                 list_parts(parts_dir),
                 folder / ENSEMBLE,
@@ -732,17 +939,20 @@ def start_run(
     solve: SolveFn | None = None,
     progress: bool | None = None,
     keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
-    Every check (scene, kinematics, arguments, ``run_dir``) happens before the folder is
-    created: a bad input raises ``SceneError``/``RunError`` and writes nothing.
+    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices) happens
+    before the folder is created: a bad input raises ``SceneError``/``RunError`` and writes
+    nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
     """
     t0 = time.perf_counter()
     if run_dir is not None:
         check_new_run_dir(run_dir)
     _check_threads(threads, dask)
     job = prepare_job(scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader)
+    check_live(rerun, job.nsample)
     prepare_seconds = time.perf_counter() - t0
     folder = create_run_folder(out, job.scene_name, run_dir)
     with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
@@ -760,6 +970,7 @@ def start_run(
         progress=progress,
         keep_parts=keep_parts,
         prepare_seconds=prepare_seconds,
+        rerun=rerun,
     )
 
 
@@ -773,11 +984,14 @@ def resume_run(
     solve: SolveFn | None = None,
     progress: bool | None = None,
     keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
 ) -> RunResult:
     """Complete an interrupted or failed run: compute only its missing chunks.
 
     The scene is read back from the folder's ``scene.toml`` with the recorded sample count,
     seed and chunk size, so the final ``ensemble.nc`` equals an uninterrupted run's.
+    ``rerun`` streams the selected samples of the chunks computed now (those computed
+    before are named in the summary: replay them with ``mcchain show``).
     """
     t0 = time.perf_counter()
     folder = resolve_run(run)
@@ -798,6 +1012,7 @@ def resume_run(
         raise RunError(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
+    check_live(rerun, job.nsample)
     argv = list(sys.argv if argv is None else argv)
     return execute(
         job,
@@ -810,6 +1025,7 @@ def resume_run(
         progress=progress,
         keep_parts=keep_parts,
         prepare_seconds=time.perf_counter() - t0,
+        rerun=rerun,
     )
 
 
