@@ -88,6 +88,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="numba threads (in-process) or workers (--dask local)",
     )
     run.add_argument("--resume", metavar="RUN", help="complete an interrupted run folder")
+    run.add_argument(
+        "--rerun",
+        metavar="SAMPLES",
+        help="stream these samples (comma-separated global indices, e.g. 0,1) to rerun while "
+        "the run goes (default sink: <run folder>/live.rrd)",
+    )
+    run.add_argument(
+        "--rerun-save", metavar="FILE.rrd", help="--rerun: write the recording to this file"
+    )
+    run.add_argument(
+        "--rerun-spawn", action="store_true", help="--rerun: spawn a rerun viewer instead"
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     validate = sub.add_parser(
@@ -107,10 +119,34 @@ def build_parser() -> argparse.ArgumentParser:
 # -- commands ----------------------------------------------------------------------------------
 
 
+def _live_options(args: argparse.Namespace) -> Any:
+    """``--rerun SAMPLES [--rerun-save FILE | --rerun-spawn]`` as ``runs.LiveOptions``
+    (``None`` without ``--rerun``); raises ``RunError`` naming the flag."""
+    from pathlib import Path
+
+    from mcchain import runs
+    from mcchain.errors import RunError
+
+    if args.rerun is None:
+        for flag, value in (("--rerun-save", args.rerun_save), ("--rerun-spawn", args.rerun_spawn)):
+            if value:
+                raise RunError(f"{flag}: requires --rerun SAMPLES")
+        return None
+    if args.rerun_save is not None and args.rerun_spawn:
+        raise RunError("--rerun-spawn: cannot be combined with --rerun-save (one sink)")
+    if args.rerun_save is not None and not args.rerun_save.strip():
+        raise RunError("--rerun-save: expected a file name")
+    save = Path(args.rerun_save) if args.rerun_save is not None else None
+    return runs.LiveOptions(
+        runs.parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn)
+    )
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from mcchain import runs
 
     progress = False if args.quiet else None
+    live = _live_options(args)
     argv = ["mcchain", *sys.argv[1:]]
     if args.resume is not None:
         conflicting = [
@@ -128,7 +164,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if conflicting:
             return _fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
         result = runs.resume_run(
-            args.resume, dask=args.dask, threads=args.threads, argv=argv, progress=progress
+            args.resume,
+            dask=args.dask,
+            threads=args.threads,
+            argv=argv,
+            progress=progress,
+            rerun=live,
         )
     else:
         if args.scene is None:
@@ -146,6 +187,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             threads=args.threads,
             argv=argv,
             progress=progress,
+            rerun=live,
         )
     for line in result.summary():
         print(line)
