@@ -175,7 +175,7 @@ T_END = {"clearance bar": 0.2, "double pendulum, clearance": 0.2, "four-bar, cle
 def _simulate(model: Model, **sim: Any) -> dict[str, np.ndarray]:
     from mcchain.solvers.simulate import simulate
 
-    return simulate(model, sim, history_dtype=np.float64)
+    return simulate(model, sim, history_dtype=np.float64, diagnostics=True)
 
 
 def _timed(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, float, Any]:

@@ -529,6 +529,7 @@ def simulate(
     history_dtype: Any = np.float32,
     status: np.ndarray | None = None,
     lanes: int = LANES,
+    diagnostics: bool = False,
 ) -> dict[str, np.ndarray]:
     """Integrate every sample of ``model`` as ``sim`` (the ``[simulate]`` section) says.
 
@@ -539,7 +540,8 @@ def simulate(
         history_dtype: dtype of the histories (float32 or float64).
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
-        lanes: instances per lane group of the lane kernels.
+        lanes: instances per lane group of the lane kernels (1..64).
+        diagnostics: also return ``steps`` (nsample,), the steps each sample took (rk45).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
@@ -574,7 +576,7 @@ def simulate(
     result["diverged_time"] = run.t_div
     result["singular_time"] = run.t_sing
     result["contact_lost_time"] = run.t_cl
-    if steps is not None:
+    if diagnostics and steps is not None:
         result["steps"] = steps
     _nan_after_failure(result)
     return result
