@@ -31,6 +31,21 @@ def spring_vectors(km, s, q, k):
 
 
 @njit(**JIT)
+def force_lever(km, s, q, k):
+    """Rotated application point p = A(θ) s and value f of constant force ``k``.
+
+    Returns:
+        (px, py, fx, fy): m and N, global frame.
+    """
+    b = km.force_body[k]
+    _, _, c, sn = body_pose(q, b)
+    ip = s % km.force_point.shape[0]
+    px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
+    iv = s % km.force_value.shape[0]
+    return px, py, km.force_value[iv, k, 0], km.force_value[iv, k, 1]
+
+
+@njit(**JIT)
 def _add_generalised(F_out, body, sign, fx, fy, px, py):
     """F += sign · (f, p × f) on ``body`` (nothing for the ground)."""
     if body < 0:
@@ -59,11 +74,8 @@ def applied_forces(km, s, q, v, F_out):
         b = km.force_body[k]
         if b < 0:
             continue
-        _, _, c, sn = body_pose(q, b)
-        ip = s % km.force_point.shape[0]
-        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
-        iv = s % km.force_value.shape[0]
-        _add_generalised(F_out, b, 1.0, km.force_value[iv, k, 0], km.force_value[iv, k, 1], px, py)
+        px, py, fx, fy = force_lever(km, s, q, k)
+        _add_generalised(F_out, b, 1.0, fx, fy, px, py)
         F_out[3 * b + 2] += km.force_torque[s % km.force_torque.shape[0], k]
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
@@ -101,11 +113,8 @@ def applied_stiffness_add(km, s, q, K_out):
         b = km.force_body[k]
         if b < 0:
             continue
-        _, _, c, sn = body_pose(q, b)
-        ip = s % km.force_point.shape[0]
-        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
-        iv = s % km.force_value.shape[0]
-        K_out[3 * b + 2, 3 * b + 2] += px * km.force_value[iv, k, 0] + py * km.force_value[iv, k, 1]
+        px, py, fx, fy = force_lever(km, s, q, k)
+        K_out[3 * b + 2, 3 * b + 2] += px * fx + py * fy
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
@@ -148,11 +157,8 @@ def potential_energy(km, s, q):
         b = km.force_body[k]
         if b < 0:
             continue
-        x, y, c, sn = body_pose(q, b)
-        ip = s % km.force_point.shape[0]
-        px, py = rotate(c, sn, km.force_point[ip, k, 0], km.force_point[ip, k, 1])
-        iv = s % km.force_value.shape[0]
-        energy -= km.force_value[iv, k, 0] * (x + px) + km.force_value[iv, k, 1] * (y + py)
+        px, py, fx, fy = force_lever(km, s, q, k)
+        energy -= fx * (q[3 * b] + px) + fy * (q[3 * b + 1] + py)
         energy -= km.force_torque[s % km.force_torque.shape[0], k] * q[3 * b + 2]
     for k in range(km.spring_body_a.shape[0]):
         _, _, _, _, ux, uy = spring_vectors(km, s, q, k)

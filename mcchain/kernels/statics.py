@@ -143,6 +143,20 @@ def project_positions(km, s, q, t, minv, m, n, lscale, B, S, phi):
     return max_abs(phi, m) <= 1e-14 * lscale
 
 
+@njit(**JIT)
+def fit_multipliers(B, minv, F, m, n, S, lam_out):
+    """λ of the least-squares fit Bᵀλ ≈ F in the M⁻¹ metric: S λ = B M⁻¹ F.
+
+    ``S`` must hold the Cholesky factor of B M⁻¹ Bᵀ (:func:`schur_factor`).
+    """
+    for i in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += B[i, k] * minv[k] * F[k]
+        lam_out[i] = acc
+    cholesky_solve(S, m, lam_out)
+
+
 # --------------------------------------------------------------------------------------
 # assembly
 # --------------------------------------------------------------------------------------
@@ -407,12 +421,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     S = np.empty((m, m))
     if not schur_factor(B, minv, m, n, S):
         return SINGULAR, 0
-    for i in range(m):
-        acc = 0.0
-        for k in range(n):
-            acc += B[i, k] * minv[k] * F[k]
-        lam[i] = acc
-    cholesky_solve(S, m, lam)
+    fit_multipliers(B, minv, F, m, n, S, lam)
 
     size = n + m
     R = np.empty(size)
@@ -451,12 +460,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
             _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R)
             if not schur_factor(B, minv, m, n, S):
                 return SINGULAR, it
-            for i in range(m):
-                acc = 0.0
-                for k in range(n):
-                    acc += B[i, k] * minv[k] * F[k]
-                lam[i] = acc
-            cholesky_solve(S, m, lam)
+            fit_multipliers(B, minv, F, m, n, S, lam)
             norm, merit = _equilibrium_residual(
                 km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R
             )
@@ -525,12 +529,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
                     # equilibrium even where the residual must first grow; λ is refitted
                     trial_energy = potential_energy(km, s, q_trial)
                     if trial_energy < energy and schur_factor(B, minv, m, n, S):
-                        for i in range(m):
-                            acc = 0.0
-                            for k in range(n):
-                                acc += B[i, k] * minv[k] * F[k]
-                            lam_trial[i] = acc
-                        cholesky_solve(S, m, lam_trial)
+                        fit_multipliers(B, minv, F, m, n, S, lam_trial)
                         trial, trial_merit = _equilibrium_residual(
                             km, s, q_trial, lam_trial, n, m, fscale, lscale, v_rest, B, F, R_trial
                         )
