@@ -284,6 +284,10 @@ def erk_group(g, {_ERK_ARGS}):
     + _GROUP_FINISH
 )
 
+_PROJECT_CALL = """
+            if project:
+                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)"""
+
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
                  out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
@@ -410,7 +414,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
 )
 
 
-_HELPERS = '''
+_OUTPUT_HELPER = '''
 @njit(**JIT)
 def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
                          out_dtq, out_cerr, out_en):
@@ -421,7 +425,11 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@load_lam_dyn
         @@outputs
         @@store_outputs
+'''
 
+_HELPERS = (
+    _OUTPUT_HELPER
+    + '''
 
 @njit(**JIT)
 def group_project_SUFFIX(W, nl, tp, ptol, max_newton, tau):
@@ -458,6 +466,7 @@ def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
         @@store_stage
         @@accept_zero
 '''
+)
 
 
 class _Layout:
@@ -709,7 +718,9 @@ def generate_source(topo: Topology) -> str:
     for template, tableau, suffix in (
         (_ACCEL_KERNEL, RK4, ""),
         (_OUTPUT_KERNEL, RK4, ""),
-        (_ERK_KERNEL + _HELPERS, RK4, "erk"),
+        # Two variants, so that plain RK4 never compiles the (large) projection code.
+        (_ERK_KERNEL.replace(_PROJECT_CALL, "") + _OUTPUT_HELPER, RK4, "erk"),
+        (_ERK_KERNEL.replace("erk_", "erk_project_") + _HELPERS, RK4, "erkp"),
         (_ADAPTIVE_KERNEL + _HELPERS, DOPRI5, "dp"),
     ):
         lay = _Layout(topo, tableau.nstage)

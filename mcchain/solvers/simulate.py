@@ -350,7 +350,7 @@ def _run_erk(run: _Run, project: bool) -> None:
     s = run.settings
     alpha, beta = (0.0, 0.0) if project else s.baumgarte
     nstep = (len(run.time) - 1) * run.every
-    module.erk_run(
+    (module.erk_project_run if project else module.erk_run)(
         P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
