@@ -433,7 +433,7 @@ class Emitter:
             if v is not None:
                 self.emit(f"phid{r} = {v}{i} - p_om{d}")
         terms = ["0.0"] + [f"abs(phi{r})" for r in range(topo.ncon)]
-        self.emit(f"phimax = max({', '.join(terms)})")
+        self.emit(f"phimax = max({', '.join(terms)})" if topo.ncon else "phimax = 0.0")
 
     def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
         """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
