@@ -500,8 +500,9 @@ METHODS: dict[str, Method] = {
             "rk4-projection",
             _run_rk4_projection,
             True,
-            "RK4 on the index-1 form, then q and v projected onto the constraints each step; "
-            "robust at rank loss (dependent rows dropped instead of flagged)",
+            "RK4 on the index-1 form (no Baumgarte), then q and v projected onto the "
+            "constraints after each step; robust at rank loss (dependent rows dropped, the "
+            "basic solution of S λ = r used, instead of a SINGULAR flag)",
         ),
         Method(
             "generalized-alpha",
