@@ -141,7 +141,7 @@ VARIABLES: dict[str, VariableSpec] = {
             "omega",
             ("sample", "mode"),
             "rad s-1",
-            "eigenpulsations p, ascending",
+            "eigenpulsations p, ascending; signed: -sqrt(-p^2) where p^2 < 0 (unstable)",
             "float64",
             "modes",
         ),
