@@ -305,7 +305,8 @@ def _p_max(model: Model) -> float:
     """Largest eigenpulsation at the equilibrium (mcchain.solvers.statics)."""
     from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
 
-    eq = solve_equilibrium(model, assemble(model))
+    assembled = assemble(model)
+    eq = solve_equilibrium(model, assembled.q, assembled.status)
     return float(np.nanmax(solve_modes(model, eq).omega))
 
 
@@ -560,6 +561,7 @@ def main(args: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         table = _RUNNERS[name](out, ns.quick)
         text = f"## {name}\n\n{table}\n\n![{name}]({name.replace('-', '_')}.png)\n"
+        (out / f"{name.replace('-', '_')}.md").write_text(text)
         print(text, f"({time.perf_counter() - t0:.0f} s)\n", flush=True)
         report.append(text)
     (out / "bench.md").write_text("\n".join(report))
