@@ -99,7 +99,7 @@ def chain_text(
     return "\n".join(parts)
 
 
-DOUBLE_PENDULUM = dict(lengths=[0.6, 0.4], masses=[1.5, 1.0])
+DOUBLE_PENDULUM: dict[str, Any] = dict(lengths=[0.6, 0.4], masses=[1.5, 1.0])
 
 
 def fourbar_text() -> str:
@@ -178,7 +178,7 @@ def _simulate(model: Model, **sim: Any) -> dict[str, np.ndarray]:
     return simulate(model, sim, history_dtype=np.float64, diagnostics=True)
 
 
-def _timed(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, float, Any]:
+def _timed(fn: Callable[..., Any], repeat: int = 3) -> tuple[float, float, Any]:
     """(best wall s, best CPU s, last result) over ``repeat`` calls."""
     wall, cpu, result = math.inf, math.inf, None
     for _ in range(repeat):
@@ -213,7 +213,7 @@ def _figure(ncols: int = 1):
 def _threads(n: int) -> None:
     import numba
 
-    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -273,7 +273,8 @@ def stability(out: Path, quick: bool) -> str:
     """Largest stable step vs clearance on the clearance bar, per fixed-step method."""
     clearances = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2] if not quick else [1e-5, 1e-3]
     methods = ["rk4", "rk4-projection", "generalized-alpha"]
-    rows, lines = [], {m: [] for m in methods}
+    rows: list[list[Any]] = []
+    lines: dict[str, list[float]] = {m: [] for m in methods}
     limits = []
     for c in clearances:
         text = clearance_bar_text(clearance=c, tilt=0.0)
@@ -336,7 +337,7 @@ def drift(out: Path, quick: bool) -> str:
     """max |Φ| over 2 s of the double pendulum with clearance (dt 1e-4)."""
     model = model_of(SCENES["double pendulum, clearance"]())
     t_end = 0.5 if quick else 2.0
-    cases = {
+    cases: dict[str, dict[str, Any]] = {
         "rk4, Baumgarte (default)": dict(method="rk4"),
         "rk4, no Baumgarte": dict(method="rk4", baumgarte=[0.0, 0.0]),
         "rk4-projection": dict(method="rk4-projection"),
@@ -367,7 +368,8 @@ def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
     scenes = {k: v for k, v in SCENES.items() if k != "clearance bar"}
     rows = []
     fig, axes = _figure()
-    labels, values = [], {th: [] for th in threads}
+    labels: list[str] = []
+    values: dict[int, list[float]] = {th: [] for th in threads}
     for scene, text in scenes.items():
         for method in ("rk4", "rk4-projection", "rk45", "generalized-alpha", "radau"):
             n = (

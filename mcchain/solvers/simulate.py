@@ -119,7 +119,9 @@ class Settings:
             rtol=float(get("rtol")),
             atol=float(get("atol")),
             rho_inf=float(get("rho_inf")),
-            baumgarte=DEFAULT_BAUMGARTE if baumgarte is None else tuple(map(float, baumgarte)),
+            baumgarte=DEFAULT_BAUMGARTE
+            if baumgarte is None
+            else (float(baumgarte[0]), float(baumgarte[1])),
             constraint_tolerance=float(get("constraint_tolerance")),
             max_newton=int(get("max_newton")),
         )
@@ -210,7 +212,8 @@ def start_state(
     status = np.zeros(n, np.uint32) if status is None else status.astype(np.uint32).copy()
     if not settings.perturb:
         return q, v, status
-    fixed_q, fixed_v = [], []
+    fixed_q: list[int] = []
+    fixed_v: list[int] = []
     for path, value in settings.perturb.items():
         which, i = perturbation_index(model, path)
         (q if which == "q" else v)[:, i] += value
@@ -376,7 +379,7 @@ def _run_rk45(run: _Run) -> None:
     nsteps = np.zeros(run.model.nsample, np.int64)
     module.adaptive_run(
         P, Q0, V0, 0.0, run.time, min(s.dt, s.output_dt), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
-        DOPRI5.c, float(DOPRI5.error_order), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
+        DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
         run.status, run.t_div, run.t_sing, run.t_cl, nsteps,
