@@ -25,8 +25,10 @@ Contract of :func:`simulate`:
    when S (or the KKT matrix) loses rank — a pivot ≤ ``SINGULAR_PIVOT`` × its diagonal —
    except on the robust path (``rk4-projection``), which drops the dependent rows and goes
    on; both are failures: the values from that time on are NaN, and ``diverged_time`` /
-   ``singular_time`` say when. CONTACT_LOST (a warning) when λ ≤ 0 at a clearance joint at
-   a step's start, with ``contact_lost_time``. Nothing raises for a bad sample.
+   ``singular_time`` say when (a rank loss inside an RK4 step is reported at the step's
+   end). CONTACT_LOST (a warning) when λ ≤ 0 at a clearance joint at the start of a step
+   (every accepted step for rk45, every output time for radau), with ``contact_lost_time``.
+   Nothing raises for a bad sample.
 6. Deterministic: a sample's history is bit-identical whatever the chunk of samples it is
    run in and the numba thread count (no reduction across samples).
 """
