@@ -4,9 +4,11 @@
   once (PERFORMANCE.md: a prange kernel took 11.5 s cold, 0.46 s from cache).
 * ``fastmath=False``: results stay reproducible and bit-identical across thread counts.
 * ``nogil=True``: a kernel can run on a writer/worker thread beside Python code.
+* ``error_model="numpy"``: a division by zero gives inf/NaN (then a status bit) instead of
+  raising ZeroDivisionError, which a ``prange`` loop would lose (PERFORMANCE.md).
 """
 
-JIT = dict(cache=True, fastmath=False, nogil=True)
+JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 """Options of serial kernels (``@njit(**JIT)``)."""
 
 PJIT = dict(JIT, parallel=True)

@@ -73,6 +73,7 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
             q_start=q_start,
             v_start=v_start,
             history_dtype=np.dtype(scene.storage.history_dtype),
+            status=status,
         )
         status |= history.pop("status")
         out.update(history)
