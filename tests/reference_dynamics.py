@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.integrate
 
+from mcchain.bench import fourbar_text
 from mcchain.model import GROUND, JOINT_IDEAL, Model
 
 
@@ -432,55 +433,6 @@ points = [[0.3, 0.0], [-0.2, 0.0]]
 clearance = 5e-4
 """
 
-_FOURBAR = """
-[scene]
-name = "fourbar-clearance"
-gravity = [0.0, -9.81]
-[[body]]
-name = "crank"
-mass = 0.1
-inertia = 8.333333333333333e-05
-position = [0.02500000000000001, 0.04330127018922193]
-angle = 1.0471975511965976
-velocity = [-0.8660254037844386, 0.5000000000000002]
-angular_velocity = 20.0
-[[body]]
-name = "coupler"
-mass = 0.3
-inertia = 0.00225
-position = [0.17582706516355487, 0.16825760557544506]
-angle = 0.5756344435187036
-velocity = [-1.4099950572949895, 0.5037254605303013]
-angular_velocity = -3.9441000934466874
-[[body]]
-name = "rocker"
-mass = 0.25
-inertia = 0.0013020833333333333
-position = [0.30085606180870794, 0.12499706859834622]
-angle = 1.5639477787895628
-velocity = [-0.5439696535105508, 0.0037254605303010955]
-angular_velocity = 4.351859284464434
-[[joint]]
-name = "O2"
-bodies = ["ground", "crank"]
-points = [[0.0, 0.0], [-0.05, 0.0]]
-[[joint]]
-name = "A"
-bodies = ["crank", "coupler"]
-points = [[0.05, 0.0], [-0.15, 0.0]]
-[[joint]]
-name = "B"
-bodies = ["coupler", "rocker"]
-points = [[0.15, 0.0], [0.125, 0.0]]
-clearance = 1e-4
-[[joint]]
-name = "O4"
-bodies = ["ground", "rocker"]
-points = [[0.3, 0.0], [-0.125, 0.0]]
-[[driver]]
-body = "crank"
-omega = 20.0
-"""
 
 _LOADED = """
 [scene]
@@ -535,7 +487,7 @@ SCENES = {
     "clearance_bar": _bar_text,
     "parallelogram": _parallelogram_text,
     "double_pendulum": lambda: _DOUBLE_PENDULUM,
-    "fourbar": lambda: _FOURBAR,
+    "fourbar": fourbar_text,
     "loaded": lambda: _LOADED,
 }
 
