@@ -9,27 +9,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from factory import chain_scene_text
+from factory import chain_scene_text, clearance_bar_text, paper_bar_text
 
 REPO = Path(__file__).resolve().parents[1]
 
-BAR = """
-[scene]
-name = "bar"
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = 0.16666666666666666
-position = [0.0, -0.5]
-angle = -1.5707963267948966
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = 1e-3
-[equilibrium]
-[modes]
-"""
+BAR = clearance_bar_text()
 
 SAMPLE = '\n[sample]\ncount = 10\n[sample.vary]\n"{path}" = {{ {dist} }}\n'
 
@@ -51,7 +35,7 @@ CASES = {
     "self joint": (BAR.replace('["ground", "bar"]', '["bar", "bar"]'), "joint.O.bodies"),
     "mass": (BAR.replace("mass = 2.0", "mass = 0.0"), "body.bar.mass"),
     "inertia nan": (BAR.replace("inertia = 0.16666666666666666", "inertia = nan"), "inertia"),
-    "clearance": (BAR.replace("clearance = 1e-3", "clearance = -1e-3"), "joint.O.clearance"),
+    "clearance": (BAR.replace("clearance = 0.001", "clearance = -0.001"), "joint.O.clearance"),
     "unknown path": (BAR + SAMPLE.format(path="body.beam.mass", dist="uniform = [1, 2]"), "beam"),
     "low > high": (BAR + SAMPLE.format(path="body.bar.mass", dist="uniform = [2, 1]"), "uniform"),
     "negative std": (BAR + SAMPLE.format(path="body.bar.mass", dist="normal = [2, -1]"), "normal"),
@@ -66,7 +50,7 @@ CASES = {
         "redundant constraints: rank of B is 4 < 6",
     ),
     "negative dof": (
-        BAR.replace("clearance = 1e-3", "")
+        paper_bar_text()
         + '[[joint]]\nbodies = ["ground", "bar"]\npoints = [[0.0, -1.0], [0.5, 0.0]]\n'
         + '[[joint]]\nname = "C"\nbodies = ["ground", "bar"]\npoints = [[0.0, 0.0], [0.0, 0.0]]\n',
         "negative degrees of freedom",
@@ -78,6 +62,7 @@ CASES = {
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_cli_run__bad_scene_is_one_line_exit_2_no_folder(tmp_path: Path, case: str) -> None:
     text, fragment = CASES[case]
+    assert text != BAR  # the mutation applied
     (tmp_path / "scene.toml").write_text(text)
     proc = subprocess.run(
         [sys.executable, "-m", "mcchain.cli", "run", "scene.toml", "--out", "runs"],
