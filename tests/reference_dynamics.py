@@ -434,32 +434,13 @@ clearance = 5e-4
 """
 
 
-_LOADED = """
-[scene]
-name = "loaded-double-pendulum"
-gravity = [0.3, -9.81]
-[[body]]
-name = "bar1"
-mass = 1.5
-inertia = 0.045
-position = [0.15000000000000002, -0.25980762113533157]
-angle = -1.0471975511965976
-[[body]]
-name = "bar2"
-mass = 1.0
-inertia = 0.013333333333333334
-position = [0.4417749096279029, -0.6613901518985659]
-angle = -0.7853981633974483
-[[joint]]
-name = "O"
-bodies = ["ground", "bar1"]
-points = [[0.0, 0.0], [-0.3, 0.0]]
-[[joint]]
-name = "B"
-bodies = ["bar1", "bar2"]
-points = [[0.3, 0.0], [-0.2, 0.0]]
-clearance = 5e-4
-[[driver]]
+# the clearance double pendulum with every kind of load: driver, force + torque, springs
+_LOADED = (
+    _DOUBLE_PENDULUM.replace(
+        'name = "double-pendulum-clearance"\ngravity = [0.0, -9.81]',
+        'name = "loaded-double-pendulum"\ngravity = [0.3, -9.81]',
+    )
+    + """[[driver]]
 body = "bar1"
 omega = 1.5
 [[force]]
@@ -482,6 +463,7 @@ points = [[0.0, 0.05], [0.0, -0.05]]
 stiffness = 50.0
 damping = 0.5
 """
+)
 
 SCENES = {
     "clearance_bar": _bar_text,
