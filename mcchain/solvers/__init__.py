@@ -7,16 +7,11 @@ keyed by ensemble variable name (DESIGN §5), sample axis first.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from mcchain.model import Model
-from mcchain.scene.schema import Equilibrium
+from mcchain.scene.schema import Equilibrium, Scene
 from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
-
-if TYPE_CHECKING:
-    from mcchain.scene.schema import Scene
 
 
 def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
