@@ -449,7 +449,12 @@ BAD = [
         "storage.compression",
         "must be one of 'zlib', 'zstd' or 'none'",
     ),
-    ("storage-zlib-level", BASE + "[storage]\ncomplevel = 12\n", "storage", "complevel 12 > 9"),
+    (
+        "storage-zlib-level",
+        BASE + '[storage]\ncompression = "zlib"\ncomplevel = 12\n',
+        "storage",
+        "complevel 12 > 9",
+    ),
     (
         "equilibrium-tolerance",
         BASE + "[equilibrium]\ntolerance = 0\n",
@@ -508,7 +513,7 @@ def test_load_scene__defaults() -> None:
     assert scene.sample is None and scene.equilibrium is None and scene.modes is None
     assert scene.simulate is None
     assert scene.storage.history_dtype == "float32"
-    assert scene.storage.compression == "zlib"
+    assert scene.storage.compression == "zstd"
     assert scene.storage.complevel == 1
     assert scene.storage.chunk_size == 1024
     assert scene.text == text and scene.source == "<string>"
