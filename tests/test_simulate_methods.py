@@ -65,7 +65,16 @@ def test_generalized_alpha__coefficients():
 
 def test_sincos__matches_numpy():
     rng = np.random.default_rng(1)
-    for x in np.concatenate([rng.uniform(-60, 60, 2000), np.arange(-8, 9) * np.pi / 4]):
+    quadrant_edges = (np.arange(-40, 41) + 0.5) * np.pi / 2
+    for x in np.concatenate(
+        [
+            rng.uniform(-60, 60, 2000),
+            rng.uniform(-1e5, 1e5, 200),
+            np.arange(-8, 9) * np.pi / 4,
+            np.nextafter(quadrant_edges, np.inf),
+            np.nextafter(quadrant_edges, -np.inf),
+        ]
+    ):
         s, c = sincos(x)
         assert abs(s - np.sin(x)) <= SINCOS_TOL and abs(c - np.cos(x)) <= SINCOS_TOL
 

@@ -45,11 +45,16 @@ from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
-# (quadrant chosen by selects), so the lane loop vectorises; ≤ 1 ulp-ish for |x| < 1e6 rad.
+# (quadrant chosen by exact 0/1 and ±1 factors), so the lane loop vectorises, and free of
+# function calls: rounding to an integer is (y + 1.5·2⁵²) − 1.5·2⁵², exact for |y| < 2⁵¹ (so
+# for |x| < 3.5e15 rad; the reduction itself stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such
+# as np.floor cost numba's type inference more than anything else in generated code.
+
+_ROUND = "6755399441055744.0"  # 1.5 · 2⁵²: adding and subtracting it rounds to an integer
 
 _SINCOS_TEMPLATE = "\n".join(
     [
-        "{k} = np.floor({x} * 0.6366197723675814 + 0.5)",
+        f"{{k}} = ({{x}} * 0.6366197723675814 + {_ROUND}) - {_ROUND}",
         "{r} = (({x} - {k} * 1.5707963267341256) - {k} * 6.077100506303966e-11)"
         " - {k} * 2.0222662487111665e-21",
         "{z} = {r} * {r}",
@@ -62,22 +67,24 @@ _SINCOS_TEMPLATE = "\n".join(
         " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
         " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
         " + {z} * -1.1359647557788195e-11)))))))",
-        "{j} = {k} - 4.0 * np.floor({k} * 0.25)",
-        # Quadrant j ∈ {0, 1, 2, 3} by exact 0/1 and ±1 factors (no branches: numba turns
-        # conditional expressions into blocks, which vectorise but compile slowly).
-        "{sw} = {j} - 2.0 * np.floor({j} * 0.5)",
+        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3}; floor(k / 4) and h = floor(j / 2) are roundings
+        # of k/4 − 3/8 and j/2 − 1/4 (never a tie). h: j ≥ 2; sw: odd j (sine and cosine swap);
+        # the sine's sign is 1 − 2h, the cosine's (1 − 2h)(1 − 2 sw).
+        f"{{j}} = {{k}} - 4.0 * ((({{k}} * 0.25 - 0.375) + {_ROUND}) - {_ROUND})",
+        f"{{h}} = (({{j}} * 0.5 - 0.25) + {_ROUND}) - {_ROUND}",
+        "{sw} = {j} - 2.0 * {h}",
+        "{ss} = 1.0 - 2.0 * {h}",
         "{sa} = {sw} * {pc} + (1.0 - {sw}) * {ps}",
         "{ca} = {sw} * {ps} + (1.0 - {sw}) * {pc}",
-        "{sin} = (1.0 - 2.0 * np.floor({j} * 0.5)) * {sa}",
-        "{cos} = (1.0 - 2.0 * np.floor((({j} + 1.0) - 4.0 * np.floor(({j} + 1.0) * 0.25))"
-        " * 0.5)) * {ca}",
+        "{sin} = {ss} * {sa}",
+        "{cos} = ({ss} * (1.0 - 2.0 * {sw})) * {ca}",
     ]
 )
 
 
 def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
     """Lines computing ``sin``/``cos`` of the expression ``x`` (temporaries suffixed ``tag``)."""
-    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "sw", "sa", "ca")
+    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "h", "sw", "ss", "sa", "ca")
     names = {n: f"_{n}{tag}" for n in temps}
     return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
 
@@ -367,10 +374,12 @@ class Emitter:
             self._point(b, f"p_sbx{k}", f"p_sby{k}", f"pb{k}", q, tag)
             self.emit(f"dx{k} = pb{k}X - pa{k}X", f"dy{k} = pb{k}Y - pa{k}Y")
             if topo.joint_kind[k] == JOINT_CLEARANCE:
+                # One division per joint: ex, ey and γ multiply by 1/ρ.
                 self.emit(
                     f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
-                    f"ex{k} = dx{k} / rho{k}",
-                    f"ey{k} = dy{k} / rho{k}",
+                    f"irho{k} = 1.0 / rho{k}",
+                    f"ex{k} = dx{k} * irho{k}",
+                    f"ey{k} = dy{k} * irho{k}",
                 )
 
     def rows(self) -> list[dict[int, Coef]]:
@@ -458,7 +467,7 @@ class Emitter:
             else:
                 self.emit(
                     f"gam{r} = ex{k} * cqx{k} + ey{k} * cqy{k} - (ddx{k} * ddx{k} + ddy{k} * ddy{k}"
-                    f" - phid{r} * phid{r}) / rho{k}"
+                    f" - phid{r} * phid{r}) * irho{k}"
                 )
         for d in range(topo.ndriver):
             self.emit(f"gam{topo.driver_row[d]} = 0.0")
@@ -466,10 +475,17 @@ class Emitter:
             for r in range(topo.ncon):
                 self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")
 
-    def forces(self, q: str = "q", v: str = "v", tag: str = "") -> None:
-        """Generalised applied forces ``F{i}`` (gravity, constant loads, springs)."""
+    def loaded_bodies(self) -> set[int]:
+        """Bodies carrying a load or a spring (the others feel gravity only)."""
         topo = self.topo
-        for b in range(topo.nbody):
+        bodies = set(topo.force_body) | set(topo.spring_a) | set(topo.spring_b)
+        return bodies - {GROUND}
+
+    def forces(self, q: str = "q", v: str = "v", tag: str = "") -> None:
+        """Generalised applied forces ``F{i}`` (gravity, constant loads, springs) of the
+        bodies in :meth:`loaded_bodies` (the free acceleration of the others is g)."""
+        topo = self.topo
+        for b in sorted(self.loaded_bodies()):
             self.emit(
                 f"F{3 * b} = p_m{b} * p_gx", f"F{3 * b + 1} = p_m{b} * p_gy", f"F{3 * b + 2} = 0.0"
             )
@@ -592,14 +608,18 @@ class Emitter:
         for i in range(n):
             self.emit(f"{out}{order[i]} = x{out}{i}")
 
-    def apply_wt(self, x: str, out: str, base: str | None) -> None:
+    def apply_wt(self, x: str, out: str, base: dict[int, Coef] | None) -> None:
         """``{out}{c}`` = base_c − Σ_r Wt{r}_{c} x_r  (base None: 0)."""
         rows = self.rows()
         for c in range(self.topo.ndof):
             terms = [f"Wt{r}_{c} * {x}{r}" for r, row in enumerate(rows) if c in row]
-            head = f"{base}{c}" if base else "0.0"
-            expr = head + ("" if not terms else " - (" + " + ".join(terms) + ")")
-            self.emit(f"{out}{c} = {expr}")
+            head = base[c] if base else 0.0
+            if not terms:
+                self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
+            elif head == 0.0:
+                self.emit(f"{out}{c} = -(" + " + ".join(terms) + ")")
+            else:
+                self.emit(f"{out}{c} = {head} - (" + " + ".join(terms) + ")")
 
     # -- whole blocks ----------------------------------------------------------------------
     def acceleration(self, t: str = "t", baumgarte: bool = True) -> None:
@@ -614,15 +634,24 @@ class Emitter:
         self.constraint_values(t=t)
         self.gamma(baumgarte=baumgarte)
         self.forces()
+        # Free accelerations M⁻¹F; a body under gravity alone has exactly (gx, gy, 0), and the
+        # structural zeros drop out of the products below.
+        loaded = self.loaded_bodies()
+        a0: dict[int, Coef] = {}
         for c in range(topo.ndof):
-            self.emit(f"a0_{c} = F{c} * {self._minv(c)}")
+            b, k = divmod(c, 3)
+            if b in loaded:
+                self.emit(f"a0_{c} = F{c} * {self._minv(c)}")
+                a0[c] = f"a0_{c}"
+            else:
+                a0[c] = ("p_gx", "p_gy", 0.0)[k]
         rows = self.rows()
         for r, row in enumerate(rows):
-            terms = [_mul(val, f"a0_{c}") for c, val in row.items()]
+            terms = [_mul(val, a0[c]) for c, val in row.items()]
             self.emit(f"rhs{r} = {_sum(terms)} - gam{r}")
         self.schur_factor()
         self.schur_solve("rhs", "lam")
-        self.apply_wt("lam", "qdd", "a0_")
+        self.apply_wt("lam", "qdd", a0)
 
     def projection_terms(self, t: str = "t") -> None:
         """Position and velocity corrections of a projection step at (q, v, t).
