@@ -12,4 +12,8 @@ JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 """Options of serial kernels (``@njit(**JIT)``)."""
 
 PJIT = dict(JIT, parallel=True)
-"""Options of batch kernels that loop ``prange`` over samples or lane groups."""
+"""Options of batch kernels that loop ``prange`` over samples or lane groups.
+
+A ``prange`` index is int64 when the kernel is typed and uint64 inside the parallel body that
+numba builds from it, so a callee taking the index is compiled twice unless the index is cast:
+every batch kernel passes ``np.int64(index)`` (measured: erk_group's cold compile halved)."""

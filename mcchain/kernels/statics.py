@@ -282,7 +282,8 @@ def assemble_batch(km, q_out, v_out, status_out):
         v_out: (nsample, 3 nbody) initial velocities in, consistent velocities out.
         status_out: (nsample,) uint32, bits OR-ed in.
     """
-    for s in prange(q_out.shape[0]):
+    for sample in prange(q_out.shape[0]):
+        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
         bits = assemble_one(km, s, q_out[s], v_out[s])
         if bits != 0:
             status_out[s] |= bits
@@ -569,7 +570,8 @@ def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history
             iteration (see :func:`equilibrium_one`), NaN-filled by the caller.
         status_out: (nsample,) uint32; samples already flagged are skipped (NaN).
     """
-    for s in prange(q_out.shape[0]):
+    for sample in prange(q_out.shape[0]):
+        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
         if status_out[s] != 0:
             q_out[s, :] = np.nan
             lam_out[s, :] = np.nan
@@ -716,7 +718,8 @@ def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out
         shapes_out: (nsample, nmode, 3 nbody); any (1, nmode, 3 nbody) array if not wanted.
         status_out: (nsample,) uint32; failed samples are skipped (NaN).
     """
-    for s in prange(q_eq.shape[0]):
+    for sample in prange(q_eq.shape[0]):
+        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
         if status_out[s] & (ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR):
             omega_out[s, :] = np.nan
             continue
@@ -737,5 +740,6 @@ def joint_forces_batch(km, q, lam, force_out, contact_out):
         q: (nsample, 3 nbody); lam: (nsample, ncon).
         force_out: (nsample, njoint, 2) N; contact_out: (nsample, njoint) N (NaN: ideal).
     """
-    for s in prange(q.shape[0]):
+    for sample in prange(q.shape[0]):
+        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
         joint_forces(km, s, q[s], lam[s], force_out[s], contact_out[s])
