@@ -94,3 +94,19 @@ def test_other_methods__match_the_parallelogram_or_flag_singular(method):
         assert err[before].max() <= PARALLELOGRAM_TOL
     else:
         assert out["status"][0] == 0 and err.max() <= PARALLELOGRAM_TOL
+
+
+def test_imaginary_axis_limit__rk4_is_2sqrt2_and_dopri5_stops_near_1():
+    """The limits the stability chart draws, from each tableau's stability function."""
+    from mcchain.bench import imaginary_axis_limit
+    from mcchain.kernels.integrators import DOPRI5, RK4
+
+    assert imaginary_axis_limit(RK4.A, RK4.b) == pytest.approx(2 * np.sqrt(2), rel=1e-9)
+    y = imaginary_axis_limit(DOPRI5.A, DOPRI5.b)
+    n = len(DOPRI5.b)
+
+    def gain(y: float) -> float:
+        z = 1j * y
+        return abs(1 + z * DOPRI5.b @ np.linalg.solve(np.eye(n) - z * DOPRI5.A, np.ones(n)))
+
+    assert 0.99 < y < 1.0 and gain(0.99 * y) <= 1.0 < gain(1.01 * y)

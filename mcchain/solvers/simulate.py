@@ -407,10 +407,17 @@ def _run_radau(run: _Run) -> None:
     lam = np.zeros((ncon, 1))
     chk = np.zeros(1)
     sing = np.zeros(1)
+    nsteps = np.zeros(n, np.int64)
+    run.out["_steps"] = nsteps
     for i in range(n):
         if run.status[i] & FAILURE_BITS:
             continue
         P = np.ascontiguousarray(P_all[:, i : i + 1])
+
+        # solve_ivp evaluates events once per accepted step (and at the start): a step count.
+        def count_step(t: float, y: np.ndarray, i: int = i) -> float:
+            nsteps[i] += 1
+            return 1.0
 
         def rhs(t: float, y: np.ndarray, P: np.ndarray = P) -> np.ndarray:
             Q = np.ascontiguousarray(y[:ndof, None])
@@ -424,8 +431,9 @@ def _run_radau(run: _Run) -> None:
         try:
             sol = solve_ivp(
                 rhs, (0.0, float(run.time[-1])), y0, method="Radau", t_eval=run.time,
-                rtol=s.rtol, atol=s.atol,
+                rtol=s.rtol, atol=s.atol, events=count_step,
             )  # fmt: skip
+            nsteps[i] -= 1
             ys, ok = sol.y, sol.status == 0
             fail_bit, fail_time = DIVERGED, (sol.t[-1] if len(sol.t) else 0.0)
         except _Singular as exc:
@@ -547,7 +555,8 @@ def simulate(
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
         lanes: instances per lane group of the lane kernels (1..64).
-        diagnostics: also return ``steps`` (nsample,), the steps each sample took (rk45).
+        diagnostics: also return ``steps`` (nsample,), the accepted steps each sample took
+            (rk45 and radau).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
