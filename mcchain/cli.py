@@ -203,12 +203,20 @@ def _fmt(value: Any) -> str:
     return text if arr.size == 1 else f"[{text}]"
 
 
-def describe_model(model: Any, scene_name: str) -> list[str]:
-    """The lines ``mcchain validate`` prints: bodies, joints, drivers, rows, dof."""
+def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str]:
+    """The lines ``mcchain validate`` prints: bodies, joints, drivers, rows, dof.
+
+    Values are those of ``nominal`` (the scene without ``[sample]``) when given, else of the
+    first sample; each sampled path is listed with its range over ``model``'s samples.
+    """
+    import numpy as np
+
     from mcchain.model import GROUND, JOINT_CLEARANCE
 
     def body(index: int) -> str:
         return "ground" if index == GROUND else str(model.body_names[index])
+
+    values = model if nominal is None else nominal
 
     def first(arr: Any, *index: int) -> Any:
         return arr[(0, *index)]
@@ -220,10 +228,10 @@ def describe_model(model: Any, scene_name: str) -> list[str]:
     lines.append("bodies:")
     for i, name in enumerate(model.body_names):
         lines.append(
-            f"  {name}: mass {_fmt(first(model.body_mass, i))} kg, "
-            f"inertia {_fmt(first(model.body_inertia, i))} kg m2, "
-            f"position {_fmt(first(model.q0)[3 * i : 3 * i + 2])} m, "
-            f"angle {_fmt(first(model.q0)[3 * i + 2])} rad"
+            f"  {name}: mass {_fmt(first(values.body_mass, i))} kg, "
+            f"inertia {_fmt(first(values.body_inertia, i))} kg m2, "
+            f"position {_fmt(first(values.q0)[3 * i : 3 * i + 2])} m, "
+            f"angle {_fmt(first(values.q0)[3 * i + 2])} rad"
         )
     lines.append("joints:")
     for j, name in enumerate(model.joint_names):
@@ -231,7 +239,7 @@ def describe_model(model: Any, scene_name: str) -> list[str]:
         nrow = 1 if clearance else 2
         row = int(model.joint_row[j])
         rows = f"row {row}" if nrow == 1 else f"rows {row}-{row + 1}"
-        kind = f"clearance {_fmt(first(model.joint_clearance, j))} m" if clearance else "ideal"
+        kind = f"clearance {_fmt(first(values.joint_clearance, j))} m" if clearance else "ideal"
         lines.append(
             f"  {name}: {body(int(model.joint_body_a[j]))} (bearing) - "
             f"{body(int(model.joint_body_b[j]))} (journal), {kind}, {rows}"
@@ -240,12 +248,16 @@ def describe_model(model: Any, scene_name: str) -> list[str]:
         lines.append("drivers:")
         for k, name in enumerate(model.driver_names):
             lines.append(
-                f"  {name}: omega {_fmt(first(model.driver_omega, k))} rad/s, "
-                f"angle0 {_fmt(first(model.driver_angle0, k))} rad, "
+                f"  {name}: omega {_fmt(first(values.driver_omega, k))} rad/s, "
+                f"angle0 {_fmt(first(values.driver_angle0, k))} rad, "
                 f"row {int(model.driver_row[k])}"
             )
     if model.param_paths:
-        lines.append("sampled: " + ", ".join(model.param_paths))
+        lines.append("sampled (range over the samples):")
+        params = np.asarray(model.parameters, dtype=float)
+        for k, path in enumerate(model.param_paths):
+            lo, hi = np.nanmin(params[:, k]), np.nanmax(params[:, k])
+            lines.append(f"  {path}: {_fmt(lo)} … {_fmt(hi)}")
     lines.append(f"coordinates: {model.ndof}")
     lines.append(f"constraint rows: {model.ncon}")
     lines.append(f"degrees of freedom: {model.nmode}")
@@ -257,7 +269,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
     scene, model = default_loader(args.scene, None, None)
     name = getattr(getattr(scene, "scene", None), "name", args.scene)
-    for line in describe_model(model, name):
+    nominal = None
+    if getattr(scene, "sample", None) is not None:
+        from mcchain.scene import compile_model
+
+        nominal = compile_model(scene.model_copy(update={"sample": None}))
+    for line in describe_model(model, name, nominal):
         print(line)
     return 0
 

@@ -115,6 +115,20 @@ def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None
     assert list(tmp_path.iterdir()) == []
 
 
+def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(tmp_path: Path) -> None:
+    proc = mcchain("validate", REPO / "configs" / "clearance-sweep.toml", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    # the scene file's values, not the first sample's
+    assert "  bar: mass 2 kg," in out and "clearance 0.001 m, row 0" in out
+    lines = out.splitlines()
+    ranges = lines[lines.index("sampled (range over the samples):") + 1 :][:2]
+    lo, hi = (float(x) for x in ranges[0].split(": ")[1].split(" … "))
+    assert ranges[0].startswith("  joint.O.clearance: ")
+    assert 1e-4 <= lo < 1.1e-4 and 9.9e-4 < hi <= 1e-3
+    assert ranges[1].startswith("  body.bar.mass: ")
+
+
 def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
     proc = mcchain("validate", REPO / "configs" / "fourbar-clearance.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
