@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
+    damper_stiffness_add,
     kinetic_energy,
     potential_energy,
 )
@@ -128,6 +129,28 @@ def test_stiffness__matches_differences(chain):
 
     _assert_close(K, _central(generalised_reaction, q), FD_RTOL)
     _assert_close(K, K.T, 1e-13)
+
+
+@SETTINGS
+@given(chains())
+def test_damper_stiffness__matches_differences_at_any_velocity(chain):
+    """−∂F/∂q of the damping forces at a fixed, non-zero q̇ (not symmetric)."""
+    model, q, v, _ = chain
+    km = model.kernel_arrays()
+    K = np.zeros((model.ndof, model.ndof))
+    damper_stiffness_add(km, 0, q, v, K)
+    if not np.any(model.spring_damping):
+        assert not K.any()
+        return
+    rest = np.zeros(model.ndof)
+
+    def minus_damping_forces(x):
+        F, F_rest = np.empty(model.ndof), np.empty(model.ndof)
+        applied_forces(km, 0, x, v, F)
+        applied_forces(km, 0, x, rest, F_rest)
+        return F_rest - F
+
+    _assert_close(K, _central(minus_damping_forces, q), FD_RTOL)
 
 
 @SETTINGS

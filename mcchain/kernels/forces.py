@@ -13,7 +13,14 @@ import math
 from numba import njit
 
 from mcchain.kernels.config import JIT
-from mcchain.kernels.joints import add_pair_outer, body_pose, body_velocity, rotate
+from mcchain.kernels.joints import (
+    add_pair_column,
+    add_pair_outer,
+    add_pair_product,
+    body_pose,
+    body_velocity,
+    rotate,
+)
 
 
 @njit(**JIT)
@@ -81,10 +88,7 @@ def applied_forces(km, s, q, v, F_out):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
         pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
-        vax, vay, wa = body_velocity(v, a)
-        vbx, vby, wb = body_velocity(v, b)
-        dux = vbx - pby * wb - vax + pay * wa
-        duy = vby + pbx * wb - vay - pax * wa
+        dux, duy = spring_rate(v, a, b, pax, pay, pbx, pby)
         stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
         rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
         damping = km.spring_damping[s % km.spring_damping.shape[0], k]
@@ -100,6 +104,65 @@ def applied_forces(km, s, q, v, F_out):
             fy = -tension * ey
         _add_generalised(F_out, b, 1.0, fx, fy, pbx, pby)
         _add_generalised(F_out, a, -1.0, fx, fy, pax, pay)
+
+
+@njit(**JIT)
+def spring_rate(v, a, b, pax, pay, pbx, pby):
+    """u̇ = ṙ_b + ω_b Ω p_b − ṙ_a − ω_a Ω p_a: the rate of a spring's vector, m/s."""
+    vax, vay, wa = body_velocity(v, a)
+    vbx, vby, wb = body_velocity(v, b)
+    return vbx - pby * wb - vax + pay * wa, vby + pbx * wb - vay - pax * wa
+
+
+@njit(**JIT)
+def damper_stiffness_add(km, s, q, v, K_out):
+    """K += −∂F/∂q of the spring-dampers' damping forces at fixed q̇ (exact; not symmetric).
+
+    With u̇ = G q̇ (G = ∂u/∂q), a damper pulls body b with f = −c Q u̇, Q = e eᵀ (rest length
+    > 0, e = u/L) or I (rest length 0), and F = Gᵀ f, so
+    −∂F/∂q = −(∂Gᵀ/∂q) f + c Gᵀ Q ∂u̇/∂q + (c/L) Gᵀ h nᵀ G (the last for Q = e eᵀ only),
+    n ⟂ e, h = n (e·u̇) + e (n·u̇); ∂u̇/∂θ_b = −ω_b p_b, ∂u̇/∂θ_a = ω_a p_a, and
+    f·∂²u/∂θ_b² = −f·p_b, f·∂²u/∂θ_a² = f·p_a. The elastic part is applied_stiffness_add's.
+    """
+    for k in range(km.spring_body_a.shape[0]):
+        damping = km.spring_damping[s % km.spring_damping.shape[0], k]
+        if damping == 0.0:
+            continue
+        a = km.spring_body_a[k]
+        b = km.spring_body_b[k]
+        pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
+        dux, duy = spring_rate(v, a, b, pax, pay, pbx, pby)
+        isotropic = km.spring_rest_length[s % km.spring_rest_length.shape[0], k] == 0.0
+        ex, ey = 1.0, 0.0
+        if isotropic:
+            fx, fy = -damping * dux, -damping * duy
+        else:
+            length = math.hypot(ux, uy)
+            ex, ey = ux / length, uy / length
+            nx, ny = -ey, ex
+            along, across = ex * dux + ey * duy, nx * dux + ny * duy
+            fx, fy = -damping * along * ex, -damping * along * ey
+            hx, hy = nx * along + ex * across, ny * along + ey * across
+            add_pair_product(K_out, damping / length, a, b, hx, hy, nx, ny, pax, pay, pbx, pby)
+        if b >= 0:
+            K_out[3 * b + 2, 3 * b + 2] += fx * pbx + fy * pby
+            _damper_column(K_out, damping, isotropic, ex, ey, 3 * b + 2, -v[3 * b + 2], pbx, pby,
+                           a, b, pax, pay, pbx, pby)  # fmt: skip
+        if a >= 0:
+            K_out[3 * a + 2, 3 * a + 2] -= fx * pax + fy * pay
+            _damper_column(K_out, damping, isotropic, ex, ey, 3 * a + 2, v[3 * a + 2], pax, pay,
+                           a, b, pax, pay, pbx, pby)  # fmt: skip
+
+
+@njit(**JIT)
+def _damper_column(K_out, damping, isotropic, ex, ey, col, omega, px, py, a, b, pax, pay, pbx,
+                   pby):  # fmt: skip
+    """K[:, col] += c Gᵀ Q ∂u̇/∂θ for the angle column ``col`` (∂u̇/∂θ = omega · p)."""
+    wx, wy = omega * px, omega * py
+    if not isotropic:
+        along = ex * wx + ey * wy
+        wx, wy = along * ex, along * ey
+    add_pair_column(K_out, damping, col, a, b, wx, wy, pax, pay, pbx, pby)
 
 
 @njit(**JIT)

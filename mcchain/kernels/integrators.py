@@ -30,6 +30,7 @@ from mcchain.kernels.config import JIT, PJIT
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
+    damper_stiffness_add,
     kinetic_energy,
     mass_diagonal,
     potential_energy,
@@ -861,7 +862,7 @@ def generalized_alpha_run(
                         Kmat[ndof + r, i] = bp * B[r, i]
                         Kmat[i, ndof + r] = bp * B[r, i]
                 # K = ∂(Bᵀλ)/∂q − ∂F/∂q, C = −∂F/∂q̇ (dampers), into the top-left block.
-                _tangent_add(km, s, q, lam, gp, Kmat)
+                _tangent_add(km, s, q, v, lam, gp, Kmat)
                 scale = 0.0
                 for i in range(nsys):
                     for j in range(nsys):
@@ -904,11 +905,13 @@ def generalized_alpha_run(
 
 
 @njit(**JIT)
-def _tangent_add(km, s, q, lam, gp, K_out):
-    """K_out[:ndof, :ndof] += ∂(Bᵀλ)/∂q − ∂F/∂q (exact) + γ′ C (spring dampers, along the
-    spring; isotropic for rest length 0)."""
+def _tangent_add(km, s, q, v, lam, gp, K_out):
+    """K_out[:ndof, :ndof] += ∂(Bᵀλ)/∂q − ∂F/∂q + γ′ C, all exact: the joints' second
+    derivatives, the loads' and springs' stiffness, the dampers' position dependence at fixed
+    q̇, and C = −∂F/∂q̇ (along the spring; isotropic for rest length 0)."""
     constraint_hessian_add(km, s, q, lam, K_out)
     applied_stiffness_add(km, s, q, K_out)
+    damper_stiffness_add(km, s, q, v, K_out)
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]

@@ -174,18 +174,40 @@ def constraint_velocity_rhs(km, s, nu_out):
 
 
 @njit(**JIT)
-def add_pair_outer(K_out, scale, a, b, wx, wy, pax, pay, pbx, pby):
-    """K += scale · gᵀg with g = w·∂d/∂q, d = (r_b + p_b) − (r_a + p_a) for any point pair."""
-    # g has at most six non-zeros: (+wx, +wy, w·Ωp_b) on b and their negatives on a.
+def _pair_gradient(a, b, wx, wy, pax, pay, pbx, pby):
+    """Indices and values of g = w·∂d/∂q, d = (r_b + p_b) − (r_a + p_a): six non-zeros,
+    (+wx, +wy, w·Ωp_b) on b and their negatives on a; the ground's indices are negative."""
     idx = (3 * b, 3 * b + 1, 3 * b + 2, 3 * a, 3 * a + 1, 3 * a + 2)
     val = (wx, wy, -wx * pby + wy * pbx, -wx, -wy, wx * pay - wy * pax)
-    # The ground's indices 3·(−1) + {0, 1, 2} are negative: skipped.
+    return idx, val
+
+
+@njit(**JIT)
+def add_pair_product(K_out, scale, a, b, xx, xy, yx, yy, pax, pay, pbx, pby):
+    """K += scale · g_xᵀ g_y with g_w = w·∂d/∂q for the point pair (see _pair_gradient)."""
+    idx, gx = _pair_gradient(a, b, xx, xy, pax, pay, pbx, pby)
+    _, gy = _pair_gradient(a, b, yx, yy, pax, pay, pbx, pby)
     for i in range(6):
         if idx[i] < 0:
             continue
         for j in range(6):
             if idx[j] >= 0:
-                K_out[idx[i], idx[j]] += scale * val[i] * val[j]
+                K_out[idx[i], idx[j]] += scale * gx[i] * gy[j]
+
+
+@njit(**JIT)
+def add_pair_outer(K_out, scale, a, b, wx, wy, pax, pay, pbx, pby):
+    """K += scale · gᵀg with g = w·∂d/∂q, d = (r_b + p_b) − (r_a + p_a) for any point pair."""
+    add_pair_product(K_out, scale, a, b, wx, wy, wx, wy, pax, pay, pbx, pby)
+
+
+@njit(**JIT)
+def add_pair_column(K_out, scale, col, a, b, wx, wy, pax, pay, pbx, pby):
+    """K[:, col] += scale · gᵀ with g = w·∂d/∂q for the point pair."""
+    idx, g = _pair_gradient(a, b, wx, wy, pax, pay, pbx, pby)
+    for i in range(6):
+        if idx[i] >= 0:
+            K_out[idx[i], col] += scale * g[i]
 
 
 @njit(**JIT)
