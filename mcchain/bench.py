@@ -451,6 +451,25 @@ def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
                     values[th].append(ns)
             if method in ("rk4", "rk4-projection", "rk45"):
                 labels.append(f"{method}\n{scene.split(',')[0]}")
+    # The reference of issue #3, side by side: MuJoCo's RK4 rollout of the ideal-joint double
+    # pendulum (minimal coordinates), and mcchain's rk4 on the same ideal-joint scene.
+    ideal = model_of(chain_text(**DOUBLE_PENDULUM), nsample=nsample)
+    sim = dict(t_end=0.2, dt=1e-4, output_dt=1e-2, method="rk4")
+    _simulate(ideal.select(0, 1), **dict(sim, t_end=1e-2))
+    mj_steps = 200 if not quick else 20
+    ratios = []
+    for th in threads:
+        _threads(th)
+        wall, cpu, _ = _timed(lambda s=sim: _simulate(ideal, **s), repeat=2)
+        ours = wall / (nsample * 2000) * 1e9
+        rows.append(["double pendulum, ideal", "rk4", th, nsample, ours,
+                     cpu / (nsample * 2000) * 1e9, "ns / instance-step"])  # fmt: skip
+        mj = _mujoco_chain(**DOUBLE_PENDULUM, dt=1e-4, nstep=mj_steps, nsample=nsample, threads=th)
+        rows.append(["double pendulum, ideal", "MuJoCo rollout, RK4", th, nsample, mj, math.nan,
+                     "ns / instance-step"])  # fmt: skip
+        clearance = next(r[4] for r in rows if r[:3] == ["double pendulum, clearance", "rk4", th])
+        ratios.append(f"{th} thread(s): MuJoCo / mcchain = {mj / ours:.0f}× (ideal joints), "
+                      f"{mj / clearance:.0f}× against the clearance version")  # fmt: skip
     x = np.arange(len(labels))
     for i, th in enumerate(threads):
         axes[0].bar(x + 0.4 * i, values[th], width=0.4, label=f"{th} thread(s)")
@@ -461,7 +480,8 @@ def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
     fig.tight_layout()
     fig.savefig(out / "speed.png", dpi=110)
     _threads(max(threads))
-    return _table(["scene", "method", "threads", "samples", "wall ns", "CPU ns", "unit"], rows)
+    table = _table(["scene", "method", "threads", "samples", "wall ns", "CPU ns", "unit"], rows)
+    return table + "\n\n" + "; ".join(ratios) + "."
 
 
 def chains(out: Path, quick: bool, nsample: int = 10_000, threads: int = 2) -> str:
