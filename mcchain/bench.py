@@ -629,14 +629,18 @@ def main(args: list[str] | None = None) -> int:
         parser.error(f"--only: unknown section {unknown[0]!r}; one of {', '.join(SECTIONS)}")
     out = Path(ns.out)
     out.mkdir(parents=True, exist_ok=True)
-    report = ["# mcchain bench\n"]
     for name in chosen:
         t0 = time.perf_counter()
         table = _RUNNERS[name](out, ns.quick)
         text = f"## {name}\n\n{table}\n\n![{name}]({name.replace('-', '_')}.png)\n"
         (out / f"{name.replace('-', '_')}.md").write_text(text)
         print(text, f"({time.perf_counter() - t0:.0f} s)\n", flush=True)
-        report.append(text)
+    # bench.md: every section present in the folder, so a partial rerun keeps the others.
+    report = ["# mcchain bench\n"]
+    for name in SECTIONS:
+        part = out / f"{name.replace('-', '_')}.md"
+        if part.exists():
+            report.append(part.read_text())
     (out / "bench.md").write_text("\n".join(report))
     print(out / "bench.md")
     return 0
