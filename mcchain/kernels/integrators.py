@@ -779,6 +779,7 @@ def _indent(line: str) -> int:
 
 
 def _demand_order(body: list[str]) -> list[str]:
+    """The lines of ``body`` renamed to single assignments (``x__2``) in demand order."""
     version: dict[str, int] = {}
     defined_by: dict[str, int] = {}
     last_store: dict[str, int] = {}
