@@ -206,3 +206,30 @@ def test_demand_order__same_stores_as_written():
     expected = _run_lane_body(body, W.copy())
     assert np.isfinite(expected).all()
     assert np.array_equal(_run_lane_body(_demand_order(body), W.copy()), expected)
+
+
+def test_radau__reports_the_steps_scipy_takes():
+    """``steps`` of radau (diagnostics) = the accepted steps of scipy's Radau on the same
+    index-1 right-hand side, integrated here without output times."""
+    from scipy.integrate import solve_ivp
+
+    from mcchain.solvers.simulate import DEFAULT_BAUMGARTE, SINGULAR_PIVOT
+
+    model = scene_model("clearance_bar")
+    sim = dict(t_end=0.05, dt=0.01, method="radau", rtol=1e-8, atol=1e-10)
+    steps = simulate(model, sim, diagnostics=True)["steps"]
+    module = lane_kernels(Topology.from_model(model))
+    P = pack_parameters(model)[:, :1].copy()
+    alpha, beta = DEFAULT_BAUMGARTE
+    n = model.ndof
+    qdd, lam, chk, sing = np.zeros((n, 1)), np.zeros((model.ncon, 1)), np.zeros(1), np.zeros(1)
+
+    def rhs(t, y):
+        Q, V = y[:n, None].copy(), y[n:, None].copy()
+        module.accel(P, Q, V, t, 2 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
+        return np.concatenate([y[n:], qdd[:, 0]])
+
+    y0 = np.concatenate([model.q0[0], model.v0[0]])
+    sol = solve_ivp(rhs, (0.0, 0.05), y0, method="Radau", rtol=1e-8, atol=1e-10)
+    assert sol.status == 0 and steps.shape == (1,)
+    assert steps[0] == len(sol.t) - 1 > 5
