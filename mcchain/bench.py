@@ -410,7 +410,7 @@ def drift(out: Path, quick: bool) -> str:
 
 def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
     """ns per instance-step of every method (dt 1e-4), 1 and 2 threads."""
-    from mcchain.solvers.simulate import LANES
+    from mcchain.kernels.integrators import LMAX as LANES
 
     nsample = min(nsample, 1000) if quick else nsample
     scenes = {k: v for k, v in SCENES.items() if k != "clearance bar"}

@@ -169,6 +169,7 @@ def test_demand_order__same_stores_as_written():
     from factory import chain_scene_text
 
     from mcchain.kernels.integrators import (
+        LMAX,
         _blocks,
         _demand_order,
         _fill,
@@ -201,8 +202,9 @@ def test_demand_order__same_stores_as_written():
     text = _fill(template, _blocks(topo, RK4.nstage, lay), _tokens(topo, RK4.nstage, lay), lay)
     body = [line.strip() for line in text.splitlines()[1:] if line.strip()]
     rng = np.random.default_rng(3)
-    W = rng.uniform(0.5, 1.5, lay.size * 64)
-    W[lay.rows["q"] * 64 : (lay.rows["q"] + topo.ndof) * 64] = np.repeat(model.q0[0], 64)
+    W = rng.uniform(0.5, 1.5, lay.size * LMAX)
+    q = slice(lay.rows["q"] * LMAX, (lay.rows["q"] + topo.ndof) * LMAX)
+    W[q] = np.repeat(model.q0[0], LMAX)
     expected = _run_lane_body(body, W.copy())
     assert np.isfinite(expected).all()
     assert np.array_equal(_run_lane_body(_demand_order(body), W.copy()), expected)

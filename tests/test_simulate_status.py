@@ -57,7 +57,7 @@ def test_simulate__bit_identical_across_threads_chunks_and_lanes(method):
         numba.set_num_threads(1)
         one = simulate(model, sim, history_dtype=np.float64)
         numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        two = simulate(model, sim, history_dtype=np.float64, lanes=16)
+        two = simulate(model, sim, history_dtype=np.float64, lanes=3)
         parts = [
             simulate(model.select(a, b), sim, history_dtype=np.float64)
             for a, b in ((0, 9), (9, 70))
@@ -73,9 +73,9 @@ def test_rk45__bit_identical_across_chunks_and_lanes():
     model = scene_model("parallelogram", nsample=40)
     v_start = model.v0 * np.linspace(0.5, 1.5, 40)[:, None]
     sim = dict(t_end=0.1, dt=1e-3, output_dt=1e-2, method="rk45", rtol=1e-9, atol=1e-12)
-    whole = simulate(model, sim, v_start=v_start, history_dtype=np.float64, lanes=32)
+    whole = simulate(model, sim, v_start=v_start, history_dtype=np.float64, lanes=3)
     parts = [
-        simulate(model.select(a, b), sim, v_start=v_start[a:b], history_dtype=np.float64, lanes=8)
+        simulate(model.select(a, b), sim, v_start=v_start[a:b], history_dtype=np.float64, lanes=2)
         for a, b in ((0, 13), (13, 40))
     ]
     joined = {k: np.concatenate([p[k] for p in parts]) for k in KEYS}

@@ -319,6 +319,8 @@ class Emitter:
         self.slots = topo.slots()
         self.lines: list[str] = []
         self._rows_cache: list[dict[int, Coef]] | None = None
+        names = {i: f"p_{name}" for name, i in self.slots.items()}
+        self._where: Callable[[int], str] = names.__getitem__  # before load_params: the names
 
     # -- plumbing --------------------------------------------------------------------------
     def emit(self, *lines: str) -> None:
@@ -331,9 +333,16 @@ class Emitter:
         return text
 
     def load_params(self, where: Callable[[int], str]) -> None:
-        """``p_<slot> = where(slot index)`` for every parameter slot."""
+        """``p_<slot> = where(slot index)`` for every parameter slot; later blocks may load a
+        parameter again from ``where`` (:meth:`_reload`)."""
+        self._where = where
         for name, i in self.slots.items():
             self.emit(f"p_{name} = {where(i)}")
+
+    def _reload(self, name: str) -> str:
+        """A fresh load of parameter ``p_<name>`` (from the last :meth:`load_params`): at the
+        end of a long body a load is cheaper than keeping the value from the start."""
+        return self._where(self.slots[name])
 
     # -- kinematics ------------------------------------------------------------------------
     def bodies(self, q: str = "q", tag: str = "") -> None:
@@ -441,8 +450,9 @@ class Emitter:
             self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}")
             if v is not None:
                 self.emit(f"phid{r} = {v}{i} - p_om{d}")
-        terms = ["0.0"] + [f"abs(phi{r})" for r in range(topo.ncon)]
-        self.emit(f"phimax = max({', '.join(terms)})" if topo.ncon else "phimax = 0.0")
+        # A running max (numba's max of many arguments is the same left fold): with demand
+        # ordering each Φ_r is then consumed where it is made instead of kept to the end.
+        self.emit("phimax = 0.0", *(f"phimax = max(phimax, abs(phi{r}))" for r in range(topo.ncon)))
 
     def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
         """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
@@ -586,7 +596,7 @@ class Emitter:
                 num = sij + ("" if not terms else " - (" + " + ".join(terms) + ")")
                 self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
             # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
-        self.emit("sing = " + " + ".join(["0.0"] + [f"(1.0 - okp{j})" for j in range(n)]))
+        self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
         self._L = L
         self._lower = lower
 
@@ -609,17 +619,21 @@ class Emitter:
             self.emit(f"{out}{order[i]} = x{out}{i}")
 
     def apply_wt(self, x: str, out: str, base: dict[int, Coef] | None) -> None:
-        """``{out}{c}`` = base_c − Σ_r Wt{r}_{c} x_r  (base None: 0)."""
+        """``{out}{c}`` = base_c − M⁻¹_c Σ_r B_rc x_r  (base None: 0).
+
+        Bᵀx first, then one product by M⁻¹ (loaded again): the entries of B (point
+        coordinates, ±1) are fewer values to keep across the Schur solve than those of M⁻¹Bᵀ,
+        and ±1 costs no product.
+        """
         rows = self.rows()
         for c in range(self.topo.ndof):
-            terms = [f"Wt{r}_{c} * {x}{r}" for r, row in enumerate(rows) if c in row]
+            terms = [_mul(row[c], f"{x}{r}") for r, row in enumerate(rows) if c in row]
             head = base[c] if base else 0.0
             if not terms:
                 self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
-            elif head == 0.0:
-                self.emit(f"{out}{c} = -(" + " + ".join(terms) + ")")
-            else:
-                self.emit(f"{out}{c} = {head} - (" + " + ".join(terms) + ")")
+                continue
+            total = f"{self._reload(self._minv(c)[2:])} * ({_sum(terms)})"
+            self.emit(f"{out}{c} = -{total}" if head == 0.0 else f"{out}{c} = {head} - {total}")
 
     # -- whole blocks ----------------------------------------------------------------------
     def acceleration(self, t: str = "t", baumgarte: bool = True) -> None:

@@ -51,8 +51,6 @@ DEFAULT_BAUMGARTE = (10.0, 10.0)
 """(α, β) of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s: critically damped, drift decays in ~0.1–0.5 s, far
 below any step-size limit (|hα| ≪ 1); see benchmarks/bench_simulate.py (drift chart)."""
 
-LANES = 32
-"""Instances advanced in lockstep per lane group (PERFORMANCE.md: 32–64)."""
 
 SINGULAR_PIVOT = 1e-8
 """Relative LDLᵀ pivot of S below which the constraints count as rank-deficient."""
@@ -333,7 +331,7 @@ class _Run:
     t_div: np.ndarray
     t_sing: np.ndarray
     t_cl: np.ndarray
-    lanes: int = LANES
+    lanes: int = 1
 
 
 def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
@@ -542,7 +540,7 @@ def simulate(
     v_start: np.ndarray | None = None,
     history_dtype: Any = np.float32,
     status: np.ndarray | None = None,
-    lanes: int = LANES,
+    lanes: int | None = None,
     diagnostics: bool = False,
 ) -> dict[str, np.ndarray]:
     """Integrate every sample of ``model`` as ``sim`` (the ``[simulate]`` section) says.
@@ -554,7 +552,8 @@ def simulate(
         history_dtype: dtype of the histories (float32 or float64).
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
-        lanes: instances per lane group of the lane kernels (1..64).
+        lanes: instances per lane group of the lane kernels (1..LMAX; default LMAX, one
+            SIMD register of doubles: see ``integrators.LMAX``).
         diagnostics: also return ``steps`` (nsample,), the accepted steps each sample took
             (rk45 and radau).
 
@@ -563,8 +562,11 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = Settings.resolve(sim)
-    if not 1 <= int(lanes) <= 64:
-        raise ValueError(f"lanes: must be in 1..64 (the lane kernels' work rows), got {lanes}")
+    from mcchain.kernels.integrators import LMAX
+
+    lanes = LMAX if lanes is None else lanes
+    if not 1 <= int(lanes) <= LMAX:
+        raise ValueError(f"lanes: must be in 1..{LMAX} (the lane kernels' work rows), got {lanes}")
     time, every = output_times(settings)
     q, v, status = start_state(model, settings, q_start, v_start, status)
     out = _allocate(model, len(time), history_dtype)
