@@ -90,3 +90,12 @@ def test_simulate__history_dtype(dtype):
     assert all(out[k].dtype == dtype for k in KEYS)
     assert out["q"].shape == (1, 11, 1, 3) and out["joint_force"].shape == (1, 11, 1, 2)
     assert out["time"].shape == (11,) and out["status"].dtype == np.uint32
+
+
+@pytest.mark.parametrize("lanes", [0, 1000])
+def test_simulate__lane_count_outside_the_work_rows_is_refused(lanes):
+    from mcchain.kernels.integrators import LMAX
+
+    model = scene_model("clearance_bar")
+    with pytest.raises(ValueError, match=rf"^lanes: must be in 1\.\.{LMAX} .* got {lanes}$"):
+        simulate(model, dict(t_end=1e-3, dt=1e-4), lanes=lanes)
