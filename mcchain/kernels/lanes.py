@@ -541,8 +541,12 @@ class Emitter:
 
     # -- Schur complement and its sparse LDLᵀ ---------------------------------------------
     def _minv(self, col: int) -> str:
+        return f"p_{self._minv_slot(col)}"
+
+    def _minv_slot(self, col: int) -> str:
+        """Parameter slot of M⁻¹ at coordinate ``col`` (1/m or 1/J of its body)."""
         b, k = divmod(col, 3)
-        return f"p_iJ{b}" if k == 2 else f"p_im{b}"
+        return f"iJ{b}" if k == 2 else f"im{b}"
 
     def schur_factor(self) -> None:
         """``Wt{r}_{c}`` = (M⁻¹Bᵀ)ᵀ, S = B M⁻¹ Bᵀ and its LDLᵀ; ``sing`` counts dropped pivots.
@@ -632,7 +636,7 @@ class Emitter:
             if not terms:
                 self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
                 continue
-            total = f"{self._reload(self._minv(c)[2:])} * ({_sum(terms)})"
+            total = f"{self._reload(self._minv_slot(c))} * ({_sum(terms)})"
             self.emit(f"{out}{c} = -{total}" if head == 0.0 else f"{out}{c} = {head} - {total}")
 
     # -- whole blocks ----------------------------------------------------------------------
