@@ -13,18 +13,23 @@ status bits on some samples. A fake scene file is a small TOML::
     steps = 20
     [storage]         # optional
     compression = "zstd"
-    [fake]            # optional: seconds to sleep per chunk (to kill a run mid-way)
-    sleep = 0.2
 
 The real pipeline is tested in test_runs_pipeline.py; these fakes keep the storage layer's
 tests independent of the solvers.
+
+To interrupt a run at a known point without racing it, :func:`start_paused_child` runs it in
+a child process whose solver stops (blocks in ``signal.pause``) at the first chunk that
+starts once ``after_parts`` part files exist, and tells the parent so through a pipe; the
+parent then kills or interrupts it. No clock is involved: the parent waits on the pipe.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
-import time
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -53,7 +58,6 @@ class FakeSection:
     count: int = 1
     seed: int | None = None
     steps: int = 0
-    sleep: float = 0.0
 
 
 @dataclass
@@ -142,7 +146,7 @@ def load_fake_scene(path: Path | str) -> FakeScene:
         scene=FakeSection(name=data["scene"]["name"]),
         sample=FakeSection(count=int(sample.get("count", 1)), seed=sample.get("seed")),
         storage=FakeStorage(**data.get("storage", {})),
-        fake=FakeSection(sleep=float(data.get("fake", {}).get("sleep", 0.0))),
+        fake=FakeSection(),
         simulate=FakeSimulate(t_end=1e-3 * steps, dt=1e-4, steps=steps) if sim else None,
     )
 
@@ -156,8 +160,6 @@ def fake_loader(path: Path, samples: int | None, seed: int | None) -> tuple[Fake
 
 def fake_solve(model: Model, scene: Any) -> dict[str, np.ndarray]:
     """Deterministic per-sample outputs of every registry variable the fake scene asks for."""
-    if getattr(getattr(scene, "fake", None), "sleep", 0.0):
-        time.sleep(scene.fake.sleep)
     p = model.parameters
     n, nbody, njoint = model.nsample, model.nbody, model.njoint
     c, m = p[:, 0], p[:, 1]
@@ -212,7 +214,6 @@ def write_fake_scene(
     count: int = 100,
     seed: int = 3,
     steps: int = 0,
-    sleep: float = 0.0,
     storage: dict[str, Any] | None = None,
 ) -> Path:
     lines = [f'[scene]\nname = "{name}"\n', f"[sample]\ncount = {count}\nseed = {seed}\n"]
@@ -221,23 +222,86 @@ def write_fake_scene(
     if storage:
         body = "".join(f"{k} = {json.dumps(v)}\n" for k, v in storage.items())
         lines.append(f"[storage]\n{body}")
-    if sleep:
-        lines.append(f"[fake]\nsleep = {sleep}\n")
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
 
 
-def _child_main(argv: list[str]) -> None:
-    """``python tests/test_runs_support.py run|resume ...``: a run with the fakes."""
-    from mcchain import runs
+PAUSE_ENV = "MCCHAIN_TEST_PAUSE"
+"""``PARTS_DIR:AFTER_PARTS:FD`` for a child started by :func:`start_paused_child`."""
 
-    command, target, *rest = argv
-    options = json.loads(rest[0]) if rest else {}
+
+def pausing(solve: Any, parts: Path, after_parts: int, notify_fd: int) -> Any:
+    """``solve``, except that the first call made once ``after_parts`` part files exist in
+    ``parts`` writes one byte to ``notify_fd`` and blocks until a signal ends the process
+    (SIGKILL) or raises (SIGINT: KeyboardInterrupt, as Ctrl-C in a terminal)."""
+    from mcchain.ensemble.io import list_parts
+
+    def solve_or_pause(model: Any, scene: Any) -> Any:
+        if len(list_parts(parts)) >= after_parts:
+            os.write(notify_fd, b"p")
+            while True:
+                signal.pause()
+        return solve(model, scene)
+
+    return solve_or_pause
+
+
+def start_paused_child(
+    args: list[str],
+    parts: Path,
+    after_parts: int = 1,
+    env: dict[str, str] | None = None,
+    **popen: Any,
+) -> subprocess.Popen[Any]:
+    """Start ``python tests/test_runs_support.py ARGS`` (``run``/``cli``, see
+    :func:`_child_main`) paused after ``after_parts`` part files; return once it is paused.
+
+    The child then has between ``after_parts`` and ``after_parts + 2`` part files (the chunk
+    being written when it paused and the one solved just before may still be on the writer
+    thread), and never finishes by itself."""
+    read_end, write_end = os.pipe()
+    command = [sys.executable, str(TESTS / "test_runs_support.py"), *args]
+    env = {**(os.environ if env is None else env), PAUSE_ENV: f"{parts}:{after_parts}:{write_end}"}
+    child = subprocess.Popen(command, env=env, pass_fds=(write_end,), **popen)
+    os.close(write_end)
+    with os.fdopen(read_end, "rb") as pipe:
+        paused = pipe.read(1)  # b"" if the child exited without pausing
+    if paused != b"p":
+        _, err = child.communicate()
+        raise AssertionError(f"the child ended before pausing (exit {child.returncode}): {err}")
+    return child
+
+
+def _pause_spec() -> tuple[Path, int, int] | None:
+    spec = os.environ.get(PAUSE_ENV)
+    if not spec:
+        return None
+    folder, after_parts, fd = spec.rsplit(":", 2)
+    return Path(folder), int(after_parts), int(fd)
+
+
+def _child_main(argv: list[str]) -> int:
+    """``python tests/test_runs_support.py run|resume SCENE|RUN [OPTIONS_JSON]``: a run with
+    the fakes; ``... cli ARGS...``: ``mcchain ARGS...`` with the real solver. Either pauses as
+    :data:`PAUSE_ENV` says, when set."""
+    import mcchain.solvers
+    from mcchain import cli, runs
+
+    pause = _pause_spec()
+    command, *rest = argv
+    if command == "cli":
+        if pause is not None:
+            mcchain.solvers.solve_chunk = pausing(mcchain.solvers.solve_chunk, *pause)
+        return cli.main(rest)
+    target, *options_json = rest
+    options = json.loads(options_json[0]) if options_json else {}
+    solve = fake_solve if pause is None else pausing(fake_solve, *pause)
     if command == "run":
-        result = runs.start_run(target, loader=fake_loader, solve=fake_solve, **options)
+        result = runs.start_run(target, loader=fake_loader, solve=solve, **options)
     else:
-        result = runs.resume_run(target, loader=fake_loader, solve=fake_solve, **options)
+        result = runs.resume_run(target, loader=fake_loader, solve=solve, **options)
     print(result.folder, flush=True)
+    return 0
 
 
 def test_fake_solve__is_independent_of_chunking() -> None:
@@ -260,4 +324,4 @@ def test_fake_solve__is_independent_of_chunking() -> None:
 
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
-    _child_main(sys.argv[1:])
+    sys.exit(_child_main(sys.argv[1:]))
