@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from mcchain.bench import main
+from integrators import main
 
 OUT = Path(__file__).resolve().parent / "results" / "chains"
 

@@ -1,6 +1,6 @@
 """Time integration: work-precision, stability map, constraint drift and speed per method.
 
-Issue #3. The measurements live in :mod:`mcchain.bench` (also ``mcchain bench``); this script
+Issue #3. The measurements live in ``benchmarks/integrators.py``; this script
 runs them and writes the tables and charts to ``benchmarks/results/``:
 
     python benchmarks/bench_simulate.py [--quick] [--only work-precision,stability,drift,speed]
@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from mcchain.bench import main
+from integrators import main
 
 OUT = Path(__file__).resolve().parent / "results" / "simulate"
 

@@ -1,7 +1,7 @@
 """Equilibrium + eigenpulsations per second: mcchain's batch kernels against a plain SciPy loop.
 
 Issue #2 speed target: ≥ 100× the SciPy loop (``scipy.optimize.root`` + ``scipy.linalg.eigh``
-per instance, ``tests/reference.py``) on 2 threads. Everything is measured in one run, side
+per instance, :mod:`mcchain.testing.dense`) on 2 threads. Everything is measured in one run, side
 by side; the SciPy loop runs on a subset of the samples (its rate per instance does not
 depend on the count). Compile time is reported apart (numba ``cache=True``).
 
@@ -13,21 +13,18 @@ Prints a Markdown table and writes ``benchmarks/results/statics.png`` and ``stat
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numba
 import numpy as np
 
+from mcchain.scene import compile_model, load_scene
+from mcchain.solvers import solve_chunk
+from mcchain.solvers.statics import assemble
+from mcchain.testing import dense as reference
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-import reference  # noqa: E402  (the shared slow reference lives with the tests)
-
-from mcchain.scene import compile_model, load_scene  # noqa: E402
-from mcchain.solvers import solve_chunk  # noqa: E402
-from mcchain.solvers.statics import assemble  # noqa: E402
 
 SCENES = {
     "clearance bar": ROOT / "configs" / "clearance-sweep.toml",

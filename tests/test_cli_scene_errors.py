@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from factory import chain_scene_text, clearance_bar_text, paper_bar_text
+
+from mcchain.testing.factory import chain_scene_text, clearance_bar_text, paper_bar_text
 
 REPO = Path(__file__).resolve().parents[1]
 

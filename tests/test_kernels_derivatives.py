@@ -6,8 +6,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import reference
-from factory import chain_scene_text
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -25,6 +23,8 @@ from mcchain.kernels.joints import (
     constraint_residual,
 )
 from mcchain.scene import compile_model, load_scene_text
+from mcchain.testing import dense as reference
+from mcchain.testing.factory import chain_scene_text
 
 FD_RTOL = 1e-6
 """Issue #2: derivatives agree with central differences to 1e-6 relative."""

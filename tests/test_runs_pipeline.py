@@ -26,6 +26,7 @@ from mcchain import open_run, runs
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.parallel import WORKER_ENV
+from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 SWEEP = REPO / "configs" / "clearance-sweep.toml"
@@ -52,14 +53,8 @@ def last_line(proc: subprocess.CompletedProcess[str]) -> Path:
 
 
 def quartic_omega(mass: np.ndarray, clearance: np.ndarray) -> np.ndarray:
-    """c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0 (DESIGN §3), roots p ascending."""
-    g, inertia, half = 9.81, 1.0 / 6.0, 0.5
-    a = clearance * inertia
-    b = -g * (mass * half**2 + inertia + mass * clearance * half)
-    c = mass * g**2 * half
-    disc = np.sqrt(b * b - 4 * a * c)
-    p2 = np.stack([(-b - disc) / (2 * a), (-b + disc) / (2 * a)], axis=-1)
-    return np.sqrt(p2)
+    """The clearance bar's two pulsations (1 m, J = 1/6 kg m² as in configs/)."""
+    return clearance_bar_pulsations(mass, 1.0 / 6.0, 0.5, G, clearance)
 
 
 def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> None:

@@ -7,7 +7,13 @@ import time
 
 import numpy as np
 import pytest
-from factory import (
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from mcchain.errors import SceneError
+from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, PER_SAMPLE_FIELDS, constraint_rows
+from mcchain.scene import compile_model, load_scene_text
+from mcchain.testing.factory import (
     chain_scene_dict,
     chain_scene_text,
     clearance_bar_text,
@@ -15,12 +21,6 @@ from factory import (
     rotation,
     toml_text,
 )
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-
-from mcchain.errors import SceneError
-from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, PER_SAMPLE_FIELDS, constraint_rows
-from mcchain.scene import compile_model, load_scene_text
 
 COMPILE_1E5_LIMIT_S = 2.0
 """1e5 samples must compile well within this (measured ~0.1 s); generous for slow CI."""

@@ -6,10 +6,10 @@ import math
 from pathlib import Path
 
 import pytest
-from factory import chain_scene_text, clearance_bar_text
 
 from mcchain.errors import SceneError
 from mcchain.scene import load_scene, load_scene_text, scene_from_dict
+from mcchain.testing.factory import chain_scene_text, clearance_bar_text
 
 BASE = """
 [scene]

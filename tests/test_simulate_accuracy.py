@@ -4,21 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference_dynamics import (
-    clearance_angle,
-    clearance_bar_minimal,
-    double_pendulum_minimal,
-    scene_model,
-)
 
 from mcchain.solvers.simulate import simulate
+from mcchain.testing.comparisons import HISTORIES, REFERENCE, failed, history_errors
+from mcchain.testing.dense import _body, _param, clearance_angle
+from mcchain.testing.minimal import clearance_bar_minimal, double_pendulum_minimal
+from mcchain.testing.scenes import scene_model
 
 ORDER_SLACK = 0.3  # fitted slope within ±0.3 of the theoretical order
-POSITION_TOL = 1e-8  # m, issue 3: rk4 (dt 1e-5) vs radau at rtol 1e-12
-FORCE_TOL = 1e-6  # joint force error relative to its peak, issue 3
 MINIMAL_TOL = 1e-9  # m: radau (index 1, absolute coordinates) vs a minimal-coordinate Radau
 ENERGY_TOL = 1e-9  # relative drift over 2 s, rk4 at dt 1e-5 (issue 3)
-RADAU = dict(method="radau", rtol=1e-12, atol=1e-13)
+RADAU = REFERENCE
 
 
 def _run(model, **sim):
@@ -48,24 +44,20 @@ def test_simulate__measured_order_on_the_clearance_bar(method, order, steps):
     assert abs(_order(method, steps) - order) <= ORDER_SLACK
 
 
-@pytest.mark.parametrize(
-    ("name", "t_end"), [("clearance_bar", 0.3), ("double_pendulum", 0.2), ("fourbar", 0.1)]
-)
-def test_rk4__matches_radau(name, t_end):
-    model = scene_model(name)
-    ref = _run(model, t_end=t_end, dt=1e-3, output_dt=1e-3, **RADAU)
-    out = _run(model, t_end=t_end, dt=1e-5, output_dt=1e-3, method="rk4")
-    assert out["status"][0] & ~np.uint32(16) == 0 and ref["status"][0] & ~np.uint32(16) == 0
-    assert np.abs(out["q"][..., :2] - ref["q"][..., :2]).max() <= POSITION_TOL
-    peak = np.abs(ref["joint_force"]).max()
-    assert np.abs(out["joint_force"] - ref["joint_force"]).max() <= FORCE_TOL * peak
+@pytest.mark.parametrize("comparison", HISTORIES, ids=lambda c: c.scene)
+def test_rk4__matches_radau(comparison):
+    model = scene_model(comparison.scene)
+    ref = comparison.reference(model)
+    out = _run(model, **comparison.settings(dt=1e-5, method="rk4"))
+    assert failed(out["status"])[0] == 0 and failed(ref["status"])[0] == 0
+    position, force = history_errors(out, ref)
+    assert position <= comparison.position_tol
+    assert force <= comparison.force_tol
 
 
 def _minimal_start(model, q, v, joints):
     """(p, ṗ) of a minimal model from absolute q, v: body angles and clearance angles."""
-    from reference_dynamics import _body, _p
-
-    pa, pb = _p(model, "joint_point_a", 0), _p(model, "joint_point_b", 0)
+    pa, pb = _param(model, "joint_point_a", 0), _param(model, "joint_point_b", 0)
     p, pd = [], []
     for kind, index in joints:
         if kind == "body":

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference_dynamics import energy, equations, kkt_acceleration, scene_model
 
 from mcchain.errors import SceneError
 from mcchain.kernels.integrators import DOPRI5, RK4, GeneralizedAlpha, lane_kernels
 from mcchain.kernels.lanes import Topology, pack_parameters, sincos
 from mcchain.solvers.simulate import METHODS, simulate
+from mcchain.testing.dense import energy, equations, kkt_acceleration
+from mcchain.testing.scenes import scene_model
 
 COEF_TOL = 1e-15  # tableau identities hold to rounding of the fractions
 SINCOS_TOL = 2.3e-16  # the fdlibm kernels: about one ulp of a value ≤ 1
@@ -166,8 +167,6 @@ def test_demand_order__same_stores_as_written():
     """Scheduling lane code keeps every value: reads after a store see it, redefinitions and
     += chains keep their order; then on a real generated body (a 3-bar chain with a clearance
     joint, a spring and a load), executed in Python."""
-    from factory import chain_scene_text
-
     from mcchain.kernels.integrators import (
         LMAX,
         _blocks,
@@ -177,6 +176,7 @@ def test_demand_order__same_stores_as_written():
         _tokens,
     )
     from mcchain.scene import compile_model, load_scene_text
+    from mcchain.testing.factory import chain_scene_text
 
     body = [
         "a = W[0 + l]",

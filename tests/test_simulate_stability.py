@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference_dynamics import parallelogram_closed_form, scene_model
 
 from mcchain.solvers.simulate import simulate
 from mcchain.status import DIVERGED, SINGULAR
+from mcchain.testing.closed_forms import imaginary_axis_limit, parallelogram_closed_form
+from mcchain.testing.scenes import scene_model
 
 LIMIT_TOL = 0.10  # issue 3: measured RK4 limit within 10 % of 2√2 / p_max
 CLEARANCE = 1e-4  # m: p_max ≈ 630 rad/s, limit ≈ 4.5 ms
@@ -98,7 +99,6 @@ def test_other_methods__match_the_parallelogram_or_flag_singular(method):
 
 def test_imaginary_axis_limit__rk4_is_2sqrt2_and_dopri5_stops_near_1():
     """The limits the stability chart draws, from each tableau's stability function."""
-    from mcchain.bench import imaginary_axis_limit
     from mcchain.kernels.integrators import DOPRI5, RK4
 
     assert imaginary_axis_limit(RK4.A, RK4.b) == pytest.approx(2 * np.sqrt(2), rel=1e-9)

@@ -7,10 +7,10 @@ import dataclasses
 import numba
 import numpy as np
 import pytest
-from reference_dynamics import scene_model
 
 from mcchain.solvers.simulate import simulate
 from mcchain.status import CONTACT_LOST
+from mcchain.testing.scenes import scene_model
 
 KEYS = ("q", "v", "joint_force", "contact_force", "driver_torque", "constraint_error", "energy")
 

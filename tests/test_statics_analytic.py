@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference import bar_pulsation, clearance_bar_pulsations
 
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers import solve_chunk
 from mcchain.solvers.statics import assemble, solve_equilibrium
 from mcchain.status import Status
+from mcchain.testing.closed_forms import bar_pulsation, clearance_bar_pulsations
 
 CLOSED_FORM_RTOL = 1e-10
 """Issue #2: relative error of every sample against the closed forms."""

@@ -6,8 +6,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
-import reference
-from factory import chain_scene_text
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -16,6 +14,8 @@ from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers import solve_chunk
 from mcchain.solvers.statics import assemble, check_scene, solve_equilibrium, solve_modes
 from mcchain.status import Status
+from mcchain.testing import dense as reference
+from mcchain.testing.factory import chain_scene_text
 
 REFERENCE_RTOL = 1e-8
 """Both sides are exact to round-off; the stiff clearance modes cost conditioning."""

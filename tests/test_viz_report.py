@@ -9,13 +9,13 @@ from typing import Any
 import numpy as np
 import pytest
 import xarray as xr
-from factory import clearance_bar_text
 from PIL import Image
 from SALib.sample import sobol as salib_sobol
 from scipy.stats import qmc
 from test_viz_synthetic import SCENE_TEXT, make_dataset, pulsations, random_params
 
 from mcchain.scene import compile_model, load_scene_text
+from mcchain.testing.factory import clearance_bar_text
 from mcchain.viz import report
 
 SALTELLI_ATOL = 0.01  # Saltelli/Jansen estimators on 2^11 scrambled-Sobol base points: observed

@@ -1,4 +1,5 @@
-"""``mcchain bench``: what the time integrators cost for the accuracy they give.
+"""What the time integrators cost for the accuracy they give (``bench_simulate.py``,
+``bench_chains.py``).
 
 Sections (each prints a markdown table and saves a PNG chart into the output folder, plus
 ``bench.md`` with every table):
@@ -31,152 +32,28 @@ import numpy as np
 
 from mcchain.model import Model
 from mcchain.status import Status
+from mcchain.testing.closed_forms import imaginary_axis_limit
+from mcchain.testing.comparisons import HISTORIES, REFERENCE, simulate_float64
+from mcchain.testing.scenes import DOUBLE_PENDULUM, fourbar_text, model_of
+from mcchain.testing.scenes import SCENES as SCENE_TEXTS
+from mcchain.testing.scenes import straight_chain_text as chain_text
+from mcchain.testing.scenes import swinging_bar_text as clearance_bar_text
 
 SECTIONS = ("work-precision", "stability", "drift", "speed", "chains")
 
-# ---------------------------------------------------------------------------------------------
-# Scenes
-
-
-def _rot(th: float) -> np.ndarray:
-    return np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-
-
-def _f(x: float) -> str:
-    return repr(float(x))
-
-
-def clearance_bar_text(clearance: float = 1e-3, tilt: float = 0.3) -> str:
-    """A 1 m, 2 kg bar hanging from a clearance pin, released ``tilt`` rad from the vertical."""
-    th = -math.pi / 2 + tilt
-    com = np.array([0.0, -clearance]) - _rot(th) @ np.array([-0.5, 0.0])
-    return f"""
-[scene]
-name = "clearance-bar"
-gravity = [0.0, -9.81]
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = {_f(2.0 / 12)}
-position = [{_f(com[0])}, {_f(com[1])}]
-angle = {_f(th)}
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = {_f(clearance)}
-"""
-
-
-def chain_text(
-    lengths: list[float], masses: list[float], angle: float = -math.pi / 3,
-    clearance: dict[int, float] | None = None,
-) -> str:  # fmt: skip
-    """Bars pinned end to end from the origin, all at ``angle`` (rad from +x), at rest.
-
-    ``clearance`` maps a joint index (0: the ground pin) to a radial clearance; the journal
-    then sits along the bar, so the start is consistent.
-    """
-    clearance = clearance or {}
-    parts = ['[scene]\nname = "chain"\ngravity = [0.0, -9.81]\n']
-    tip = np.zeros(2)
-    u = np.array([math.cos(angle), math.sin(angle)])
-    for i, (length, mass) in enumerate(zip(lengths, masses, strict=True)):
-        tip = tip + clearance.get(i, 0.0) * u
-        com = tip + 0.5 * length * u
-        parts.append(
-            f'[[body]]\nname = "b{i}"\nmass = {_f(mass)}\ninertia = {_f(mass * length**2 / 12)}\n'
-            f"position = [{_f(com[0])}, {_f(com[1])}]\nangle = {_f(angle)}\n"
-        )
-        tip = com + 0.5 * length * u
-    for i, length in enumerate(lengths):
-        a = '"ground"' if i == 0 else f'"b{i - 1}"'
-        pa = "[0.0, 0.0]" if i == 0 else f"[{_f(lengths[i - 1] / 2)}, 0.0]"
-        extra = f"clearance = {_f(clearance[i])}\n" if i in clearance else ""
-        parts.append(
-            f'[[joint]]\nname = "j{i}"\nbodies = [{a}, "b{i}"]\n'
-            f"points = [{pa}, [{_f(-length / 2)}, 0.0]]\n{extra}"
-        )
-    return "\n".join(parts)
-
-
-DOUBLE_PENDULUM: dict[str, Any] = dict(lengths=[0.6, 0.4], masses=[1.5, 1.0])
-
-
-def fourbar_text() -> str:
-    """The driven four-bar of ``configs/fourbar-clearance.toml`` (clearance 1e-4 m at B)."""
-    return """
-[scene]
-name = "fourbar-clearance"
-gravity = [0.0, -9.81]
-[[body]]
-name = "crank"
-mass = 0.1
-inertia = 8.333333333333333e-05
-position = [0.02500000000000001, 0.04330127018922193]
-angle = 1.0471975511965976
-velocity = [-0.8660254037844386, 0.5000000000000002]
-angular_velocity = 20.0
-[[body]]
-name = "coupler"
-mass = 0.3
-inertia = 0.00225
-position = [0.17582706516355487, 0.16825760557544506]
-angle = 0.5756344435187036
-velocity = [-1.4099950572949895, 0.5037254605303013]
-angular_velocity = -3.9441000934466874
-[[body]]
-name = "rocker"
-mass = 0.25
-inertia = 0.0013020833333333333
-position = [0.30085606180870794, 0.12499706859834622]
-angle = 1.5639477787895628
-velocity = [-0.5439696535105508, 0.0037254605303010955]
-angular_velocity = 4.351859284464434
-[[joint]]
-name = "O2"
-bodies = ["ground", "crank"]
-points = [[0.0, 0.0], [-0.05, 0.0]]
-[[joint]]
-name = "A"
-bodies = ["crank", "coupler"]
-points = [[0.05, 0.0], [-0.15, 0.0]]
-[[joint]]
-name = "B"
-bodies = ["coupler", "rocker"]
-points = [[0.15, 0.0], [0.125, 0.0]]
-clearance = 1e-4
-[[joint]]
-name = "O4"
-bodies = ["ground", "rocker"]
-points = [[0.3, 0.0], [-0.125, 0.0]]
-[[driver]]
-body = "crank"
-omega = 20.0
-"""
-
-
-def model_of(text: str, nsample: int | None = None) -> Model:
-    from mcchain.scene import compile_model, load_scene_text
-
-    return compile_model(load_scene_text(text), nsample=nsample)
-
-
 SCENES: dict[str, Callable[[], str]] = {
-    "clearance bar": clearance_bar_text,
-    "double pendulum, clearance": lambda: chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4}),
-    "four-bar, clearance": fourbar_text,
+    c.name: (lambda c=c: SCENE_TEXTS[c.scene]()) for c in HISTORIES
 }
-T_END = {"clearance bar": 0.2, "double pendulum, clearance": 0.2, "four-bar, clearance": 0.1}
+"""The work-precision and speed scenes: those of the tests' history comparisons."""
+T_END = {c.name: c.t_end for c in HISTORIES}
+
 
 # ---------------------------------------------------------------------------------------------
 # Helpers
 
 
 def _simulate(model: Model, **sim: Any) -> dict[str, np.ndarray]:
-    from mcchain.solvers.simulate import simulate
-
-    return simulate(model, sim, history_dtype=np.float64, diagnostics=True)
+    return simulate_float64(model, sim, diagnostics=True)
 
 
 def _timed(fn: Callable[..., Any], repeat: int = 3) -> tuple[float, float, Any]:
@@ -236,8 +113,7 @@ def work_precision(out: Path, quick: bool) -> str:
         model = model_of(text())
         batch = model_of(text(), nsample=nbatch)
         out_dt = 0.01  # a multiple of every fixed step in the sweep
-        ref = _simulate(model, t_end=t_end, dt=out_dt, output_dt=out_dt, method="radau",
-                        rtol=1e-12, atol=1e-13)["q"][0]  # fmt: skip
+        ref = _simulate(model, t_end=t_end, dt=out_dt, output_dt=out_dt, **REFERENCE)["q"][0]
         for method in ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau"):
             xs, ys = [], []
             sweep = fixed if method in ("rk4", "rk4-projection", "generalized-alpha") else tols
@@ -331,25 +207,6 @@ def stability(out: Path, quick: bool) -> str:
     return _table(header, rows)
 
 
-def imaginary_axis_limit(A: np.ndarray, b: np.ndarray) -> float:
-    """The y > 0 where |R(iy)| first exceeds 1 for the Runge–Kutta tableau (A, b): the largest
-    p·h an undamped mode of pulsation p stays bounded at (2√2 for classical RK4)."""
-    n = len(b)
-
-    def amplification(y: float) -> float:
-        z = 1j * y
-        return abs(1.0 + z * (b @ np.linalg.solve(np.eye(n) - z * A, np.ones(n))))
-
-    ys = np.linspace(1e-3, 6.0, 6001)
-    grows = np.array([amplification(y) > 1.0 + 1e-12 for y in ys])
-    if not grows.any():
-        return math.inf
-    from scipy.optimize import brentq
-
-    i = int(np.argmax(grows))
-    return float(brentq(lambda y: amplification(y) - 1.0 - 1e-12, ys[max(i - 1, 0)], ys[i]))
-
-
 def _p_max(model: Model) -> float:
     """Largest eigenpulsation at the equilibrium (mcchain.solvers.statics)."""
     from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
@@ -413,7 +270,12 @@ def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
     from mcchain.kernels.integrators import LMAX as LANES
 
     nsample = min(nsample, 1000) if quick else nsample
-    scenes = {k: v for k, v in SCENES.items() if k != "clearance bar"}
+    # the double pendulum of the chains section (both bars at −60°), so that MuJoCo's
+    # rollout of its ideal-joint twin below measures the same mechanism
+    scenes: dict[str, Callable[[], str]] = {
+        "double pendulum, clearance": lambda: chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4}),
+        "four-bar, clearance": fourbar_text,
+    }
     rows = []
     fig, axes = _figure()
     labels: list[str] = []
@@ -614,7 +476,7 @@ _RUNNERS = {
 
 def main(args: list[str] | None = None) -> int:
     """Run the benchmark sections; write PNGs and ``bench.md`` into ``--out``."""
-    parser = argparse.ArgumentParser(prog="mcchain bench", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="bench", help="output folder (default ./bench)")
     parser.add_argument(
         "--only",

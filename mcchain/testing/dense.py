@@ -1,11 +1,17 @@
-"""Slow, obvious reference implementations that the fast kernels are compared against.
+"""Slow, obvious dense references that the fast kernels are compared against.
 
-Dense NumPy/SciPy, one sample at a time, written straight from DESIGN §2 without sharing
-code with the kernels. Used by the tests and by ``benchmarks/bench_statics.py`` (the "plain
-SciPy loop": ``scipy.optimize.root`` + ``scipy.linalg.eigh`` per instance).
+Dense NumPy/SciPy, one sample at a time, written straight from the formulation (absolute
+coordinates, constraints Φ, Jacobian B, KKT system) without sharing code with the kernels.
+Used by the tests and by the benchmarks (the "plain SciPy loop").
 
-Φ and F are written so that they accept complex q: :func:`complex_step_jacobian` then gives
-their exact first derivatives (error ~1e-16, no subtractive cancellation).
+* statics: Φ, F, B (complex step and written out), equilibrium by ``scipy.optimize.root``,
+  eigenpulsations by ``scipy.linalg.eigh`` on the null space of B;
+* dynamics: the index-1 accelerations and multipliers from the full KKT system
+  [[M, Bᵀ], [B, 0]] (:func:`kkt_acceleration`), energy, and scipy Radau on those equations
+  (:func:`integrate_kkt`).
+
+Φ and F accept complex q: :func:`complex_step_jacobian` then gives their exact first
+derivatives (error ~1e-16, no subtractive cancellation).
 """
 
 from __future__ import annotations
@@ -13,10 +19,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.integrate
 import scipy.linalg
 import scipy.optimize
 
 from mcchain.model import GROUND, JOINT_IDEAL, Model
+from mcchain.testing.factory import rotation
+
+OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
+"""Ω: ∂(A s)/∂θ = Ω A s."""
 
 
 def _param(model: Model, name: str, s: int) -> np.ndarray:
@@ -179,7 +190,7 @@ def modes(model: Model, s: int, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 
 def constraint_jacobian_formula(model: Model, s: int, q: np.ndarray) -> np.ndarray:
-    """B written out from DESIGN §2 (rows [I, Ω A_b s_b] / [−I, −Ω A_a s_a], e·∂d/∂q for
+    """B written out from the formulation (rows [I, Ω A_b s_b] / [−I, −Ω A_a s_a], e·∂d/∂q for
     clearance joints, 1 on θ for drivers); complex-safe so that K can be complex-stepped."""
     B = np.zeros((model.ncon, model.ndof), dtype=np.result_type(q, float))
     omega = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -214,20 +225,125 @@ def stiffness(model: Model, s: int, q: np.ndarray, lam: np.ndarray) -> np.ndarra
     return 0.5 * (K + K.T)
 
 
-# -- closed forms of the seed bar (DESIGN §3) -----------------------------------------------
-def bar_pulsation(m: float, J: float, l: float, g: float) -> float:
-    """Seed bar, ideal pin: p² = m g l / (J + m l²)."""
-    return float(np.sqrt(m * g * l / (J + m * l * l)))
+# -- dynamics ----------------------------------------------------------------------------
+def _body(q: np.ndarray, v: np.ndarray, b: int):
+    """r, A, ṙ, θ̇ of body b (ground at rest)."""
+    if b == GROUND:
+        return np.zeros(2), np.eye(2), np.zeros(2), 0.0
+    return q[3 * b : 3 * b + 2], rotation(q[3 * b + 2]), v[3 * b : 3 * b + 2], v[3 * b + 2]
 
 
-def clearance_bar_pulsations(m: float, J: float, l: float, g: float, c: float) -> np.ndarray:
-    """Both roots of c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0, ascending.
+def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
+    """Dense M (n,n), B (m,n), γ (m,) with B q̈ = γ, Φ (m,), Φ̇ (m,), F (n,) of sample s."""
+    n = model.ndof
+    M = np.zeros((n, n))
+    mass, inertia = _param(model, "body_mass", s), _param(model, "body_inertia", s)
+    for b in range(model.nbody):
+        M[3 * b, 3 * b] = M[3 * b + 1, 3 * b + 1] = mass[b]
+        M[3 * b + 2, 3 * b + 2] = inertia[b]
+    rows_B, gam, phi, phid = [], [], [], []
+    pa_all, pb_all = _param(model, "joint_point_a", s), _param(model, "joint_point_b", s)
+    clearance = _param(model, "joint_clearance", s)
+    for k in range(model.njoint):
+        a, b = int(model.joint_body_a[k]), int(model.joint_body_b[k])
+        ra, Aa, va, wa = _body(q, v, a)
+        rb, Ab, vb, wb = _body(q, v, b)
+        ua, ub = Aa @ pa_all[k], Ab @ pb_all[k]
+        d = rb + ub - ra - ua
+        dd = vb + wb * (OMEGA @ ub) - va - wa * (OMEGA @ ua)
+        D = np.zeros((2, n))  # ∂d/∂q
+        if b != GROUND:
+            D[:, 3 * b : 3 * b + 2] = np.eye(2)
+            D[:, 3 * b + 2] = OMEGA @ ub
+        if a != GROUND:
+            D[:, 3 * a : 3 * a + 2] = -np.eye(2)
+            D[:, 3 * a + 2] = -(OMEGA @ ua)
+        w = -(wb**2) * ub + wa**2 * ua  # d̈ = D q̈ + w
+        if model.joint_kind[k] == JOINT_IDEAL:
+            rows_B += [D[0], D[1]]
+            gam += list(-w)
+            phi += list(d)
+            phid += list(dd)
+        else:
+            rho = np.linalg.norm(d)
+            e = d / rho
+            rows_B.append(e @ D)
+            # Φ̈ = e·d̈ + (|ḋ|² − (e·ḋ)²)/|d| = 0
+            gam.append(-(e @ w) - (dd @ dd - (e @ dd) ** 2) / rho)
+            phi.append(rho - clearance[k])
+            phid.append(e @ dd)
+    theta0, omega = _param(model, "driver_angle0", s), _param(model, "driver_omega", s)
+    for j in range(model.ndriver):
+        row = np.zeros(n)
+        row[3 * int(model.driver_body[j]) + 2] = 1.0
+        rows_B.append(row)
+        gam.append(0.0)
+        phi.append(q[3 * int(model.driver_body[j]) + 2] - theta0[j] - omega[j] * t)
+        phid.append(v[3 * int(model.driver_body[j]) + 2] - omega[j])
+    B = np.array(rows_B).reshape(-1, n)
+    F = applied_forces(model, s, q, v)
+    return M, B, np.array(gam), np.array(phi), np.array(phid), F
 
-    The quadratic in p² is solved without cancellation (product of roots for the small one).
-    """
-    a = c * J
-    b = g * (m * l * l + J + m * c * l)
-    cc = m * g * g * l
-    big = (b + np.sqrt(b * b - 4 * a * cc)) / (2 * a)
-    small = cc / (a * big)
-    return np.sqrt(np.array([small, big]))
+
+def kkt_acceleration(
+    model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float, baumgarte=(0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """(q̈, λ) from the dense KKT system with Baumgarte (α, β)."""
+    M, B, gam, phi, phid, F = equations(model, s, q, v, t)
+    alpha, beta = baumgarte
+    n, m = M.shape[0], B.shape[0]
+    K = np.zeros((n + m, n + m))
+    K[:n, :n] = M
+    K[:n, n:] = B.T
+    K[n:, :n] = B
+    x = np.linalg.solve(K, np.concatenate([F, gam - 2 * alpha * phid - beta**2 * phi]))
+    return x[:n], x[n:]
+
+
+def energy(model: Model, s: int, q: np.ndarray, v: np.ndarray) -> float:
+    """Kinetic + potential energy (gravity, constant forces and couples, springs)."""
+    mass, inertia, g = (_param(model, x, s) for x in ("body_mass", "body_inertia", "gravity"))
+    e = 0.0
+    for b in range(model.nbody):
+        r, w = q[3 * b : 3 * b + 2], v[3 * b + 2]
+        e += 0.5 * (mass[b] * v[3 * b : 3 * b + 2] @ v[3 * b : 3 * b + 2] + inertia[b] * w * w)
+        e -= mass[b] * g @ r
+    point, value, torque = (
+        _param(model, x, s) for x in ("force_point", "force_value", "force_torque")
+    )
+    for k in range(model.nforce):
+        b = int(model.force_body[k])
+        if b != GROUND:
+            e -= value[k] @ (q[3 * b : 3 * b + 2] + rotation(q[3 * b + 2]) @ point[k])
+            e -= torque[k] * q[3 * b + 2]
+    spa, spb = _param(model, "spring_point_a", s), _param(model, "spring_point_b", s)
+    k_, l0 = _param(model, "spring_stiffness", s), _param(model, "spring_rest_length", s)
+    for k in range(model.nspring):
+        a, b = int(model.spring_body_a[k]), int(model.spring_body_b[k])
+        pa = _body(q, q, a)[0] + _body(q, q, a)[1] @ spa[k]
+        pb = _body(q, q, b)[0] + _body(q, q, b)[1] @ spb[k]
+        e += 0.5 * k_[k] * (np.linalg.norm(pb - pa) - l0[k]) ** 2
+    return float(e)
+
+
+def integrate_kkt(
+    model: Model, s: int, q0, v0, times: np.ndarray, rtol=1e-12, atol=1e-13, baumgarte=(0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """scipy Radau on the dense index-1 equations: q, v at ``times`` (ntime, ndof)."""
+    n = model.ndof
+
+    def rhs(t, y):
+        qdd, _ = kkt_acceleration(model, s, y[:n], y[n:], t, baumgarte)
+        return np.concatenate([y[n:], qdd])
+
+    sol = scipy.integrate.solve_ivp(
+        rhs, (times[0], times[-1]), np.concatenate([q0, v0]), method="Radau",
+        t_eval=times, rtol=rtol, atol=atol,
+    )  # fmt: skip
+    assert sol.status == 0, sol.message
+    return sol.y[:n].T, sol.y[n:].T
+
+
+def clearance_angle(d: np.ndarray, dd: np.ndarray) -> tuple[float, float]:
+    """Angle α of d and its rate (d × ḋ)/|d|²."""
+    return float(np.arctan2(d[1], d[0])), float((d[0] * dd[1] - d[1] * dd[0]) / (d @ d))

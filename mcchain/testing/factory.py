@@ -1,4 +1,4 @@
-"""One seeded factory of test scenes (TOML text), shared by every test module.
+"""One seeded factory of test scenes (TOML text), shared by the tests and benchmarks.
 
 Builders return the text of a scene file, so tests exercise the real loader:
 
@@ -8,8 +8,8 @@ Builders return the text of a scene file, so tests exercise the real loader:
   the journal sits at ``clearance`` along its eccentricity, which points along the journal
   bar, the direction the chain's weight pulls it).
 * :func:`paper_bar_text`, :func:`clearance_bar_text`, :func:`tip_load_bar_text` — the
-  DESIGN §3 check scenes, with the analytic answers in :func:`paper_bar_omega2`,
-  :func:`clearance_bar_omega2` and :func:`tip_load_tan_phi`.
+  seed bar's check scenes (ideal pin, clearance pin, horizontal tip load), whose analytic
+  answers are in :mod:`mcchain.testing.closed_forms`.
 * :func:`toml_text` — the small TOML writer behind them (scene dicts -> text).
 
 Same arguments, same text: every random choice comes from ``numpy.random.default_rng(seed)``.
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-G = 9.81
-"""Gravity used by the factory's scenes, m/s²."""
+from mcchain.model import JOINT_IDEAL
+from mcchain.testing.closed_forms import G, bar_inertia
 
 
 # -- TOML writer ---------------------------------------------------------------------------
@@ -118,18 +118,13 @@ def constraint_residual(model: Any, s: int = 0) -> float:
         d = world(model.joint_body_b[k], pick("joint_point_b")[k]) - world(
             model.joint_body_a[k], pick("joint_point_a")[k]
         )
-        if model.joint_kind[k] == 0:
+        if model.joint_kind[k] == JOINT_IDEAL:
             out += [abs(float(x)) for x in d]
         else:
             out.append(abs(math.hypot(*d) - pick("joint_clearance")[k]))
     for j in range(model.ndriver):
         out.append(abs(q[3 * model.driver_body[j] + 2] - pick("driver_angle0")[j]))
     return max(out, default=0.0)
-
-
-def bar_inertia(mass: float, length: float) -> float:
-    """Centroidal moment of inertia of a homogeneous bar, m L² / 12."""
-    return mass * length**2 / 12
 
 
 # -- random chains -------------------------------------------------------------------------
@@ -307,7 +302,7 @@ def chain_scene_text(
     return toml_text(doc, header=header)
 
 
-# -- the DESIGN §3 bars ----------------------------------------------------------------------
+# -- the seed bar ----------------------------------------------------------------------
 def bar_scene_dict(
     *,
     mass: float = 2.0,
@@ -369,41 +364,19 @@ def bar_scene_dict(
 
 
 def paper_bar_text(*, mass: float = 2.0, length: float = 1.0, **kw: Any) -> str:
-    """The paper's bar with an ideal pin (DESIGN §3 check 1)."""
+    """The paper's bar with an ideal pin (the first check: p² = m g l / (J + m l²))."""
     return toml_text(bar_scene_dict(mass=mass, length=length, name="paper-bar", **kw))
 
 
 def clearance_bar_text(
     clearance: float = 1e-3, eccentricity: float = -math.pi / 2, **kw: Any
 ) -> str:
-    """The paper's bar with a radial clearance at the pin (DESIGN §3 check 2)."""
+    """The paper's bar with a radial clearance at the pin (the clearance quartic)."""
     kw.setdefault("name", "clearance-bar")
     return toml_text(bar_scene_dict(clearance=clearance, eccentricity=eccentricity, **kw))
 
 
 def tip_load_bar_text(P: float = 5.0, clearance: float = 1e-3, **kw: Any) -> str:
-    """The clearance bar with a horizontal force P at its free end (DESIGN §3 check 3)."""
+    """The clearance bar with a horizontal force P at its free end (tan φ = 2P/(m g))."""
     kw.setdefault("name", "clearance-bar-tip-load")
     return toml_text(bar_scene_dict(clearance=clearance, tip_force=P, **kw))
-
-
-def paper_bar_omega2(mass: float = 2.0, length: float = 1.0, g: float = G) -> float:
-    """p² = m g l / (J + m l²) of the ideal bar, l = length / 2."""
-    l = length / 2
-    return mass * g * l / (bar_inertia(mass, length) + mass * l**2)
-
-
-def clearance_bar_omega2(
-    mass: float = 2.0, length: float = 1.0, clearance: float = 1e-3, g: float = G
-) -> tuple[float, float]:
-    """Both roots p² of c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0, ascending."""
-    l, J, c = length / 2, bar_inertia(mass, length), clearance
-    a, b, cc = c * J, -g * (mass * l**2 + J + mass * c * l), mass * g**2 * l
-    disc = math.sqrt(b * b - 4 * a * cc)
-    big = (-b + disc) / (2 * a)
-    return cc / (a * big), big  # the small root without cancellation
-
-
-def tip_load_tan_phi(P: float = 5.0, mass: float = 2.0, g: float = G) -> float:
-    """tan φ = 2 P / (m g): the bar's equilibrium angle from the downward vertical."""
-    return 2 * P / (mass * g)

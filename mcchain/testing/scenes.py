@@ -1,0 +1,278 @@
+"""Named test and benchmark scenes (TOML text), with start states consistent to rounding.
+
+* :func:`swinging_bar_text` — the seed bar on a clearance pin, released ``tilt`` rad from
+  hanging, journal at the bottom of its bearing;
+* :func:`straight_chain_text` — bars pinned end to end, all at one angle, at rest (the
+  chains benchmark; :data:`DOUBLE_PENDULUM` is its two-bar case);
+* :func:`fourbar_text` — the driven four-bar of ``configs/fourbar-clearance.toml``;
+* :func:`parallelogram_text` — a parallelogram four-bar with a closed form
+  (:func:`mcchain.testing.closed_forms.parallelogram_closed_form`);
+* :data:`DOUBLE_PENDULUM_TEXT` and :data:`LOADED_TEXT` — the clearance double pendulum, bare
+  and with every kind of load (driver, force and couple, springs with damping).
+
+:data:`SCENES` names them for :func:`scene_model`. Random scenes come from
+:mod:`mcchain.testing.factory`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mcchain.model import Model
+from mcchain.testing.factory import rotation
+
+
+def _f(x: float) -> str:
+    return repr(float(x))
+
+
+def swinging_bar_text(clearance: float = 1e-3, tilt: float = 0.3, count: int | None = None) -> str:
+    """A 1 m, 2 kg bar hanging from a clearance pin, released ``tilt`` rad from the vertical,
+    the journal at the bottom of its bearing; ``count``: a ``[sample]`` of that many copies."""
+    th = -math.pi / 2 + tilt
+    com = np.array([0.0, -clearance]) - rotation(th) @ np.array([-0.5, 0.0])
+    sample = "" if count is None else f"[sample]\ncount = {count}\nseed = 3\n"
+    return f"""
+[scene]
+name = "clearance-bar"
+gravity = [0.0, -9.81]
+[[body]]
+name = "bar"
+mass = 2.0
+inertia = {_f(2.0 / 12)}
+position = [{_f(com[0])}, {_f(com[1])}]
+angle = {_f(th)}
+[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+clearance = {_f(clearance)}
+{sample}"""
+
+
+def straight_chain_text(
+    lengths: list[float], masses: list[float], angle: float = -math.pi / 3,
+    clearance: dict[int, float] | None = None,
+) -> str:  # fmt: skip
+    """Bars pinned end to end from the origin, all at ``angle`` (rad from +x), at rest.
+
+    ``clearance`` maps a joint index (0: the ground pin) to a radial clearance; the journal
+    then sits along the bar, so the start is consistent.
+    """
+    clearance = clearance or {}
+    parts = ['[scene]\nname = "chain"\ngravity = [0.0, -9.81]\n']
+    tip = np.zeros(2)
+    u = np.array([math.cos(angle), math.sin(angle)])
+    for i, (length, mass) in enumerate(zip(lengths, masses, strict=True)):
+        tip = tip + clearance.get(i, 0.0) * u
+        com = tip + 0.5 * length * u
+        parts.append(
+            f'[[body]]\nname = "b{i}"\nmass = {_f(mass)}\ninertia = {_f(mass * length**2 / 12)}\n'
+            f"position = [{_f(com[0])}, {_f(com[1])}]\nangle = {_f(angle)}\n"
+        )
+        tip = com + 0.5 * length * u
+    for i, length in enumerate(lengths):
+        a = '"ground"' if i == 0 else f'"b{i - 1}"'
+        pa = "[0.0, 0.0]" if i == 0 else f"[{_f(lengths[i - 1] / 2)}, 0.0]"
+        extra = f"clearance = {_f(clearance[i])}\n" if i in clearance else ""
+        parts.append(
+            f'[[joint]]\nname = "j{i}"\nbodies = [{a}, "b{i}"]\n'
+            f"points = [{pa}, [{_f(-length / 2)}, 0.0]]\n{extra}"
+        )
+    return "\n".join(parts)
+
+
+DOUBLE_PENDULUM: dict[str, Any] = dict(lengths=[0.6, 0.4], masses=[1.5, 1.0])
+
+
+def fourbar_text() -> str:
+    """The driven four-bar of ``configs/fourbar-clearance.toml`` (clearance 1e-4 m at B)."""
+    return """
+[scene]
+name = "fourbar-clearance"
+gravity = [0.0, -9.81]
+[[body]]
+name = "crank"
+mass = 0.1
+inertia = 8.333333333333333e-05
+position = [0.02500000000000001, 0.04330127018922193]
+angle = 1.0471975511965976
+velocity = [-0.8660254037844386, 0.5000000000000002]
+angular_velocity = 20.0
+[[body]]
+name = "coupler"
+mass = 0.3
+inertia = 0.00225
+position = [0.17582706516355487, 0.16825760557544506]
+angle = 0.5756344435187036
+velocity = [-1.4099950572949895, 0.5037254605303013]
+angular_velocity = -3.9441000934466874
+[[body]]
+name = "rocker"
+mass = 0.25
+inertia = 0.0013020833333333333
+position = [0.30085606180870794, 0.12499706859834622]
+angle = 1.5639477787895628
+velocity = [-0.5439696535105508, 0.0037254605303010955]
+angular_velocity = 4.351859284464434
+[[joint]]
+name = "O2"
+bodies = ["ground", "crank"]
+points = [[0.0, 0.0], [-0.05, 0.0]]
+[[joint]]
+name = "A"
+bodies = ["crank", "coupler"]
+points = [[0.05, 0.0], [-0.15, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["coupler", "rocker"]
+points = [[0.15, 0.0], [0.125, 0.0]]
+clearance = 1e-4
+[[joint]]
+name = "O4"
+bodies = ["ground", "rocker"]
+points = [[0.3, 0.0], [-0.125, 0.0]]
+[[driver]]
+body = "crank"
+omega = 20.0
+"""
+
+
+def parallelogram_text(crank: float = 0.2, coupler: float = 0.5, omega0: float = 5.0) -> str:
+    """Two cranks (0.2 kg) joined by a coupler (0.5 kg), all pinned, released with ω0 at
+    90°: the coupler translates and both cranks share one angle."""
+    th = np.pi / 2
+    c1 = 0.5 * crank * np.array([np.cos(th), np.sin(th)])
+    tip = 2 * c1
+    v1 = 0.5 * crank * omega0 * np.array([-np.sin(th), np.cos(th)])
+    vt = 2 * v1
+    return f"""
+[scene]
+name = "parallelogram"
+gravity = [0.0, -9.81]
+[[body]]
+name = "crank1"
+mass = 0.2
+inertia = {float(0.2 * crank**2 / 12)!r}
+position = [{float(c1[0])!r}, {float(c1[1])!r}]
+angle = {float(th)!r}
+velocity = [{float(v1[0])!r}, {float(v1[1])!r}]
+angular_velocity = {float(omega0)!r}
+[[body]]
+name = "coupler"
+mass = 0.5
+inertia = {float(0.5 * coupler**2 / 12)!r}
+position = [{float(tip[0] + coupler / 2)!r}, {float(tip[1])!r}]
+angle = 0.0
+velocity = [{float(vt[0])!r}, {float(vt[1])!r}]
+[[body]]
+name = "crank2"
+mass = 0.2
+inertia = {float(0.2 * crank**2 / 12)!r}
+position = [{float(coupler + c1[0])!r}, {float(c1[1])!r}]
+angle = {float(th)!r}
+velocity = [{float(v1[0])!r}, {float(v1[1])!r}]
+angular_velocity = {float(omega0)!r}
+[[joint]]
+name = "O1"
+bodies = ["ground", "crank1"]
+points = [[0.0, 0.0], [{float(-crank / 2)!r}, 0.0]]
+[[joint]]
+name = "A"
+bodies = ["crank1", "coupler"]
+points = [[{float(crank / 2)!r}, 0.0], [{float(-coupler / 2)!r}, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["coupler", "crank2"]
+points = [[{float(coupler / 2)!r}, 0.0], [{float(crank / 2)!r}, 0.0]]
+[[joint]]
+name = "O2"
+bodies = ["ground", "crank2"]
+points = [[{float(coupler)!r}, 0.0], [{float(-crank / 2)!r}, 0.0]]
+"""
+
+
+DOUBLE_PENDULUM_TEXT = """
+[scene]
+name = "double-pendulum-clearance"
+gravity = [0.0, -9.81]
+[[body]]
+name = "bar1"
+mass = 1.5
+inertia = 0.045
+position = [0.15000000000000002, -0.25980762113533157]
+angle = -1.0471975511965976
+[[body]]
+name = "bar2"
+mass = 1.0
+inertia = 0.013333333333333334
+position = [0.4417749096279029, -0.6613901518985659]
+angle = -0.7853981633974483
+[[joint]]
+name = "O"
+bodies = ["ground", "bar1"]
+points = [[0.0, 0.0], [-0.3, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["bar1", "bar2"]
+points = [[0.3, 0.0], [-0.2, 0.0]]
+clearance = 5e-4
+"""
+
+
+# the clearance double pendulum with every kind of load: driver, force + torque, springs
+LOADED_TEXT = (
+    DOUBLE_PENDULUM_TEXT.replace(
+        'name = "double-pendulum-clearance"\ngravity = [0.0, -9.81]',
+        'name = "loaded-double-pendulum"\ngravity = [0.3, -9.81]',
+    )
+    + """[[driver]]
+body = "bar1"
+omega = 1.5
+[[force]]
+name = "tip"
+body = "bar2"
+point = [0.2, 0.01]
+value = [3.0, -1.0]
+torque = 0.4
+[[spring]]
+name = "s0"
+bodies = ["ground", "bar2"]
+points = [[0.5, 0.2], [0.2, 0.0]]
+stiffness = 300.0
+rest_length = 0.3
+damping = 2.0
+[[spring]]
+name = "s1"
+bodies = ["bar1", "bar2"]
+points = [[0.0, 0.05], [0.0, -0.05]]
+stiffness = 50.0
+damping = 0.5
+"""
+)
+
+
+def model_of(text: str, nsample: int | None = None, name: str = "<string>") -> Model:
+    """A scene text compiled to a Model of ``nsample`` instances (default: the scene's)."""
+    from mcchain.scene import compile_model, load_scene_text
+
+    return compile_model(load_scene_text(text, name=name), nsample=nsample)
+
+
+SCENES: dict[str, Callable[..., str]] = {
+    "clearance_bar": swinging_bar_text,
+    "parallelogram": parallelogram_text,
+    "double_pendulum": lambda: DOUBLE_PENDULUM_TEXT,
+    "fourbar": fourbar_text,
+    "loaded": lambda: LOADED_TEXT,
+}
+"""The named scenes of the simulation tests and benchmarks."""
+
+
+def scene_model(name: str, nsample: int | None = None, **kwargs: Any) -> Model:
+    """A named scene compiled to a Model (``nsample`` copies; kwargs for its builder)."""
+    return model_of(SCENES[name](**kwargs), nsample=nsample, name=name)
