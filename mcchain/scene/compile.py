@@ -1,4 +1,4 @@
-"""Compile a validated :class:`~mcchain.scene.schema.Scene` into a :class:`~mcchain.model.Model`.
+"""Compile a validated :class:`~mcchain.scene.models.Scene` into a :class:`~mcchain.model.Model`.
 
 The model's parameter arrays have a leading sample axis of size 1, except the arrays a
 ``[sample.vary]`` path lands in, which get ``nsample`` rows (and arrays derived from a varied
@@ -29,18 +29,9 @@ import numpy as np
 
 from mcchain.errors import SceneError
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model, constraint_rows
+from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
+from mcchain.scene.paths import PARAM_DOMAINS, PARAM_SHAPES, ParamRef, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
-from mcchain.scene.schema import (
-    GROUND_NAME,
-    MAX_SEED,
-    PARAM_DOMAINS,
-    PARAM_SHAPES,
-    ParamRef,
-    Scene,
-    _quote,
-    parse_path,
-    saltelli_count_error,
-)
 
 Slot = tuple[str, tuple[int, ...]]
 
@@ -220,8 +211,8 @@ def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
         i = int(np.argmin(ok))
         rule = f"{ref.key} must be {domain.text}" if domain is not None else "not finite"
         raise SceneError(
-            f"sample.vary.{_quote(path)}: sampled value {float(column[i])!r} at sample {i}: {rule} "
-            "(bound the distribution, e.g. with truncnormal)"
+            f"sample.vary.{quote_key(path)}: sampled value {float(column[i])!r} at sample {i}: "
+            f"{rule} (bound the distribution, e.g. with truncnormal)"
         )
 
 

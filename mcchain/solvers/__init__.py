@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcchain.model import Model
-from mcchain.scene.schema import Equilibrium, Scene
+from mcchain.scene.models import Equilibrium, Scene
 from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
 
 
