@@ -9,9 +9,9 @@ against ``dt``. Each failure is one :class:`~mcchain.errors.SceneError` line
 from __future__ import annotations
 
 from mcchain.errors import SceneError
+from mcchain.parameters import PARAMETERS
 from mcchain.scene.models import FIXED_STEP_METHODS, GROUND_NAME, Scene, saltelli_count_error
 from mcchain.scene.paths import (
-    PARAM_DOMAINS,
     PARAM_SHAPES,
     PERTURB_KEYS,
     item_path,
@@ -112,7 +112,7 @@ def check_scene(scene: Scene) -> None:
                 same = quote_key(targets[canonical])
                 raise SceneError(f"{where}: the same parameter as {same!s}")
             targets[canonical] = path
-            domain = PARAM_DOMAINS.get((ref.kind, ref.key))
+            domain = PARAMETERS[ref.kind, ref.key].domain
             bounds = dist.bounds()
             if domain is not None and bounds is not None and not domain.contains(bounds[0]):
                 raise SceneError(

@@ -10,31 +10,35 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
 
-from mcchain.scene.models import NAME_RE, Scene
+from pydantic import BaseModel
+
+from mcchain.parameters import PARAMETERS, rows_of
+from mcchain.scene.models import NAME_RE, Body, Driver, Force, Joint, Scene, SceneSection, Spring
 
 KINDS = ("body", "joint", "driver", "force", "spring")
 
-PARAM_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {
-    "scene": {"gravity": (2,)},
-    "body": {
-        "mass": (),
-        "inertia": (),
-        "position": (2,),
-        "angle": (),
-        "velocity": (2,),
-        "angular_velocity": (),
-    },
-    "joint": {"points": (2, 2), "clearance": (), "eccentricity": ()},
-    "driver": {"omega": (), "angle0": ()},
-    "force": {"point": (2,), "value": (2,), "torque": ()},
-    "spring": {"points": (2, 2), "stiffness": (), "rest_length": (), "damping": ()},
+SCENE_MODELS: dict[str, type[BaseModel]] = {
+    "scene": SceneSection,
+    "body": Body,
+    "joint": Joint,
+    "driver": Driver,
+    "force": Force,
+    "spring": Spring,
 }
-"""For each kind, the keys a sampled path may name and their array shapes."""
+"""The scene model of each kind of :data:`mcchain.parameters.TABLE`."""
 
-PERTURB_KEYS = {"position": (2,), "angle": (), "velocity": (2,), "angular_velocity": ()}
-"""The body keys ``[simulate] perturb`` may name."""
+PARAM_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {
+    kind: {
+        key: PARAMETERS[kind, key].shape for key in model.model_fields if (kind, key) in PARAMETERS
+    }
+    for kind, model in SCENE_MODELS.items()
+}
+"""For each kind, the keys a sampled path may name and their array shapes (the rows of
+:data:`mcchain.parameters.TABLE`, listed in the order the scene model declares its keys)."""
+
+PERTURB_KEYS = {row.key: row.shape for row in rows_of("body") if row.dof is not None}
+"""The body keys ``[simulate] perturb`` may name: those of the start state."""
 
 _PATH_RE = re.compile(r"^(?P<head>[^\[\]]+?)(?P<idx>(\[[^\[\]]*\])*)$")
 
@@ -136,31 +140,3 @@ def item_path(kind: str, index: int, name: str | None) -> str:
     if isinstance(name, str) and NAME_RE.match(name):
         return f"{kind}.{name}"
     return f"{kind}[{index}]"
-
-
-@dataclass(frozen=True)
-class Domain:
-    """The allowed values of a parameter: ``> low`` (open) or ``>= low``."""
-
-    low: float
-    open_low: bool
-
-    @property
-    def text(self) -> str:
-        return f"{'>' if self.open_low else '>='} {self.low!r}"
-
-    def contains(self, values: Any) -> Any:
-        return values > self.low if self.open_low else values >= self.low
-
-
-PARAM_DOMAINS: dict[tuple[str, str], Domain] = {
-    ("body", "mass"): Domain(0.0, True),
-    ("body", "inertia"): Domain(0.0, True),
-    # A sampled clearance makes a clearance joint: it must stay > 0 (|d| = 0 is singular).
-    ("joint", "clearance"): Domain(0.0, True),
-    ("spring", "stiffness"): Domain(0.0, False),
-    ("spring", "rest_length"): Domain(0.0, False),
-    ("spring", "damping"): Domain(0.0, False),
-}
-"""Lower bounds of sampled parameters, checked on the distribution's support (bounded
-distributions) at load time and on every sampled value at compile time."""
