@@ -9,10 +9,11 @@ from __future__ import annotations
 import os
 import re
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from mcchain.errors import SceneError
 from mcchain.scene.checks import check_scene
@@ -68,6 +69,24 @@ def scene_from_dict(data: dict[str, Any], source: str = "<dict>", text: str = ""
         scene.scene.name = _default_scene_name(source)
     check_scene(scene)
     return scene
+
+
+SectionT = TypeVar("SectionT", bound=BaseModel)
+
+
+def load_section(
+    model: type[SectionT], section: str, data: SectionT | Mapping[str, Any]
+) -> SectionT:
+    """A settings section given without a scene (``simulate(model, dict(t_end=1.0, dt=1e-3))``),
+    validated by its scene model, so its defaults are the schema's; a model instance is
+    returned as is. A bad table raises :class:`SceneError` ``section.key: reason``.
+    """
+    if isinstance(data, model):
+        return data
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise SceneError(format_validation_error(exc, data, section)) from None
 
 
 def _default_scene_name(source: str) -> str:

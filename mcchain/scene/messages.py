@@ -17,10 +17,16 @@ from mcchain.scene.models import Distribution, Scene
 from mcchain.scene.paths import KINDS, item_path, quote_key
 
 
-def format_validation_error(exc: ValidationError, data: Any) -> str:
-    """The first error of ``exc`` as ``key.path: reason`` (list items named when they can be)."""
+def format_validation_error(exc: ValidationError, data: Any, section: str | None = None) -> str:
+    """The first error of ``exc`` as ``key.path: reason`` (list items named when they can be).
+
+    ``exc`` comes from validating a whole scene (``data``), or from validating one settings
+    ``section`` alone (``data`` is then that section's table).
+    """
     err = exc.errors(include_url=False)[0]
     loc = tuple(err["loc"])
+    if section is not None:
+        loc, data = (section, *loc), {section: data}
     path = loc_path(loc, data)
     return f"{path}: {_reason(err, loc)}"
 

@@ -44,6 +44,11 @@ DEFAULT_SAMPLE_COUNT = 1000
 DEFAULT_SAMPLE_SEED = 0
 MAX_SEED = 2**64 - 1
 
+DEFAULT_BAUMGARTE = (10.0, 10.0)
+"""(α, β) of Φ̈ + 2αΦ̇ + β²Φ = 0 when ``[simulate] baumgarte`` is omitted, 1/s: critically
+damped, drift decays in ~0.1–0.5 s, far below any step-size limit (|hα| ≪ 1); see
+benchmarks/bench_simulate.py (drift chart)."""
+
 Num = Annotated[float, Strict(), AllowInfNan(False)]
 """A finite number (TOML int or float)."""
 Int = Annotated[int, Strict()]
@@ -442,8 +447,8 @@ class Simulate(_Section):
     )
     baumgarte: Vec2 | None = Field(
         default=None,
-        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s (rk4, rk45); default: the "
-        "solver's, [10, 10] (critically damped; mcchain.solvers.simulate.DEFAULT_BAUMGARTE).",
+        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s (rk4, rk45); default "
+        "[10, 10] (critically damped; DEFAULT_BAUMGARTE).",
     )
     constraint_tolerance: Num = Field(
         default=1e-6, gt=0, description="max |Φ| past which a sample diverged; default 1e-6."
@@ -461,6 +466,15 @@ class Simulate(_Section):
     def output_step(self) -> float:
         """``output_dt`` resolved (dt when omitted), s."""
         return self.dt if self.output_dt is None else self.output_dt
+
+    @property
+    def gains(self) -> tuple[float, float]:
+        """``baumgarte`` resolved (:data:`DEFAULT_BAUMGARTE` when omitted), 1/s."""
+        return (
+            DEFAULT_BAUMGARTE
+            if self.baumgarte is None
+            else (float(self.baumgarte[0]), float(self.baumgarte[1]))
+        )
 
 
 class Storage(_Section):
