@@ -20,7 +20,7 @@ import numpy as np
 
 from mcchain.errors import SceneError
 from mcchain.kernels import statics as kernels
-from mcchain.model import JOINT_IDEAL, Model
+from mcchain.model import JointKind, Model
 from mcchain.scene.models import Equilibrium
 from mcchain.status import STATUS_DTYPE, Status
 
@@ -177,9 +177,9 @@ def describe_constraints(model: Model) -> list[tuple[str, str, int, int]]:
     """(name, kind, first row, rows) of every joint and driver, for ``mcchain validate``."""
     rows = []
     for k, name in enumerate(model.joint_names):
-        ideal = model.joint_kind[k] == JOINT_IDEAL
-        kind = "ideal revolute" if ideal else "clearance revolute"
-        rows.append((name, kind, int(model.joint_row[k]), 2 if ideal else 1))
+        kind = JointKind(int(model.joint_kind[k]))
+        text = "ideal revolute" if kind == JointKind.IDEAL else "clearance revolute"
+        rows.append((name, text, int(model.joint_row[k]), kind.rows))
     for j, name in enumerate(model.driver_names):
         rows.append((name, "driver", int(model.driver_row[j]), 1))
     return rows
