@@ -203,6 +203,15 @@ def _fmt(value: Any) -> str:
     return text if arr.size == 1 else f"[{text}]"
 
 
+def _units(units: str) -> str:
+    """CF units as ``validate`` prints them: a ``-1`` power after a slash (``rad s-1`` ->
+    ``rad/s``)."""
+    words = units.split()
+    num = [w for w in words if not w.endswith("-1")]
+    den = [w[:-2] for w in words if w.endswith("-1")]
+    return " ".join(num) + "".join(f"/{w}" for w in den)
+
+
 def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str]:
     """The lines ``mcchain validate`` prints: bodies, joints, drivers, rows, dof.
 
@@ -211,15 +220,20 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     """
     import numpy as np
 
-    from mcchain.model import GROUND, JOINT_CLEARANCE
+    from mcchain.model import GROUND, JointKind
+    from mcchain.parameters import PARAMETERS
 
     def body(index: int) -> str:
         return "ground" if index == GROUND else str(model.body_names[index])
 
     values = model if nominal is None else nominal
 
-    def first(arr: Any, *index: int) -> Any:
-        return arr[(0, *index)]
+    def show(kind: str, item: int, *keys: str) -> str:
+        """``key value units`` of each key of one item (the first sample's values)."""
+        rows = [PARAMETERS[kind, key] for key in keys]
+        return ", ".join(
+            f"{row.key} {_fmt(row.read(values, item))} {_units(row.units)}" for row in rows
+        )
 
     lines = [
         f"scene {scene_name}: {model.nbody} bodies, {model.njoint} joints, "
@@ -227,30 +241,22 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     ]
     lines.append("bodies:")
     for i, name in enumerate(model.body_names):
-        lines.append(
-            f"  {name}: mass {_fmt(first(values.body_mass, i))} kg, "
-            f"inertia {_fmt(first(values.body_inertia, i))} kg m2, "
-            f"position {_fmt(first(values.q0)[3 * i : 3 * i + 2])} m, "
-            f"angle {_fmt(first(values.q0)[3 * i + 2])} rad"
-        )
+        lines.append(f"  {name}: {show('body', i, 'mass', 'inertia', 'position', 'angle')}")
     lines.append("joints:")
     for j, name in enumerate(model.joint_names):
-        clearance = int(model.joint_kind[j]) == JOINT_CLEARANCE
-        nrow = 1 if clearance else 2
+        kind = JointKind(int(model.joint_kind[j]))
         row = int(model.joint_row[j])
-        rows = f"row {row}" if nrow == 1 else f"rows {row}-{row + 1}"
-        kind = f"clearance {_fmt(first(values.joint_clearance, j))} m" if clearance else "ideal"
+        rows = f"row {row}" if kind.rows == 1 else f"rows {row}-{row + kind.rows - 1}"
+        what = show("joint", j, "clearance") if kind == JointKind.CLEARANCE else "ideal"
         lines.append(
             f"  {name}: {body(int(model.joint_body_a[j]))} (bearing) - "
-            f"{body(int(model.joint_body_b[j]))} (journal), {kind}, {rows}"
+            f"{body(int(model.joint_body_b[j]))} (journal), {what}, {rows}"
         )
     if model.ndriver:
         lines.append("drivers:")
         for k, name in enumerate(model.driver_names):
             lines.append(
-                f"  {name}: omega {_fmt(first(values.driver_omega, k))} rad/s, "
-                f"angle0 {_fmt(first(values.driver_angle0, k))} rad, "
-                f"row {int(model.driver_row[k])}"
+                f"  {name}: {show('driver', k, 'omega', 'angle0')}, row {int(model.driver_row[k])}"
             )
     if model.param_paths:
         lines.append("sampled (range over the samples):")

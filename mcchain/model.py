@@ -9,7 +9,7 @@ A :class:`Model` holds two kinds of arrays:
   reads sample ``s`` with the broadcast index ``a[s % a.shape[0]]``, so any scalar can vary
   per sample at no cost to the ones that do not.
 
-Generalised coordinates follow DESIGN §2: ``q = [X_1, Y_1, θ_1, …, X_n, Y_n, θ_n]`` (m, m,
+Generalised coordinates: ``q = [X_1, Y_1, θ_1, …, X_n, Y_n, θ_n]`` (m, m,
 rad). Constraint rows are ordered by joint (2 rows for an ideal joint, 1 for a clearance
 joint), then by driver (1 row each); ``joint_row`` / ``driver_row`` give the first row.
 
@@ -20,6 +20,7 @@ Shapes are written ``(*, nbody)`` for a parameter with a leading sample axis of 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
@@ -27,10 +28,35 @@ import numpy as np
 GROUND = -1
 """Body index of the fixed ground body (r = 0, θ = 0)."""
 
-JOINT_IDEAL = 0
-"""Ideal revolute joint: Φ = d = 0 (two rows)."""
-JOINT_CLEARANCE = 1
-"""Revolute joint with radial clearance c: Φ = |d| − c = 0 (one row)."""
+
+class JointKind(IntEnum):
+    """The kind of a joint, as stored in ``Model.joint_kind``; each knows its constraint rows.
+
+    * ``IDEAL``: ideal revolute joint, Φ = d = 0 (two rows);
+    * ``CLEARANCE``: revolute joint with radial clearance c, Φ = |d| − c = 0 (one row).
+    """
+
+    IDEAL = 0
+    CLEARANCE = 1
+
+    @property
+    def rows(self) -> int:
+        """Number of constraint rows of a joint of this kind."""
+        return _JOINT_ROWS[self]
+
+
+_JOINT_ROWS = {JointKind.IDEAL: 2, JointKind.CLEARANCE: 1}
+
+JOINT_IDEAL = int(JointKind.IDEAL)
+"""``JointKind.IDEAL`` as a plain int, for numba kernels (they read int module globals)."""
+JOINT_CLEARANCE = int(JointKind.CLEARANCE)
+"""``JointKind.CLEARANCE`` as a plain int, for numba kernels."""
+
+
+def joint_rows(joint_kind: np.ndarray) -> np.ndarray:
+    """(njoint,) int64 number of constraint rows of each joint (:attr:`JointKind.rows`)."""
+    table = np.array([JointKind(k).rows for k in range(len(JointKind))], dtype=np.int64)
+    return table[np.asarray(joint_kind, dtype=np.int64).reshape(-1)]
 
 
 class KernelModel(NamedTuple):
@@ -92,7 +118,7 @@ class Model:
         nsample: number of instances.
         joint_body_a: (njoint,) int64 bearing body index (``GROUND`` = -1).
         joint_body_b: (njoint,) int64 journal body index.
-        joint_kind: (njoint,) int64 ``JOINT_IDEAL`` or ``JOINT_CLEARANCE``.
+        joint_kind: (njoint,) int64 :class:`JointKind` values.
         joint_row: (njoint,) int64 first constraint row of each joint.
         driver_body: (ndriver,) int64 driven body.
         driver_row: (ndriver,) int64 constraint row of each driver.
@@ -184,9 +210,8 @@ class Model:
 
     @property
     def ncon(self) -> int:
-        """Number of constraint rows: 2 per ideal joint, 1 per clearance joint and driver."""
-        rows = np.where(self.joint_kind == JOINT_IDEAL, 2, 1).sum() if self.njoint else 0
-        return int(rows) + self.ndriver
+        """Number of constraint rows: :attr:`JointKind.rows` per joint, 1 per driver."""
+        return int(joint_rows(self.joint_kind).sum()) + self.ndriver
 
     @property
     def nmode(self) -> int:
@@ -195,7 +220,7 @@ class Model:
 
     @property
     def has_clearance(self) -> bool:
-        return bool(np.any(self.joint_kind == JOINT_CLEARANCE))
+        return bool(np.any(self.joint_kind == JointKind.CLEARANCE))
 
     # -- arrays for kernels ----------------------------------------------------------------
     def kernel_arrays(self) -> KernelModel:
@@ -247,13 +272,13 @@ def constraint_rows(joint_kind: np.ndarray, ndriver: int) -> tuple[np.ndarray, n
     """First constraint row of each joint and of each driver.
 
     Args:
-        joint_kind: (njoint,) ``JOINT_IDEAL`` / ``JOINT_CLEARANCE``.
+        joint_kind: (njoint,) :class:`JointKind` values.
         ndriver: number of drivers.
 
     Returns:
         ``(joint_row, driver_row)``, int64 arrays of shape (njoint,) and (ndriver,).
     """
-    sizes = np.where(np.asarray(joint_kind) == JOINT_IDEAL, 2, 1)
+    sizes = joint_rows(joint_kind)
     joint_row = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     first_driver_row = int(sizes.sum())
     driver_row = first_driver_row + np.arange(ndriver, dtype=np.int64)

@@ -68,7 +68,6 @@ LOCK = ".lock"
 LIVE_RRD = "live.rrd"
 
 DEFAULT_OUT = "runs"
-DEFAULT_CHUNK_SIZE = 1024
 
 DEPENDENCIES = ("numpy", "numba", "scipy", "xarray", "netCDF4", "pydantic")
 """Packages whose versions are recorded in ``ensemble.nc`` and ``run.json``."""
@@ -226,9 +225,9 @@ class Job:
     nsample: int
     seed: int | None
     chunk_size: int
-    history_dtype: str = "float32"
-    compression: str = "zlib"
-    complevel: int = 1
+    history_dtype: str
+    compression: str
+    complevel: int
     steps_per_sample: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
 
@@ -317,8 +316,11 @@ def prepare_job(
         raise RunError(f"--seed: must be an integer >= 0, got {seed!r}")
     path = Path(scene_path)
     scene, model = (loader or default_loader)(path, samples, seed)
-    storage = _section(scene, "storage")
-    chunk = chunk_size or getattr(storage, "chunk_size", None) or DEFAULT_CHUNK_SIZE
+    from mcchain.scene.models import Storage
+
+    # A scene without ``[storage]`` (a fake) gets the schema's defaults.
+    storage = _section(scene, "storage") or Storage()
+    chunk = chunk_size or storage.chunk_size
     _check_positive("storage.chunk_size", chunk)
     effective_seed: Any = model.meta.get("seed", seed)
     if effective_seed is None:
@@ -337,9 +339,9 @@ def prepare_job(
         nsample=nsample,
         seed=effective_seed,
         chunk_size=int(chunk),
-        history_dtype=str(getattr(storage, "history_dtype", "float32")),
-        compression=str(getattr(storage, "compression", "zlib")),
-        complevel=int(getattr(storage, "complevel", 1)),
+        history_dtype=str(storage.history_dtype),
+        compression=str(storage.compression),
+        complevel=int(storage.complevel),
         steps_per_sample=_steps_per_sample(scene),
         settings=resolved_settings(scene, nsample, effective_seed),
     )

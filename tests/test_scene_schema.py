@@ -601,3 +601,19 @@ def test_scene_from_dict__same_as_text() -> None:
     a = load_scene_text(text)
     b = scene_from_dict(tomllib.loads(text))
     assert a.model_dump() == b.model_dump()
+
+
+def test_load_section__settings_without_a_scene_use_the_schema() -> None:
+    from mcchain.errors import SceneError
+    from mcchain.scene import Simulate, Storage
+    from mcchain.scene.loading import load_section
+
+    sim = load_section(Simulate, "simulate", {"t_end": 1.0, "dt": 1e-3})
+    assert sim == Simulate(t_end=1.0, dt=1e-3)
+    assert sim.output_step == 1e-3 and sim.gains == (10.0, 10.0)
+    assert load_section(Simulate, "simulate", sim) is sim
+    with pytest.raises(SceneError, match=r"^simulate\.t_end: must be > 0.0, got -1$"):
+        load_section(Simulate, "simulate", {"t_end": -1, "dt": 1e-3})
+    with pytest.raises(SceneError, match=r"^simulate\.dt: missing required key$"):
+        load_section(Simulate, "simulate", {"t_end": 1.0})
+    assert load_section(Storage, "storage", {}).compression == "zstd"

@@ -215,7 +215,8 @@ def test_radau__reports_the_steps_scipy_takes():
     index-1 right-hand side, integrated here without output times."""
     from scipy.integrate import solve_ivp
 
-    from mcchain.solvers.simulate import DEFAULT_BAUMGARTE, SINGULAR_PIVOT
+    from mcchain.scene.models import DEFAULT_BAUMGARTE
+    from mcchain.solvers.simulate import SINGULAR_PIVOT
 
     model = scene_model("clearance_bar")
     sim = dict(t_end=0.05, dt=0.01, method="radau", rtol=1e-8, atol=1e-10)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mcchain.scene import compile_model, load_scene_text
+from mcchain.scene import Equilibrium, compile_model, load_scene_text
 from mcchain.solvers import solve_chunk
 from mcchain.solvers.statics import assemble, solve_equilibrium
 from mcchain.status import Status
@@ -142,7 +142,7 @@ def test_equilibrium__newton_converges_quadratically(clearance, max_iterations):
     text = text[: text.index("[sample]")] + "[equilibrium]\n"
     model = compile_model(load_scene_text(text))
     assembled = assemble(model)
-    result = solve_equilibrium(model, assembled.q, assembled.status, tolerance=1e-12)
+    result = solve_equilibrium(model, assembled.q, assembled.status, Equilibrium(tolerance=1e-12))
     assert result.status[0] == 0
     iterations = int(result.iterations[0])
     assert iterations <= max_iterations

@@ -443,8 +443,8 @@ def merge_parts(
     parts: Sequence[Part],
     out: Path,
     *,
-    compression: str = "zlib",
-    complevel: int = 1,
+    compression: str | None = None,
+    complevel: int | None = None,
     nsample: int | None = None,
 ) -> MergeStats:
     """Stream part files into one compressed netCDF file ``out``, atomically.
@@ -452,8 +452,9 @@ def merge_parts(
     Args:
         parts: finished part files; together they must cover ``0:nsample`` exactly.
         out: the merged file; written under a temporary name and renamed when complete.
-        compression: ``zlib``, ``zstd`` (zlib if unsupported, see the note) or ``none``.
-        complevel: codec level.
+        compression: ``zlib``, ``zstd`` (zlib if unsupported, see the note) or ``none``;
+            default the ``[storage]`` default (``Storage().compression``).
+        complevel: codec level; default ``Storage().complevel``.
         nsample: expected sample count (checked), or ``None``.
 
     The layout (dims, variables, attributes) comes from the first part; every other part
@@ -468,6 +469,12 @@ def merge_parts(
     t0 = time.perf_counter()
     parts = sorted(parts)
     total = check_tiling(parts, nsample)
+    if compression is None or complevel is None:
+        from mcchain.scene.models import Storage
+
+        default = Storage()
+        compression = default.compression if compression is None else compression
+        complevel = default.complevel if complevel is None else complevel
     options, note = compression_options(compression, complevel)
     if note:
         log.warning(note)

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.parameters import param_units
 from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
 
 if TYPE_CHECKING:
@@ -229,33 +230,6 @@ COORDINATES: dict[str, dict[str, str]] = {
     "time": {"long_name": "time", "units": "s", "standard_name": "time", "axis": "T"},
 }
 """Attributes of the coordinate variables."""
-
-_PARAM_UNITS = {
-    "mass": "kg",
-    "inertia": "kg m2",
-    "position": "m",
-    "angle": "rad",
-    "velocity": "m s-1",
-    "angular_velocity": "rad s-1",
-    "points": "m",
-    "clearance": "m",
-    "eccentricity": "rad",
-    "omega": "rad s-1",
-    "angle0": "rad",
-    "point": "m",
-    "value": "N",
-    "torque": "N m",
-    "stiffness": "N m-1",
-    "rest_length": "m",
-    "damping": "N s m-1",
-    "gravity": "m s-2",
-}
-
-
-def param_units(path: str) -> str:
-    """Units of a sampled parameter path (``body.bar.mass`` -> ``kg``), ``1`` if unknown."""
-    key = path.split("[", 1)[0].rsplit(".", 1)[-1].strip('"')
-    return _PARAM_UNITS.get(key, "1")
 
 
 def by_analysis(analysis: str) -> list[VariableSpec]:

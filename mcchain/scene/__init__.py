@@ -1,6 +1,10 @@
 """Scenes: TOML file -> validated :class:`Scene` -> compiled :class:`~mcchain.model.Model`.
 
-``load_scene(path)`` reads and checks a scene file (DESIGN §4) and raises
+``models`` (the pydantic models), ``paths`` (parameter paths), ``checks`` (cross-references),
+``messages`` (one-line errors), ``loading`` (file/text/dict in), ``sampling`` (designs and
+distributions), ``compile`` (scene -> Model).
+
+``load_scene(path)`` reads and checks a scene file and raises
 :class:`~mcchain.errors.SceneError` with one line ``key.path: reason``;
 ``compile_model(scene, nsample, seed)`` draws the ``[sample]`` parameters and lays the scene
 out as the flat arrays the kernels read. This package never imports numba or the kernels.
@@ -9,8 +13,8 @@ out as the flat arrays the kernels read. This package never imports numba or the
 from __future__ import annotations
 
 from mcchain.scene.compile import compile_model, parameter_slot
-from mcchain.scene.sampling import philox_uniform, ppf, sample_parameters, unit_design
-from mcchain.scene.schema import (
+from mcchain.scene.loading import load_scene, load_scene_text, scene_from_dict
+from mcchain.scene.models import (
     GROUND_NAME,
     Body,
     Distribution,
@@ -19,18 +23,15 @@ from mcchain.scene.schema import (
     Force,
     Joint,
     Modes,
-    ParamRef,
     Sample,
     Scene,
     SceneSection,
     Simulate,
     Spring,
     Storage,
-    load_scene,
-    load_scene_text,
-    parse_path,
-    scene_from_dict,
 )
+from mcchain.scene.paths import ParamRef, parse_path
+from mcchain.scene.sampling import philox_uniform, ppf, sample_parameters, unit_design
 
 __all__ = [
     "GROUND_NAME",

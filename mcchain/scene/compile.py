@@ -1,69 +1,31 @@
-"""Compile a validated :class:`~mcchain.scene.schema.Scene` into a :class:`~mcchain.model.Model`.
+"""Compile a validated :class:`~mcchain.scene.models.Scene` into a :class:`~mcchain.model.Model`.
 
 The model's parameter arrays have a leading sample axis of size 1, except the arrays a
 ``[sample.vary]`` path lands in, which get ``nsample`` rows (and arrays derived from a varied
 value: a driver's default ``angle0`` follows its body's sampled angle, a spring's default
-rest length follows sampled positions/points). Where each path lands:
-
-========================================  ==========================================
-path                                      array slot (after the sample axis)
-========================================  ==========================================
-``scene.gravity[k]``                      ``gravity[k]``
-``body.B.mass`` / ``inertia``             ``body_mass[b]`` / ``body_inertia[b]``
-``body.B.position[k]`` / ``angle``        ``q0[3b + k]`` / ``q0[3b + 2]``
-``body.B.velocity[k]`` / ``angular_...``  ``v0[3b + k]`` / ``v0[3b + 2]``
-``joint.J.points[0|1][k]``                ``joint_point_a[j, k]`` / ``joint_point_b[j, k]``
-``joint.J.clearance`` / ``eccentricity``  ``joint_clearance[j]`` / ``joint_eccentricity[j]``
-``driver.B.omega`` / ``angle0``           ``driver_omega[d]`` / ``driver_angle0[d]``
-``force.F.point[k]`` / ``value[k]``       ``force_point[f, k]`` / ``force_value[f, k]``
-``force.F.torque``                        ``force_torque[f]``
-``spring.S.points[0|1][k]``               ``spring_point_a[s, k]`` / ``spring_point_b[s, k]``
-``spring.S.stiffness`` / ...              ``spring_stiffness[s]`` / ``spring_rest_length[s]``
-                                          / ``spring_damping[s]``
-========================================  ==========================================
+rest length follows sampled positions/points). Where each path lands, and the array each
+scene key fills, is its row's Model field in :data:`mcchain.parameters.TABLE`.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from mcchain.errors import SceneError
-from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model, constraint_rows
+from mcchain.model import GROUND, JointKind, Model, constraint_rows
+from mcchain.parameters import PARAMETERS, TABLE
+from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
+from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
-from mcchain.scene.schema import (
-    GROUND_NAME,
-    MAX_SEED,
-    PARAM_DOMAINS,
-    PARAM_SHAPES,
-    ParamRef,
-    Scene,
-    _quote,
-    parse_path,
-    saltelli_count_error,
-)
 
 Slot = tuple[str, tuple[int, ...]]
 
 
 def parameter_slot(ref: ParamRef) -> Slot:
     """The model array and the index (without the sample axis) a parameter path lands in."""
-    i, key, idx = ref.index, ref.key, ref.indices
-    if ref.kind == "scene":
-        return "gravity", idx
-    if ref.kind == "body":
-        if key in ("mass", "inertia"):
-            return f"body_{key}", (i,)
-        if key == "position":
-            return "q0", (3 * i + idx[0],)
-        if key == "angle":
-            return "q0", (3 * i + 2,)
-        if key == "velocity":
-            return "v0", (3 * i + idx[0],)
-        return "v0", (3 * i + 2,)  # angular_velocity
-    if ref.kind in ("joint", "spring") and key == "points":
-        side = "a" if idx[0] == 0 else "b"
-        return f"{ref.kind}_point_{side}", (i, idx[1])
-    return f"{ref.kind}_{key}", (i, *idx)
+    return PARAMETERS[ref.kind, ref.key].model_index(ref.index, ref.indices)
 
 
 def _check_count(name: str, value: int, low: int, high: int | None = None) -> int:
@@ -128,11 +90,12 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         values = np.empty((nsample, 0), dtype=np.float64)
     _derived_defaults(scene, arrays, varied, nsample)
 
+    clearance = PARAMETERS["joint", "clearance"]
     kind = np.array(
         [
-            JOINT_CLEARANCE
-            if j.clearance > 0 or ("joint_clearance", (k,)) in varied
-            else JOINT_IDEAL
+            JointKind.CLEARANCE
+            if j.clearance > 0 or clearance.model_index(k, ()) in varied
+            else JointKind.IDEAL
             for k, j in enumerate(scene.joint)
         ],
         dtype=np.int64,
@@ -172,47 +135,35 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
     )
 
 
+def _items(scene: Scene, kind: str) -> list[Any]:
+    """The scene's items of one kind of :data:`~mcchain.parameters.TABLE` (``[scene]`` is one)."""
+    return [scene.scene] if kind == "scene" else list(getattr(scene, kind))
+
+
 def _base_arrays(scene: Scene) -> dict[str, np.ndarray]:
-    """The parameter arrays of the scene as written, each with a sample axis of size 1."""
+    """The parameter arrays of the scene as written, each with a sample axis of size 1.
 
-    def a(values: object, *shape: int) -> np.ndarray:
-        return np.asarray(values, dtype=np.float64).reshape(1, *shape)
-
-    nb, nj, nd = len(scene.body), len(scene.joint), len(scene.driver)
-    nf, ns = len(scene.force), len(scene.spring)
-    angle_of = {b.name: b.angle for b in scene.body}
-    nan = float("nan")
-    return {
-        "gravity": a(scene.scene.gravity, 2),
-        "body_mass": a([b.mass for b in scene.body], nb),
-        "body_inertia": a([b.inertia for b in scene.body], nb),
-        "joint_point_a": a([j.points[0] for j in scene.joint], nj, 2),
-        "joint_point_b": a([j.points[1] for j in scene.joint], nj, 2),
-        "joint_clearance": a([j.clearance for j in scene.joint], nj),
-        "joint_eccentricity": a(
-            [nan if j.eccentricity is None else j.eccentricity for j in scene.joint], nj
-        ),
-        "driver_angle0": a(
-            [angle_of[d.body] if d.angle0 is None else d.angle0 for d in scene.driver], nd
-        ),
-        "driver_omega": a([d.omega for d in scene.driver], nd),
-        "force_point": a([f.point for f in scene.force], nf, 2),
-        "force_value": a([f.value or (0.0, 0.0) for f in scene.force], nf, 2),
-        "force_torque": a([f.torque or 0.0 for f in scene.force], nf),
-        "spring_point_a": a([s.points[0] for s in scene.spring], ns, 2),
-        "spring_point_b": a([s.points[1] for s in scene.spring], ns, 2),
-        "spring_stiffness": a([s.stiffness for s in scene.spring], ns),
-        "spring_rest_length": a(
-            [nan if s.rest_length is None else s.rest_length for s in scene.spring], ns
-        ),
-        "spring_damping": a([s.damping for s in scene.spring], ns),
-        "q0": a([[*b.position, b.angle] for b in scene.body], 3 * nb),
-        "v0": a([[*b.velocity, b.angular_velocity] for b in scene.body], 3 * nb),
-    }
+    Every row of :data:`~mcchain.parameters.TABLE` copies its key of every item into its
+    Model array; an omitted optional key gives the row's ``unset`` value.
+    """
+    arrays: dict[str, np.ndarray] = {}
+    for row in TABLE:
+        items = _items(scene, row.kind)
+        fields = row.field if isinstance(row.field, tuple) else (row.field,)
+        for name in fields:
+            if name not in arrays:
+                arrays[name] = np.zeros((1, *row.field_shape(len(items))), dtype=np.float64)
+        for i, item in enumerate(items):
+            value = getattr(item, row.key)
+            values = np.broadcast_to(np.asarray(row.unset if value is None else value), row.shape)
+            for idx in row.elements:
+                name, at = row.model_index(i, idx)
+                arrays[name][(0, *at)] = values[idx]
+    return arrays
 
 
 def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
-    domain = PARAM_DOMAINS.get((ref.kind, ref.key))
+    domain = PARAMETERS[ref.kind, ref.key].domain
     ok = np.isfinite(column)
     if domain is not None:
         ok &= domain.contains(column)
@@ -220,8 +171,8 @@ def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
         i = int(np.argmin(ok))
         rule = f"{ref.key} must be {domain.text}" if domain is not None else "not finite"
         raise SceneError(
-            f"sample.vary.{_quote(path)}: sampled value {float(column[i])!r} at sample {i}: {rule} "
-            "(bound the distribution, e.g. with truncnormal)"
+            f"sample.vary.{quote_key(path)}: sampled value {float(column[i])!r} at sample {i}: "
+            f"{rule} (bound the distribution, e.g. with truncnormal)"
         )
 
 
@@ -239,7 +190,8 @@ def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
 def _derived_defaults(
     scene: Scene, arrays: dict[str, np.ndarray], varied: set[Slot], nsample: int
 ) -> None:
-    """Fill defaults that follow other values: driver angle0, spring rest length."""
+    """Fill defaults that follow other values: driver angle0 (the body's angle), spring rest
+    length (the distance at the initial positions)."""
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
     q0 = arrays["q0"]
@@ -249,10 +201,14 @@ def _derived_defaults(
 
     for d, driver in enumerate(scene.driver):
         b = index[driver.body]
-        if driver.angle0 is None and ("q0", (3 * b + 2,)) in varied:
+        if driver.angle0 is not None:
+            continue
+        if ("q0", (3 * b + 2,)) in varied:
             if arrays["driver_angle0"].shape[0] != nsample:
                 arrays["driver_angle0"] = np.repeat(arrays["driver_angle0"], nsample, axis=0)
             arrays["driver_angle0"][:, d] = q0[:, 3 * b + 2]
+        elif ("driver_angle0", (d,)) not in varied:
+            arrays["driver_angle0"][:, d] = q0[0, 3 * b + 2]
 
     for s, spring in enumerate(scene.spring):
         if spring.rest_length is not None or ("spring_rest_length", (s,)) in varied:

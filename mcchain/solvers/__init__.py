@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from mcchain.model import Model
-from mcchain.scene.schema import Equilibrium, Scene
+from mcchain.scene.models import Scene
 from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
 
 
@@ -33,14 +33,8 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
     status = assembled.status.copy()
     equilibrium = None
     if scene.equilibrium is not None or scene.modes is not None:
-        settings = scene.equilibrium if scene.equilibrium is not None else Equilibrium()
-        equilibrium = solve_equilibrium(
-            model,
-            assembled.q,
-            assembled.status,
-            tolerance=settings.tolerance,
-            max_iterations=settings.max_iterations,
-        )
+        settings = scene.equilibrium
+        equilibrium = solve_equilibrium(model, assembled.q, assembled.status, settings)
         want_shapes = scene.modes is not None and scene.modes.shapes
         modes = solve_modes(model, equilibrium, shapes=want_shapes)
         status |= modes.status

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,12 +45,9 @@ import numpy as np
 
 from mcchain.errors import SceneError
 from mcchain.model import Model
+from mcchain.scene.loading import load_section
+from mcchain.scene.models import Simulate
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
-
-DEFAULT_BAUMGARTE = (10.0, 10.0)
-"""(α, β) of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s: critically damped, drift decays in ~0.1–0.5 s, far
-below any step-size limit (|hα| ≪ 1); see benchmarks/bench_simulate.py (drift chart)."""
-
 
 SINGULAR_PIVOT = 1e-8
 """Relative LDLᵀ pivot of S below which the constraints count as rank-deficient."""
@@ -64,23 +61,10 @@ ADAPTIVE_MIN_STEP = 1e-12
 ADAPTIVE_MAX_STEPS = 10_000_000
 """Step attempts of ``rk45`` per sample before it counts as diverged."""
 
-DEFAULTS: dict[str, Any] = {
-    "method": "rk4",
-    "output_dt": None,
-    "start": "scene",
-    "perturb": {},
-    "rtol": 1e-8,
-    "atol": 1e-10,
-    "rho_inf": 0.8,
-    "baumgarte": None,
-    "constraint_tolerance": 1e-6,
-    "max_newton": 20,
-}
-
 
 @dataclass(frozen=True)
 class Settings:
-    """The ``[simulate]`` section resolved (defaults filled in)."""
+    """The validated ``[simulate]`` section with ``output_dt`` and ``baumgarte`` resolved."""
 
     t_end: float
     dt: float
@@ -96,46 +80,24 @@ class Settings:
     max_newton: int
 
     @classmethod
-    def resolve(cls, sim: Any) -> Settings:
-        def get(name: str) -> Any:
-            if isinstance(sim, dict):
-                value = sim.get(name, DEFAULTS.get(name))
-            else:
-                value = getattr(sim, name, DEFAULTS.get(name))
-            if name not in DEFAULTS and value is None:
-                raise SceneError(f"simulate.{name}: required")
-            return value
-
-        dt = float(get("dt"))
-        output_dt = get("output_dt")
-        baumgarte = get("baumgarte")
-        settings = cls(
-            t_end=float(get("t_end")),
-            dt=dt,
-            method=str(get("method")),
-            output_dt=dt if output_dt is None else float(output_dt),
-            start=str(get("start")),
-            perturb={str(k): float(v) for k, v in dict(get("perturb") or {}).items()},
-            rtol=float(get("rtol")),
-            atol=float(get("atol")),
-            rho_inf=float(get("rho_inf")),
-            baumgarte=DEFAULT_BAUMGARTE
-            if baumgarte is None
-            else (float(baumgarte[0]), float(baumgarte[1])),
-            constraint_tolerance=float(get("constraint_tolerance")),
-            max_newton=int(get("max_newton")),
+    def resolve(cls, sim: Simulate | Mapping[str, Any]) -> Settings:
+        """The settings of a validated ``[simulate]`` section (a dict is validated by the
+        schema first, so defaults and ranges are the schema's)."""
+        sim = load_section(Simulate, "simulate", sim)
+        return cls(
+            t_end=sim.t_end,
+            dt=sim.dt,
+            method=sim.method,
+            output_dt=sim.output_step,
+            start=sim.start,
+            perturb=dict(sim.perturb),
+            rtol=sim.rtol,
+            atol=sim.atol,
+            rho_inf=sim.rho_inf,
+            baumgarte=sim.gains,
+            constraint_tolerance=sim.constraint_tolerance,
+            max_newton=sim.max_newton,
         )
-        for name in ("t_end", "dt", "output_dt", "rtol", "atol", "constraint_tolerance"):
-            value = getattr(settings, name)
-            if not (value > 0 and math.isfinite(value)):
-                raise SceneError(f"simulate.{name}: must be a positive number, got {value!r}")
-        if settings.method not in METHODS:
-            raise SceneError(
-                f"simulate.method: unknown method {settings.method!r}; one of {', '.join(METHODS)}"
-            )
-        if not 0.0 <= settings.rho_inf <= 1.0:
-            raise SceneError(f"simulate.rho_inf: must be in [0, 1], got {settings.rho_inf}")
-        return settings
 
 
 @dataclass(frozen=True)
@@ -535,7 +497,7 @@ METHODS: dict[str, Method] = {
 
 def simulate(
     model: Model,
-    sim: Any,
+    sim: Simulate | Mapping[str, Any],
     q_start: np.ndarray | None = None,
     v_start: np.ndarray | None = None,
     history_dtype: Any = np.float32,
@@ -547,7 +509,7 @@ def simulate(
 
     Args:
         model: the compiled model (a chunk of samples).
-        sim: the ``[simulate]`` settings (pydantic model, dict or any object with the keys).
+        sim: the ``[simulate]`` section (a validated ``Simulate``, or its table as a dict).
         q_start, v_start: (nsample or 1, 3 nbody) start state overriding ``model.q0/v0``.
         history_dtype: dtype of the histories (float32 or float64).
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are

@@ -20,11 +20,9 @@ import numpy as np
 
 from mcchain.errors import SceneError
 from mcchain.kernels import statics as kernels
-from mcchain.model import JOINT_IDEAL, Model
+from mcchain.model import JointKind, Model
+from mcchain.scene.models import Equilibrium
 from mcchain.status import STATUS_DTYPE, Status
-
-DEFAULT_TOLERANCE = 1e-10
-DEFAULT_MAX_ITERATIONS = 50
 
 
 @dataclass(frozen=True)
@@ -37,7 +35,7 @@ class Assembled:
 
 
 @dataclass(frozen=True)
-class Equilibrium:
+class EquilibriumResult:
     """Equilibria of a batch.
 
     Attributes:
@@ -61,7 +59,7 @@ class Equilibrium:
 
 
 @dataclass(frozen=True)
-class Modes:
+class ModesResult:
     """Eigenpulsations of a batch.
 
     Attributes:
@@ -91,13 +89,16 @@ def solve_equilibrium(
     model: Model,
     q_start: np.ndarray,
     status: np.ndarray | None = None,
-    tolerance: float = DEFAULT_TOLERANCE,
-    max_iterations: int = DEFAULT_MAX_ITERATIONS,
-) -> Equilibrium:
+    settings: Equilibrium | None = None,
+) -> EquilibriumResult:
     """Newton equilibrium of every sample from ``q_start`` (nsample, 3 nbody).
 
-    Samples whose ``status`` already carries a bit are skipped (NaN).
+    ``settings`` is the scene's ``[equilibrium]`` section (tolerance, iterations); without
+    it, the section's defaults (``Equilibrium()``). Samples whose ``status`` already carries
+    a bit are skipped (NaN).
     """
+    settings = Equilibrium() if settings is None else settings
+    tolerance, max_iterations = settings.tolerance, settings.max_iterations
     nsample = model.nsample
     q = np.array(q_start, dtype=np.float64, copy=True)
     lam = np.full((nsample, model.ncon), np.nan)
@@ -109,10 +110,10 @@ def solve_equilibrium(
     joint_force = np.full((nsample, model.njoint, 2), np.nan)
     contact_force = np.full((nsample, model.njoint), np.nan)
     kernels.joint_forces_batch(km, q, lam, joint_force, contact_force)
-    return Equilibrium(q, lam, joint_force, contact_force, iterations, history, status)
+    return EquilibriumResult(q, lam, joint_force, contact_force, iterations, history, status)
 
 
-def solve_modes(model: Model, equilibrium: Equilibrium, shapes: bool = False) -> Modes:
+def solve_modes(model: Model, equilibrium: EquilibriumResult, shapes: bool = False) -> ModesResult:
     """Eigenpulsations about each sample's equilibrium (DESIGN §2.2)."""
     nsample = model.nsample
     omega = np.full((nsample, model.nmode), np.nan)
@@ -123,7 +124,7 @@ def solve_modes(model: Model, equilibrium: Equilibrium, shapes: bool = False) ->
         model.kernel_arrays(), equilibrium.q, equilibrium.lam, shapes, omega, shape_array, status
     )
     stable = (status & (Status.UNSTABLE_EQUILIBRIUM | _FAILED)) == 0
-    return Modes(omega, shape_array if shapes else None, stable, status)
+    return ModesResult(omega, shape_array if shapes else None, stable, status)
 
 
 _FAILED = Status.ASSEMBLY_FAILED | Status.EQUILIBRIUM_NOT_CONVERGED | Status.SINGULAR
@@ -176,9 +177,9 @@ def describe_constraints(model: Model) -> list[tuple[str, str, int, int]]:
     """(name, kind, first row, rows) of every joint and driver, for ``mcchain validate``."""
     rows = []
     for k, name in enumerate(model.joint_names):
-        ideal = model.joint_kind[k] == JOINT_IDEAL
-        kind = "ideal revolute" if ideal else "clearance revolute"
-        rows.append((name, kind, int(model.joint_row[k]), 2 if ideal else 1))
+        kind = JointKind(int(model.joint_kind[k]))
+        text = "ideal revolute" if kind == JointKind.IDEAL else "clearance revolute"
+        rows.append((name, text, int(model.joint_row[k]), kind.rows))
     for j, name in enumerate(model.driver_names):
         rows.append((name, "driver", int(model.driver_row[j]), 1))
     return rows

@@ -1,15 +1,18 @@
-"""The scene file schema (DESIGN §4): pydantic v2 models of a validated scene.
+"""The scene file's pydantic v2 models: the shape of a validated scene.
 
 A scene file is TOML. Its tables map one to one onto the models below; every model forbids
 unknown keys, every number must be finite, and ints are accepted where floats are expected
 (``mass = 2`` is 2.0) but not the other way round (``count = 10.0`` is an error). Each field
-documents its default; a field without a default is required.
+documents its default; a field without a default is required, and a default is stated here
+only: solvers read the validated sections (or ``Simulate``/``Storage``/... built from these
+defaults), never a second literal.
 
 Shape checks (types, ranges, one-key distributions) live in the models. Checks that relate
 one part of the file to another (a joint naming a body, duplicate names, sampled paths) live
-in :func:`check_scene`, which :func:`mcchain.scene.load_scene` runs after the models; both
-raise :class:`~mcchain.errors.SceneError` with a one-line ``key.path: reason`` message.
-Kinematic checks (rank of B, assembly) need the kernels and are not made here.
+in :func:`mcchain.scene.checks.check_scene`, which :func:`mcchain.scene.load_scene` runs after
+the models; both raise :class:`~mcchain.errors.SceneError` with a one-line ``key.path: reason``
+message (:mod:`mcchain.scene.messages`). Kinematic checks (rank of B, assembly) need the
+kernels and are not made here.
 
 Conventions: SI units (m, kg, s, rad, N); ``"ground"`` is the fixed body; a joint's
 ``bodies = [bearing, journal]`` and its ``points`` are local coordinates on each of them (for
@@ -18,13 +21,8 @@ ground, global coordinates); angles are counter-clockwise from the global x axis
 
 from __future__ import annotations
 
-import os
 import re
-import tomllib
-import types
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Annotated, Any, Literal, Union, get_args, get_origin
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -34,13 +32,9 @@ from pydantic import (
     Field,
     PrivateAttr,
     Strict,
-    ValidationError,
     field_validator,
     model_validator,
 )
-from pydantic.fields import FieldInfo
-
-from mcchain.errors import SceneError
 
 GROUND_NAME = "ground"
 """The name of the fixed body in ``bodies``/``body`` keys."""
@@ -49,6 +43,11 @@ DEFAULT_GRAVITY = (0.0, -9.81)
 DEFAULT_SAMPLE_COUNT = 1000
 DEFAULT_SAMPLE_SEED = 0
 MAX_SEED = 2**64 - 1
+
+DEFAULT_BAUMGARTE = (10.0, 10.0)
+"""(α, β) of Φ̈ + 2αΦ̇ + β²Φ = 0 when ``[simulate] baumgarte`` is omitted, 1/s: critically
+damped, drift decays in ~0.1–0.5 s, far below any step-size limit (|hα| ≪ 1); see
+benchmarks/bench_simulate.py (drift chart)."""
 
 Num = Annotated[float, Strict(), AllowInfNan(False)]
 """A finite number (TOML int or float)."""
@@ -59,11 +58,11 @@ Vec2 = Annotated[list[Num], Field(min_length=2, max_length=2)]
 Points = Annotated[list[Vec2], Field(min_length=2, max_length=2)]
 """Two local points ``[[xa, ya], [xb, yb]]``, one on each of the two bodies."""
 
-_NAME_RE = re.compile(r"^[^\s.\[\]\"'/\\]+$")
+NAME_RE = re.compile(r"^[^\s.\[\]\"'/\\]+$")
 
 
 def _check_name(value: str) -> str:
-    if not _NAME_RE.match(value):
+    if not NAME_RE.match(value):
         raise ValueError(
             f"invalid name {value!r}: use a non-empty name without spaces, dots, brackets, "
             "quotes or slashes"
@@ -448,8 +447,8 @@ class Simulate(_Section):
     )
     baumgarte: Vec2 | None = Field(
         default=None,
-        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s (rk4, rk45); default: the "
-        "solver's, [10, 10] (critically damped; mcchain.solvers.simulate.DEFAULT_BAUMGARTE).",
+        description="[alpha, beta] of Φ̈ + 2αΦ̇ + β²Φ = 0, 1/s (rk4, rk45); default "
+        "[10, 10] (critically damped; DEFAULT_BAUMGARTE).",
     )
     constraint_tolerance: Num = Field(
         default=1e-6, gt=0, description="max |Φ| past which a sample diverged; default 1e-6."
@@ -467,6 +466,15 @@ class Simulate(_Section):
     def output_step(self) -> float:
         """``output_dt`` resolved (dt when omitted), s."""
         return self.dt if self.output_dt is None else self.output_dt
+
+    @property
+    def gains(self) -> tuple[float, float]:
+        """``baumgarte`` resolved (:data:`DEFAULT_BAUMGARTE` when omitted), 1/s."""
+        return (
+            DEFAULT_BAUMGARTE
+            if self.baumgarte is None
+            else (float(self.baumgarte[0]), float(self.baumgarte[1]))
+        )
 
 
 class Storage(_Section):
@@ -498,7 +506,8 @@ class Storage(_Section):
 # -- the scene -----------------------------------------------------------------------------
 class Scene(_Section):
     """A validated scene. Build it with :func:`mcchain.scene.load_scene` (or
-    ``load_scene_text``), which also runs :func:`check_scene`.
+    ``load_scene_text``), which also runs
+    :func:`~mcchain.scene.checks.check_scene`.
 
     ``text`` is the file's source text and ``source`` where it came from; neither is part of
     the validated data.
@@ -580,522 +589,3 @@ class Scene(_Section):
     def param_paths(self) -> list[str]:
         """The ``[sample.vary]`` paths, in order (empty without ``[sample]``)."""
         return list(self.sample.vary) if self.sample else []
-
-
-# -- parameter paths -----------------------------------------------------------------------
-KINDS = ("body", "joint", "driver", "force", "spring")
-
-PARAM_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {
-    "scene": {"gravity": (2,)},
-    "body": {
-        "mass": (),
-        "inertia": (),
-        "position": (2,),
-        "angle": (),
-        "velocity": (2,),
-        "angular_velocity": (),
-    },
-    "joint": {"points": (2, 2), "clearance": (), "eccentricity": ()},
-    "driver": {"omega": (), "angle0": ()},
-    "force": {"point": (2,), "value": (2,), "torque": ()},
-    "spring": {"points": (2, 2), "stiffness": (), "rest_length": (), "damping": ()},
-}
-"""For each kind, the keys a sampled path may name and their array shapes."""
-
-PERTURB_KEYS = {"position": (2,), "angle": (), "velocity": (2,), "angular_velocity": ()}
-"""The body keys ``[simulate] perturb`` may name."""
-
-_PATH_RE = re.compile(r"^(?P<head>[^\[\]]+?)(?P<idx>(\[[^\[\]]*\])*)$")
-
-
-@dataclass(frozen=True)
-class ParamRef:
-    """A resolved parameter path ``kind.name.key[i][j]``.
-
-    Attributes:
-        kind: ``scene``, ``body``, ``joint``, ``driver``, ``force`` or ``spring``.
-        name: the item's name ("" for ``scene``).
-        index: the item's position in its list (0 for ``scene``).
-        key: the key in the item (``mass``, ``points``, ...).
-        indices: indices into the key's array, as many as its dimensions.
-    """
-
-    kind: str
-    name: str
-    index: int
-    key: str
-    indices: tuple[int, ...]
-
-    def canonical(self) -> str:
-        head = "scene" if self.kind == "scene" else f"{self.kind}.{self.name}"
-        return f"{head}.{self.key}" + "".join(f"[{i}]" for i in self.indices)
-
-
-def _names_of(scene: Scene, kind: str) -> list[str]:
-    return {
-        "body": scene.body_names,
-        "joint": scene.joint_names,
-        "driver": scene.driver_names,
-        "force": scene.force_names,
-        "spring": scene.spring_names,
-    }[kind]
-
-
-def parse_path(scene: Scene, path: str, shapes: dict[str, dict[str, tuple[int, ...]]]) -> ParamRef:
-    """Resolve ``path`` against ``scene``; raise ``ValueError(reason)`` if it names nothing.
-
-    ``shapes`` is :data:`PARAM_SHAPES` (sampled parameters) or a subset of it.
-    """
-    m = _PATH_RE.match(path)
-    if not m:
-        raise ValueError("not a parameter path such as `body.bar.mass` or `joint.O.points[1][0]`")
-    head, idx_text = m.group("head"), m.group("idx")
-    parts = head.split(".")
-    raw_indices = re.findall(r"\[([^\[\]]*)\]", idx_text)
-    kinds = ", ".join(shapes)
-    if parts[0] == "scene":
-        if "scene" not in shapes:
-            raise ValueError(f"unknown kind 'scene' (expected one of: {kinds})")
-        if len(parts) != 2:
-            raise ValueError("expected `scene.<key>`, e.g. `scene.gravity[1]`")
-        kind, name, index, key = "scene", "", 0, parts[1]
-    elif parts[0] in shapes:
-        kind = parts[0]
-        if len(parts) != 3 or not parts[1] or not parts[2]:
-            raise ValueError(f"expected `{kind}.<name>.<key>`")
-        name, key = parts[1], parts[2]
-        names = _names_of(scene, kind)
-        if name not in names:
-            what = "driver (named by its body)" if kind == "driver" else kind
-            known = ", ".join(names) if names else "none"
-            raise ValueError(f"unknown {what} {name!r} (known: {known})")
-        index = names.index(name)
-    else:
-        raise ValueError(f"unknown kind {parts[0]!r} (expected one of: {kinds})")
-    keys = shapes[kind]
-    if key not in keys:
-        raise ValueError(f"unknown key {key!r} of a {kind} (expected one of: {', '.join(keys)})")
-    shape = keys[key]
-    indices: list[int] = []
-    for text in raw_indices:
-        if not text.isdigit() or (len(text) > 1 and text[0] == "0"):
-            raise ValueError(f"bad index [{text}]: expected a non-negative integer")
-        indices.append(int(text))
-    if len(indices) != len(shape):
-        if not shape:
-            raise ValueError(f"`{key}` is a number and takes no index")
-        dims = "".join(f"[0..{n - 1}]" for n in shape)
-        raise ValueError(
-            f"`{key}` needs {len(shape)} index{'es' if len(shape) > 1 else ''} "
-            f"{dims}, got {len(indices)}"
-        )
-    for i, n in zip(indices, shape, strict=True):
-        if i >= n:
-            raise ValueError(f"index {i} out of range 0..{n - 1} of `{key}`")
-    return ParamRef(kind, name, index, key, tuple(indices))
-
-
-# -- cross checks ------------------------------------------------------------------------
-def _quote(key: str) -> str:
-    """A key as TOML writes it in a dotted path: bare if it can be, else quoted."""
-    return key if re.fullmatch(r"[A-Za-z0-9_\-]+", key) else f'"{key}"'
-
-
-def item_path(kind: str, index: int, name: str | None) -> str:
-    """``kind.name`` when the item has a usable name, else ``kind[index]``."""
-    if isinstance(name, str) and _NAME_RE.match(name):
-        return f"{kind}.{name}"
-    return f"{kind}[{index}]"
-
-
-def _item(scene: Scene, kind: str, index: int) -> str:
-    entry = getattr(scene, kind)[index]
-    if kind == "driver":
-        return item_path(kind, index, entry.body)
-    if getattr(entry, "_auto_name", False):
-        return f"{kind}[{index}]"
-    return item_path(kind, index, entry.name)
-
-
-def check_scene(scene: Scene) -> None:
-    """Cross-reference checks the models cannot make; raise :class:`SceneError`.
-
-    Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
-    drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
-    distributions' supports against the parameter's domain, a ``"saltelli"`` count against
-    the number of varied paths, ``output_dt`` against ``dt``. Kinematics are not checked.
-    """
-    bodies = scene.body_names
-    known = {GROUND_NAME, *bodies}
-    listing = ", ".join([GROUND_NAME, *bodies])
-
-    def unique(kind: str, names: list[str]) -> None:
-        seen: dict[str, int] = {}
-        for i, name in enumerate(names):
-            if name in seen:
-                entry = getattr(scene, kind)[i]
-                auto = " (a default name: give the item a `name`)" if entry._auto_name else ""
-                raise SceneError(
-                    f"{kind}[{i}].name: duplicate {kind} name {name!r} "
-                    f"(also {kind}[{seen[name]}]){auto}"
-                )
-            seen[name] = i
-
-    for i, name in enumerate(bodies):
-        if name == GROUND_NAME:
-            raise SceneError(f"body[{i}].name: {GROUND_NAME!r} is reserved for the fixed body")
-    seen_body: dict[str, int] = {}
-    for i, name in enumerate(bodies):
-        if name in seen_body:
-            raise SceneError(
-                f"body[{i}].name: duplicate body name {name!r} (also body[{seen_body[name]}])"
-            )
-        seen_body[name] = i
-
-    for kind in ("joint", "spring"):
-        items = getattr(scene, kind)
-        for i, item in enumerate(items):
-            where = _item(scene, kind, i)
-            for k, ref in enumerate(item.bodies):
-                if ref not in known:
-                    raise SceneError(
-                        f"{where}.bodies[{k}]: unknown body {ref!r} (known: {listing})"
-                    )
-            if item.bodies[0] == item.bodies[1]:
-                raise SceneError(f"{where}.bodies: joins body {item.bodies[0]!r} to itself")
-        unique(kind, [str(item.name) for item in items])
-
-    drivers: dict[str, int] = {}
-    for i, driver in enumerate(scene.driver):
-        where = _item(scene, "driver", i)
-        if driver.body == GROUND_NAME:
-            raise SceneError(f"{where}.body: cannot drive the fixed body 'ground'")
-        if driver.body not in known:
-            raise SceneError(f"{where}.body: unknown body {driver.body!r} (known: {listing})")
-        if driver.body in drivers:
-            raise SceneError(
-                f"driver[{i}].body: body {driver.body!r} already driven by "
-                f"driver[{drivers[driver.body]}]"
-            )
-        drivers[driver.body] = i
-
-    for i, force in enumerate(scene.force):
-        where = _item(scene, "force", i)
-        if force.body == GROUND_NAME:
-            raise SceneError(f"{where}.body: a load on the fixed body 'ground' does nothing")
-        if force.body not in known:
-            raise SceneError(f"{where}.body: unknown body {force.body!r} (known: {listing})")
-    unique("force", scene.force_names)
-
-    if scene.sample is not None:
-        targets: dict[str, str] = {}
-        for path, dist in scene.sample.vary.items():
-            where = f"sample.vary.{_quote(path)}"
-            try:
-                ref = parse_path(scene, path, PARAM_SHAPES)
-            except ValueError as exc:
-                raise SceneError(f"{where}: {exc}") from None
-            canonical = ref.canonical()
-            if canonical in targets:
-                raise SceneError(f"{where}: the same parameter as {_quote(targets[canonical])!s}")
-            targets[canonical] = path
-            domain = PARAM_DOMAINS.get((ref.kind, ref.key))
-            bounds = dist.bounds()
-            if domain is not None and bounds is not None and not domain.contains(bounds[0]):
-                raise SceneError(
-                    f"{where}.{dist.kind}: can give {bounds[0]!r}, but {ref.key} must be "
-                    f"{domain.text}"
-                )
-        if scene.sample.design == "saltelli":
-            reason = saltelli_count_error(len(scene.sample.vary), scene.sample.count)
-            if reason is not None:
-                raise SceneError(f"sample.count: {reason}")
-
-    if scene.simulate is not None:
-        sim = scene.simulate
-        for path in sim.perturb:
-            try:
-                parse_path(scene, path, {"body": PERTURB_KEYS})
-            except ValueError as exc:
-                raise SceneError(f"simulate.perturb.{_quote(path)}: {exc}") from None
-        if sim.output_dt is not None:
-            if sim.output_dt < sim.dt:
-                raise SceneError(
-                    f"simulate.output_dt: must be >= dt ({sim.dt!r}), got {sim.output_dt!r}"
-                )
-            ratio = sim.output_dt / sim.dt
-            if sim.method in FIXED_STEP_METHODS and abs(ratio - round(ratio)) > 1e-9 * ratio:
-                raise SceneError(
-                    f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
-                    f"method {sim.method!r}, got {sim.output_dt!r}"
-                )
-
-
-@dataclass(frozen=True)
-class Domain:
-    """The allowed values of a parameter: ``> low`` (open) or ``>= low``."""
-
-    low: float
-    open_low: bool
-
-    @property
-    def text(self) -> str:
-        return f"{'>' if self.open_low else '>='} {self.low!r}"
-
-    def contains(self, values: Any) -> Any:
-        return values > self.low if self.open_low else values >= self.low
-
-
-PARAM_DOMAINS: dict[tuple[str, str], Domain] = {
-    ("body", "mass"): Domain(0.0, True),
-    ("body", "inertia"): Domain(0.0, True),
-    # A sampled clearance makes a clearance joint: it must stay > 0 (|d| = 0 is singular).
-    ("joint", "clearance"): Domain(0.0, True),
-    ("spring", "stiffness"): Domain(0.0, False),
-    ("spring", "rest_length"): Domain(0.0, False),
-    ("spring", "damping"): Domain(0.0, False),
-}
-"""Lower bounds of sampled parameters, checked on the distribution's support (bounded
-distributions) at load time and on every sampled value at compile time."""
-
-
-# -- loading -------------------------------------------------------------------------------
-def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read and validate a scene file; raise :class:`SceneError` (one line) if it is bad.
-
-    A missing or unreadable file, malformed TOML (with its line and column), a schema error
-    or a cross-reference error all give ``key.path: reason`` (the file's path as the key for
-    file-level errors).
-    """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise SceneError(f"{path}: is a directory, not a scene file") from None
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read the file ({exc.strerror})") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    return load_scene_text(text, name=str(path))
-
-
-def load_scene_text(text: str, name: str = "<string>") -> Scene:
-    """Validate a scene given as TOML text; ``name`` labels it in messages.
-
-    When ``[scene] name`` is omitted, the scene is named after ``name``'s stem (so
-    ``configs/paper-bar.toml`` gives ``paper-bar``), or ``scene`` for a ``<label>``.
-    """
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{name}: malformed TOML: {exc}") from None
-    return scene_from_dict(data, source=name, text=text)
-
-
-def scene_from_dict(data: dict[str, Any], source: str = "<dict>", text: str = "") -> Scene:
-    """Validate a scene given as the dict a TOML parser returns (see :func:`load_scene`)."""
-    try:
-        scene = Scene.model_validate(data)
-    except ValidationError as exc:
-        raise SceneError(format_validation_error(exc, data)) from None
-    scene._text = text
-    scene._source = source
-    if scene.scene.name is None:
-        scene.scene.name = _default_scene_name(source)
-    check_scene(scene)
-    return scene
-
-
-def _default_scene_name(source: str) -> str:
-    if source.startswith("<"):
-        return "scene"
-    stem = Path(source).stem
-    stem = re.sub(r"[\s.\[\]\"'/\\]+", "-", stem).strip("-")
-    return stem or "scene"
-
-
-# -- pydantic errors -> one line ------------------------------------------------------------
-def format_validation_error(exc: ValidationError, data: Any) -> str:
-    """The first error of ``exc`` as ``key.path: reason`` (list items named when they can be)."""
-    err = exc.errors(include_url=False)[0]
-    loc = tuple(err["loc"])
-    path = loc_path(loc, data)
-    return f"{path}: {_reason(err, loc)}"
-
-
-def loc_path(loc: tuple[str | int, ...], data: Any) -> str:
-    """Turn a pydantic location into a scene key path, naming list items by their name.
-
-    ``("body", 0, "mass")`` -> ``body.bar.mass`` when body 0 is named ``bar`` (a driver is
-    named by its ``body``), else ``body[0].mass``; dict keys that are not bare TOML keys are
-    quoted: ``sample.vary."body.bar.mass".normal``.
-    """
-    parts: list[str] = []
-    node: Any = data
-    for i, elem in enumerate(loc):
-        if isinstance(elem, int):
-            parent = loc[i - 1] if i > 0 else None
-            item = node[elem] if isinstance(node, list) and 0 <= elem < len(node) else None
-            if i == 1 and parent in KINDS and parts:
-                key = "body" if parent == "driver" else "name"
-                name = item.get(key) if isinstance(item, dict) else None
-                parts[-1] = item_path(str(parent), elem, name)
-            elif parts:
-                parts[-1] += f"[{elem}]"
-            else:
-                parts.append(f"[{elem}]")
-            node = item
-        else:
-            parts.append(_quote(elem))
-            node = node.get(elem) if isinstance(node, dict) else None
-    return ".".join(parts) if parts else "scene"
-
-
-def _strip(tp: Any) -> Any:
-    while True:
-        origin = get_origin(tp)
-        if origin is Annotated:
-            tp = get_args(tp)[0]
-        elif origin in (Union, types.UnionType):
-            args = [a for a in get_args(tp) if a is not type(None)]
-            if len(args) != 1:
-                return tp
-            tp = args[0]
-        else:
-            return tp
-
-
-def _schema_at(loc: tuple[str | int, ...]) -> Any:
-    """The schema type at a location (a model class, list[...], dict[...], ...) or None."""
-    tp: Any = Scene
-    for elem in loc:
-        tp = _strip(tp)
-        origin = get_origin(tp)
-        if isinstance(elem, int):
-            if origin is not list:
-                return None
-            tp = get_args(tp)[0]
-        elif isinstance(tp, type) and issubclass(tp, BaseModel):
-            field = tp.model_fields.get(elem)
-            if field is None:
-                return None
-            tp = field.annotation
-        elif origin is dict:
-            tp = get_args(tp)[1]
-        else:
-            return None
-    return _strip(tp)
-
-
-def _describe(value: Any) -> str:
-    """A TOML-flavoured description of an input value."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f"the string {value!r}"
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, list):
-        return "an array"
-    if isinstance(value, int | float):
-        return repr(value)
-    return f"a {type(value).__name__}"
-
-
-def _reason(err: Any, loc: tuple[str | int, ...]) -> str:
-    kind = err["type"]
-    ctx = err.get("ctx") or {}
-    value = err.get("input")
-    if kind == "missing":
-        return "missing required key"
-    if kind == "extra_forbidden":
-        parent = _schema_at(loc[:-1])
-        allowed = (
-            list(parent.model_fields)
-            if isinstance(parent, type) and issubclass(parent, BaseModel)
-            else []
-        )
-        if parent is Distribution:
-            return f"unknown distribution (expected one of: {', '.join(allowed)})"
-        what = "section" if parent is Scene else "key"
-        return f"unknown {what} (expected one of: {', '.join(allowed)})"
-    if kind in ("float_type", "float_parsing"):
-        return f"expected a number, got {_describe(value)}"
-    if kind == "finite_number":
-        return f"must be a finite number, got {_describe(value)}"
-    if kind in ("int_type", "int_parsing", "int_from_float"):
-        return f"expected an integer, got {_describe(value)}"
-    if kind in ("string_type",):
-        return f"expected a string, got {_describe(value)}"
-    if kind == "bool_type":
-        return f"expected true or false, got {_describe(value)}"
-    if kind in ("list_type", "tuple_type"):
-        target = loc[-1] if loc else ""
-        if len(loc) == 1 and target in KINDS:
-            return f"expected an array of tables [[{target}]], got {_describe(value)}"
-        return f"expected an array, got {_describe(value)}"
-    if kind in ("model_type", "model_attributes_type", "dict_type"):
-        if _schema_at(loc) is Distribution:
-            return (
-                f"expected a distribution table such as {{ uniform = [low, high] }}, "
-                f"got {_describe(value)}"
-            )
-        return f"expected a table, got {_describe(value)}"
-    if kind in ("too_short", "too_long"):
-        lo = _min_max(loc)
-        n = len(value) if isinstance(value, list | dict) else ctx.get("actual_length")
-        return f"expected {lo}, got {n}"
-    bounds = {
-        "greater_than": (">", "gt"),
-        "greater_than_equal": (">=", "ge"),
-        "less_than": ("<", "lt"),
-        "less_than_equal": ("<=", "le"),
-    }
-    if kind in bounds:
-        op, key = bounds[kind]
-        return f"must be {op} {ctx.get(key)!r}, got {_describe(value)}"
-    if kind == "literal_error":
-        return f"must be one of {ctx.get('expected')}, got {_describe(value)}"
-    if kind in ("value_error", "assertion_error"):
-        return str(ctx.get("error", err["msg"]))
-    return str(err["msg"])
-
-
-def _min_max(loc: tuple[str | int, ...]) -> str:
-    """The length rule of the sequence at ``loc``: "2", "at least 1", ..."""
-    metadata: list[Any] = []
-    parent = _schema_at(loc[:-1])
-    last = loc[-1] if loc else None
-    tp: Any = None
-    if isinstance(parent, type) and issubclass(parent, BaseModel) and isinstance(last, str):
-        field = parent.model_fields.get(last)
-        if field is not None:
-            metadata.extend(field.metadata)
-            tp = field.annotation
-    elif get_origin(parent) is list and isinstance(last, int):
-        tp = get_args(parent)[0]
-    while get_origin(tp) in (Annotated, Union, types.UnionType):
-        args = get_args(tp)
-        if get_origin(tp) is Annotated:
-            metadata.extend(args[1:])
-            tp = args[0]
-        else:
-            tp = next(a for a in args if a is not type(None))
-    lo = hi = None
-    flat: list[Any] = []
-    for meta in metadata:
-        flat.extend(meta.metadata if isinstance(meta, FieldInfo) else [meta])
-    for meta in flat:
-        lo = getattr(meta, "min_length", None) if lo is None else lo
-        hi = getattr(meta, "max_length", None) if hi is None else hi
-    if lo is not None and lo == hi:
-        return f"{lo} item" if lo == 1 else f"{lo} items"
-    if hi is None:
-        return f"at least {lo} item" + ("" if lo == 1 else "s")
-    if lo is None:
-        return f"at most {hi} items"
-    return f"{lo} to {hi} items"

@@ -1,0 +1,244 @@
+"""Every parameter of a scene, defined once: one :class:`Parameter` row per (kind, key).
+
+A row says everything the rest of mcchain needs to know about one scene key that a
+``[sample.vary]`` path may name:
+
+* ``kind``, ``key``, ``shape``: the path ``kind.name.key[i][j]`` and how many indices it takes
+  (:mod:`mcchain.scene.paths` parses against these rows);
+* ``field`` (and ``dof``): the :class:`~mcchain.model.Model` array it lands in and how the
+  item and indices map to an index of that array (:meth:`Parameter.model_index`; the compiler
+  writes scene values and sampled columns there, ``mcchain validate`` reads them back);
+* ``domain``: the allowed values, checked on a distribution's support at load time and on
+  every sampled value at compile time;
+* ``units``: the CF units of its column of the ensemble's ``parameters``;
+* ``slots``: the names of its rows in the lane kernels' packed parameter array ``P``, one per
+  element (C order), ``{i}`` standing for the item's index; ``inverse_slots`` hold 1/value
+  (packed after every plain slot of the item); ``packed_for`` limits a joint row to joints of
+  one :class:`~mcchain.model.JointKind`. :func:`packed_slots` lays them out in the order the
+  generated kernels read them.
+
+Adding a parameter of an existing kind means: a row here, the key in the scene model
+(:mod:`mcchain.scene.models`), its array in :class:`~mcchain.model.Model`, and the kernel that
+reads it. This module imports numpy only (no numba, no pydantic), so the code generator can
+use it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from mcchain.model import JointKind
+
+
+@dataclass(frozen=True)
+class Domain:
+    """The allowed values of a parameter: ``> low`` (open) or ``>= low``."""
+
+    low: float
+    open_low: bool
+
+    @property
+    def text(self) -> str:
+        return f"{'>' if self.open_low else '>='} {self.low!r}"
+
+    def contains(self, values: Any) -> Any:
+        return values > self.low if self.open_low else values >= self.low
+
+
+POSITIVE = Domain(0.0, True)
+NON_NEGATIVE = Domain(0.0, False)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One sampled-parameter key of one kind of scene item (see the module docstring).
+
+    Attributes:
+        kind: ``scene``, ``body``, ``joint``, ``driver``, ``force`` or ``spring``.
+        key: the scene key (``mass``, ``points``, ...).
+        shape: the key's array shape; ``()`` for a number.
+        field: the Model array; a tuple gives one array per first index (``points[0|1]``
+            land in ``joint_point_a`` / ``joint_point_b``).
+        units: CF units.
+        domain: allowed values, or None for any finite value.
+        dof: for a body's state, the coordinate offset: the value lands in
+            ``field[3 * body + dof + k]``.
+        slots: packed slot names, one per element, ``{i}`` the item index.
+        inverse_slots: packed slots holding 1 / value (after the item's plain slots).
+        packed_for: pack the slots only for joints of this kind.
+        unset: the Model value of an optional key the scene leaves out (None in the scene
+            model); NaN where the compiler derives it (from positions, or the body's angle).
+    """
+
+    kind: str
+    key: str
+    shape: tuple[int, ...]
+    field: str | tuple[str, ...]
+    units: str
+    domain: Domain | None = None
+    dof: int | None = None
+    slots: tuple[str, ...] = ()
+    inverse_slots: tuple[str, ...] = ()
+    packed_for: JointKind | None = None
+    unset: float | None = None
+
+    @property
+    def size(self) -> int:
+        return math.prod(self.shape)
+
+    @property
+    def elements(self) -> list[tuple[int, ...]]:
+        """Every index into the key's array, in C order (``[()]`` for a number)."""
+        return [tuple(int(i) for i in idx) for idx in np.ndindex(*self.shape)]
+
+    def model_index(self, item: int, indices: tuple[int, ...]) -> tuple[str, tuple[int, ...]]:
+        """The Model array and the index (without the sample axis) of element ``indices``
+        of item ``item`` (0 for ``scene``)."""
+        if isinstance(self.field, tuple):
+            return self.field[indices[0]], (item, *indices[1:])
+        if self.dof is not None:
+            return self.field, (3 * item + self.dof + sum(indices),)
+        if self.kind == "scene":
+            return self.field, indices
+        return self.field, (item, *indices)
+
+    def field_shape(self, nitem: int) -> tuple[int, ...]:
+        """Shape (without the sample axis) of the Model array for ``nitem`` items."""
+        if isinstance(self.field, tuple):
+            return (nitem, *self.shape[1:])
+        if self.dof is not None:
+            return (3 * nitem,)
+        if self.kind == "scene":
+            return self.shape
+        return (nitem, *self.shape)
+
+    def read(self, model: Any, item: int, sample: int = 0) -> np.ndarray:
+        """The value of item ``item`` in ``model`` (a Model) at ``sample``, shaped ``shape``."""
+        values = []
+        for idx in self.elements:
+            name, at = self.model_index(item, idx)
+            arr = getattr(model, name)
+            values.append(arr[(sample % arr.shape[0], *at)])
+        return np.asarray(values, dtype=np.float64).reshape(self.shape)
+
+
+_P = Parameter
+_AB = ("joint_point_a", "joint_point_b")
+_SAB = ("spring_point_a", "spring_point_b")
+_NAN = math.nan
+
+# fmt: off
+TABLE: tuple[Parameter, ...] = (
+    # Rows of one kind are in packed order (the generated kernels' slot order).
+    # kind     key                 shape   Model field              units      domain
+    _P("scene", "gravity",          (2,),   "gravity",               "m s-2",   None,
+      slots=("gx", "gy")),
+    _P("body",  "mass",             (),     "body_mass",             "kg",      POSITIVE,
+      slots=("m{i}",), inverse_slots=("im{i}",)),
+    _P("body",  "inertia",          (),     "body_inertia",          "kg m2",   POSITIVE,
+      slots=("J{i}",), inverse_slots=("iJ{i}",)),
+    _P("body",  "position",         (2,),   "q0",                    "m",       None, dof=0),
+    _P("body",  "angle",            (),     "q0",                    "rad",     None, dof=2),
+    _P("body",  "velocity",         (2,),   "v0",                    "m s-1",   None, dof=0),
+    _P("body",  "angular_velocity", (),     "v0",                    "rad s-1", None, dof=2),
+    _P("joint", "points",           (2, 2), _AB,                     "m",       None,
+      slots=("sax{i}", "say{i}", "sbx{i}", "sby{i}")),
+    # A sampled clearance makes a clearance joint: it must stay > 0 (|d| = 0 is singular).
+    _P("joint", "clearance",        (),     "joint_clearance",       "m",       POSITIVE,
+      slots=("cl{i}",), packed_for=JointKind.CLEARANCE),
+    _P("joint", "eccentricity",     (),     "joint_eccentricity",    "rad",     None,
+      unset=_NAN),
+    _P("driver", "angle0",          (),     "driver_angle0",         "rad",     None,
+      slots=("th0_{i}",), unset=_NAN),
+    _P("driver", "omega",           (),     "driver_omega",          "rad s-1", None,
+      slots=("om{i}",)),
+    _P("force", "point",            (2,),   "force_point",           "m",       None,
+      slots=("fpx{i}", "fpy{i}")),
+    _P("force", "value",            (2,),   "force_value",           "N",       None,
+      slots=("fx{i}", "fy{i}"), unset=0.0),
+    _P("force", "torque",           (),     "force_torque",          "N m",     None,
+      slots=("tq{i}",), unset=0.0),
+    _P("spring", "points",          (2, 2), _SAB,                    "m",       None,
+      slots=("spax{i}", "spay{i}", "spbx{i}", "spby{i}")),
+    _P("spring", "stiffness",       (),     "spring_stiffness",      "N m-1",   NON_NEGATIVE,
+      slots=("k{i}",)),
+    _P("spring", "rest_length",     (),     "spring_rest_length",    "m",       NON_NEGATIVE,
+      slots=("l0{i}",), unset=_NAN),
+    _P("spring", "damping",         (),     "spring_damping",        "N s m-1", NON_NEGATIVE,
+      slots=("cd{i}",)),
+)
+# fmt: on
+"""Every sampled parameter; rows of one kind are in the order of their packed slots."""
+
+PARAMETERS: dict[tuple[str, str], Parameter] = {(p.kind, p.key): p for p in TABLE}
+"""The rows by (kind, key)."""
+
+KINDS: tuple[str, ...] = tuple(dict.fromkeys(p.kind for p in TABLE))
+"""The kinds, in packed order: scene, body, joint, driver, force, spring."""
+
+
+def rows_of(kind: str) -> list[Parameter]:
+    """The rows of one kind, in table order."""
+    return [p for p in TABLE if p.kind == kind]
+
+
+def param_units(path: str) -> str:
+    """CF units of a sampled parameter path (``body.bar.mass`` -> ``kg``), ``1`` if unknown."""
+    parts = [part.strip('"') for part in path.split("[", 1)[0].split(".")]
+    row = PARAMETERS.get((parts[0], parts[-1]))
+    return row.units if row is not None else "1"
+
+
+class Slot(NamedTuple):
+    """One row of the packed parameter array ``P``: its name, where its value comes from
+    (Model array and the element's index without the sample axis) and whether it holds
+    1 / value."""
+
+    name: str
+    field: str
+    at: tuple[int, ...]
+    inverse: bool
+
+
+def packed_slots(
+    joint_kind: Sequence[int], nbody: int, ndriver: int, nforce: int, nspring: int
+) -> list[Slot]:
+    """The rows of ``P`` for a topology, in order: kinds in table order, then items in order;
+    per item, every row's plain slots in table order, then the inverse slots.
+
+    A joint row with ``packed_for`` is packed only for joints of that kind.
+    """
+    counts = {"scene": 1, "body": nbody, "joint": len(joint_kind), "driver": ndriver}
+    counts |= {"force": nforce, "spring": nspring}
+    out: list[Slot] = []
+    for kind in KINDS:
+        rows = rows_of(kind)
+        for i in range(counts[kind]):
+            plain: list[Slot] = []
+            inverse: list[Slot] = []
+            for row in rows:
+                if row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
+                    continue
+                for names, target, inv in (
+                    (row.slots, plain, False),
+                    (row.inverse_slots, inverse, True),
+                ):
+                    if not names:
+                        continue
+                    for template, idx in zip(names, row.elements, strict=True):
+                        field, at = row.model_index(i, idx)
+                        target.append(Slot(template.format(i=i), field, at, inv))
+            out += plain + inverse
+    return out
+
+
+def packed_slot_names(
+    joint_kind: Sequence[int], nbody: int, ndriver: int, nforce: int, nspring: int
+) -> list[str]:
+    """The names of the rows of ``P`` (see :func:`packed_slots`), in order."""
+    return [s.name for s in packed_slots(joint_kind, nbody, ndriver, nforce, nspring)]

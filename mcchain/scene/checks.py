@@ -1,0 +1,144 @@
+"""Cross-reference checks of a scene: what the models alone cannot see.
+
+Duplicate or reserved names, references to unknown bodies, sampled and perturbation paths,
+distribution supports against the parameter's domain, counts against the design, ``output_dt``
+against ``dt``. Each failure is one :class:`~mcchain.errors.SceneError` line
+``key.path: reason``.
+"""
+
+from __future__ import annotations
+
+from mcchain.errors import SceneError
+from mcchain.parameters import PARAMETERS
+from mcchain.scene.models import FIXED_STEP_METHODS, GROUND_NAME, Scene, saltelli_count_error
+from mcchain.scene.paths import (
+    PARAM_SHAPES,
+    PERTURB_KEYS,
+    item_path,
+    parse_path,
+    quote_key,
+)
+
+
+def _item(scene: Scene, kind: str, index: int) -> str:
+    entry = getattr(scene, kind)[index]
+    if kind == "driver":
+        return item_path(kind, index, entry.body)
+    if getattr(entry, "_auto_name", False):
+        return f"{kind}[{index}]"
+    return item_path(kind, index, entry.name)
+
+
+def check_scene(scene: Scene) -> None:
+    """Cross-reference checks the models cannot make; raise :class:`SceneError`.
+
+    Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
+    drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
+    distributions' supports against the parameter's domain, a ``"saltelli"`` count against
+    the number of varied paths, ``output_dt`` against ``dt``. Kinematics are not checked.
+    """
+    bodies = scene.body_names
+    known = {GROUND_NAME, *bodies}
+    listing = ", ".join([GROUND_NAME, *bodies])
+
+    def unique(kind: str, names: list[str]) -> None:
+        seen: dict[str, int] = {}
+        for i, name in enumerate(names):
+            if name in seen:
+                entry = getattr(scene, kind)[i]
+                auto = " (a default name: give the item a `name`)" if entry._auto_name else ""
+                raise SceneError(
+                    f"{kind}[{i}].name: duplicate {kind} name {name!r} "
+                    f"(also {kind}[{seen[name]}]){auto}"
+                )
+            seen[name] = i
+
+    for i, name in enumerate(bodies):
+        if name == GROUND_NAME:
+            raise SceneError(f"body[{i}].name: {GROUND_NAME!r} is reserved for the fixed body")
+    seen_body: dict[str, int] = {}
+    for i, name in enumerate(bodies):
+        if name in seen_body:
+            raise SceneError(
+                f"body[{i}].name: duplicate body name {name!r} (also body[{seen_body[name]}])"
+            )
+        seen_body[name] = i
+
+    for kind in ("joint", "spring"):
+        items = getattr(scene, kind)
+        for i, item in enumerate(items):
+            where = _item(scene, kind, i)
+            for k, ref in enumerate(item.bodies):
+                if ref not in known:
+                    raise SceneError(
+                        f"{where}.bodies[{k}]: unknown body {ref!r} (known: {listing})"
+                    )
+            if item.bodies[0] == item.bodies[1]:
+                raise SceneError(f"{where}.bodies: joins body {item.bodies[0]!r} to itself")
+        unique(kind, [str(item.name) for item in items])
+
+    drivers: dict[str, int] = {}
+    for i, driver in enumerate(scene.driver):
+        where = _item(scene, "driver", i)
+        if driver.body == GROUND_NAME:
+            raise SceneError(f"{where}.body: cannot drive the fixed body 'ground'")
+        if driver.body not in known:
+            raise SceneError(f"{where}.body: unknown body {driver.body!r} (known: {listing})")
+        if driver.body in drivers:
+            raise SceneError(
+                f"driver[{i}].body: body {driver.body!r} already driven by "
+                f"driver[{drivers[driver.body]}]"
+            )
+        drivers[driver.body] = i
+
+    for i, force in enumerate(scene.force):
+        where = _item(scene, "force", i)
+        if force.body == GROUND_NAME:
+            raise SceneError(f"{where}.body: a load on the fixed body 'ground' does nothing")
+        if force.body not in known:
+            raise SceneError(f"{where}.body: unknown body {force.body!r} (known: {listing})")
+    unique("force", scene.force_names)
+
+    if scene.sample is not None:
+        targets: dict[str, str] = {}
+        for path, dist in scene.sample.vary.items():
+            where = f"sample.vary.{quote_key(path)}"
+            try:
+                ref = parse_path(scene, path, PARAM_SHAPES)
+            except ValueError as exc:
+                raise SceneError(f"{where}: {exc}") from None
+            canonical = ref.canonical()
+            if canonical in targets:
+                same = quote_key(targets[canonical])
+                raise SceneError(f"{where}: the same parameter as {same!s}")
+            targets[canonical] = path
+            domain = PARAMETERS[ref.kind, ref.key].domain
+            bounds = dist.bounds()
+            if domain is not None and bounds is not None and not domain.contains(bounds[0]):
+                raise SceneError(
+                    f"{where}.{dist.kind}: can give {bounds[0]!r}, but {ref.key} must be "
+                    f"{domain.text}"
+                )
+        if scene.sample.design == "saltelli":
+            reason = saltelli_count_error(len(scene.sample.vary), scene.sample.count)
+            if reason is not None:
+                raise SceneError(f"sample.count: {reason}")
+
+    if scene.simulate is not None:
+        sim = scene.simulate
+        for path in sim.perturb:
+            try:
+                parse_path(scene, path, {"body": PERTURB_KEYS})
+            except ValueError as exc:
+                raise SceneError(f"simulate.perturb.{quote_key(path)}: {exc}") from None
+        if sim.output_dt is not None:
+            if sim.output_dt < sim.dt:
+                raise SceneError(
+                    f"simulate.output_dt: must be >= dt ({sim.dt!r}), got {sim.output_dt!r}"
+                )
+            ratio = sim.output_dt / sim.dt
+            if sim.method in FIXED_STEP_METHODS and abs(ratio - round(ratio)) > 1e-9 * ratio:
+                raise SceneError(
+                    f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
+                    f"method {sim.method!r}, got {sim.output_dt!r}"
+                )
