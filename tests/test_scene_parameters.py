@@ -6,7 +6,6 @@ from dataclasses import fields
 
 import numpy as np
 import pytest
-from factory import chain_scene_dict
 
 from mcchain.kernels.lanes import Topology, pack_parameters
 from mcchain.model import (
@@ -27,6 +26,7 @@ from mcchain.parameters import (
 )
 from mcchain.scene import compile_model, parameter_slot, parse_path, scene_from_dict
 from mcchain.scene.paths import PARAM_SHAPES, SCENE_MODELS
+from mcchain.testing.factory import chain_scene_dict
 
 U = {"uniform": [0.1, 0.2]}
 
