@@ -1,0 +1,103 @@
+"""Contact-law data shared by the scene layer and the kernels (no numba here).
+
+The clearance joint's contact model (``[joint.contact]`` in a scene) is a compliant force law
+between the journal and its bearing: with ``d`` the vector from the bearing point to the
+journal point, ``δ = |d| − c`` the penetration, ``n = d/|d|`` and ``δ̇ = n·ḋ``,
+
+    F_n = K δ^m (1 + D δ̇)  for δ > 0, clipped at F_n ≥ 0;   F_n = 0 for δ ≤ 0,
+
+with the hysteresis damping factor ``D`` fixed at the contact's onset from the restitution
+``e`` and the approach speed ``δ̇⁻`` (see :data:`LAW_CODES`). The kernels evaluate the law
+(:mod:`mcchain.kernels.contact`); this module holds what the scene loader needs without
+importing numba: the law names and codes, the default friction regularisation velocities,
+and the stiffness of internal cylindrical contact from radius, clearance and materials.
+"""
+
+from __future__ import annotations
+
+import math
+
+HERTZ = 0
+"""Purely elastic Hertz law, D = 0."""
+LANKARANI_NIKRAVESH = 1
+"""D = 3 (1 − e²) / (4 δ̇⁻) (Lankarani & Nikravesh 1990, J. Mech. Des. 112, 369–376)."""
+FLORES = 2
+"""D = 8 (1 − e) / (5 e δ̇⁻) (Flores, Machado, Silva & Martins 2011, Multibody Syst. Dyn. 25,
+357–375)."""
+HUNT_CROSSLEY = 3
+"""D = 3 (1 − e) / (2 δ̇⁻) (Hunt & Crossley 1975, J. Appl. Mech. 42, 440–445)."""
+
+LAW_CODES: dict[str, int] = {
+    "hertz": HERTZ,
+    "lankarani-nikravesh": LANKARANI_NIKRAVESH,
+    "flores": FLORES,
+    "hunt-crossley": HUNT_CROSSLEY,
+}
+"""Scene spelling of ``[joint.contact] law`` → the integer code the kernels take."""
+
+LAW_NAMES: dict[int, str] = {code: name for name, code in LAW_CODES.items()}
+"""Integer code → scene spelling."""
+
+FRICTION_V0 = 1e-4
+"""Tangential speed (m/s) below which the regularised Coulomb friction is zero (Ambrósio's
+``v0``). Chosen here, not taken from a paper: well under the sliding speeds of a journal."""
+FRICTION_V1 = 1e-3
+"""Tangential speed (m/s) above which the regularised Coulomb friction is fully developed
+(Ambrósio's ``v1``); between ``v0`` and ``v1`` it ramps linearly. Chosen here."""
+
+
+def material_compliance(youngs_modulus: float, poisson_ratio: float) -> float:
+    """σ = (1 − ν²) / E (1/Pa) of one body's material."""
+    return (1.0 - poisson_ratio**2) / youngs_modulus
+
+
+def internal_cylinder_stiffness(
+    radius: float,
+    clearance: float,
+    youngs_modulus: float,
+    poisson_ratio: float,
+    bearing_youngs_modulus: float | None = None,
+    bearing_poisson_ratio: float | None = None,
+) -> float:
+    """Generalised stiffness K (N/m^1.5) of a journal of radius R_i in a bearing of radius
+    R_j = R_i + c, for the law with exponent m = 1.5:
+
+        K = 4 / (3 (σ_i + σ_j)) · (R_i R_j / (R_j − R_i))^½,   σ_k = (1 − ν_k²) / E_k.
+
+    This is the Hertz sphere formula with the relative radius of two conforming surfaces
+    (concave bearing), as used for revolute clearance joints by Lankarani & Nikravesh (1990,
+    J. Mech. Des. 112, 369–376, with h_k = σ_k / π), Flores & Ambrósio (2004, Comput. Struct.
+    82, 1359–1369) and Flores, Ambrósio, Claro & Lankarani (2008, *Kinematics and Dynamics of
+    Multibody Systems with Imperfect Joints*, Springer). Pereira, Ramalho & Ambrósio (2011,
+    Nonlinear Dyn. 63, 681–697) review it against cylinder-specific laws: it is the usual
+    choice in the field, not an exact line-contact result, and it stiffens without bound as
+    c → 0.
+
+    Args:
+        radius: R_i, the journal radius, m.
+        clearance: c = R_j − R_i > 0, m.
+        youngs_modulus, poisson_ratio: the journal's E_i (Pa) and ν_i.
+        bearing_youngs_modulus, bearing_poisson_ratio: the bearing's E_j, ν_j; default: the
+            journal's material.
+
+    Raises:
+        ValueError: a non-positive radius, clearance or modulus, or ν outside (−1, 0.5].
+    """
+    e_j = youngs_modulus if bearing_youngs_modulus is None else bearing_youngs_modulus
+    nu_j = poisson_ratio if bearing_poisson_ratio is None else bearing_poisson_ratio
+    for name, value in (
+        ("radius", radius),
+        ("clearance", clearance),
+        ("youngs_modulus", youngs_modulus),
+        ("bearing_youngs_modulus", e_j),
+    ):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"`{name}` must be a positive number, got {value!r}.")
+    for name, value in (("poisson_ratio", poisson_ratio), ("bearing_poisson_ratio", nu_j)):
+        if not (-1.0 < value <= 0.5):
+            raise ValueError(f"`{name}` must lie in (-1, 0.5], got {value!r}.")
+    r_i = radius
+    r_j = radius + clearance
+    sigma = material_compliance(youngs_modulus, poisson_ratio) + material_compliance(e_j, nu_j)
+    # R_j − R_i is the clearance itself: no cancellation for c ≪ R.
+    return 4.0 / (3.0 * sigma) * math.sqrt(r_i * r_j / clearance)

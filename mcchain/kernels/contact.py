@@ -1,0 +1,134 @@
+"""The clearance joint's contact law, scalar by scalar: hysteresis damping factor, normal
+force and its partial derivatives, regularised Coulomb friction.
+
+With ``d`` the vector from the bearing point to the journal point, ``δ = |d| − c``,
+``n = d/|d|`` and ``δ̇ = n·ḋ``:
+
+    F_n = K δ^m (1 + D δ̇)   for δ > 0, clipped at F_n ≥ 0;   F_n = 0 for δ ≤ 0,
+
+where ``D`` is fixed at the contact's onset (δ crossing 0 upwards, approach speed δ̇⁻ > 0):
+
+    hertz                 D = 0
+    lankarani-nikravesh   D = 3 (1 − e²) / (4 δ̇⁻)
+    flores                D = 8 (1 − e) / (5 e δ̇⁻)
+    hunt-crossley         D = 3 (1 − e) / (2 δ̇⁻)
+
+The journal body receives −F_n n at its point, the bearing body +F_n n. The law codes and
+the friction defaults live in :mod:`mcchain.contact` (no numba), so the scene loader can name
+them without compiling anything; they are re-exported here for the kernels.
+
+Every function is ``@njit(**JIT)`` on scalars: no allocation, never raises (a division by
+zero gives inf/NaN under ``error_model="numpy"``).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from mcchain.contact import (
+    FLORES,
+    FRICTION_V0,
+    FRICTION_V1,
+    HERTZ,
+    HUNT_CROSSLEY,
+    LANKARANI_NIKRAVESH,
+)
+from mcchain.kernels.config import JIT
+
+__all__ = [
+    "FLORES",
+    "FRICTION_V0",
+    "FRICTION_V1",
+    "HERTZ",
+    "HUNT_CROSSLEY",
+    "LANKARANI_NIKRAVESH",
+    "damping_factor",
+    "friction_factor",
+    "friction_force",
+    "normal_force",
+    "normal_force_derivatives",
+]
+
+
+@njit(**JIT)
+def damping_factor(law, e, approach_speed):
+    """Hysteresis damping factor D (s/m) of ``law`` for restitution ``e`` ∈ (0, 1] and the
+    approach speed δ̇⁻ (m/s) at the contact's onset.
+
+    D = 0 for ``HERTZ``, for an unknown code, and when δ̇⁻ is not > 0 (no located onset: a
+    contact present at t = 0, or one entered from the link with δ̇ = 0, stays undamped).
+    """
+    if not (approach_speed > 0.0):
+        return 0.0
+    if law == LANKARANI_NIKRAVESH:
+        return 3.0 * (1.0 - e * e) / (4.0 * approach_speed)
+    if law == FLORES:
+        return 8.0 * (1.0 - e) / (5.0 * e * approach_speed)
+    if law == HUNT_CROSSLEY:
+        return 3.0 * (1.0 - e) / (2.0 * approach_speed)
+    return 0.0
+
+
+@njit(**JIT)
+def normal_force(delta, delta_rate, K, m, D):
+    """F_n = K δ^m (1 + D δ̇) (N) for δ > 0, clipped at ≥ 0; 0 for δ ≤ 0.
+
+    Args:
+        delta: penetration δ, m.
+        delta_rate: δ̇, m/s (positive while the journal goes in).
+        K: stiffness, N/m^m.  m: exponent.  D: damping factor, s/m (:func:`damping_factor`).
+    """
+    if not (delta > 0.0):
+        return 0.0
+    f = K * delta**m * (1.0 + D * delta_rate)
+    if f > 0.0:
+        return f
+    return 0.0
+
+
+@njit(**JIT)
+def normal_force_derivatives(delta, delta_rate, K, m, D):
+    """F_n and its partial derivatives, for implicit steps and Newton iterations.
+
+    Returns:
+        (F_n, ∂F_n/∂δ, ∂F_n/∂δ̇): N, N/m, N s/m. Where the force is zero (δ ≤ 0 or clipped)
+        both derivatives are zero; at δ = 0 and at the clip they are the one-sided values
+        from the zero side.
+    """
+    if not (delta > 0.0):
+        return 0.0, 0.0, 0.0
+    p = delta**m
+    s = 1.0 + D * delta_rate
+    f = K * p * s
+    if not (f > 0.0):
+        return 0.0, 0.0, 0.0
+    return f, K * m * delta ** (m - 1.0) * s, K * p * D
+
+
+@njit(**JIT)
+def friction_factor(tangential_speed, v0=FRICTION_V0, v1=FRICTION_V1):
+    """Ambrósio's dynamic correction c_d ∈ [0, 1] of the regularised Coulomb law.
+
+    c_d = 0 for |v_t| ≤ v0, (|v_t| − v0)/(v1 − v0) for v0 < |v_t| < v1, 1 for |v_t| ≥ v1
+    (J. Ambrósio, "Impact of rigid and flexible multibody systems: deformation description
+    and contact models", in *Virtual Nonlinear Multibody Systems*, Kluwer 2003; used for
+    clearance joints by Flores et al. 2008). ``v0 < v1``, m/s.
+    """
+    a = abs(tangential_speed)
+    if a <= v0:
+        return 0.0
+    if a >= v1:
+        return 1.0
+    return (a - v0) / (v1 - v0)
+
+
+@njit(**JIT)
+def friction_force(normal, tangential_speed, mu, v0=FRICTION_V0, v1=FRICTION_V1):
+    """Tangential friction force F_t = −μ c_d(v_t) F_n sign(v_t) (N) on the body whose contact
+    point slides at ``tangential_speed`` v_t (m/s) relative to the other; ``normal`` F_n ≥ 0."""
+    cd = friction_factor(tangential_speed, v0, v1)
+    if cd == 0.0:
+        return 0.0
+    if tangential_speed > 0.0:
+        return -mu * cd * normal
+    return mu * cd * normal
