@@ -94,7 +94,7 @@ def test_simulate__history_dtype(dtype):
 
 @pytest.mark.parametrize("lanes", [0, 1000])
 def test_simulate__lane_count_outside_the_work_rows_is_refused(lanes):
-    from mcchain.kernels.integrators import LMAX
+    from mcchain.codegen.layout import LMAX
 
     model = scene_model("clearance_bar")
     with pytest.raises(ValueError, match=rf"^lanes: must be in 1\.\.{LMAX} .* got {lanes}$"):

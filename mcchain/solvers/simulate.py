@@ -335,8 +335,8 @@ class _Run:
 
 
 def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
-    from mcchain.kernels.integrators import lane_kernels
-    from mcchain.kernels.lanes import Topology, pack_parameters
+    from mcchain.codegen.generate import lane_kernels
+    from mcchain.codegen.topology import Topology, pack_parameters
 
     topo = Topology.from_model(run.model)
     module = lane_kernels(topo)
@@ -347,7 +347,7 @@ def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _run_erk(run: _Run, project: bool) -> None:
-    from mcchain.kernels.integrators import RK4
+    from mcchain.kernels.tableaux import RK4
 
     module, P, Q0, V0 = _lane_setup(run)
     s = run.settings
@@ -371,7 +371,7 @@ def _run_rk4_projection(run: _Run) -> None:
 
 
 def _run_rk45(run: _Run) -> None:
-    from mcchain.kernels.integrators import DOPRI5
+    from mcchain.kernels.tableaux import DOPRI5
 
     module, P, Q0, V0 = _lane_setup(run)
     s = run.settings
@@ -488,7 +488,8 @@ def _run_radau(run: _Run) -> None:
 
 
 def _run_generalized_alpha(run: _Run) -> None:
-    from mcchain.kernels.integrators import GeneralizedAlpha, generalized_alpha_run
+    from mcchain.kernels.implicit import generalized_alpha_run
+    from mcchain.kernels.tableaux import GeneralizedAlpha
 
     s = run.settings
     coef = GeneralizedAlpha.from_rho(s.rho_inf)
@@ -553,7 +554,7 @@ def simulate(
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
         lanes: instances per lane group of the lane kernels (1..LMAX; default LMAX, one
-            SIMD register of doubles: see ``integrators.LMAX``).
+            SIMD register of doubles: see ``mcchain.codegen.layout.LMAX``).
         diagnostics: also return ``steps`` (nsample,), the accepted steps each sample took
             (rk45 and radau).
 
@@ -562,7 +563,7 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = Settings.resolve(sim)
-    from mcchain.kernels.integrators import LMAX
+    from mcchain.codegen.layout import LMAX
 
     lanes = LMAX if lanes is None else lanes
     if not 1 <= int(lanes) <= LMAX:
