@@ -161,7 +161,8 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
             f"out_cf[s0 + l, it, {k}] = cf{k}",
         ]
     store += [f"out_dtq[s0 + l, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
-    store += ["out_cerr[s0 + l, it] = phimax", "out_en[s0 + l, it] = energy"]
+    # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
+    store += ["out_cerr[s0 + l, it] = phimax + energy * 0.0", "out_en[s0 + l, it] = energy"]
     em.emit(*store)
     block("store_outputs")
     em.emit(

@@ -247,7 +247,15 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                     )
                     iout[l] += 1
                 if iout[l] >= nout or not alive:
-                    # Finished or dead: the rest of a dead lane's history stays NaN.
+                    # Finished or dead: the rest of a dead lane's history is NaN.
+                    for it in range(iout[l], nout):
+                        out_q[s0 + l, it, :] = np.nan
+                        out_v[s0 + l, it, :] = np.nan
+                        out_jf[s0 + l, it, :] = np.nan
+                        out_cf[s0 + l, it, :] = np.nan
+                        out_dtq[s0 + l, it, :] = np.nan
+                        out_cerr[s0 + l, it] = np.nan
+                        out_en[s0 + l, it] = np.nan
                     run[l] = False
                     nsteps_out[s0 + l] = nstp[l]
                 else:

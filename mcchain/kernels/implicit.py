@@ -32,6 +32,7 @@ from mcchain.kernels.joints import (
     joint_forces,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
+from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 
@@ -56,6 +57,7 @@ def generalized_alpha_run(
     for sample in prange(nsample):
         s = np.int64(sample)  # one index type for the callees (see config.PJIT)
         if status[s] & FAILURE_BITS:
+            _nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
@@ -82,6 +84,7 @@ def generalized_alpha_run(
             acc[i] = rhs[i]
         for r in range(ncon):
             lam[r] = rhs[ndof + r]
+        written = 0  # output times written so far; after a failure the rest are NaN
         for n in range(nstep + 1):
             t = t0 + n * h
             constraint_residual(km, s, q, t, phi)
@@ -95,7 +98,8 @@ def generalized_alpha_run(
                 t_div[s] = t
                 break
             for k in range(km.joint_body_a.shape[0]):
-                if km.joint_kind[k] != 0 and lam[km.joint_row[k]] <= 0.0 and not st & CONTACT_LOST:
+                clearance = km.joint_kind[k] == JOINT_CLEARANCE
+                if clearance and lam[km.joint_row[k]] <= 0.0 and not st & CONTACT_LOST:
                     st |= CONTACT_LOST
                     t_cl[s] = t
             if n % out_every == 0:
@@ -112,6 +116,7 @@ def generalized_alpha_run(
                     out_dtq[s, it, d] = -lam[km.driver_row[d]]
                 out_cerr[s, it] = err
                 out_en[s, it] = kinetic_energy(km, s, v) + potential_energy(km, s, q)
+                written = it + 1
             if n == nstep:
                 break
             # Predictor.
@@ -184,7 +189,21 @@ def generalized_alpha_run(
             for i in range(ndof):
                 acc[i] += (1.0 - alpha_f) / (1.0 - alpha_m) * qdd[i]
                 acc[i] -= (1.0 - alpha_f) / (1.0 - alpha_m) * qdd_old[i]
+        _nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         status[s] = st
+
+
+@njit(**JIT)
+def _nan_history(s, first, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en):
+    """Outputs of sample ``s`` from history index ``first`` on are NaN (after a failure)."""
+    for it in range(first, out_q.shape[1]):
+        out_q[s, it, :] = np.nan
+        out_v[s, it, :] = np.nan
+        out_jf[s, it, :] = np.nan
+        out_cf[s, it, :] = np.nan
+        out_dtq[s, it, :] = np.nan
+        out_cerr[s, it] = np.nan
+        out_en[s, it] = np.nan
 
 
 @njit(**JIT)

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from mcchain.errors import SceneError
-from mcchain.model import Model
+from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 DEFAULT_BAUMGARTE = (10.0, 10.0)
@@ -409,6 +409,8 @@ def _run_radau(run: _Run) -> None:
     run.out["_steps"] = nsteps
     for i in range(n):
         if run.status[i] & FAILURE_BITS:
+            for array in flat:
+                array[i] = np.nan
             continue
         P = np.ascontiguousarray(P_all[:, i : i + 1])
 
@@ -479,7 +481,10 @@ def _run_radau(run: _Run) -> None:
         flat[4][i, :nt] = dtq[:, :nt].T
         flat[5][i, :nt] = cerr[:nt]
         flat[6][i, :nt] = en[:nt]
-        rows = [model.joint_row[k] for k in range(model.njoint) if model.joint_kind[k] == 1]
+        for array in flat:  # from the failure on (or past scipy's last time): NaN
+            array[i, nt:] = np.nan
+        kinds = model.joint_kind
+        rows = [model.joint_row[k] for k in range(model.njoint) if kinds[k] == JOINT_CLEARANCE]
         if rows:
             lost = np.any(LAM[rows, :nt] <= 0.0, axis=0)
             if lost.any():
@@ -596,20 +601,4 @@ def simulate(
     result["contact_lost_time"] = run.t_cl
     if diagnostics and steps is not None:
         result["steps"] = steps
-    _nan_after_failure(result)
     return result
-
-
-def _nan_after_failure(result: dict[str, np.ndarray]) -> None:
-    """Histories at and after a failure time are NaN (kernels already do; this is a guard)."""
-    fail = np.fmin(result["diverged_time"], result["singular_time"])
-    bad = np.nonzero(np.isfinite(fail))[0]
-    if not len(bad):
-        return
-    time = result["time"]
-    for s in bad:
-        first = int(np.searchsorted(time, fail[s], side="left"))
-        for key in ("q", "v", "joint_force", "contact_force", "driver_torque"):
-            result[key][s, first:] = np.nan
-        result["constraint_error"][s, first:] = np.nan
-        result["energy"][s, first:] = np.nan
