@@ -16,7 +16,7 @@ import numpy as np
 from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.emitter import Emitter
-from mcchain.codegen.layout import LMAX, Layout
+from mcchain.codegen.layout import LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY
@@ -247,7 +247,14 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
 def generate_source(topo: Topology, lmax: int = LMAX) -> str:
     """Source of the lane-kernel module of ``topo`` (RK4 and Dormand–Prince stage counts)
     for work rows ``lmax`` doubles long (default: this CPU's SIMD register)."""
-    parts = [templates.HEADER, f"# topology: {topo!r}\n"]
+    parts = [templates.HEADER, f"# topology: {topo!r}\n", ROW_MEANINGS]
+    for tableau, users in (
+        (RK4, "accel, outputs, erk_run, erk_project_run"),
+        (DOPRI5, "adaptive_run"),
+    ):
+        parts.append(
+            Layout(topo, tableau.nstage, lmax).row_map(f"{users} ({tableau.nstage} stages)")
+        )
     sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
     assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     erk_plain = templates.ERK_KERNEL.replace(templates.PROJECT_CALL, "") + templates.OUTPUT_HELPER

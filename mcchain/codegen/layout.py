@@ -32,6 +32,17 @@ fast or faster: 51.7 / 48.6 / 48.3 ns and 122.1 / 107.4 / 108.8 ns with rows of 
 lanes), 8 and 4."""
 
 
+ROW_MEANINGS = """\
+# W rows: P parameters (slots of Topology.slots); q, v state; kq{j}, kv{j} stage j (q', v');
+# kqc, kvc the current stage; aq, av the accumulated increment of a fixed step; qn, vn the
+# proposed state of an adaptive step; lam, lamc multipliers (accepted, current stage); chk,
+# chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
+# the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
+# tl the lane's time.
+"""
+"""Legend of the row map written into the header of a generated module."""
+
+
 class Layout:
     """Rows of the flat work array W (each ``lmax`` long, default :data:`LMAX`) of one
     lane group."""
@@ -57,6 +68,25 @@ class Layout:
         self.add("lamc", ncon1)
         for name in ("chk", "sg", "chkc", "sgc", "sga", "act", "pmax", "hs", "tl"):
             self.add(name, 1)
+
+    def row_map(self, title: str) -> str:
+        """A comment block naming the rows of W (first-last) under ``title``."""
+        names = list(self.rows)
+        items = []
+        for i, name in enumerate(names):
+            start = self.rows[name]
+            end = self.rows[names[i + 1]] if i + 1 < len(names) else self.size
+            items.append(f"{name} {start}" if end - start == 1 else f"{name} {start}-{end - 1}")
+        lines = [f"# W rows of {title}; element W[row * {self.lmax} + lane]:"]
+        for item in items:
+            if lines[-1].endswith(":"):
+                lines.append("#   " + item)
+            elif len(lines[-1]) + len(item) + 2 > 96:
+                lines[-1] += ","
+                lines.append("#   " + item)
+            else:
+                lines[-1] += ", " + item
+        return "\n".join(lines) + "\n"
 
     def add(self, name: str, count: int) -> None:
         self.rows[name] = self.size
