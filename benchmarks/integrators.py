@@ -154,7 +154,7 @@ def stability(out: Path, quick: bool) -> str:
     beside the linear limits of an undamped mode, y/p_max, with y where |R(iy)| first exceeds
     1 for the method's stability function R (2√2 for RK4; ≈ 1.0 for Dormand–Prince).
     """
-    from mcchain.kernels.integrators import DOPRI5, RK4
+    from mcchain.kernels.tableaux import DOPRI5, RK4
 
     clearances = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2] if not quick else [1e-5, 1e-3]
     fixed = ["rk4", "rk4-projection", "generalized-alpha"]
@@ -267,7 +267,7 @@ def drift(out: Path, quick: bool) -> str:
 
 def speed(out: Path, quick: bool, nsample: int = 10_000, threads=(1, 2)) -> str:
     """ns per instance-step of every method (dt 1e-4), 1 and 2 threads."""
-    from mcchain.kernels.integrators import LMAX as LANES
+    from mcchain.codegen.layout import LMAX as LANES
 
     nsample = min(nsample, 1000) if quick else nsample
     # the double pendulum of the chains section (both bars at −60°), so that MuJoCo's

@@ -7,7 +7,7 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from mcchain.kernels.lanes import Topology, pack_parameters
+from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.model import (
     JOINT_CLEARANCE,
     JOINT_IDEAL,
@@ -21,7 +21,6 @@ from mcchain.parameters import (
     PARAMETERS,
     TABLE,
     packed_slot_names,
-    packed_slots,
     param_units,
 )
 from mcchain.scene import compile_model, parameter_slot, parse_path, scene_from_dict
@@ -48,24 +47,42 @@ def _sizes(topo: Topology) -> tuple[tuple[int, ...], int, int, int, int]:
     return (topo.joint_kind, topo.nbody, topo.ndriver, len(topo.force_body), len(topo.spring_a))
 
 
+def test_packed_slot_names__in_the_generated_kernels_order() -> None:
+    """The order the generated code reads ``P`` in (its golden hashes pin it too): scene,
+    bodies (plain slots, then inverses), joints (clearance only for clearance joints),
+    drivers, forces, springs."""
+    names = packed_slot_names((JointKind.IDEAL, JointKind.CLEARANCE), 2, 1, 1, 1)
+    assert names == [
+        "gx", "gy",
+        "m0", "J0", "im0", "iJ0", "m1", "J1", "im1", "iJ1",
+        "sax0", "say0", "sbx0", "sby0", "sax1", "say1", "sbx1", "sby1", "cl1",
+        "th0_0", "om0",
+        "fpx0", "fpy0", "fx0", "fy0", "tq0",
+        "spax0", "spay0", "spbx0", "spby0", "k0", "l00", "cd0",
+    ]  # fmt: skip
+
+
 @pytest.mark.parametrize("name", sorted(TOPOLOGIES))
-def test_packed_slot_names__same_names_and_order_as_topology_slots(name: str) -> None:
+def test_topology_slots__are_the_tables(name: str) -> None:
     topo = TOPOLOGIES[name]()
-    assert packed_slot_names(*_sizes(topo)) == list(topo.slots())
+    assert list(topo.slots()) == packed_slot_names(*_sizes(topo))
 
 
-def test_packed_slots__fill_P_exactly_as_pack_parameters() -> None:
+def test_pack_parameters__rows_hold_the_model_values() -> None:
     vary = {"body.b1.mass": U, "joint.J2.clearance": U, "spring.S0.damping": U}
     d = chain_scene_dict(3, (0, 2), seed=2, springs=1, forces=1, driver=True, sample=5, vary=vary)
     model = compile_model(scene_from_dict(d))
     topo = Topology.from_model(model)
-    expected = pack_parameters(model, topo)
-    P = np.empty_like(expected)
-    for row, slot in enumerate(packed_slots(*_sizes(topo))):
-        arr = getattr(model, slot.field)
-        column = arr[(slice(None), *slot.at)]
-        P[row] = np.broadcast_to(1.0 / column if slot.inverse else column, (model.nsample,))
-    np.testing.assert_array_equal(P, expected)
+    P, slot = pack_parameters(model, topo), topo.slots()
+    assert P.shape == (len(slot), 5)
+    np.testing.assert_array_equal(P[slot["m1"]], model.body_mass[:, 1])
+    np.testing.assert_array_equal(P[slot["im1"]], 1.0 / model.body_mass[:, 1])
+    np.testing.assert_array_equal(P[slot["iJ0"]], np.full(5, 1.0 / model.body_inertia[0, 0]))
+    np.testing.assert_array_equal(P[slot["cl2"]], model.joint_clearance[:, 2])
+    np.testing.assert_array_equal(P[slot["sbx1"]], np.full(5, model.joint_point_b[0, 1, 0]))
+    np.testing.assert_array_equal(P[slot["cd0"]], model.spring_damping[:, 0])
+    np.testing.assert_array_equal(P[slot["om0"]], np.full(5, model.driver_omega[0, 0]))
+    assert "cl1" not in slot  # J1 is ideal: no clearance slot
 
 
 def test_table__rows_unique_and_every_slot_per_element() -> None:

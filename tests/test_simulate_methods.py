@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mcchain.codegen.generate import lane_kernels
+from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.errors import SceneError
-from mcchain.kernels.integrators import DOPRI5, RK4, GeneralizedAlpha, lane_kernels
-from mcchain.kernels.lanes import Topology, pack_parameters, sincos
+from mcchain.kernels.sincos import sincos
+from mcchain.kernels.tableaux import DOPRI5, RK4, GeneralizedAlpha
 from mcchain.solvers.simulate import METHODS, simulate
 from mcchain.testing.dense import energy, equations, kkt_acceleration
 from mcchain.testing.scenes import scene_model
@@ -167,14 +169,9 @@ def test_demand_order__same_stores_as_written():
     """Scheduling lane code keeps every value: reads after a store see it, redefinitions and
     += chains keep their order; then on a real generated body (a 3-bar chain with a clearance
     joint, a spring and a load), executed in Python."""
-    from mcchain.kernels.integrators import (
-        LMAX,
-        _blocks,
-        _demand_order,
-        _fill,
-        _Layout,
-        _tokens,
-    )
+    from mcchain.codegen.generate import _blocks, _fill, _tokens
+    from mcchain.codegen.layout import LMAX, Layout
+    from mcchain.codegen.schedule import demand_order
     from mcchain.scene import compile_model, load_scene_text
     from mcchain.testing.factory import chain_scene_text
 
@@ -191,12 +188,12 @@ def test_demand_order__same_stores_as_written():
     ]
     start = np.arange(1.0, 200.0)
     assert np.array_equal(
-        _run_lane_body(_demand_order(body), start.copy()), _run_lane_body(body, start.copy())
+        _run_lane_body(demand_order(body), start.copy()), _run_lane_body(body, start.copy())
     )
 
     model = compile_model(load_scene_text(chain_scene_text(3, {1}, 5, springs=1, forces=1)))
     topo = Topology.from_model(model)
-    lay = _Layout(topo, RK4.nstage)
+    lay = Layout(topo, RK4.nstage)
     template = "for l in range(nl):\n    @@load_params\n    @@load_stage_sub\n    @@accel_stage\n"
     template += "    @@store_stage\n    @@accumulate\n"
     text = _fill(template, _blocks(topo, RK4.nstage, lay), _tokens(topo, RK4.nstage, lay), lay)
@@ -207,7 +204,7 @@ def test_demand_order__same_stores_as_written():
     W[q] = np.repeat(model.q0[0], LMAX)
     expected = _run_lane_body(body, W.copy())
     assert np.isfinite(expected).all()
-    assert np.array_equal(_run_lane_body(_demand_order(body), W.copy()), expected)
+    assert np.array_equal(_run_lane_body(demand_order(body), W.copy()), expected)
 
 
 def test_radau__reports_the_steps_scipy_takes():

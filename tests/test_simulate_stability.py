@@ -99,7 +99,7 @@ def test_other_methods__match_the_parallelogram_or_flag_singular(method):
 
 def test_imaginary_axis_limit__rk4_is_2sqrt2_and_dopri5_stops_near_1():
     """The limits the stability chart draws, from each tableau's stability function."""
-    from mcchain.kernels.integrators import DOPRI5, RK4
+    from mcchain.kernels.tableaux import DOPRI5, RK4
 
     assert imaginary_axis_limit(RK4.A, RK4.b) == pytest.approx(2 * np.sqrt(2), rel=1e-9)
     y = imaginary_axis_limit(DOPRI5.A, DOPRI5.b)

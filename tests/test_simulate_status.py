@@ -8,8 +8,9 @@ import numba
 import numpy as np
 import pytest
 
-from mcchain.solvers.simulate import simulate
-from mcchain.status import CONTACT_LOST
+from mcchain.solvers import simulate as simulate_module
+from mcchain.solvers.simulate import METHODS, simulate
+from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST
 from mcchain.testing.scenes import scene_model
 
 KEYS = ("q", "v", "joint_force", "contact_force", "driver_torque", "constraint_error", "energy")
@@ -94,8 +95,37 @@ def test_simulate__history_dtype(dtype):
 
 @pytest.mark.parametrize("lanes", [0, 1000])
 def test_simulate__lane_count_outside_the_work_rows_is_refused(lanes):
-    from mcchain.kernels.integrators import LMAX
+    from mcchain.codegen.layout import LMAX
 
     model = scene_model("clearance_bar")
     with pytest.raises(ValueError, match=rf"^lanes: must be in 1\.\.{LMAX} .* got {lanes}$"):
         simulate(model, dict(t_end=1e-3, dt=1e-4), lanes=lanes)
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_simulate__outputs_from_a_failure_on_are_nan_as_the_method_writes_them(method, monkeypatch):
+    """The histories are filled with +inf before the method runs, so an element it leaves
+    unwritten fails the test: before a sample's failure time every output is finite, from it
+    on NaN; a sample failed on entry is NaN throughout."""
+    allocate = simulate_module._allocate
+
+    def sentinel(*args, **kwargs):
+        out = allocate(*args, **kwargs)
+        for array in out.values():
+            array.fill(np.inf)
+        return out
+
+    monkeypatch.setattr(simulate_module, "_allocate", sentinel)
+    model = scene_model("clearance_bar", nsample=4)
+    v_start = np.repeat(model.v0, 4, axis=0)
+    v_start[:, 2] += [0.0, 5.0, 40.0, 0.0]  # Φ̇ ≠ 0: the constraint error grows past tolerance
+    status = np.array([0, 0, 0, ASSEMBLY_FAILED], np.uint32)
+    sim = dict(t_end=0.02, dt=1e-3, output_dt=1e-3, method=method)
+    out = simulate(model, sim, v_start=v_start, status=status, history_dtype=np.float64)
+    fail = np.fmin(out["diverged_time"], out["singular_time"])
+    assert np.isnan(fail[0]) and np.isfinite(fail[2]) and out["status"][3] & ASSEMBLY_FAILED
+    for s in range(4):
+        first = 0 if s == 3 else int(np.searchsorted(out["time"], fail[s], side="left"))
+        for key in KEYS:
+            assert np.isfinite(out[key][s, :first]).all(), (key, s)
+            assert np.isnan(out[key][s, first:]).all(), (key, s)

@@ -20,8 +20,7 @@ import math
 from numba import njit
 
 from mcchain.kernels.config import JIT
-
-JOINT_IDEAL = 0  # mirrors mcchain.model.JOINT_IDEAL (numba reads module globals as constants)
+from mcchain.model import JOINT_IDEAL  # numba reads module globals as compile-time constants
 
 
 @njit(**JIT)

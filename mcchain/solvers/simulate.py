@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from mcchain.errors import SceneError
-from mcchain.model import Model
+from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import Simulate
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
@@ -297,8 +297,8 @@ class _Run:
 
 
 def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
-    from mcchain.kernels.integrators import lane_kernels
-    from mcchain.kernels.lanes import Topology, pack_parameters
+    from mcchain.codegen.generate import lane_kernels
+    from mcchain.codegen.topology import Topology, pack_parameters
 
     topo = Topology.from_model(run.model)
     module = lane_kernels(topo)
@@ -309,7 +309,7 @@ def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _run_erk(run: _Run, project: bool) -> None:
-    from mcchain.kernels.integrators import RK4
+    from mcchain.kernels.tableaux import RK4
 
     module, P, Q0, V0 = _lane_setup(run)
     s = run.settings
@@ -333,7 +333,7 @@ def _run_rk4_projection(run: _Run) -> None:
 
 
 def _run_rk45(run: _Run) -> None:
-    from mcchain.kernels.integrators import DOPRI5
+    from mcchain.kernels.tableaux import DOPRI5
 
     module, P, Q0, V0 = _lane_setup(run)
     s = run.settings
@@ -371,6 +371,8 @@ def _run_radau(run: _Run) -> None:
     run.out["_steps"] = nsteps
     for i in range(n):
         if run.status[i] & FAILURE_BITS:
+            for array in flat:
+                array[i] = np.nan
             continue
         P = np.ascontiguousarray(P_all[:, i : i + 1])
 
@@ -441,7 +443,10 @@ def _run_radau(run: _Run) -> None:
         flat[4][i, :nt] = dtq[:, :nt].T
         flat[5][i, :nt] = cerr[:nt]
         flat[6][i, :nt] = en[:nt]
-        rows = [model.joint_row[k] for k in range(model.njoint) if model.joint_kind[k] == 1]
+        for array in flat:  # from the failure on (or past scipy's last time): NaN
+            array[i, nt:] = np.nan
+        kinds = model.joint_kind
+        rows = [model.joint_row[k] for k in range(model.njoint) if kinds[k] == JOINT_CLEARANCE]
         if rows:
             lost = np.any(LAM[rows, :nt] <= 0.0, axis=0)
             if lost.any():
@@ -450,7 +455,8 @@ def _run_radau(run: _Run) -> None:
 
 
 def _run_generalized_alpha(run: _Run) -> None:
-    from mcchain.kernels.integrators import GeneralizedAlpha, generalized_alpha_run
+    from mcchain.kernels.implicit import generalized_alpha_run
+    from mcchain.kernels.tableaux import GeneralizedAlpha
 
     s = run.settings
     coef = GeneralizedAlpha.from_rho(s.rho_inf)
@@ -515,7 +521,7 @@ def simulate(
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
         lanes: instances per lane group of the lane kernels (1..LMAX; default LMAX, one
-            SIMD register of doubles: see ``integrators.LMAX``).
+            SIMD register of doubles: see ``mcchain.codegen.layout.LMAX``).
         diagnostics: also return ``steps`` (nsample,), the accepted steps each sample took
             (rk45 and radau).
 
@@ -524,7 +530,7 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = Settings.resolve(sim)
-    from mcchain.kernels.integrators import LMAX
+    from mcchain.codegen.layout import LMAX
 
     lanes = LMAX if lanes is None else lanes
     if not 1 <= int(lanes) <= LMAX:
@@ -557,20 +563,4 @@ def simulate(
     result["contact_lost_time"] = run.t_cl
     if diagnostics and steps is not None:
         result["steps"] = steps
-    _nan_after_failure(result)
     return result
-
-
-def _nan_after_failure(result: dict[str, np.ndarray]) -> None:
-    """Histories at and after a failure time are NaN (kernels already do; this is a guard)."""
-    fail = np.fmin(result["diverged_time"], result["singular_time"])
-    bad = np.nonzero(np.isfinite(fail))[0]
-    if not len(bad):
-        return
-    time = result["time"]
-    for s in bad:
-        first = int(np.searchsorted(time, fail[s], side="left"))
-        for key in ("q", "v", "joint_force", "contact_force", "driver_torque"):
-            result[key][s, first:] = np.nan
-        result["constraint_error"][s, first:] = np.nan
-        result["energy"][s, first:] = np.nan

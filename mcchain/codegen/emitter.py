@@ -1,47 +1,23 @@
-"""Lane-form evaluation of the equations of motion, generated per scene topology.
+"""Straight-line code of one lane of a :class:`~mcchain.codegen.topology.Topology`.
 
-PERFORMANCE.md: a group of ``lanes`` instances is advanced in lockstep with the instance index
-innermost (``x[..., lane]``), the lane count is a run-time argument, the step is one fused
-function body, and sin/cos are a branch-free polynomial. To get a fused body without paying
-for what a scene does not have, the straight-line code for one lane is *generated* from the
-scene's topology (which bodies each joint, driver, force and spring connects, and the joint
-kinds) — never from parameter values, which are read per lane from the packed array ``P``.
-The generated module is written once to a cache folder under a name that is the hash of its
-text (and of these generator sources), so numba's ``cache=True`` works for it as for any file.
+:class:`Emitter` writes the index-1 acceleration (Schur complement S = B M⁻¹ Bᵀ, sparse
+LDLᵀ in a bandwidth-reducing row order), the constraint projection and the outputs (joint
+forces, energy, max |Φ|); the generator (``generate.py``) puts these blocks into the time
+loops of ``templates.py``. :func:`sincos_code` is the branch-free sine/cosine it inlines.
 
-What this module provides:
-
-* :class:`Topology`: the hashable structure of a :class:`~mcchain.model.Model`.
-* :func:`pack_parameters`: the per-sample parameters as ``P`` (nslot, nsample), float64,
-  sample innermost; the slot of each named quantity is fixed by :class:`Topology`.
-* :class:`Emitter`: straight-line code for one lane — the index-1 acceleration (Schur
-  complement S = B M⁻¹ Bᵀ, sparse LDLᵀ in a bandwidth-reducing row order), the constraint
-  projection, the outputs (joint forces, energy, max |Φ|). Integrators (``integrators.py``)
-  put these blocks into their time-stepping templates.
-* :func:`load_module`: write a generated source to the cache and import it.
-* :func:`sincos`: the polynomial sine/cosine (also emitted inline into generated code).
-
-Formulation: DESIGN §2 (and ``mcchain/kernels/joints.py``, whose conventions are mirrored:
-rotated point p = A(θ) s, d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
+Formulation: the constraints and forces of ``mcchain/kernels/joints.py`` and
+``mcchain/kernels/forces.py``, whose conventions are mirrored (rotated point p = A(θ) s,
+d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
 """
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
-import os
-import sys
-import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
-from types import ModuleType
 
 import numpy as np
-from numba import njit
 
-from mcchain.kernels.config import JIT
-from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model
+from mcchain.codegen.topology import Topology
+from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -87,160 +63,6 @@ def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
     temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "h", "sw", "ss", "sa", "ca")
     names = {n: f"_{n}{tag}" for n in temps}
     return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
-
-
-def _sincos_function() -> str:
-    body = "\n".join("    " + line for line in sincos_code("x", "s", "c", ""))
-    return f"def sincos(x):\n{body}\n    return s, c\n"
-
-
-_namespace: dict[str, object] = {"math": __import__("math"), "np": np}
-exec(_sincos_function(), _namespace)
-# exec'd code has no file for numba's cache: compiled uncached (it serves tests and tools).
-sincos = njit(**dict(JIT, cache=False))(_namespace["sincos"])
-sincos.__doc__ = "(sin x, cos x) by the branch-free polynomial that generated kernels inline."
-
-
-# ---------------------------------------------------------------------------------------------
-# Topology and parameter packing
-
-
-@dataclass(frozen=True)
-class Topology:
-    """The structure of a model that generated code depends on (never parameter values).
-
-    Constraint rows follow :func:`mcchain.model.constraint_rows`: joints in order (2 rows
-    ideal, 1 clearance), then drivers.
-    """
-
-    nbody: int
-    joint_a: tuple[int, ...]
-    joint_b: tuple[int, ...]
-    joint_kind: tuple[int, ...]
-    driver_body: tuple[int, ...]
-    force_body: tuple[int, ...]
-    spring_a: tuple[int, ...]
-    spring_b: tuple[int, ...]
-
-    @classmethod
-    def from_model(cls, model: Model) -> Topology:
-        def t(a: np.ndarray) -> tuple[int, ...]:
-            return tuple(int(x) for x in np.asarray(a).reshape(-1))
-
-        return cls(
-            nbody=model.nbody,
-            joint_a=t(model.joint_body_a),
-            joint_b=t(model.joint_body_b),
-            joint_kind=t(model.joint_kind),
-            driver_body=t(model.driver_body),
-            force_body=t(model.force_body),
-            spring_a=t(model.spring_body_a),
-            spring_b=t(model.spring_body_b),
-        )
-
-    @property
-    def ndof(self) -> int:
-        return 3 * self.nbody
-
-    @property
-    def njoint(self) -> int:
-        return len(self.joint_kind)
-
-    @property
-    def ndriver(self) -> int:
-        return len(self.driver_body)
-
-    @property
-    def joint_row(self) -> tuple[int, ...]:
-        rows, r = [], 0
-        for kind in self.joint_kind:
-            rows.append(r)
-            r += 2 if kind == JOINT_IDEAL else 1
-        return tuple(rows)
-
-    @property
-    def driver_row(self) -> tuple[int, ...]:
-        first = sum(2 if k == JOINT_IDEAL else 1 for k in self.joint_kind)
-        return tuple(first + i for i in range(self.ndriver))
-
-    @property
-    def ncon(self) -> int:
-        return sum(2 if k == JOINT_IDEAL else 1 for k in self.joint_kind) + self.ndriver
-
-    @property
-    def clearance_rows(self) -> tuple[int, ...]:
-        return tuple(
-            r
-            for r, kind in zip(self.joint_row, self.joint_kind, strict=True)
-            if kind == JOINT_CLEARANCE
-        )
-
-    def slots(self) -> dict[str, int]:
-        """Row of ``P`` holding each named per-sample quantity."""
-        names = ["gx", "gy"]
-        for b in range(self.nbody):
-            names += [f"m{b}", f"J{b}", f"im{b}", f"iJ{b}"]
-        for k, kind in enumerate(self.joint_kind):
-            names += [f"sax{k}", f"say{k}", f"sbx{k}", f"sby{k}"]
-            if kind == JOINT_CLEARANCE:
-                names.append(f"cl{k}")
-        for d in range(self.ndriver):
-            names += [f"th0_{d}", f"om{d}"]
-        for f in range(len(self.force_body)):
-            names += [f"fpx{f}", f"fpy{f}", f"fx{f}", f"fy{f}", f"tq{f}"]
-        for s in range(len(self.spring_a)):
-            names += [f"spax{s}", f"spay{s}", f"spbx{s}", f"spby{s}", f"k{s}", f"l0{s}", f"cd{s}"]
-        return {n: i for i, n in enumerate(names)}
-
-
-def pack_parameters(model: Model, topology: Topology | None = None) -> np.ndarray:
-    """The parameters of every sample as ``P`` (nslot, nsample), sample innermost."""
-    topo = topology or Topology.from_model(model)
-    slots = topo.slots()
-    n = model.nsample
-    P = np.empty((len(slots), n), dtype=np.float64)
-
-    def put(name: str, column: np.ndarray) -> None:
-        P[slots[name]] = np.broadcast_to(np.asarray(column, dtype=np.float64), (n,))
-
-    def col(arr: np.ndarray, *index: int) -> np.ndarray:
-        a = np.asarray(arr, dtype=np.float64)
-        return a[(slice(None), *index)]
-
-    put("gx", col(model.gravity, 0))
-    put("gy", col(model.gravity, 1))
-    for b in range(topo.nbody):
-        m = col(model.body_mass, b)
-        J = col(model.body_inertia, b)
-        put(f"m{b}", m)
-        put(f"J{b}", J)
-        put(f"im{b}", 1.0 / m)
-        put(f"iJ{b}", 1.0 / J)
-    for k, kind in enumerate(topo.joint_kind):
-        put(f"sax{k}", col(model.joint_point_a, k, 0))
-        put(f"say{k}", col(model.joint_point_a, k, 1))
-        put(f"sbx{k}", col(model.joint_point_b, k, 0))
-        put(f"sby{k}", col(model.joint_point_b, k, 1))
-        if kind == JOINT_CLEARANCE:
-            put(f"cl{k}", col(model.joint_clearance, k))
-    for d in range(topo.ndriver):
-        put(f"th0_{d}", col(model.driver_angle0, d))
-        put(f"om{d}", col(model.driver_omega, d))
-    for f in range(len(topo.force_body)):
-        put(f"fpx{f}", col(model.force_point, f, 0))
-        put(f"fpy{f}", col(model.force_point, f, 1))
-        put(f"fx{f}", col(model.force_value, f, 0))
-        put(f"fy{f}", col(model.force_value, f, 1))
-        put(f"tq{f}", col(model.force_torque, f))
-    for s in range(len(topo.spring_a)):
-        put(f"spax{s}", col(model.spring_point_a, s, 0))
-        put(f"spay{s}", col(model.spring_point_a, s, 1))
-        put(f"spbx{s}", col(model.spring_point_b, s, 0))
-        put(f"spby{s}", col(model.spring_point_b, s, 1))
-        put(f"k{s}", col(model.spring_stiffness, s))
-        put(f"l0{s}", col(model.spring_rest_length, s))
-        put(f"cd{s}", col(model.spring_damping, s))
-    return P
 
 
 # ---------------------------------------------------------------------------------------------
@@ -576,7 +398,7 @@ class Emitter:
                 S[i, j] = f"S{i}_{j}"
         # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
         L: set[tuple[int, int]] = set()
-        lower = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
+        lower: list[set[int]] = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
         for j in range(n):
             for i in range(j + 1, n):
                 if (i, j) in S or (lower[i] & lower[j]):
@@ -584,8 +406,8 @@ class Emitter:
                     lower[i].add(j)
 
         for j in range(n):
-            terms = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
-            dj = S[j, j] + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
+            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
             self.emit(
                 f"D{j} = {dj}",
                 f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
@@ -596,8 +418,8 @@ class Emitter:
                     continue
                 common = sorted(lower[i] & lower[j])
                 sij = S.get((i, j), "0.0")
-                terms = [f"L{i}_{k} * E{j}_{k}" for k in common]
-                num = sij + ("" if not terms else " - (" + " + ".join(terms) + ")")
+                prods = [f"L{i}_{k} * E{j}_{k}" for k in common]
+                num = sij + ("" if not prods else " - (" + " + ".join(prods) + ")")
                 self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
             # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
         self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
@@ -612,7 +434,7 @@ class Emitter:
             terms = [f"L{i}_{k} * y{out}{k}" for k in sorted(self._lower[i])]
             expr = f"{rhs}{order[i]}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
             self.emit(f"y{out}{i} = {expr}")
-        upper = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
+        upper: list[list[int]] = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
         for i, k in self._L:
             upper[k].append(i)
         for k in reversed(range(n)):
@@ -725,64 +547,3 @@ class Emitter:
                 f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
                 f"energy += 0.5 * p_k{s} * st{s} * st{s}",
             )
-
-
-# ---------------------------------------------------------------------------------------------
-# Generated modules: written once under a content hash, imported like any file.
-
-_GENERATOR_FILES = ("lanes.py", "integrators.py")
-
-
-def generator_hash() -> str:
-    """Hash of the generator sources: generated files change name when the generator does."""
-    h = hashlib.sha256()
-    here = Path(__file__).parent
-    for name in _GENERATOR_FILES:
-        h.update((here / name).read_bytes())
-    return h.hexdigest()[:16]
-
-
-def cache_dir() -> Path:
-    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``."""
-    root = os.environ.get("MCCHAIN_CACHE_DIR")
-    if root:
-        path = Path(root)
-    else:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        path = Path(base) / "mcchain"
-    path = path / "generated"
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        if not os.access(path, os.W_OK):
-            raise PermissionError(path)
-    except OSError:
-        path = Path(tempfile.gettempdir()) / f"mcchain-generated-{os.getuid()}"
-        path.mkdir(parents=True, exist_ok=True)
-    return path
-
-
-def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:
-    """Write ``source`` to the cache (atomically, once) and import it.
-
-    The file name is the hash of the text, so two processes generating the same module write
-    the same file, and numba finds its cached machine code beside it.
-    """
-    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
-    name = f"{prefix}_{digest}"
-    if name in sys.modules:
-        return sys.modules[name]
-    folder = cache_dir()
-    path = folder / f"{name}.py"
-    if not path.exists() or path.read_text() != source:
-        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            fh.write(source)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    spec = importlib.util.spec_from_file_location(name, path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module

@@ -1,0 +1,80 @@
+"""Generated modules on disk: written once under a content hash, imported like any file.
+
+The file name is the hash of the generated text, so numba's ``cache=True`` works for a
+generated module as for any other file, and two processes generating the same module write
+the same file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import tempfile
+from pathlib import Path
+from types import ModuleType
+
+_GENERATOR_FILES = (
+    "topology.py",
+    "emitter.py",
+    "layout.py",
+    "templates.py",
+    "schedule.py",
+    "generate.py",
+)
+
+
+def generator_hash() -> str:
+    """Hash of the generator sources (the modules of this package that shape the text)."""
+    h = hashlib.sha256()
+    here = Path(__file__).parent
+    for name in _GENERATOR_FILES:
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``."""
+    root = os.environ.get("MCCHAIN_CACHE_DIR")
+    if root:
+        path = Path(root)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        path = Path(base) / "mcchain"
+    path = path / "generated"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        if not os.access(path, os.W_OK):
+            raise PermissionError(path)
+    except OSError:
+        path = Path(tempfile.gettempdir()) / f"mcchain-generated-{os.getuid()}"
+        path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:
+    """Write ``source`` to the cache (atomically, once) and import it.
+
+    The file name is the hash of the text, so two processes generating the same module write
+    the same file, and numba finds its cached machine code beside it.
+    """
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    name = f"{prefix}_{digest}"
+    if name in sys.modules:
+        return sys.modules[name]
+    folder = cache_dir()
+    path = folder / f"{name}.py"
+    if not path.exists() or path.read_text() != source:
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            fh.write(source)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

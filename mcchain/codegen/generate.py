@@ -1,0 +1,286 @@
+"""The lane-kernel module of a topology: its source text and the loaded module.
+
+:func:`generate_source` fills the templates (``templates.py``) with the emitter's blocks
+(``emitter.py``) for the work-array rows of ``layout.py``, then schedules the lane loops
+(``schedule.py``); :func:`lane_kernels` writes the text to the cache and imports it
+(``cache.py``; numba is imported then, by the generated module).
+"""
+
+from __future__ import annotations
+
+import re
+from types import ModuleType
+
+import numpy as np
+
+from mcchain.codegen import templates
+from mcchain.codegen.cache import load_module
+from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.layout import LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.schedule import schedule_lane_loops
+from mcchain.codegen.topology import Topology
+from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY
+from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
+
+
+def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: Layout) -> str:
+    out: list[str] = []
+    for line in template.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("@@"):
+            indent = len(line) - len(stripped)
+            block = blocks[stripped[2:]]
+            out.extend((" " * indent + b) if b else "" for b in block.splitlines())
+        else:
+            out.append(line)
+    text = "\n".join(out)
+    text = re.sub(
+        r"@\[(\w+)(?:,(\d+))?\]", lambda m: lay.at(m.group(1), int(m.group(2) or 0)), text
+    )
+    for key, value in tokens.items():
+        text = re.sub(rf"\b{key}\b", value, text)
+        text = text.replace(f"_{key}(", f"_{value}(")
+    return text
+
+
+def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
+    em = Emitter(topo)
+    ndof, ncon = topo.ndof, topo.ncon
+    at = lay.at
+    b: dict[str, str] = {}
+
+    def block(name: str) -> None:
+        b[name] = em.take(0)
+
+    # prb: the sum of the accelerations, so a non-finite one reaches the failure check (as
+    # a running sum: each term is consumed where it is made).
+    probe = (
+        ["prb = 0.0"]
+        if ndof == 0
+        else ["prb = qdd0", *(f"prb = prb + qdd{i}" for i in range(1, ndof))]
+    )
+    # Python-facing kernels (arrays P, Q, V; not the hot path).
+    em.load_params(lambda k: f"P[{k}, l]")
+    block("load_params_p")
+    em.emit(
+        *(f"q{i} = Q[{i}, l]" for i in range(ndof)), *(f"v{i} = V[{i}, l]" for i in range(ndof))
+    )
+    block("load_state_qv")
+    em.emit(*(f"lam{r} = LAM[{r}, l]" for r in range(ncon)))
+    block("load_lam_arr")
+    em.acceleration()
+    block("accel")
+    em.emit(
+        *(f"qdd_out[{i}, l] = qdd{i}" for i in range(ndof)),
+        *(f"lam_out[{r}, l] = lam{r}" for r in range(ncon)),
+        *probe,
+        "chk_out[l] = phimax + prb * 0.0",
+        "sing_out[l] = sing",
+    )
+    block("store_accel")
+    em.outputs(t="t_now")
+    block("outputs")
+    store = []
+    for k in range(topo.njoint):
+        store += [f"jf_out[{2 * k}, l] = jfx{k}", f"jf_out[{2 * k + 1}, l] = jfy{k}"]
+        store += [f"cf_out[{k}, l] = cf{k}"]
+    store += [f"dtq_out[{d}, l] = dtq{d}" for d in range(topo.ndriver)]
+    store += ["cerr_out[l] = phimax", "en_out[l] = energy"]
+    em.emit(*store)
+    block("store_outputs_py")
+
+    # Lane kernels: everything in W.
+    em.load_params(lambda k: at("P", k))
+    block("load_params")
+    em.emit(
+        *(f"q{i} = {at('q', i)}" for i in range(ndof)),
+        *(f"v{i} = {at('v', i)}" for i in range(ndof)),
+    )
+    block("load_state")
+    em.emit(*(f"lam{r} = {at('lam', r)}" for r in range(ncon)))
+    block("load_lam")
+    em.emit(*(f"lam{r} = W[(lamrow + {r}) * {lay.lmax} + l]" for r in range(ncon)))
+    block("load_lam_dyn")
+    em.emit(*(f"ah{j} = A[s, {j}] * h" for j in range(nstage)))
+    block("stage_coefs")
+    em.emit("cs = cc[s]", *(f"aa{j} = A[s, {j}]" for j in range(nstage)))
+    block("stage_coefs_lane")
+    em.emit(*(f"aa{j} = A[0, {j}]" for j in range(nstage)), "hh = 0.0")
+    block("stage_coefs_zero")
+    em.emit(*(f"ah{j} = aa{j} * hh" for j in range(nstage)))
+    block("stage_coefs_per_lane")
+    for i in range(ndof):
+        qt = " + ".join(f"ah{j} * {at(f'kq{j}', i)}" for j in range(nstage))
+        vt = " + ".join(f"ah{j} * {at(f'kv{j}', i)}" for j in range(nstage))
+        em.emit(f"q{i} = {at('q', i)} + ({qt})", f"v{i} = {at('v', i)} + ({vt})")
+    block("load_stage")
+    em.acceleration(t="ts")
+    block("accel_stage")
+
+    em.emit(
+        *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
+        *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
+        *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
+        *probe,
+        f"{at('chkc')} = phimax + prb * 0.0",
+        f"{at('sgc')} = sing",
+    )
+    block("store_stage")
+    em.emit(
+        *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(ndof)),
+        *(f"{at('kv0', i)} = {at('kvc', i)}" for i in range(ndof)),
+        *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
+        f"{at('chk')} = {at('chkc')}",
+        f"{at('sg')} = {at('sgc')}",
+    )
+    block("accept_zero")
+    em.emit(
+        *(f"{at(x, i)} = np.nan" for x in ("q", "v", "kq0", "kv0") for i in range(ndof)),
+        *(f"{at(x, r)} = np.nan" for x in ("lam", "lamc") for r in range(ncon)),
+    )
+    block("kill_lane")
+    for row, name in (("lam", "contact_check"), ("lamc", "contact_check_c")):
+        lines = []
+        for r in topo.clearance_rows:
+            lines += [
+                f"if {at(row, r)} <= 0.0 and (st[l] & CONTACT_BIT) == 0:",
+                "    st[l] |= CONTACT_BIT",
+                "    tcl[l] = ts",
+            ]
+        em.emit(*(lines or ["pass"]))
+        block(name)
+    em.outputs(t="t_now")
+    block("outputs")
+    store = []
+    for i in range(ndof):
+        store += [f"out_q[s0 + l, it, {i}] = q{i}", f"out_v[s0 + l, it, {i}] = v{i}"]
+    for k in range(topo.njoint):
+        store += [
+            f"out_jf[s0 + l, it, {2 * k}] = jfx{k}",
+            f"out_jf[s0 + l, it, {2 * k + 1}] = jfy{k}",
+            f"out_cf[s0 + l, it, {k}] = cf{k}",
+        ]
+    store += [f"out_dtq[s0 + l, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
+    # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
+    store += ["out_cerr[s0 + l, it] = phimax + energy * 0.0", "out_en[s0 + l, it] = energy"]
+    em.emit(*store)
+    block("store_outputs")
+    em.emit(
+        *(f"{at(x, i)} = {at(x, i)} + {at('a' + x, i)}" for x in ("q", "v") for i in range(ndof))
+    )
+    block("combine")
+    em.emit(
+        *(f"{at('aq', i)} = {at('aq', i)} * keep + bh * v{i}" for i in range(ndof)),
+        *(f"{at('av', i)} = {at('av', i)} * keep + bh * qdd{i}" for i in range(ndof)),
+    )
+    block("accumulate")
+    for i in range(ndof):
+        em.emit(
+            f"q{i} = {at('q', i)} + ah * {at('kqc', i)}",
+            f"v{i} = {at('v', i)} + ah * {at('kvc', i)}",
+        )
+    block("load_stage_sub")
+    em.projection_terms(t="tp")
+    block("projection")
+    # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).
+    em.emit(
+        f"act = {at('act')}",
+        f"conv = ((phimax <= ptol) | (last > 0.0) | (phimax >= 0.5 * {at('pmax')})"
+        " | (phimax != phimax)) * 1.0",
+        "upd_q = act * (1.0 - conv)",
+        "upd_v = act * conv",
+        *(f"{at('q', i)} = q{i} + upd_q * dq{i}" for i in range(ndof)),
+        *(f"{at('v', i)} = v{i} + upd_v * dv{i}" for i in range(ndof)),
+        f"{at('act')} = upd_q",
+        f"{at('pmax')} = phimax",
+    )
+    block("apply_projection")
+    # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)).
+    em.emit("en = 0.0")
+    for i in range(ndof):
+        for x in ("q", "v"):
+            new = " + ".join(f"bw[{j}] * {at(f'k{x}{j}', i)}" for j in range(nstage))
+            err = " + ".join(f"be[{j}] * {at(f'k{x}{j}', i)}" for j in range(nstage))
+            em.emit(
+                f"{at(x + 'n', i)} = {at(x, i)} + hh * ({new})",
+                f"e_ = hh * ({err}) / (atol + rtol * max(abs({at(x, i)}), abs({at(x + 'n', i)})))",
+                "en += e_ * e_",
+            )
+    em.emit(f"en = math.sqrt(en / {2 * ndof})", "en = en if en == en else np.inf")
+    block("error_norm")
+    em.emit(
+        *(f"{at(x, i)} = {at(x + 'n', i)}" for x in ("q", "v") for i in range(ndof)),
+        *(f"{at('kq0', i)} = {at(f'kq{nstage - 1}', i)}" for i in range(ndof)),
+        *(f"{at('kv0', i)} = {at(f'kv{nstage - 1}', i)}" for i in range(ndof)),
+        *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
+        f"{at('chk')} = {at('chkc')}",
+        f"{at('sg')} = {at('sga')}",
+    )
+    block("accept")
+    return b
+
+
+def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
+    return {
+        "NDOF": str(topo.ndof),
+        "NSLOT": str(len(topo.slots())),
+        "NSTAGE": str(nstage),
+        "NROW": str(lay.size),
+        "LMAXV": str(lay.lmax),
+        "PROW": str(lay.rows["P"]),
+        "QROW": str(lay.rows["q"]),
+        "VROW": str(lay.rows["v"]),
+        "LAMROW": str(lay.rows["lam"]),
+        "LAMCROW": str(lay.rows["lamc"]),
+        "K0ROW": str(lay.rows["kq0"]),
+        "KCROW": str(lay.rows["kqc"]),
+        "FAILBITS": str(FAILURE_BITS),
+        "DIVERGED_BIT": str(DIVERGED),
+        "SINGULAR_BIT": str(SINGULAR),
+        "CONTACT_BIT": str(CONTACT_LOST),
+        "SAFETY": repr(SAFETY),
+        "MIN_FACTOR": repr(MIN_FACTOR),
+        "MAX_FACTOR": repr(MAX_FACTOR),
+    }
+
+
+def generate_source(topo: Topology, lmax: int = LMAX) -> str:
+    """Source of the lane-kernel module of ``topo`` (RK4 and Dormand–Prince stage counts)
+    for work rows ``lmax`` doubles long (default: this CPU's SIMD register)."""
+    parts = [templates.HEADER, f"# topology: {topo!r}\n", ROW_MEANINGS]
+    for tableau, users in (
+        (RK4, "accel, outputs, erk_run, erk_project_run"),
+        (DOPRI5, "adaptive_run"),
+    ):
+        parts.append(
+            Layout(topo, tableau.nstage, lmax).row_map(f"{users} ({tableau.nstage} stages)")
+        )
+    sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
+    assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
+    erk_plain = templates.ERK_KERNEL.replace(templates.PROJECT_CALL, "") + templates.OUTPUT_HELPER
+    for template, tableau, suffix in (
+        (templates.ACCEL_KERNEL, RK4, ""),
+        (templates.OUTPUT_KERNEL, RK4, ""),
+        # Two variants, so that plain RK4 never compiles the (large) projection code.
+        (erk_plain, RK4, "erk"),
+        (templates.ERK_KERNEL.replace("erk_", "erk_project_") + templates.HELPERS, RK4, "erkp"),
+        (templates.ADAPTIVE_KERNEL + templates.HELPERS, DOPRI5, "dp"),
+    ):
+        lay = Layout(topo, tableau.nstage, lmax)
+        blocks = _blocks(topo, tableau.nstage, lay)
+        tokens = {**_tokens(topo, tableau.nstage, lay), "SUFFIX": suffix}
+        parts.append(schedule_lane_loops(_fill(template, blocks, tokens, lay)))
+    return "\n".join(parts)
+
+
+_MODULES: dict[Topology, ModuleType] = {}
+
+
+def lane_kernels(topo: Topology) -> ModuleType:
+    """The compiled lane kernels of a topology: ``accel``, ``outputs``, ``erk_run``,
+    ``adaptive_run`` (numba compiles each on first call; machine code cached on disk)."""
+    module = _MODULES.get(topo)
+    if module is None:
+        module = load_module(generate_source(topo))
+        _MODULES[topo] = module
+    return module

@@ -1,0 +1,96 @@
+"""The flat work array ``W`` of one lane group: its rows and their length.
+
+Vectorising (PERFORMANCE.md, and measured here): every hot lane loop reads and writes ONE
+flat work array ``W`` whose rows are LMAX apart, a literal. LLVM then sees constant distances
+between rows and vectorises without run-time alias checks; with several arrays (or rows a
+run-time stride apart) it needs more checks than it allows and gives up. The parameters are
+copied into W once per lane group for the same reason. The trip count (the lane count) stays a
+run-time value, so the loop is vectorised rather than unrolled.
+"""
+
+from __future__ import annotations
+
+from mcchain.codegen.topology import Topology
+
+
+def _simd_doubles() -> int:
+    """Doubles in one SIMD register of this CPU: 8 with AVX-512, else 4 (AVX2)."""
+    from llvmlite import binding
+
+    return 8 if binding.get_host_cpu_features().get("avx512f") else 4
+
+
+LMAX = _simd_doubles()
+"""Largest lane count of a lane group, and the row length of the work array: one SIMD
+register of doubles, so W is contiguous and a lane loop touches each element once. Measured
+here (AVX2, rk4, ns per instance-step, side by side): rows of 64 doubles, 512 bytes apart,
+all fell into an eighth of the L1 sets and long chains thrashed the cache (16-bar chain,
+1 thread: 1,518 ns; rows of 72 doubles: 1,231; rows of 8: 1,139; of 4: 1,166), and the
+32-bar chain's work rows (~830 of them) fit in L1 only with rows of 4 (1 thread: 3,218 ns
+with rows of 8, 2,704 with 4). The clearance double pendulum and four-bar (2 threads) are as
+fast or faster: 51.7 / 48.6 / 48.3 ns and 122.1 / 107.4 / 108.8 ns with rows of 72 (32
+lanes), 8 and 4."""
+
+
+ROW_MEANINGS = """\
+# W rows: P parameters (slots of Topology.slots); q, v state; kq{j}, kv{j} stage j (q', v');
+# kqc, kvc the current stage; aq, av the accumulated increment of a fixed step; qn, vn the
+# proposed state of an adaptive step; lam, lamc multipliers (accepted, current stage); chk,
+# chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
+# the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
+# tl the lane's time.
+"""
+"""Legend of the row map written into the header of a generated module."""
+
+
+class Layout:
+    """Rows of the flat work array W (each ``lmax`` long, default :data:`LMAX`) of one
+    lane group."""
+
+    def __init__(self, topo: Topology, nstage: int, lmax: int | None = None):
+        self.lmax = LMAX if lmax is None else lmax
+        self.rows: dict[str, int] = {}
+        self.size = 0
+        ncon1 = max(topo.ncon, 1)
+        self.add("P", len(topo.slots()))
+        self.add("q", topo.ndof)
+        self.add("v", topo.ndof)
+        for j in range(nstage):  # stage j: kq_j then kv_j, 2 ndof consecutive rows
+            self.add(f"kq{j}", topo.ndof)
+            self.add(f"kv{j}", topo.ndof)
+        self.add("kqc", topo.ndof)  # current stage, then copied to its rows
+        self.add("kvc", topo.ndof)
+        self.add("aq", topo.ndof)  # accumulated increment of a fixed step
+        self.add("av", topo.ndof)
+        self.add("qn", topo.ndof)
+        self.add("vn", topo.ndof)
+        self.add("lam", ncon1)
+        self.add("lamc", ncon1)
+        for name in ("chk", "sg", "chkc", "sgc", "sga", "act", "pmax", "hs", "tl"):
+            self.add(name, 1)
+
+    def row_map(self, title: str) -> str:
+        """A comment block naming the rows of W (first-last) under ``title``."""
+        names = list(self.rows)
+        items = []
+        for i, name in enumerate(names):
+            start = self.rows[name]
+            end = self.rows[names[i + 1]] if i + 1 < len(names) else self.size
+            items.append(f"{name} {start}" if end - start == 1 else f"{name} {start}-{end - 1}")
+        lines = [f"# W rows of {title}; element W[row * {self.lmax} + lane]:"]
+        for item in items:
+            if lines[-1].endswith(":"):
+                lines.append("#   " + item)
+            elif len(lines[-1]) + len(item) + 2 > 96:
+                lines[-1] += ","
+                lines.append("#   " + item)
+            else:
+                lines[-1] += ", " + item
+        return "\n".join(lines) + "\n"
+
+    def add(self, name: str, count: int) -> None:
+        self.rows[name] = self.size
+        self.size += count
+
+    def at(self, name: str, i: int = 0) -> str:
+        return f"W[{(self.rows[name] + i) * self.lmax} + l]"

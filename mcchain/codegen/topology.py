@@ -1,0 +1,107 @@
+"""The structure of a model that generated code depends on, and the packed parameters.
+
+* :class:`Topology`: the hashable structure of a :class:`~mcchain.model.Model` (which bodies
+  each joint, driver, force and spring connects, and the joint kinds).
+* :func:`pack_parameters`: the per-sample parameters as ``P`` (nslot, nsample), float64,
+  sample innermost; the slot of each named quantity is fixed by :meth:`Topology.slots`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mcchain.model import JointKind, Model, constraint_rows
+from mcchain.parameters import Slot, packed_slots
+
+
+@dataclass(frozen=True)
+class Topology:
+    """The structure of a model that generated code depends on (never parameter values).
+
+    Constraint rows follow :func:`mcchain.model.constraint_rows`: joints in order (2 rows
+    ideal, 1 clearance), then drivers.
+    """
+
+    nbody: int
+    joint_a: tuple[int, ...]
+    joint_b: tuple[int, ...]
+    joint_kind: tuple[int, ...]
+    driver_body: tuple[int, ...]
+    force_body: tuple[int, ...]
+    spring_a: tuple[int, ...]
+    spring_b: tuple[int, ...]
+
+    @classmethod
+    def from_model(cls, model: Model) -> Topology:
+        def t(a: np.ndarray) -> tuple[int, ...]:
+            return tuple(int(x) for x in np.asarray(a).reshape(-1))
+
+        return cls(
+            nbody=model.nbody,
+            joint_a=t(model.joint_body_a),
+            joint_b=t(model.joint_body_b),
+            joint_kind=t(model.joint_kind),
+            driver_body=t(model.driver_body),
+            force_body=t(model.force_body),
+            spring_a=t(model.spring_body_a),
+            spring_b=t(model.spring_body_b),
+        )
+
+    @property
+    def ndof(self) -> int:
+        return 3 * self.nbody
+
+    @property
+    def njoint(self) -> int:
+        return len(self.joint_kind)
+
+    @property
+    def ndriver(self) -> int:
+        return len(self.driver_body)
+
+    @property
+    def joint_row(self) -> tuple[int, ...]:
+        joint_row, _ = constraint_rows(np.asarray(self.joint_kind, dtype=np.int64), self.ndriver)
+        return tuple(int(r) for r in joint_row)
+
+    @property
+    def driver_row(self) -> tuple[int, ...]:
+        _, driver_row = constraint_rows(np.asarray(self.joint_kind, dtype=np.int64), self.ndriver)
+        return tuple(int(r) for r in driver_row)
+
+    @property
+    def ncon(self) -> int:
+        return sum(JointKind(k).rows for k in self.joint_kind) + self.ndriver
+
+    @property
+    def clearance_rows(self) -> tuple[int, ...]:
+        return tuple(
+            r
+            for r, kind in zip(self.joint_row, self.joint_kind, strict=True)
+            if kind == JointKind.CLEARANCE
+        )
+
+    def packed(self) -> list[Slot]:
+        """The rows of ``P``, in order (:func:`mcchain.parameters.packed_slots`)."""
+        return packed_slots(
+            self.joint_kind, self.nbody, self.ndriver, len(self.force_body), len(self.spring_a)
+        )
+
+    def slots(self) -> dict[str, int]:
+        """Row of ``P`` holding each named per-sample quantity."""
+        return {slot.name: i for i, slot in enumerate(self.packed())}
+
+
+def pack_parameters(model: Model, topology: Topology | None = None) -> np.ndarray:
+    """The parameters of every sample as ``P`` (nslot, nsample), sample innermost."""
+    topo = topology or Topology.from_model(model)
+    slots = topo.packed()
+    P = np.empty((len(slots), model.nsample), dtype=np.float64)
+    for row, slot in enumerate(slots):
+        arr = np.asarray(getattr(model, slot.field), dtype=np.float64)
+        index: tuple[slice | int, ...] = (slice(None), *slot.at)
+        column = arr[index]
+        P[row] = np.broadcast_to(1.0 / column if slot.inverse else column, (model.nsample,))
+    return P
