@@ -120,12 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _live_options(args: argparse.Namespace) -> Any:
-    """``--rerun SAMPLES [--rerun-save FILE | --rerun-spawn]`` as ``runs.LiveOptions``
+    """``--rerun SAMPLES [--rerun-save FILE | --rerun-spawn]`` as ``viz.live.LiveOptions``
     (``None`` without ``--rerun``); raises ``RunError`` naming the flag."""
     from pathlib import Path
 
-    from mcchain import runs
     from mcchain.errors import RunError
+    from mcchain.viz.live import LiveOptions, parse_rerun_samples
 
     if args.rerun is None:
         for flag, value in (("--rerun-save", args.rerun_save), ("--rerun-spawn", args.rerun_spawn)):
@@ -137,13 +137,11 @@ def _live_options(args: argparse.Namespace) -> Any:
     if args.rerun_save is not None and not args.rerun_save.strip():
         raise RunError("--rerun-save: expected a file name")
     save = Path(args.rerun_save) if args.rerun_save is not None else None
-    return runs.LiveOptions(
-        runs.parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn)
-    )
+    return LiveOptions(parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn))
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from mcchain import runs
+    from mcchain import execution, runs
 
     progress = False if args.quiet else None
     live = _live_options(args)
@@ -163,7 +161,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         ]
         if conflicting:
             return _fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
-        result = runs.resume_run(
+        result = execution.resume_run(
             args.resume,
             dask=args.dask,
             threads=args.threads,
@@ -176,7 +174,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return _fail("run: a SCENE.toml (or --resume RUN) is required")
         if args.out is not None and args.run_dir is not None:
             return _fail("--run-dir: cannot be combined with --out")
-        result = runs.start_run(
+        result = execution.start_run(
             args.scene,
             samples=args.samples,
             seed=args.seed,
@@ -265,7 +263,7 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from mcchain.runs import default_loader
+    from mcchain.job import default_loader
 
     scene, model = default_loader(args.scene, None, None)
     name = getattr(getattr(scene, "scene", None), "name", args.scene)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
 
-from mcchain import cli, runs
+from mcchain import cli, execution
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 
@@ -144,7 +144,7 @@ def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
 def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
     made = [
-        runs.start_run(
+        execution.start_run(
             scene, out=tmp_path / "out", loader=fake_loader, solve=fake_solve, progress=False
         ).folder
         for _ in range(2)

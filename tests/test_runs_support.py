@@ -229,14 +229,14 @@ def write_fake_scene(
 
 def _child_main(argv: list[str]) -> None:
     """``python tests/test_runs_support.py run|resume ...``: a run with the fakes."""
-    from mcchain import runs
+    from mcchain import execution
 
     command, target, *rest = argv
     options = json.loads(rest[0]) if rest else {}
     if command == "run":
-        result = runs.start_run(target, loader=fake_loader, solve=fake_solve, **options)
+        result = execution.start_run(target, loader=fake_loader, solve=fake_solve, **options)
     else:
-        result = runs.resume_run(target, loader=fake_loader, solve=fake_solve, **options)
+        result = execution.resume_run(target, loader=fake_loader, solve=fake_solve, **options)
     print(result.folder, flush=True)
 
 

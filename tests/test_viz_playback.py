@@ -19,7 +19,7 @@ import xarray as xr
 from test_viz_synthetic import make_dataset, make_model, random_params
 
 from mcchain.errors import RunError
-from mcchain.viz import geometry, playback
+from mcchain.viz import geometry, live, playback
 
 FLOAT32 = 1e-6  # relative round-off of positions, which rerun stores as float32
 OFFSET_FROM_FLOAT32 = 4 * 2.0**-24 * 2.0  # |d| from float32 positions of ~1 m (m, unmagnified)
@@ -284,7 +284,7 @@ def test_live_stream__chunks_built_by_the_registry_are_logged_as_show_logs_them(
     ds, model = synthetic
     whole = ds.load()
     out = tmp_path / "live.rrd"
-    with playback.LiveStream([3, 1], save=out, force_scale=0.01) as stream:
+    with live.LiveStream([3, 1], save=out, force_scale=0.01) as stream:
         for start, stop in ((0, 2), (2, 4), (4, NSAMPLE)):
             part = whole.isel(sample=slice(start, stop))
             outputs = {name: part[name].values for name in part.data_vars}
