@@ -1,9 +1,16 @@
-"""``mcchain`` command line: a thin front end over :mod:`mcchain.runs` (DESIGN §6).
+"""``mcchain`` command line: a thin front end, and the one place that parses arguments.
 
-Commands: ``run``, ``validate``, ``runs``, and ``report``/``show``/``bench``, which hand the
-rest of the command line to ``mcchain.viz.report:main``, ``mcchain.viz.playback:main`` and
-``mcchain.bench:main``. A bad input (``SceneError``, ``RunError``, a bad flag) prints one
-line ``mcchain: error: <message>`` on stderr and exits with 2, having written nothing.
+Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcchain.runs`),
+``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
+(:func:`mcchain.viz.report.write_report`), and ``bench``, which hands the rest of the
+command line to ``mcchain.bench:main``. A bad input (``SceneError``, ``RunError``, a bad
+flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
+written nothing; usage errors of ``show`` and ``report`` name the command
+(``mcchain show: ...``).
+
+This module imports only the standard library at import time, and building the parser
+does too (``mcchain runs`` must stay fast): ``show``'s arguments, whose help lists the
+status flags, are added when ``show`` is parsed.
 """
 
 from __future__ import annotations
@@ -11,7 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from mcchain import __version__
@@ -21,11 +28,10 @@ EXIT_USAGE = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 
-DELEGATED = {
-    "report": ("mcchain.viz.report", "draw a run's plots as PNG"),
-    "show": ("mcchain.viz.playback", "replay samples of a run in the rerun viewer"),
-    "bench": ("mcchain.bench", "run the benchmarks"),
-}
+DELEGATED = {"bench": ("mcchain.bench", "run the benchmarks")}
+"""Commands that parse the rest of the command line themselves."""
+NAMED_ERRORS = ("show", "report")
+"""Commands whose usage errors start with ``mcchain <command>:``."""
 
 
 class _UsageError(Exception):
@@ -33,10 +39,43 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error in one line, through :func:`main`."""
+    """argparse that reports a usage error in one line, through :func:`main`.
+
+    ``populate(parser)`` adds the arguments when the parser is first used (parsed or its
+    help printed), so that building the whole parser imports nothing heavy;
+    ``named_errors`` starts each error with the parser's ``prog``.
+    """
+
+    def __init__(
+        self,
+        *args: Any,
+        populate: Callable[[argparse.ArgumentParser], None] | None = None,
+        named_errors: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(*args, **kwargs)
+        self._populate = populate
+        self._named_errors = named_errors
+
+    def populate(self) -> None:
+        if self._populate is not None:
+            add, self._populate = self._populate, None
+            add(self)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self.populate()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self) -> str:
+        self.populate()
+        return super().format_usage()
+
+    def format_help(self) -> str:
+        self.populate()
+        return super().format_help()
 
     def error(self, message: str) -> NoReturn:
-        raise _UsageError(message)
+        raise _UsageError(f"{self.prog}: {message}" if self._named_errors else message)
 
 
 def _fail(message: str, code: int = EXIT_USAGE) -> int:
@@ -110,10 +149,75 @@ def build_parser() -> argparse.ArgumentParser:
     runs = sub.add_parser("runs", help="list past runs")
     runs.add_argument("--out", default="runs", metavar="DIR", help="folder of run folders")
 
+    sub.add_parser(
+        "show",
+        help="replay samples of a run in the rerun viewer",
+        description="replay samples of a run in the rerun viewer",
+        populate=add_show_arguments,
+        named_errors=True,
+    )
+    report = sub.add_parser(
+        "report",
+        help="draw a run's plots as PNG",
+        description="draw a run's plots as PNG",
+        named_errors=True,
+    )
+    report.add_argument("run", help="run folder (or its id under runs/)")
+    report.add_argument("--out", metavar="DIR", help="folder of the PNG files (default RUN/report)")
+
     for name, (_, text) in DELEGATED.items():
         delegated = sub.add_parser(name, help=text, add_help=False)
         delegated.add_argument("args", nargs=argparse.REMAINDER)
     return parser
+
+
+def add_show_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``mcchain show`` arguments.
+
+    The viewer flags are those of ``rr.script_add_args`` (``--save``, ``--serve``,
+    ``--connect``/``--url``, ``--stdout``, ``--headless``) plus ``--spawn`` (the default),
+    which :func:`mcchain.viz.playback.show` hands to ``rr.script_setup``; they are declared
+    here rather than by ``rr.script_add_args`` so that parsing does not import rerun.
+    """
+    from mcchain.ensemble.queries import DEFAULT_LIMIT
+    from mcchain.status import Status
+    from mcchain.viz.playback import DEFAULT_MAGNIFY
+
+    parser.add_argument("run", help="run folder")
+    parser.add_argument("--samples", help="comma-separated global sample indices, e.g. 0,17")
+    parser.add_argument(
+        "--worst", metavar="VARIABLE:N", help="the N samples of largest peak |VARIABLE|"
+    )
+    parser.add_argument(
+        "--status",
+        metavar="FLAG[,FLAG]",
+        help="samples carrying any of these status flags ("
+        + ", ".join(["ok", *(f.meaning for f in Status)])
+        + ")",
+    )
+    parser.add_argument(
+        "--limit",
+        type=int,
+        default=DEFAULT_LIMIT,
+        help=f"most samples --status alone picks (default {DEFAULT_LIMIT})",
+    )
+    parser.add_argument(
+        "--magnify",
+        type=float,
+        default=DEFAULT_MAGNIFY,
+        help=f"draw clearance offsets this many times longer (default {DEFAULT_MAGNIFY:g})",
+    )
+    parser.add_argument(
+        "--force-scale", type=float, default=None, help="force arrows, m per N (default: auto)"
+    )
+    sink = parser.add_mutually_exclusive_group()
+    sink.add_argument("--save", metavar="FILE.rrd", help="save the recording to this file")
+    sink.add_argument("--spawn", action="store_true", help="spawn a viewer (the default)")
+    sink.add_argument("--serve", action="store_true", help="serve gRPC and a web viewer")
+    sink.add_argument("--connect", action="store_true", help="connect to a running viewer")
+    sink.add_argument("--stdout", action="store_true", help="write the recording to stdout")
+    sink.add_argument("--headless", action="store_true", help="log nowhere (for timing)")
+    parser.add_argument("--url", help="viewer URL for --connect")
 
 
 # -- commands ----------------------------------------------------------------------------------
@@ -288,6 +392,42 @@ def _cmd_runs(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_show(args: argparse.Namespace) -> int:
+    from mcchain.ensemble.queries import parse_samples
+    from mcchain.viz.playback import show_run
+
+    shown = show_run(
+        args.run,
+        parse_samples(args.samples),
+        worst=args.worst,
+        status=args.status,
+        limit=args.limit,
+        save=args.save,
+        serve=args.serve,
+        connect=args.connect,
+        url=args.url,
+        stdout=args.stdout,
+        headless=args.headless,
+        magnify=args.magnify,
+        force_scale=args.force_scale,
+    )
+    print("samples " + ",".join(str(s) for s in shown))
+    if args.save:
+        print(args.save)
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from mcchain.viz.report import write_report
+
+    report = write_report(args.run, args.out)
+    for name, reason in report.skipped.items():
+        print(f"skipped {name}: {reason}")
+    for path in report.written:
+        print(path)
+    return 0
+
+
 def _cmd_delegated(command: str, args: Sequence[str]) -> int:
     module_name = DELEGATED[command][0]
     try:
@@ -308,14 +448,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         command, rest = argv[0], argv[1:]
     else:
         try:
-            args = parser.parse_args(argv)
+            args, extra = parser.parse_known_args(argv)
         except _UsageError as exc:
             return _fail(str(exc))
         command, rest = args.command, []
+        if extra:
+            message = f"unrecognized arguments: {' '.join(extra)}"
+            return _fail(f"mcchain {command}: {message}" if command in NAMED_ERRORS else message)
     try:
         if command in DELEGATED:
             return _cmd_delegated(command, rest)
-        handler = {"run": _cmd_run, "validate": _cmd_validate, "runs": _cmd_runs}[command]
+        handler = {
+            "run": _cmd_run,
+            "validate": _cmd_validate,
+            "runs": _cmd_runs,
+            "show": _cmd_show,
+            "report": _cmd_report,
+        }[command]
         return handler(args)
     except McchainError as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)

@@ -1,4 +1,4 @@
-"""The ``mcchain`` command line: errors, validate, runs, delegated commands."""
+"""The ``mcchain`` command line: errors, validate, runs, show, report, bench."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import subprocess
 import sys
 import types
 from pathlib import Path
+from typing import Any
 
 import pytest
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
@@ -174,28 +175,75 @@ def test_cli_runs__does_not_import_numba_or_xarray() -> None:
     assert proc.stdout.splitlines()[-1] == "[]"
 
 
-@pytest.mark.parametrize(
-    ("command", "module"),
-    [
-        ("report", "mcchain.viz.report"),
-        ("show", "mcchain.viz.playback"),
-        ("bench", "mcchain.bench"),
-    ],
-)
-def test_cli__delegated_commands_get_the_rest_of_the_argv(
-    monkeypatch: pytest.MonkeyPatch, command: str, module: str
-) -> None:
+def test_cli__bench_gets_the_rest_of_the_argv(monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[list[str]] = []
-    fake = types.ModuleType(module)
+    fake = types.ModuleType("mcchain.bench")
 
     def main(argv: list[str]) -> int:
         seen.append(argv)
         return 3
 
     fake.main = main  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, module, fake)
-    assert cli.main([command, "RUN", "--samples", "0,3", "--help"]) == 3
+    monkeypatch.setitem(sys.modules, "mcchain.bench", fake)
+    assert cli.main(["bench", "RUN", "--samples", "0,3", "--help"]) == 3
     assert seen == [["RUN", "--samples", "0,3", "--help"]]
+
+
+def test_cli_show__parses_and_calls_show_run(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mcchain.viz import playback
+
+    calls: list[tuple[Any, ...]] = []
+
+    def show_run(run: str, samples: list[int], **options: Any) -> list[int]:
+        calls.append((run, samples, options))
+        return [*samples, 9]
+
+    monkeypatch.setattr(playback, "show_run", show_run)
+    argv = ["show", "RUN", "--samples", "3,0,3", "--worst", "energy:1", "--save", "x.rrd"]
+    assert cli.main(argv) == 0
+    assert capsys.readouterr().out == "samples 3,0,9\nx.rrd\n"
+    ((run, samples, options),) = calls
+    assert run == "RUN" and samples == [3, 0]
+    assert options == {
+        "worst": "energy:1",
+        "status": None,
+        "limit": 16,
+        "save": "x.rrd",
+        "serve": False,
+        "connect": False,
+        "url": None,
+        "stdout": False,
+        "headless": False,
+        "magnify": 100.0,
+        "force_scale": None,
+    }
+    assert cli.main(["show", "RUN", "--samples", "0,a"]) == 2
+    assert capsys.readouterr().err == (
+        "mcchain: error: --samples: expected comma-separated integers, got '0,a'\n"
+    )
+
+
+def test_cli_report__parses_and_calls_write_report(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mcchain.viz import report
+
+    calls: list[tuple[str, str | None]] = []
+
+    def write_report(run: str, out: str | None = None) -> report.Report:
+        calls.append((run, out))
+        return report.Report([Path("d/a.png")], {"sobol.png": "no design"})
+
+    monkeypatch.setattr(report, "write_report", write_report)
+    assert cli.main(["report", "RUN", "--out", "d"]) == 0
+    assert calls == [("RUN", "d")]
+    assert capsys.readouterr().out == "skipped sobol.png: no design\nd/a.png\n"
+    assert cli.main(["report"]) == 2
+    assert capsys.readouterr().err == (
+        "mcchain: error: mcchain report: the following arguments are required: run\n"
+    )
 
 
 def test_cli__delegated_command_missing_is_a_usage_error(

@@ -259,14 +259,10 @@ class LiveStream:
     def log_chunk(self, dataset: xr.Dataset, model: Model, start: int = 0) -> list[int]:
         """Log the samples of interest in this chunk; ``model`` is the chunk's model (row 0 =
         global sample ``start``) or the whole run's with ``start=0``. Returns those logged."""
-        from mcchain.viz.playback import (
-            _sample_ids,
-            default_force_scale,
-            log_samples,
-            make_blueprint,
-        )
+        from mcchain.ensemble.queries import sample_ids
+        from mcchain.viz.playback import default_force_scale, log_samples, make_blueprint
 
-        present = set(_sample_ids(dataset).tolist())
+        present = set(sample_ids(dataset).tolist())
         wanted = [s for s in self.samples if s in present and s not in self.logged]
         if not wanted:
             return []
