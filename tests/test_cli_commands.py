@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 import types
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,19 +50,38 @@ angle = 0.0
 """
 
 
-def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
-    return subprocess.run(
-        [sys.executable, "-m", "mcchain.cli", *map(str, args)],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+@dataclass(frozen=True)
+class Ran:
+    """Exit code and output of one ``mcchain`` command line."""
+
+    returncode: int
+    stdout: str
+    stderr: str
 
 
-def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) -> None:
+def in_process(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    """``run(*args, cwd=DIR)``: :func:`mcchain.cli.main` in this process, from ``DIR``."""
+
+    def run(*args: str | Path, cwd: Path) -> Ran:
+        monkeypatch.chdir(cwd)
+        capsys.readouterr()
+        code = cli.main([str(a) for a in args])
+        out, err = capsys.readouterr()
+        return Ran(code, out, err)
+
+    return run
+
+
+@pytest.fixture
+def mcchain(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    return in_process(monkeypatch, capsys)
+
+
+def assert_usage_error(proc: Ran | subprocess.CompletedProcess[str], *fragments: str) -> None:
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.splitlines()
     assert len(lines) == 1, proc.stderr
@@ -68,6 +89,21 @@ def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) 
     for fragment in fragments:
         assert fragment in lines[0]
     assert proc.stdout == ""
+
+
+def test_cli__console_entry_point_smoke(tmp_path: Path) -> None:
+    """One real process: ``python -m mcchain.cli`` exits 2 with the one-line message."""
+    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "run", "missing.toml"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert_usage_error(proc, "missing.toml: no such file")
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(
@@ -93,7 +129,11 @@ def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) 
     ],
 )
 def test_cli__bad_input_is_one_line_exit_2_and_writes_nothing(
-    tmp_path: Path, files: dict[str, str | None], args: list[str], fragments: list[str]
+    mcchain: Callable[..., Ran],
+    tmp_path: Path,
+    files: dict[str, str | None],
+    args: list[str],
+    fragments: list[str],
 ) -> None:
     for name, text in files.items():
         if text is None:
@@ -105,7 +145,9 @@ def test_cli__bad_input_is_one_line_exit_2_and_writes_nothing(
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no runs/ folder
 
 
-def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None:
+def test_cli_validate__prints_bodies_joints_rows_and_dof(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", CLEARANCE_BAR, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
@@ -116,7 +158,9 @@ def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None
     assert list(tmp_path.iterdir()) == []
 
 
-def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(tmp_path: Path) -> None:
+def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", REPO / "configs" / "clearance-sweep.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
@@ -130,7 +174,9 @@ def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(tmp_path
     assert ranges[1].startswith("  body.bar.mass: ")
 
 
-def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
+def test_cli_validate__four_bar_rows_and_driver(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", REPO / "configs" / "fourbar-clearance.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
@@ -142,7 +188,7 @@ def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
     assert coords - rows == dof
 
 
-def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
+def test_cli_runs__lists_the_runs_of_a_folder(mcchain: Callable[..., Ran], tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
     made = [
         execution.start_run(
@@ -163,10 +209,11 @@ def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
     assert empty.returncode == 0 and "no runs" in empty.stdout
 
 
-def test_cli_runs__does_not_import_numba_or_xarray() -> None:
+def test_cli_runs__does_not_import_numpy_numba_or_xarray() -> None:
     code = (
         "import sys; from mcchain import cli; cli.main(['runs', '--out', '/nonexistent']);"
-        "print(sorted(m for m in ('numba', 'xarray', 'netCDF4', 'dask') if m in sys.modules))"
+        "print(sorted(m for m in ('numpy', 'numba', 'xarray', 'netCDF4', 'dask')"
+        " if m in sys.modules))"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.run(
