@@ -1,17 +1,23 @@
-"""``mcchain`` command line: a thin front end over :mod:`mcchain.runs` (DESIGN §6).
+"""``mcchain`` command line: a thin front end, and the one place that parses arguments.
 
-Commands: ``run``, ``validate``, ``runs``, and ``report``/``show``/``bench``, which hand the
-rest of the command line to ``mcchain.viz.report:main``, ``mcchain.viz.playback:main`` and
-``mcchain.bench:main``. A bad input (``SceneError``, ``RunError``, a bad flag) prints one
-line ``mcchain: error: <message>`` on stderr and exits with 2, having written nothing.
+Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcchain.runs`),
+``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
+(:func:`mcchain.viz.report.write_report`); the benchmarks are scripts in ``benchmarks/``.
+A bad input (``SceneError``, ``RunError``, a bad
+flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
+written nothing; usage errors of ``show`` and ``report`` name the command
+(``mcchain show: ...``).
+
+This module imports only the standard library at import time, and building the parser
+does too (``mcchain runs`` must stay fast): ``show``'s arguments, whose help lists the
+status flags, are added when ``show`` is parsed.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from mcchain import __version__
@@ -21,11 +27,9 @@ EXIT_USAGE = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 
-DELEGATED = {
-    "report": ("mcchain.viz.report", "draw a run's plots as PNG"),
-    "show": ("mcchain.viz.playback", "replay samples of a run in the rerun viewer"),
-    "bench": ("mcchain.bench", "run the benchmarks"),
-}
+"""Commands that parse the rest of the command line themselves."""
+NAMED_ERRORS = ("show", "report")
+"""Commands whose usage errors start with ``mcchain <command>:``."""
 
 
 class _UsageError(Exception):
@@ -33,10 +37,43 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error in one line, through :func:`main`."""
+    """argparse that reports a usage error in one line, through :func:`main`.
+
+    ``populate(parser)`` adds the arguments when the parser is first used (parsed or its
+    help printed), so that building the whole parser imports nothing heavy;
+    ``named_errors`` starts each error with the parser's ``prog``.
+    """
+
+    def __init__(
+        self,
+        *args: Any,
+        populate: Callable[[argparse.ArgumentParser], None] | None = None,
+        named_errors: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(*args, **kwargs)
+        self._populate = populate
+        self._named_errors = named_errors
+
+    def populate(self) -> None:
+        if self._populate is not None:
+            add, self._populate = self._populate, None
+            add(self)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self.populate()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self) -> str:
+        self.populate()
+        return super().format_usage()
+
+    def format_help(self) -> str:
+        self.populate()
+        return super().format_help()
 
     def error(self, message: str) -> NoReturn:
-        raise _UsageError(message)
+        raise _UsageError(f"{self.prog}: {message}" if self._named_errors else message)
 
 
 def _fail(message: str, code: int = EXIT_USAGE) -> int:
@@ -110,22 +147,84 @@ def build_parser() -> argparse.ArgumentParser:
     runs = sub.add_parser("runs", help="list past runs")
     runs.add_argument("--out", default="runs", metavar="DIR", help="folder of run folders")
 
-    for name, (_, text) in DELEGATED.items():
-        delegated = sub.add_parser(name, help=text, add_help=False)
-        delegated.add_argument("args", nargs=argparse.REMAINDER)
+    sub.add_parser(
+        "show",
+        help="replay samples of a run in the rerun viewer",
+        description="replay samples of a run in the rerun viewer",
+        populate=add_show_arguments,
+        named_errors=True,
+    )
+    report = sub.add_parser(
+        "report",
+        help="draw a run's plots as PNG",
+        description="draw a run's plots as PNG",
+        named_errors=True,
+    )
+    report.add_argument("run", help="run folder (or its id under runs/)")
+    report.add_argument("--out", metavar="DIR", help="folder of the PNG files (default RUN/report)")
+
     return parser
+
+
+def add_show_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``mcchain show`` arguments.
+
+    The viewer flags are those of ``rr.script_add_args`` (``--save``, ``--serve``,
+    ``--connect``/``--url``, ``--stdout``, ``--headless``) plus ``--spawn`` (the default),
+    which :func:`mcchain.viz.playback.show` hands to ``rr.script_setup``; they are declared
+    here rather than by ``rr.script_add_args`` so that parsing does not import rerun.
+    """
+    from mcchain.ensemble.queries import DEFAULT_LIMIT
+    from mcchain.status import Status
+    from mcchain.viz.playback import DEFAULT_MAGNIFY
+
+    parser.add_argument("run", help="run folder")
+    parser.add_argument("--samples", help="comma-separated global sample indices, e.g. 0,17")
+    parser.add_argument(
+        "--worst", metavar="VARIABLE:N", help="the N samples of largest peak |VARIABLE|"
+    )
+    parser.add_argument(
+        "--status",
+        metavar="FLAG[,FLAG]",
+        help="samples carrying any of these status flags ("
+        + ", ".join(["ok", *(f.meaning for f in Status)])
+        + ")",
+    )
+    parser.add_argument(
+        "--limit",
+        type=int,
+        default=DEFAULT_LIMIT,
+        help=f"most samples --status alone picks (default {DEFAULT_LIMIT})",
+    )
+    parser.add_argument(
+        "--magnify",
+        type=float,
+        default=DEFAULT_MAGNIFY,
+        help=f"draw clearance offsets this many times longer (default {DEFAULT_MAGNIFY:g})",
+    )
+    parser.add_argument(
+        "--force-scale", type=float, default=None, help="force arrows, m per N (default: auto)"
+    )
+    sink = parser.add_mutually_exclusive_group()
+    sink.add_argument("--save", metavar="FILE.rrd", help="save the recording to this file")
+    sink.add_argument("--spawn", action="store_true", help="spawn a viewer (the default)")
+    sink.add_argument("--serve", action="store_true", help="serve gRPC and a web viewer")
+    sink.add_argument("--connect", action="store_true", help="connect to a running viewer")
+    sink.add_argument("--stdout", action="store_true", help="write the recording to stdout")
+    sink.add_argument("--headless", action="store_true", help="log nowhere (for timing)")
+    parser.add_argument("--url", help="viewer URL for --connect")
 
 
 # -- commands ----------------------------------------------------------------------------------
 
 
 def _live_options(args: argparse.Namespace) -> Any:
-    """``--rerun SAMPLES [--rerun-save FILE | --rerun-spawn]`` as ``runs.LiveOptions``
+    """``--rerun SAMPLES [--rerun-save FILE | --rerun-spawn]`` as ``viz.live.LiveOptions``
     (``None`` without ``--rerun``); raises ``RunError`` naming the flag."""
     from pathlib import Path
 
-    from mcchain import runs
     from mcchain.errors import RunError
+    from mcchain.viz.live import LiveOptions, parse_rerun_samples
 
     if args.rerun is None:
         for flag, value in (("--rerun-save", args.rerun_save), ("--rerun-spawn", args.rerun_spawn)):
@@ -137,13 +236,11 @@ def _live_options(args: argparse.Namespace) -> Any:
     if args.rerun_save is not None and not args.rerun_save.strip():
         raise RunError("--rerun-save: expected a file name")
     save = Path(args.rerun_save) if args.rerun_save is not None else None
-    return runs.LiveOptions(
-        runs.parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn)
-    )
+    return LiveOptions(parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn))
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from mcchain import runs
+    from mcchain import execution, runs
 
     progress = False if args.quiet else None
     live = _live_options(args)
@@ -163,7 +260,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         ]
         if conflicting:
             return _fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
-        result = runs.resume_run(
+        result = execution.resume_run(
             args.resume,
             dask=args.dask,
             threads=args.threads,
@@ -176,7 +273,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return _fail("run: a SCENE.toml (or --resume RUN) is required")
         if args.out is not None and args.run_dir is not None:
             return _fail("--run-dir: cannot be combined with --out")
-        result = runs.start_run(
+        result = execution.start_run(
             args.scene,
             samples=args.samples,
             seed=args.seed,
@@ -271,7 +368,7 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from mcchain.runs import default_loader
+    from mcchain.job import default_loader
 
     scene, model = default_loader(args.scene, None, None)
     name = getattr(getattr(scene, "scene", None), "name", args.scene)
@@ -296,34 +393,62 @@ def _cmd_runs(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_delegated(command: str, args: Sequence[str]) -> int:
-    module_name = DELEGATED[command][0]
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and module_name.startswith(exc.name):
-            return _fail(f"{command}: not available ({module_name} is missing)")
-        raise
-    code = module.main(list(args))
-    return int(code or 0)
+def _cmd_show(args: argparse.Namespace) -> int:
+    from mcchain.ensemble.queries import parse_samples
+    from mcchain.viz.playback import show_run
+
+    shown = show_run(
+        args.run,
+        parse_samples(args.samples),
+        worst=args.worst,
+        status=args.status,
+        limit=args.limit,
+        save=args.save,
+        serve=args.serve,
+        connect=args.connect,
+        url=args.url,
+        stdout=args.stdout,
+        headless=args.headless,
+        magnify=args.magnify,
+        force_scale=args.force_scale,
+    )
+    print("samples " + ",".join(str(s) for s in shown))
+    if args.save:
+        print(args.save)
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from mcchain.viz.report import write_report
+
+    report = write_report(args.run, args.out)
+    for name, reason in report.skipped.items():
+        print(f"skipped {name}: {reason}")
+    for path in report.written:
+        print(path)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    if argv and argv[0] in DELEGATED:
-        command, rest = argv[0], argv[1:]
-    else:
-        try:
-            args = parser.parse_args(argv)
-        except _UsageError as exc:
-            return _fail(str(exc))
-        command, rest = args.command, []
     try:
-        if command in DELEGATED:
-            return _cmd_delegated(command, rest)
-        handler = {"run": _cmd_run, "validate": _cmd_validate, "runs": _cmd_runs}[command]
+        args, extra = parser.parse_known_args(argv)
+    except _UsageError as exc:
+        return _fail(str(exc))
+    command = args.command
+    if extra:
+        message = f"unrecognized arguments: {' '.join(extra)}"
+        return _fail(f"mcchain {command}: {message}" if command in NAMED_ERRORS else message)
+    try:
+        handler = {
+            "run": _cmd_run,
+            "validate": _cmd_validate,
+            "runs": _cmd_runs,
+            "show": _cmd_show,
+            "report": _cmd_report,
+        }[command]
         return handler(args)
     except McchainError as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)

@@ -1,17 +1,19 @@
-"""The ``mcchain`` command line: errors, validate, runs, delegated commands."""
+"""The ``mcchain`` command line: errors, validate, runs, show, report."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
-import types
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
 
-from mcchain import cli, runs
+from mcchain import cli, execution
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 
@@ -47,19 +49,38 @@ angle = 0.0
 """
 
 
-def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
-    return subprocess.run(
-        [sys.executable, "-m", "mcchain.cli", *map(str, args)],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+@dataclass(frozen=True)
+class Ran:
+    """Exit code and output of one ``mcchain`` command line."""
+
+    returncode: int
+    stdout: str
+    stderr: str
 
 
-def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) -> None:
+def in_process(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    """``run(*args, cwd=DIR)``: :func:`mcchain.cli.main` in this process, from ``DIR``."""
+
+    def run(*args: str | Path, cwd: Path) -> Ran:
+        monkeypatch.chdir(cwd)
+        capsys.readouterr()
+        code = cli.main([str(a) for a in args])
+        out, err = capsys.readouterr()
+        return Ran(code, out, err)
+
+    return run
+
+
+@pytest.fixture
+def mcchain(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    return in_process(monkeypatch, capsys)
+
+
+def assert_usage_error(proc: Ran | subprocess.CompletedProcess[str], *fragments: str) -> None:
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.splitlines()
     assert len(lines) == 1, proc.stderr
@@ -67,6 +88,21 @@ def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) 
     for fragment in fragments:
         assert fragment in lines[0]
     assert proc.stdout == ""
+
+
+def test_cli__console_entry_point_smoke(tmp_path: Path) -> None:
+    """One real process: ``python -m mcchain.cli`` exits 2 with the one-line message."""
+    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "run", "missing.toml"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert_usage_error(proc, "missing.toml: no such file")
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(
@@ -92,7 +128,11 @@ def assert_usage_error(proc: subprocess.CompletedProcess[str], *fragments: str) 
     ],
 )
 def test_cli__bad_input_is_one_line_exit_2_and_writes_nothing(
-    tmp_path: Path, files: dict[str, str | None], args: list[str], fragments: list[str]
+    mcchain: Callable[..., Ran],
+    tmp_path: Path,
+    files: dict[str, str | None],
+    args: list[str],
+    fragments: list[str],
 ) -> None:
     for name, text in files.items():
         if text is None:
@@ -104,7 +144,9 @@ def test_cli__bad_input_is_one_line_exit_2_and_writes_nothing(
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no runs/ folder
 
 
-def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None:
+def test_cli_validate__prints_bodies_joints_rows_and_dof(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", CLEARANCE_BAR, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
@@ -115,7 +157,9 @@ def test_cli_validate__prints_bodies_joints_rows_and_dof(tmp_path: Path) -> None
     assert list(tmp_path.iterdir()) == []
 
 
-def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(tmp_path: Path) -> None:
+def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", REPO / "configs" / "clearance-sweep.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
@@ -129,7 +173,9 @@ def test_cli_validate__a_sweep_prints_nominal_values_and_sampled_ranges(tmp_path
     assert ranges[1].startswith("  body.bar.mass: ")
 
 
-def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
+def test_cli_validate__four_bar_rows_and_driver(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
     proc = mcchain("validate", REPO / "configs" / "fourbar-clearance.toml", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
@@ -141,10 +187,10 @@ def test_cli_validate__four_bar_rows_and_driver(tmp_path: Path) -> None:
     assert coords - rows == dof
 
 
-def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
+def test_cli_runs__lists_the_runs_of_a_folder(mcchain: Callable[..., Ran], tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
     made = [
-        runs.start_run(
+        execution.start_run(
             scene, out=tmp_path / "out", loader=fake_loader, solve=fake_solve, progress=False
         ).folder
         for _ in range(2)
@@ -162,10 +208,11 @@ def test_cli_runs__lists_the_runs_of_a_folder(tmp_path: Path) -> None:
     assert empty.returncode == 0 and "no runs" in empty.stdout
 
 
-def test_cli_runs__does_not_import_numba_or_xarray() -> None:
+def test_cli_runs__does_not_import_numpy_numba_or_xarray() -> None:
     code = (
         "import sys; from mcchain import cli; cli.main(['runs', '--out', '/nonexistent']);"
-        "print(sorted(m for m in ('numba', 'xarray', 'netCDF4', 'dask') if m in sys.modules))"
+        "print(sorted(m for m in ('numpy', 'numba', 'xarray', 'netCDF4', 'dask')"
+        " if m in sys.modules))"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.run(
@@ -174,36 +221,58 @@ def test_cli_runs__does_not_import_numba_or_xarray() -> None:
     assert proc.stdout.splitlines()[-1] == "[]"
 
 
-@pytest.mark.parametrize(
-    ("command", "module"),
-    [
-        ("report", "mcchain.viz.report"),
-        ("show", "mcchain.viz.playback"),
-        ("bench", "mcchain.bench"),
-    ],
-)
-def test_cli__delegated_commands_get_the_rest_of_the_argv(
-    monkeypatch: pytest.MonkeyPatch, command: str, module: str
-) -> None:
-    seen: list[list[str]] = []
-    fake = types.ModuleType(module)
-
-    def main(argv: list[str]) -> int:
-        seen.append(argv)
-        return 3
-
-    fake.main = main  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, module, fake)
-    assert cli.main([command, "RUN", "--samples", "0,3", "--help"]) == 3
-    assert seen == [["RUN", "--samples", "0,3", "--help"]]
-
-
-def test_cli__delegated_command_missing_is_a_usage_error(
+def test_cli_show__parses_and_calls_show_run(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setitem(sys.modules, "mcchain.bench", None)  # import fails
-    assert cli.main(["bench"]) == 2
-    assert (
-        capsys.readouterr().err
-        == "mcchain: error: bench: not available (mcchain.bench is missing)\n"
+    from mcchain.viz import playback
+
+    calls: list[tuple[Any, ...]] = []
+
+    def show_run(run: str, samples: list[int], **options: Any) -> list[int]:
+        calls.append((run, samples, options))
+        return [*samples, 9]
+
+    monkeypatch.setattr(playback, "show_run", show_run)
+    argv = ["show", "RUN", "--samples", "3,0,3", "--worst", "energy:1", "--save", "x.rrd"]
+    assert cli.main(argv) == 0
+    assert capsys.readouterr().out == "samples 3,0,9\nx.rrd\n"
+    ((run, samples, options),) = calls
+    assert run == "RUN" and samples == [3, 0]
+    assert options == {
+        "worst": "energy:1",
+        "status": None,
+        "limit": 16,
+        "save": "x.rrd",
+        "serve": False,
+        "connect": False,
+        "url": None,
+        "stdout": False,
+        "headless": False,
+        "magnify": 100.0,
+        "force_scale": None,
+    }
+    assert cli.main(["show", "RUN", "--samples", "0,a"]) == 2
+    assert capsys.readouterr().err == (
+        "mcchain: error: --samples: expected comma-separated integers, got '0,a'\n"
+    )
+
+
+def test_cli_report__parses_and_calls_write_report(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mcchain.viz import report
+
+    calls: list[tuple[str, str | None]] = []
+
+    def write_report(run: str, out: str | None = None) -> report.Report:
+        calls.append((run, out))
+        return report.Report([Path("d/a.png")], {"sobol.png": "no design"})
+
+    monkeypatch.setattr(report, "write_report", write_report)
+    assert cli.main(["report", "RUN", "--out", "d"]) == 0
+    assert calls == [("RUN", "d")]
+    assert capsys.readouterr().out == "skipped sobol.png: no design\nd/a.png\n"
+    assert cli.main(["report"]) == 2
+    assert capsys.readouterr().err == (
+        "mcchain: error: mcchain report: the following arguments are required: run\n"
     )

@@ -3,16 +3,13 @@ and the reason, exit code 2, and no run folder."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from test_cli_commands import Ran, assert_usage_error, in_process
 
 from mcchain.testing.factory import chain_scene_text, clearance_bar_text, paper_bar_text
-
-REPO = Path(__file__).resolve().parents[1]
 
 BAR = clearance_bar_text()
 
@@ -60,23 +57,19 @@ CASES = {
 }
 
 
+@pytest.fixture
+def mcchain(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    return in_process(monkeypatch, capsys)
+
+
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_cli_run__bad_scene_is_one_line_exit_2_no_folder(tmp_path: Path, case: str) -> None:
+def test_cli_run__bad_scene_is_one_line_exit_2_no_folder(
+    mcchain: Callable[..., Ran], tmp_path: Path, case: str
+) -> None:
     text, fragment = CASES[case]
     assert text != BAR  # the mutation applied
     (tmp_path / "scene.toml").write_text(text)
-    proc = subprocess.run(
-        [sys.executable, "-m", "mcchain.cli", "run", "scene.toml", "--out", "runs"],
-        cwd=tmp_path,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("mcchain: error: ")
-    assert fragment in lines[0], lines[0]
-    assert proc.stdout == ""
+    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]

@@ -210,13 +210,13 @@ REAL_MEMORY_SCRIPT = """
 import json, resource, sys
 from pathlib import Path
 import netCDF4, numpy, xarray, tqdm
-from mcchain import runs
+from mcchain import execution, runs
 def peak():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 tmp, scene, chunk = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 peaks = {"imports": peak()}
 for name, n in (("warm", 2 * chunk), ("medium", 20_000), ("big", 100_000)):
-    result = runs.start_run(scene, samples=n, chunk_size=chunk, out=tmp / name, progress=False)
+    result = execution.start_run(scene, samples=n, chunk_size=chunk, out=tmp / name, progress=False)
     peaks[name] = peak()
 with runs.open_run(result.folder) as ds:
     sizes = {"time": ds.sizes["time"], "nbytes": int(ds.nbytes)}

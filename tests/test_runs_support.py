@@ -285,7 +285,7 @@ def _child_main(argv: list[str]) -> int:
     the fakes; ``... cli ARGS...``: ``mcchain ARGS...`` with the real solver. Either pauses as
     :data:`PAUSE_ENV` says, when set."""
     import mcchain.solvers
-    from mcchain import cli, runs
+    from mcchain import cli, execution
 
     pause = _pause_spec()
     command, *rest = argv
@@ -297,9 +297,9 @@ def _child_main(argv: list[str]) -> int:
     options = json.loads(options_json[0]) if options_json else {}
     solve = fake_solve if pause is None else pausing(fake_solve, *pause)
     if command == "run":
-        result = runs.start_run(target, loader=fake_loader, solve=solve, **options)
+        result = execution.start_run(target, loader=fake_loader, solve=solve, **options)
     else:
-        result = runs.resume_run(target, loader=fake_loader, solve=solve, **options)
+        result = execution.resume_run(target, loader=fake_loader, solve=solve, **options)
     print(result.folder, flush=True)
     return 0
 

@@ -18,8 +18,10 @@ import pytest
 import xarray as xr
 from test_viz_synthetic import make_dataset, make_model, random_params
 
+from mcchain import cli
+from mcchain.ensemble import queries
 from mcchain.errors import RunError
-from mcchain.viz import geometry, playback
+from mcchain.viz import geometry, live, playback
 
 FLOAT32 = 1e-6  # relative round-off of positions, which rerun stores as float32
 OFFSET_FROM_FLOAT32 = 4 * 2.0**-24 * 2.0  # |d| from float32 positions of ~1 m (m, unmagnified)
@@ -76,9 +78,9 @@ def saved(
     ds, model = synthetic
     out = tmp_path_factory.mktemp("show") / "sub" / "show.rrd"
     mp = pytest.MonkeyPatch()
-    mp.setattr(playback, "_open_inputs", lambda run: (ds, model))
+    mp.setattr(playback, "open_inputs", lambda run: (ds, model))
     try:
-        assert playback.main(["RUN", "--samples", "0,1", "--save", str(out)]) == 0
+        assert cli.main(["show", "RUN", "--samples", "0,1", "--save", str(out)]) == 0
     finally:
         mp.undo()
     return out, read_rrd(out)
@@ -184,7 +186,7 @@ def test_show__equilibrium_only_run_is_one_frame_at_zero(tmp_path: Path) -> None
     ds = make_dataset(params, history=False)
     model = make_model(params)
     out = tmp_path / "eq.rrd"
-    playback.show(ds, model, [0], argparse.Namespace(save=str(out)))
+    playback.show(ds, model, [0], save=out)
     rrd = read_rrd(out)
     force = rrd["/sample/0/joint_force/O"]
     np.testing.assert_array_equal(force["time"], [0])
@@ -217,14 +219,14 @@ def test_select_samples__worst_status_and_explicit(synthetic: Any) -> None:
     cf = np.abs(ds["contact_force"].values.astype(np.float64))
     peak = np.nanmax(cf.reshape(NSAMPLE, -1), axis=1)
     worst2 = [int(i) for i in np.argsort(-peak, kind="stable")[:2]]
-    assert playback.select_samples(ds, worst="contact_force:2") == worst2
-    assert playback.select_samples(ds, status="contact_lost") == [1]
-    assert playback.select_samples(ds, status="ok", limit=2) == [0, 3]
-    assert playback.select_samples(ds, status="contact_lost", worst="energy:3") == [1]
-    assert playback.select_samples(ds, [4], status="contact_lost") == [4, 1]
-    assert playback.select_samples(ds) == [0]
+    assert queries.select_samples(ds, worst="contact_force:2") == worst2
+    assert queries.select_samples(ds, status="contact_lost") == [1]
+    assert queries.select_samples(ds, status="ok", limit=2) == [0, 3]
+    assert queries.select_samples(ds, status="contact_lost", worst="energy:3") == [1]
+    assert queries.select_samples(ds, [4], status="contact_lost") == [4, 1]
+    assert queries.select_samples(ds) == [0]
     # peak |omega| skips the sample whose equilibrium failed (all NaN)
-    assert 2 not in playback.select_samples(ds, worst=f"omega:{NSAMPLE}")
+    assert 2 not in queries.select_samples(ds, worst=f"omega:{NSAMPLE}")
 
 
 @pytest.mark.parametrize(
@@ -243,32 +245,40 @@ def test_select_samples__bad_criteria_name_the_flag(
 ) -> None:
     ds, _ = synthetic
     with pytest.raises(RunError, match=message):
-        playback.select_samples(ds, **kwargs)
+        queries.select_samples(ds, **kwargs)
 
 
 def test_parse_samples__integers_only() -> None:
-    assert playback.parse_samples("0,17,0") == [0, 17]
+    assert queries.parse_samples("0,17,0") == [0, 17]
     with pytest.raises(RunError, match="--samples"):
-        playback.parse_samples("0,a")
+        queries.parse_samples("0,a")
 
 
-def test_main__usage_error_is_one_line_run_error() -> None:
-    with pytest.raises(RunError, match=r"mcchain show: .*--bogus"):
-        playback.main(["RUN", "--bogus"])
-    with pytest.raises(RunError, match="not allowed with"):
-        playback.main(["RUN", "--save", "x.rrd", "--spawn"])
+def test_show_command__usage_error_is_one_line_naming_the_command(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert cli.main(["show", "RUN", "--bogus"]) == 2
+    assert capsys.readouterr().err == (
+        "mcchain: error: mcchain show: unrecognized arguments: --bogus\n"
+    )
+    assert cli.main(["show", "RUN", "--save", "x.rrd", "--spawn"]) == 2
+    assert "mcchain show: argument --spawn: not allowed with" in capsys.readouterr().err
 
 
-def test_add_arguments__covers_rerun_script_flags() -> None:
+def show_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser()
+    cli.add_show_arguments(parser)
+    return parser
+
+
+def test_show_arguments__cover_rerun_script_flags() -> None:
     """``rr.script_setup`` reads the flags ``rr.script_add_args`` declares; ours has them all."""
     import rerun as rr
 
     theirs = argparse.ArgumentParser()
     rr.script_add_args(theirs)
-    ours = playback.build_parser()
-    ours_dests = {a.dest for a in ours._actions}
-    assert {a.dest for a in theirs._actions} <= ours_dests
-    assert set(playback._RERUN_FLAGS) <= ours_dests
+    ours = show_parser()
+    assert {a.dest for a in theirs._actions} <= {a.dest for a in ours._actions}
     args = ours.parse_args(["RUN", "--samples", "0,17", "--magnify", "50"])
     assert args.magnify == 50.0 and args.samples == "0,17" and not args.spawn
     assert ours.parse_args(["RUN"]).magnify == playback.DEFAULT_MAGNIFY == 100.0
@@ -284,7 +294,7 @@ def test_live_stream__chunks_built_by_the_registry_are_logged_as_show_logs_them(
     ds, model = synthetic
     whole = ds.load()
     out = tmp_path / "live.rrd"
-    with playback.LiveStream([3, 1], save=out, force_scale=0.01) as stream:
+    with live.LiveStream([3, 1], save=out, force_scale=0.01) as stream:
         for start, stop in ((0, 2), (2, 4), (4, NSAMPLE)):
             part = whole.isel(sample=slice(start, stop))
             outputs = {name: part[name].values for name in part.data_vars}

@@ -14,6 +14,8 @@ from SALib.sample import sobol as salib_sobol
 from scipy.stats import qmc
 from test_viz_synthetic import SCENE_TEXT, make_dataset, pulsations, random_params
 
+from mcchain import cli
+from mcchain.ensemble import queries
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.testing.factory import clearance_bar_text
 from mcchain.viz import report
@@ -75,7 +77,7 @@ def test_report__writes_every_png_from_a_run(
         {"num_vars": 2, "names": ["c", "m"], "bounds": [[1e-4, 1e-3], [1.5, 2.5]]}, 16, seed=5
     )
     run = make_run(tmp_path / "run", params, "sobol", ntime=30)
-    assert report.main([str(run)]) == 0
+    assert cli.main(["report", str(run)]) == 0
     out = run / "report"
     assert {p.name for p in out.glob("*.png")} == EVERY_PNG
     for name in sorted(EVERY_PNG):
@@ -114,12 +116,20 @@ def test_report__skips_what_the_run_lacks_and_says_why(tmp_path: Path) -> None:
         assert_real_picture(path)
 
 
-def test_run_design__from_the_scene_copy_or_the_attribute(tmp_path: Path) -> None:
+def test_run_design__from_the_settings_the_scene_attribute_or_the_scene_copy(
+    tmp_path: Path,
+) -> None:
     run = make_run(tmp_path / "run", random_params(4), "lhs", history=False)
-    assert report.run_design(run) == "lhs"
+    assert queries.run_design(run) == "lhs"
+    elsewhere = tmp_path / "elsewhere"
     ds = xr.Dataset(attrs={"scene": SCENE_TEXT.format(count=4, design="sobol")})
-    assert report.run_design(tmp_path / "elsewhere", ds) == "sobol"
-    assert report.run_design(tmp_path / "elsewhere", xr.Dataset(attrs={"scene": "[scene]"})) is None
+    assert queries.run_design(elsewhere, ds) == "sobol"
+    assert queries.run_design(elsewhere, xr.Dataset(attrs={"scene": "[scene]"})) is None
+    # the resolved settings the ensemble stores come first (its scene text is the same)
+    settings = '{"scene": {"sample": {"design": "saltelli"}}, "samples": 4, "seed": 7}'
+    assert queries.run_design(run, ds.assign_attrs(settings=settings)) == "saltelli"
+    no_sample = '{"scene": {"sample": null}, "samples": 1, "seed": null}'
+    assert queries.run_design(run, ds.assign_attrs(settings=no_sample)) is None
 
 
 # -- Sobol indices ---------------------------------------------------------------------------------

@@ -1,9 +1,13 @@
 """Looking at results: rerun playback of samples and report plots of an ensemble.
 
-* :mod:`mcchain.viz.playback` — ``mcchain show`` and :func:`~mcchain.viz.playback.log_samples`
-  (also used to stream samples live during ``mcchain run --rerun``);
+* :mod:`mcchain.viz.playback` — ``mcchain show``: :func:`~mcchain.viz.playback.show_run`
+  and :func:`~mcchain.viz.playback.log_samples`;
+* :mod:`mcchain.viz.live` — ``mcchain run --rerun``: the samples of each chunk streamed to
+  rerun while the run computes them, drawn as ``mcchain show`` draws them;
 * :mod:`mcchain.viz.report` — ``mcchain report``: matplotlib PNGs and Sobol indices;
 * :mod:`mcchain.viz.geometry` — body outlines and world positions from a Model.
 
-rerun, matplotlib and SALib are imported only when a figure or recording is made.
+The sample queries both commands share live in :mod:`mcchain.ensemble.queries`, the model
+of a run's samples in :mod:`mcchain.ensemble.describe`. rerun, matplotlib and SALib are
+imported only when a figure or recording is made.
 """

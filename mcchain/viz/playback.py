@@ -1,11 +1,14 @@
-"""Replay samples of an ensemble in the rerun viewer (``mcchain show``) and stream them live.
+"""Replay samples of an ensemble in the rerun viewer (``mcchain show``).
 
 ``mcchain show RUN --samples 0,17 [--save FILE.rrd | --spawn | --serve]`` draws each chosen
-sample of a run (DESIGN §6). Samples may also be picked by a criterion:
-``--worst VARIABLE:N`` takes the N samples with the largest peak ``|VARIABLE|`` (e.g.
-``--worst contact_force:3``) and ``--status contact_lost`` those whose status carries a flag
-(names of :attr:`mcchain.status.Status.meaning`, plus ``ok``; with both, the worst N of the
-samples with that status).
+sample of a run (:func:`show_run`). Samples may also be picked by a criterion
+(:func:`mcchain.ensemble.queries.select_samples`): ``--worst VARIABLE:N`` takes the N
+samples with the largest peak ``|VARIABLE|`` (e.g. ``--worst contact_force:3``) and
+``--status contact_lost`` those whose status carries a flag (names of
+:attr:`mcchain.status.Status.meaning`, plus ``ok``; with both, the worst N of the samples
+with that status). What each sample looks like comes from the ensemble itself (its stored
+scene text and parameters, :func:`mcchain.ensemble.describe.stored_model`). The same
+drawing streams samples live during ``mcchain run --rerun`` (:mod:`mcchain.viz.live`).
 
 Entities (``{i}`` is the global sample index, names are escaped entity-path parts):
 
@@ -44,7 +47,6 @@ Drawing conventions:
 from __future__ import annotations
 
 import argparse
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.queries import DEFAULT_LIMIT, positions, sample_ids, select_samples
 from mcchain.errors import RunError
 from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.status import Status
@@ -62,17 +65,12 @@ if TYPE_CHECKING:
     import rerun.blueprint as rrb
     import xarray as xr
 
-log = logging.getLogger(__name__)
 
 APPLICATION_ID = "mcchain"
 DEFAULT_MAGNIFY = 100.0
 """Default magnification of clearance offsets: 0.1 mm is drawn as 1 cm."""
 FORCE_ARROW_FRACTION = 0.3
 """Default force scale: the largest force shown is drawn this fraction of the mechanism size."""
-DEFAULT_LIMIT = 16
-"""Most samples ``--status`` alone picks (a recording of thousands of samples is unusable)."""
-PEAK_BLOCK = 512
-"""Samples read at once when ranking ``--worst`` (bounds memory on long histories)."""
 
 BODY_COLORS = np.array(
     [
@@ -93,184 +91,6 @@ JOINT_COLOR = [20, 20, 20]
 GROUND_COLOR = [90, 90, 90]
 FORCE_COLOR = [200, 30, 30]
 CLEARANCE_COLOR = [0, 150, 136]
-
-_RERUN_FLAGS = ("headless", "connect", "serve", "url", "save", "stdout")
-"""Attributes ``rr.script_setup`` reads from the parsed arguments."""
-
-
-# -- arguments ---------------------------------------------------------------------------------
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``mcchain show`` arguments to ``parser``.
-
-    The viewer flags are those of ``rr.script_add_args`` (``--save``, ``--serve``,
-    ``--connect``/``--url``, ``--stdout``, ``--headless``) plus ``--spawn`` (the default), so
-    that ``rr.script_setup``/``script_teardown`` read them; they are declared here rather than
-    by ``rr.script_add_args`` so that building the CLI parser does not import rerun.
-    """
-    parser.add_argument("run", help="run folder")
-    parser.add_argument("--samples", help="comma-separated global sample indices, e.g. 0,17")
-    parser.add_argument(
-        "--worst", metavar="VARIABLE:N", help="the N samples of largest peak |VARIABLE|"
-    )
-    parser.add_argument(
-        "--status",
-        metavar="FLAG[,FLAG]",
-        help="samples carrying any of these status flags ("
-        + ", ".join(["ok", *(f.meaning for f in Status)])
-        + ")",
-    )
-    parser.add_argument(
-        "--limit",
-        type=int,
-        default=DEFAULT_LIMIT,
-        help=f"most samples --status alone picks (default {DEFAULT_LIMIT})",
-    )
-    parser.add_argument(
-        "--magnify",
-        type=float,
-        default=DEFAULT_MAGNIFY,
-        help=f"draw clearance offsets this many times longer (default {DEFAULT_MAGNIFY:g})",
-    )
-    parser.add_argument(
-        "--force-scale", type=float, default=None, help="force arrows, m per N (default: auto)"
-    )
-    sink = parser.add_mutually_exclusive_group()
-    sink.add_argument("--save", metavar="FILE.rrd", help="save the recording to this file")
-    sink.add_argument("--spawn", action="store_true", help="spawn a viewer (the default)")
-    sink.add_argument("--serve", action="store_true", help="serve gRPC and a web viewer")
-    sink.add_argument("--connect", action="store_true", help="connect to a running viewer")
-    sink.add_argument("--stdout", action="store_true", help="write the recording to stdout")
-    sink.add_argument("--headless", action="store_true", help="log nowhere (for timing)")
-    parser.add_argument("--url", help="viewer URL for --connect")
-
-
-def parse_samples(text: str | None) -> list[int]:
-    """``"0,17"`` -> ``[0, 17]``; raises :class:`RunError` naming ``--samples``."""
-    if not text:
-        return []
-    try:
-        values = [int(part) for part in text.split(",") if part.strip()]
-    except ValueError:
-        raise RunError(f"--samples: expected comma-separated integers, got {text!r}") from None
-    if any(v < 0 for v in values):
-        raise RunError(f"--samples: sample indices are >= 0, got {text!r}")
-    return list(dict.fromkeys(values))
-
-
-def parse_worst(text: str) -> tuple[str, int]:
-    """``"contact_force:3"`` -> ``("contact_force", 3)``; raises :class:`RunError`."""
-    name, sep, count = text.rpartition(":")
-    if not sep or not name:
-        raise RunError(f"--worst: expected VARIABLE:N, got {text!r}")
-    try:
-        n = int(count)
-    except ValueError:
-        raise RunError(f"--worst: N must be an integer, got {count!r}") from None
-    if n < 1:
-        raise RunError(f"--worst: N must be >= 1, got {n}")
-    return name, n
-
-
-# -- sample selection --------------------------------------------------------------------------
-def _sample_ids(ds: xr.Dataset) -> np.ndarray:
-    if "sample" in ds.coords:
-        return np.asarray(ds["sample"].values, dtype=np.int64)
-    return np.arange(ds.sizes["sample"], dtype=np.int64)
-
-
-def peak_abs(ds: xr.Dataset, variable: str, block: int = PEAK_BLOCK) -> np.ndarray:
-    """Peak ``|variable|`` of every sample over all its other axes (NaN if all NaN).
-
-    Reads ``block`` samples at a time, so a lazy ensemble is never loaded whole.
-    """
-    if variable not in ds.data_vars or "sample" not in ds[variable].dims:
-        choices = sorted(
-            str(name)
-            for name, v in ds.data_vars.items()
-            if "sample" in v.dims and v.dtype.kind == "f"
-        )
-        raise RunError(
-            f"--worst: no per-sample variable {variable!r} in the run "
-            f"(choose from {', '.join(choices)})"
-        )
-    da = ds[variable].transpose("sample", ...)
-    n = ds.sizes["sample"]
-    peak = np.full(n, np.nan)
-    for start in range(0, n, block):
-        values = np.abs(np.asarray(da.isel(sample=slice(start, start + block)).values, float))
-        flat = values.reshape(values.shape[0], -1)
-        finite = np.isfinite(flat)
-        has = finite.any(axis=1)
-        peak_block = np.where(finite, flat, -np.inf).max(axis=1, initial=-np.inf)
-        peak[start : start + len(flat)] = np.where(has, peak_block, np.nan)
-    return peak
-
-
-def _status_mask(ds: xr.Dataset, names: str) -> np.ndarray:
-    known = {flag.meaning: int(flag.value) for flag in Status}
-    status = np.asarray(ds["status"].values, dtype=np.int64)
-    mask = np.zeros(status.shape, dtype=bool)
-    for name in (part.strip() for part in names.split(",") if part.strip()):
-        if name == "ok":
-            mask |= status == 0
-        elif name in known:
-            mask |= (status & known[name]) != 0
-        else:
-            raise RunError(f"--status: unknown flag {name!r} (choose from ok, {', '.join(known)})")
-    return mask
-
-
-def select_samples(
-    ds: xr.Dataset,
-    samples: Sequence[int] = (),
-    worst: str | None = None,
-    status: str | None = None,
-    limit: int = DEFAULT_LIMIT,
-) -> list[int]:
-    """Global sample indices to show, in order: ``samples`` first, then those the criteria pick.
-
-    ``status`` (comma-separated flag names) filters the candidates; ``worst``
-    (``VARIABLE:N``) takes the N candidates with the largest peak ``|VARIABLE|`` (samples with
-    no finite value are never "worst"); ``status`` alone takes the first ``limit``. With no
-    argument at all: the first sample.
-    """
-    ids = _sample_ids(ds)
-    known = set(ids.tolist())
-    chosen = list(dict.fromkeys(int(s) for s in samples))
-    missing = [s for s in chosen if s not in known]
-    if missing:
-        raise RunError(
-            f"--samples: {missing[0]} is not a sample of the run "
-            f"({len(ids)} samples, {ids.min()}..{ids.max()})"
-        )
-    picked: list[int] = []
-    if worst is not None or status is not None:
-        candidates = np.ones(len(ids), dtype=bool)
-        if status is not None:
-            candidates &= _status_mask(ds, status)
-        if worst is not None:
-            variable, n = parse_worst(worst)
-            peak = peak_abs(ds, variable)
-            candidates &= np.isfinite(peak)
-            order = np.argsort(-np.where(candidates, peak, -np.inf), kind="stable")
-            picked = [int(ids[i]) for i in order[: min(n, int(candidates.sum()))]]
-        else:
-            where = np.flatnonzero(candidates)
-            if len(where) > limit:
-                log.info(
-                    "--status %s matches %d samples; showing the first %d (--limit)",
-                    status,
-                    len(where),
-                    limit,
-                )
-            picked = [int(ids[i]) for i in where[:limit]]
-        if not picked and not chosen:
-            raise RunError(
-                f"no sample matches {' '.join(filter(None, [worst, status]))!s} in the run"
-            )
-    elif not chosen:
-        chosen = [int(ids[0])]
-    return list(dict.fromkeys(chosen + picked))
 
 
 # -- one sample as arrays ----------------------------------------------------------------------
@@ -321,15 +141,6 @@ def _track(ds: xr.Dataset, pos: int) -> _Track:
     return _Track(np.zeros(1), q[None], jf[None], None, None, None, None)
 
 
-def _positions(ds: xr.Dataset, samples: Sequence[int]) -> list[int]:
-    ids = _sample_ids(ds)
-    where = {int(s): i for i, s in enumerate(ids)}
-    missing = [s for s in samples if int(s) not in where]
-    if missing:
-        raise RunError(f"sample {missing[0]} is not in the dataset")
-    return [where[int(s)] for s in samples]
-
-
 def _flip(xy: np.ndarray) -> np.ndarray:
     """World (y up) to rerun 2D view coordinates (y down)."""
     out = np.array(xy, dtype=np.float64, copy=True)
@@ -353,7 +164,7 @@ def default_force_scale(
     """m per N such that the largest joint force of ``samples`` is ``fraction`` of the
     mechanism size (1 if there is no finite non-zero force)."""
     fmax = 0.0
-    for pos in _positions(ds, samples):
+    for pos in positions(ds, samples):
         jf = _track(ds, pos).joint_force
         mag = np.hypot(jf[..., 0], jf[..., 1])
         if np.isfinite(mag).any():
@@ -401,7 +212,7 @@ def log_samples(
     """Log ``samples`` (global indices) of ``dataset`` to ``recording`` (see the module doc).
 
     Args:
-        dataset: an ensemble (DESIGN §5 variables) or the chunk of it being computed; only
+        dataset: an ensemble (the registry's variables) or the chunk of it being computed; only
             the variables present are logged.
         model: a model whose row ``s - model_offset`` is global sample ``s`` (the whole
             run's model with offset 0, or ``model.select(start, stop)`` with offset
@@ -417,10 +228,10 @@ def log_samples(
 
     if not samples:
         return
-    positions = _positions(dataset, samples)
+    where = positions(dataset, samples)
     if force_scale is None:
         force_scale = default_force_scale(dataset, model, samples, model_offset=model_offset)
-    for sample, pos in zip(samples, positions, strict=True):
+    for sample, pos in zip(samples, where, strict=True):
         row = int(sample) - model_offset
         _log_one(dataset, model, int(sample), pos, row, recording, rr, magnify, force_scale)
 
@@ -607,7 +418,7 @@ def view_bounds(
 ) -> tuple[list[float], list[float]]:
     """x and y ranges (view coordinates, y down) that hold every drawn point of ``samples``."""
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
-    for sample, pos in zip(samples, _positions(ds, samples), strict=True):
+    for sample, pos in zip(samples, positions(ds, samples), strict=True):
         row = int(sample) - model_offset
         track = _track(ds, pos)
         pts = [track.q[:, :, :2].reshape(-1, 2)]
@@ -641,7 +452,7 @@ def make_blueprint(
     """
     import rerun.blueprint as rrb
 
-    present = set(_sample_ids(ds).tolist())
+    present = set(sample_ids(ds).tolist())
     x_range, y_range = view_bounds(
         ds, model, [s for s in samples if s in present], magnify, model_offset
     )
@@ -707,183 +518,69 @@ def open_recording(
 
 
 # -- command -----------------------------------------------------------------------------------
-class LiveStream:
-    """Stream chosen samples to rerun while a run computes them (``mcchain run --rerun 0,1``).
+def open_inputs(run: str | Path) -> tuple[xr.Dataset, Model]:
+    """The ensemble of a run folder and the model of its samples (row = global sample).
 
-    Call :meth:`log_chunk` with each finished chunk (the Dataset the runs module builds with
-    ``mcchain.ensemble.registry.build_dataset(outputs, chunk_model, start=start)``); the
-    samples of interest it holds are logged with :func:`log_samples`. The default blueprint is
-    sent with the first chunk that holds one of them; the force scale is fixed then too, so
-    arrows compare across chunks. :meth:`close` (or leaving a ``with`` block) flushes and
-    closes the sink, completing a saved file.
-
-    Args:
-        samples: global sample indices to stream.
-        save, serve, url, spawn: the sink, as :func:`open_recording`.
-        magnify: clearance offsets are drawn this many times longer.
-        force_scale: force arrows, m per N (default: from the first chunk logged).
+    The model is rebuilt from what the ensemble stores (its scene text and ``parameters``,
+    :func:`mcchain.ensemble.describe.stored_model`), never by sampling the scene again.
     """
-
-    def __init__(
-        self,
-        samples: Sequence[int],
-        *,
-        save: str | Path | None = None,
-        serve: bool = False,
-        url: str | None = None,
-        spawn: bool = True,
-        magnify: float = DEFAULT_MAGNIFY,
-        force_scale: float | None = None,
-    ) -> None:
-        self.samples = list(dict.fromkeys(int(s) for s in samples))
-        self.magnify = magnify
-        self.force_scale = force_scale
-        self.logged: list[int] = []
-        self.recording = open_recording(save=save, serve=serve, url=url, spawn=spawn)
-        self._blueprint_sent = False
-
-    def log_chunk(self, dataset: xr.Dataset, model: Model, start: int = 0) -> list[int]:
-        """Log the samples of interest in this chunk; ``model`` is the chunk's model (row 0 =
-        global sample ``start``) or the whole run's with ``start=0``. Returns those logged."""
-        present = set(_sample_ids(dataset).tolist())
-        wanted = [s for s in self.samples if s in present and s not in self.logged]
-        if not wanted:
-            return []
-        if self.force_scale is None:
-            self.force_scale = default_force_scale(dataset, model, wanted, model_offset=start)
-        if not self._blueprint_sent:
-            blueprint = make_blueprint(dataset, model, self.samples, self.magnify, start)
-            self.recording.send_blueprint(blueprint)
-            self._blueprint_sent = True
-        log_samples(
-            dataset,
-            model,
-            wanted,
-            self.recording,
-            magnify=self.magnify,
-            force_scale=self.force_scale,
-            model_offset=start,
-        )
-        self.logged += wanted
-        return wanted
-
-    def close(self) -> None:
-        """Flush everything logged and close the sink (a saved file is then complete)."""
-        self.recording.flush()
-        self.recording.disconnect()
-
-    def __enter__(self) -> LiveStream:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
-def _attr_int(ds: xr.Dataset, name: str) -> int | None:
-    value = ds.attrs.get(name)
-    try:
-        return None if value is None else int(value)
-    except (TypeError, ValueError):  # "none": a run without [sample]
-        return None
-
-
-def _open_inputs(run: str | Path) -> tuple[xr.Dataset, Model]:
-    """The ensemble of a run folder and the model of the whole run (row = global sample).
-
-    The model is recompiled from the run's ``scene.toml`` with its ``sample_count`` and
-    ``seed`` attributes; a mismatch with the stored ``parameters`` is logged (the geometry
-    of sampled attachment points would then be the recompiled one).
-    """
+    from mcchain.ensemble.describe import stored_model
     from mcchain.runs import open_run, resolve_run
-    from mcchain.scene import compile_model, load_scene
 
-    folder = resolve_run(run)
-    ds = open_run(folder)
-    scene = load_scene(folder / "scene.toml")
-    if not ds.sizes.get("param", 0):
-        return ds, compile_model(scene)
-    count = _attr_int(ds, "sample_count") or int(_sample_ids(ds).max()) + 1
-    seed = _attr_int(ds, "seed")
-    model = compile_model(scene, nsample=count, seed=seed)
-    ids = _sample_ids(ds)
-    stored = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
-    if ids.max() >= model.nsample or not np.allclose(
-        model.parameters[ids], stored, rtol=1e-12, atol=0.0, equal_nan=True
-    ):
-        log.warning(
-            "%s: the scene recompiled (%d samples, seed %s) does not reproduce the stored "
-            "parameters; sampled geometry is drawn from the recompiled model",
-            run,
-            count,
-            seed,
-        )
-    return ds, model
-
-
-class _ArgumentParser(argparse.ArgumentParser):
-    """Usage errors as :class:`RunError` (one line through the CLI), not ``SystemExit``."""
-
-    def error(self, message: str) -> Any:
-        raise RunError(f"{self.prog}: {message}")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``mcchain show`` parser (see :func:`add_arguments`)."""
-    parser = _ArgumentParser(
-        prog="mcchain show", description="replay samples of a run in the rerun viewer"
-    )
-    add_arguments(parser)
-    return parser
+    ds = open_run(resolve_run(run))
+    return ds, stored_model(ds)
 
 
 def show(
     ds: xr.Dataset,
     model: Model,
     samples: Sequence[int],
-    args: argparse.Namespace,
+    *,
+    save: str | Path | None = None,
+    serve: bool = False,
+    connect: bool = False,
+    url: str | None = None,
+    stdout: bool = False,
+    headless: bool = False,
+    magnify: float | None = None,
+    force_scale: float | None = None,
 ) -> None:
-    """Log ``samples`` to the sink the rerun flags in ``args`` choose (``rr.script_setup``)."""
+    """Log ``samples`` to one sink, chosen as ``rr.script_setup`` does: ``save`` (a file,
+    its folder created), ``serve``, ``connect`` (to ``url``), ``stdout``, ``headless``, or by
+    default a spawned viewer."""
     import rerun as rr
 
-    rr_args = argparse.Namespace(**{flag: getattr(args, flag, None) for flag in _RERUN_FLAGS})
-    for flag in ("headless", "connect", "serve", "stdout"):
-        setattr(rr_args, flag, bool(getattr(rr_args, flag)))
+    rr_args = argparse.Namespace(
+        headless=bool(headless),
+        connect=bool(connect),
+        serve=bool(serve),
+        url=url,
+        save=None if save is None else str(save),
+        stdout=bool(stdout),
+    )
     if rr_args.save is not None:
         Path(rr_args.save).parent.mkdir(parents=True, exist_ok=True)
-    magnify = float(getattr(args, "magnify", None) or DEFAULT_MAGNIFY)
+    magnify = float(magnify or DEFAULT_MAGNIFY)
     blueprint = make_blueprint(ds, model, samples, magnify)
     rec = rr.script_setup(rr_args, APPLICATION_ID, default_blueprint=blueprint)
     with rec:
-        log_samples(
-            ds,
-            model,
-            samples,
-            rec,
-            magnify=magnify,
-            force_scale=getattr(args, "force_scale", None),
-        )
+        log_samples(ds, model, samples, rec, magnify=magnify, force_scale=force_scale)
     rr.script_teardown(rr_args)
 
 
-def main(argv: Sequence[str] | argparse.Namespace | None = None) -> int:
-    """``mcchain show RUN ...``: the command-line words after ``show`` (or parsed arguments
-    of :func:`add_arguments`); prints the samples shown and, with ``--save``, the file."""
-    import sys
-
-    if isinstance(argv, argparse.Namespace):
-        args = argv
-    else:
-        args = build_parser().parse_args(sys.argv[2:] if argv is None else list(argv))
-    ds, model = _open_inputs(args.run)
-    samples = select_samples(
-        ds,
-        parse_samples(getattr(args, "samples", None)),
-        worst=getattr(args, "worst", None),
-        status=getattr(args, "status", None),
-        limit=getattr(args, "limit", None) or DEFAULT_LIMIT,
-    )
-    show(ds, model, samples, args)
-    print("samples " + ",".join(str(s) for s in samples))
-    if getattr(args, "save", None):
-        print(args.save)
-    return 0
+def show_run(
+    run: str | Path,
+    samples: Sequence[int] = (),
+    *,
+    worst: str | None = None,
+    status: str | None = None,
+    limit: int | None = None,
+    **options: Any,
+) -> list[int]:
+    """``mcchain show``: pick samples of a run (:func:`~mcchain.ensemble.queries.select_samples`)
+    and :func:`show` them; ``options`` are :func:`show`'s sink and drawing options. Returns
+    the samples shown."""
+    ds, model = open_inputs(run)
+    chosen = select_samples(ds, samples, worst=worst, status=status, limit=limit or DEFAULT_LIMIT)
+    show(ds, model, chosen, **options)
+    return chosen

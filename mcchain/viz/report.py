@@ -35,18 +35,17 @@ global backend switch). A lazy ensemble is read in blocks, never whole.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import logging
-import tomllib
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.queries import dim_names, peak_abs_over_time, run_design
 from mcchain.status import Status, counts
 
 if TYPE_CHECKING:
@@ -111,28 +110,6 @@ def _block(ds: xr.Dataset, name: str, axis: str) -> int:
     return max(1, BLOCK_BYTES // max(per, 1))
 
 
-def _names(ds: xr.Dataset, dim: str) -> list[str]:
-    if dim in ds.coords:
-        return [str(v) for v in ds[dim].values]
-    return [str(i) for i in range(ds.sizes.get(dim, 0))]
-
-
-def _peak_abs_over_time(ds: xr.Dataset, name: str) -> np.ndarray:
-    """max over time of |name| per sample and trailing component: (nsample, ...)."""
-    da = ds[name].transpose("sample", "time", ...)
-    n, step = ds.sizes["sample"], _block(ds, name, "sample")
-    out = None
-    for start in range(0, n, step):
-        a = np.abs(np.asarray(da.isel(sample=slice(start, start + step)).values, float))
-        finite = np.isfinite(a)
-        peak = np.where(finite, a, -np.inf).max(axis=1, initial=-np.inf)
-        peak = np.where(finite.any(axis=1), peak, np.nan)
-        if out is None:
-            out = np.full((n, *peak.shape[1:]), np.nan)
-        out[start : start + len(peak)] = peak
-    return out if out is not None else np.empty((0,))
-
-
 def results(ds: xr.Dataset) -> list[Result]:
     """The per-sample results present in the ensemble (see the module docstring)."""
     out: list[Result] = []
@@ -141,23 +118,23 @@ def results(ds: xr.Dataset) -> list[Result]:
         out.append(Result("omega", tuple(f"ω{k}" for k in range(omega.shape[1])), omega, "rad/s"))
     if "q_eq" in ds.data_vars:
         q = np.asarray(ds["q_eq"].transpose("sample", "body", "dof").values, float)
-        labels = tuple(f"{b}.{d}" for b in _names(ds, "body") for d in _names(ds, "dof"))
+        labels = tuple(f"{b}.{d}" for b in dim_names(ds, "body") for d in dim_names(ds, "dof"))
         out.append(Result("q_eq", labels, q.reshape(q.shape[0], -1), "m, rad"))
     if "joint_force_eq" in ds.data_vars and ds.sizes.get("joint", 0):
         f = np.asarray(ds["joint_force_eq"].transpose("sample", "joint", "xy").values, float)
         out.append(
             Result(
                 "joint_force_eq",
-                tuple(f"|f {j}|" for j in _names(ds, "joint")),
+                tuple(f"|f {j}|" for j in dim_names(ds, "joint")),
                 np.hypot(f[..., 0], f[..., 1]),
                 "N",
             )
         )
     if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
-        peak = _peak_abs_over_time(ds, "contact_force")
+        peak = peak_abs_over_time(ds, "contact_force", _block(ds, "contact_force", "sample"))
         keep = np.isfinite(peak).any(axis=0) if peak.ndim == 2 else np.zeros(0, bool)
         if keep.any():
-            names = [j for j, k in zip(_names(ds, "joint"), keep, strict=True) if k]
+            names = [j for j, k in zip(dim_names(ds, "joint"), keep, strict=True) if k]
             out.append(
                 Result(
                     "peak_contact_force",
@@ -167,28 +144,6 @@ def results(ds: xr.Dataset) -> list[Result]:
                 )
             )
     return out
-
-
-def run_design(run: str | Path, ds: xr.Dataset | None = None) -> str | None:
-    """The ``[sample] design`` of a run: from ``RUN/scene.toml``, else the ensemble's scene
-    text attribute; ``"random"`` when the scene samples without naming a design; ``None`` if
-    there is no scene or no ``[sample]``."""
-    texts = []
-    path = Path(run) / "scene.toml"
-    if path.is_file():
-        texts.append(path.read_text())
-    if ds is not None:
-        texts += [v for k, v in ds.attrs.items() if "scene" in str(k) and isinstance(v, str)]
-    for text in texts:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError:
-            continue
-        sample = data.get("sample")
-        if isinstance(sample, dict):
-            return str(sample.get("design", "random"))
-        return None
-    return None
 
 
 # -- figures -----------------------------------------------------------------------------------
@@ -250,7 +205,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     if "parameters" not in ds.data_vars or not nparam:
         return "the run samples no parameter ([sample] absent)"
     params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
-    paths = _names(ds, "param")
+    paths = dim_names(ds, "param")
     rows, constant = [], []
     for k in range(result.values.shape[1]):
         y = result.values[:, k][np.isfinite(result.values[:, k])]
@@ -313,16 +268,16 @@ def reaction_envelopes(ds: xr.Dataset, path: Path) -> Path | str:
         return "the run has no time history of joint forces ([simulate] absent)"
     panels: list[tuple[str, np.ndarray, np.ndarray, str]] = []
     q, time = _envelope(ds, "joint_force", lambda a: np.hypot(a[..., 0], a[..., 1]))
-    for k, j in enumerate(_names(ds, "joint")):
+    for k, j in enumerate(dim_names(ds, "joint")):
         panels.append((f"|f {j}|", q[..., k], time, "N"))
     if "contact_force" in ds.data_vars:
         q, time = _envelope(ds, "contact_force", lambda a: a)
-        for k, j in enumerate(_names(ds, "joint")):
+        for k, j in enumerate(dim_names(ds, "joint")):
             if np.isfinite(q[..., k]).any():
                 panels.append((f"λ {j} (contact)", q[..., k], time, "N"))
     if "driver_torque" in ds.data_vars and ds.sizes.get("driver", 0):
         q, time = _envelope(ds, "driver_torque", lambda a: a)
-        for k, d in enumerate(_names(ds, "driver")):
+        for k, d in enumerate(dim_names(ds, "driver")):
             panels.append((f"driver torque {d}", q[..., k], time, "N m"))
     nrow, ncol = _grid(len(panels), 2)
     fig, axes = _figure(nrow, ncol, w=4.5, h=2.6)
@@ -536,7 +491,7 @@ def sobol_figure(
     if "parameters" not in ds.data_vars or not ds.sizes.get("param", 0):
         return "the run samples no parameter"
     params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
-    names = _names(ds, "param")
+    names = dim_names(ds, "param")
     outputs: dict[str, np.ndarray] = {}
     for result in results(ds):
         if result.name == "q_eq":
@@ -609,45 +564,12 @@ def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = Non
     return report
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``mcchain report`` arguments to ``parser``."""
-    parser.add_argument("run", help="run folder (or its id under runs/)")
-    parser.add_argument("--out", metavar="DIR", help="folder of the PNG files (default RUN/report)")
-
-
-class _ArgumentParser(argparse.ArgumentParser):
-    """Usage errors as :class:`RunError` (one line through the CLI), not ``SystemExit``."""
-
-    def error(self, message: str) -> Any:
-        from mcchain.errors import RunError
-
-        raise RunError(f"{self.prog}: {message}")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``mcchain report`` parser."""
-    parser = _ArgumentParser(prog="mcchain report", description="draw a run's plots as PNG")
-    add_arguments(parser)
-    return parser
-
-
-def main(argv: Sequence[str] | argparse.Namespace | None = None) -> int:
-    """``mcchain report RUN [--out DIR]``: the command-line words after ``report`` (or parsed
-    arguments); prints each figure skipped (with why) and each file written."""
-    import sys
-
+def write_report(run: str | Path, out: str | Path | None = None) -> Report:
+    """``mcchain report``: every figure of a run folder (path or id under ``runs/``) into
+    ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
     from mcchain.runs import open_run, resolve_run
 
-    if isinstance(argv, argparse.Namespace):
-        args = argv
-    else:
-        args = build_parser().parse_args(sys.argv[2:] if argv is None else list(argv))
-    folder = resolve_run(args.run)
+    folder = resolve_run(run)
     ds = open_run(folder)
-    out = Path(args.out) if getattr(args, "out", None) else folder / "report"
-    report = make_report(ds, out, design=run_design(folder, ds))
-    for name, reason in report.skipped.items():
-        print(f"skipped {name}: {reason}")
-    for path in report.written:
-        print(path)
-    return 0
+    target = Path(out) if out else folder / "report"
+    return make_report(ds, target, design=run_design(folder, ds))

@@ -1,0 +1,511 @@
+"""Executing a run: compute the missing chunks, merge them, complete ``run.json``.
+
+:func:`start_run` (``mcchain run SCENE``) prepares the job, creates the run folder and
+executes it; :func:`resume_run` (``mcchain run --resume RUN``) executes the chunks an
+interrupted run lacks; :func:`execute` is the part both share (see its docstring for the
+phases timed and the throughput recorded in ``run.json``).
+
+Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host names, so the
+same scene and seed give a byte-identical file whatever the chunk size, thread count or
+scheduler, and a resumed run equals an uninterrupted one.
+
+This module imports only the standard library at import time; numpy, xarray, netCDF4,
+numba, the solvers and rerun are imported when a run executes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import logging
+import os
+import re
+import sys
+import time
+import traceback
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mcchain.errors import RunError
+from mcchain.job import Job, Loader, check_positive, prepare_job
+from mcchain.provenance import git_state, host_info, software_versions
+from mcchain.runs import (
+    COMPLETED,
+    DEFAULT_OUT,
+    ENSEMBLE,
+    FAILED,
+    PARTS,
+    RUNNING,
+    SCENE_COPY,
+    check_new_run_dir,
+    create_run_folder,
+    is_locked,
+    read_record,
+    resolve_run,
+    run_lock,
+    run_log,
+    write_record,
+)
+from mcchain.viz.live import LiveOptions, LiveRun, check_live, live_summary
+
+if TYPE_CHECKING:
+    from mcchain.ensemble.io import MergeStats
+    from mcchain.parallel import ExecutionStats, SolveFn
+
+log = logging.getLogger("mcchain")
+
+
+def _now() -> str:
+    return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+@dataclass
+class RunResult:
+    """What :func:`start_run` / :func:`resume_run` return."""
+
+    folder: Path
+    record: dict[str, Any]
+
+    def summary(self) -> list[str]:
+        """Human lines for the CLI (the folder is printed after them)."""
+        r = self.record
+        counts = r.get("status_counts") or {}
+        flags = ", ".join(f"{k} {v}" for k, v in counts.items() if v and k != "samples")
+        t = r.get("timings", {})
+        tp = r.get("throughput", {})
+        lines = [
+            f"{r['scene']}: {r['samples']} samples in {r['chunks']} chunks "
+            f"({r['sessions'][-1]['chunks_computed']} computed now); {flags or 'no samples'}",
+            f"wall {t.get('total', 0):.2f} s (kernels {t.get('kernel', 0):.2f} s, "
+            f"merge {t.get('merge', 0):.2f} s); {tp.get('samples_per_s') or 0:,.0f} samples/s",
+        ]
+        if tp.get("instance_steps_per_s"):
+            lines.append(f"{tp['instance_steps_per_s']:.3g} instance-steps/s")
+        live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
+        if live:
+            lines.append(live_summary(live))
+        return lines
+
+
+def _status_counts(path: Path) -> dict[str, int]:
+    """Status counts of a merged ensemble, read block by block."""
+    import netCDF4
+    import numpy as np
+
+    from mcchain.status import counts
+
+    total: dict[str, int] = {}
+    with netCDF4.Dataset(path) as nc:
+        var = nc["status"]
+        n = var.shape[0]
+        for b0 in range(0, n, 1 << 20):
+            block = np.asarray(var[b0 : min(b0 + (1 << 20), n)])
+            for key, value in counts(block).items():
+                total[key] = total.get(key, 0) + value
+        total["samples"] = int(n)
+    return total
+
+
+def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -> dict[str, Any]:
+    from mcchain.parallel import plan_chunks
+
+    return {
+        "id": folder.name,
+        "status": RUNNING,
+        "scene": job.scene_name,
+        "scene_file": str(scene_path.resolve()),
+        "samples": job.nsample,
+        "seed": job.seed,
+        "chunk_size": job.chunk_size,
+        "chunks": len(plan_chunks(job.nsample, job.chunk_size)),
+        "storage": {
+            "history_dtype": job.history_dtype,
+            "compression": job.compression,
+            "complevel": job.complevel,
+        },
+        "start": _now(),
+        "end": None,
+        "argv": list(argv),
+        "versions": software_versions(),
+        "git": git_state(),
+        "host": host_info(),
+        "pid": os.getpid(),
+        "threads": None,
+        "scheduler": None,
+        "timings": {},
+        "wall_time": None,
+        "status_counts": None,
+        "throughput": {},
+        "merge": None,
+        "sessions": [],
+        "error": None,
+    }
+
+
+def _compute(
+    job: Job,
+    parts_dir: Path,
+    attrs: Mapping[str, Any],
+    *,
+    dask: str | None,
+    threads: int | None,
+    solve: SolveFn | None,
+    progress: bool | None,
+    live: LiveRun | None = None,
+) -> ExecutionStats:
+    """Solve the chunks that have no part file yet, writing each as a part file (and
+    streaming the ``--rerun`` samples they hold to ``live``)."""
+    from mcchain.ensemble.io import list_parts, write_part
+    from mcchain.ensemble.registry import build_dataset
+    from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
+
+    chunks = plan_chunks(job.nsample, job.chunk_size)
+    done = {(p.start, p.stop) for p in list_parts(parts_dir)}
+    if done - set(chunks):
+        raise RunError(f"{parts_dir}: part files do not match chunk size {job.chunk_size}")
+    missing = [c for c in chunks if c not in done]
+    log.info(
+        "scene %s: %d samples, %d chunks of %d, %d to compute",
+        job.scene_name,
+        job.nsample,
+        len(chunks),
+        job.chunk_size,
+        len(missing),
+    )
+    if live is not None:
+        live.open(missing)
+    if not missing:
+        return ExecutionStats(scheduler="none (all chunks present)")
+
+    def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
+        chunk = job.model.select(start, stop)
+        ds = build_dataset(
+            outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
+        )
+        write_part(ds, parts_dir, start, stop)
+
+    observe = live.observe if live is not None else None
+    bar = Progress(len(chunks), len(done), enabled=progress)
+    try:
+        if dask:
+            return run_dask(
+                job.model,
+                job.scene,
+                missing,
+                sink,
+                address=dask,
+                workers=threads,
+                history_dtype=job.history_dtype,
+                solve=solve,
+                progress=bar,
+                observe=observe,
+            )
+        return run_local(
+            job.model,
+            job.scene,
+            missing,
+            sink,
+            history_dtype=job.history_dtype,
+            threads=threads,
+            solve=solve,
+            progress=bar,
+            observe=observe,
+        )
+    finally:
+        bar.close()
+
+
+def _complete(
+    job: Job,
+    record: dict[str, Any],
+    session: dict[str, Any],
+    stats: ExecutionStats,
+    merged: MergeStats,
+    counts: dict[str, int],
+    total: float,
+    prepare_seconds: float,
+) -> None:
+    """Fill ``run.json``'s timings, throughput, merge figures and status counts."""
+    timings = {
+        "prepare": prepare_seconds,
+        "warmup": stats.warmup,
+        "compute": stats.compute,
+        "kernel": stats.kernel,
+        "write": stats.write,
+        "merge": merged.seconds,
+        "total": total,
+    }
+    session.update(
+        end=_now(),
+        status=COMPLETED,
+        chunks_computed=stats.chunks,
+        samples_computed=stats.samples,
+        scheduler=stats.scheduler,
+        threads=stats.threads,
+        timings=timings,
+    )
+    summed: dict[str, float] = {}
+    for s in record["sessions"]:
+        for key, value in (s.get("timings") or {}).items():
+            summed[key] = summed.get(key, 0.0) + float(value)
+    samples_per_s = stats.samples / stats.compute if stats.compute > 0 else None
+    steps = job.steps_per_sample
+    busy = stats.workers * (stats.compute + merged.seconds)
+    record.update(
+        status=COMPLETED,
+        end=session["end"],
+        threads=stats.threads,
+        scheduler=stats.scheduler,
+        timings=summed,
+        wall_time=summed.get("total"),
+        status_counts=counts,
+        throughput={
+            "samples_per_s": samples_per_s,
+            "steps_per_sample": steps,
+            "instance_steps_per_s": samples_per_s * steps if samples_per_s and steps else None,
+            "outside_kernel_share": 1.0 - stats.kernel / busy if busy > 0 else None,
+        },
+        merge={
+            "bytes_in": merged.bytes_in,
+            "bytes_out": merged.bytes_out,
+            "seconds": merged.seconds,
+            "mb_per_s": merged.throughput,
+            "compression": job.compression,
+            "note": merged.note or None,
+        },
+    )
+    if stats.worker_info:
+        record["workers"] = stats.worker_info
+
+
+def execute(
+    job: Job,
+    folder: Path,
+    record: dict[str, Any],
+    *,
+    argv: Sequence[str] = (),
+    dask: str | None = None,
+    threads: int | None = None,
+    solve: SolveFn | None = None,
+    progress: bool | None = None,
+    keep_parts: bool = False,
+    prepare_seconds: float = 0.0,
+    rerun: LiveOptions | None = None,
+) -> RunResult:
+    """Compute the missing chunks of a run folder, merge them, and complete ``run.json``.
+
+    Phases timed in ``run.json["timings"]`` (seconds, summed over sessions): ``prepare``
+    (load, compile, check), ``warmup`` (kernel compile/cache load, cluster start),
+    ``compute`` (the chunk loop, writes overlapping), ``kernel`` (time inside the solver),
+    ``write`` (part files), ``merge``, ``total``.
+
+    Throughput (this session): ``samples_per_s`` = samples computed / ``compute``;
+    ``instance_steps_per_s`` = that × integration steps per sample (``[simulate]`` only);
+    ``outside_kernel_share`` = 1 − ``kernel`` / (workers × (``compute`` + ``merge``)), the
+    share of the chunk loop and merge spent outside the solver (I/O, merge, Python; compile
+    excluded). With Dask, ``kernel`` sums the workers' solver time and workers is their count.
+
+    With ``rerun``, the selected samples of the chunks this session computes are streamed
+    to rerun as their chunks arrive (see :class:`LiveRun`; ``run.json`` records it in the
+    session's ``rerun`` entry). The stream is closed before the merge.
+
+    A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
+    with a note naming the folder to resume.
+    """
+    from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries
+
+    t_start = time.perf_counter()
+    session: dict[str, Any] = {"argv": list(argv), "start": _now(), "end": None, "pid": os.getpid()}
+    record.update(status=RUNNING, end=None, error=None, pid=os.getpid())
+    record["sessions"].append(session)
+    versions = software_versions()
+    if record.get("versions") and record["versions"] != versions:
+        # The ensemble records the versions of the run's first session.
+        session["versions"] = versions
+        versions = record["versions"]
+    parts_dir = folder / PARTS
+    parts_dir.mkdir(exist_ok=True)
+    with run_lock(folder), run_log(folder):
+        write_record(folder, record)
+        try:
+            if "versions" in session:
+                log.warning("resumed with other software versions: %s", session["versions"])
+            removed = remove_temporaries(parts_dir) + remove_temporaries(folder)
+            if removed:
+                log.info("removed %d temporary files left by an interrupted run", removed)
+            live = None
+            if rerun is not None:
+                live = LiveRun(rerun, job, folder, session.setdefault("rerun", {}))
+            try:
+                stats = _compute(
+                    job,
+                    parts_dir,
+                    job.attributes(versions),
+                    dask=dask,
+                    threads=threads,
+                    solve=solve,
+                    progress=progress,
+                    live=live,
+                )
+            finally:
+                if live is not None:
+                    live.close()
+            merged = merge_parts(
+                list_parts(parts_dir),
+                folder / ENSEMBLE,
+                compression=job.compression,
+                complevel=job.complevel,
+                nsample=job.nsample,
+            )
+            log.info(
+                "merged %d parts into %s: %.1f MB -> %.1f MB in %.2f s (%.0f MB/s)",
+                merged.nparts,
+                ENSEMBLE,
+                merged.bytes_in / 1e6,
+                merged.bytes_out / 1e6,
+                merged.seconds,
+                merged.throughput,
+            )
+            counts = _status_counts(folder / ENSEMBLE)
+        except BaseException as exc:
+            session["end"] = record["end"] = _now()
+            record["status"] = session["status"] = FAILED
+            message = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).strip()
+            record["error"] = message or type(exc).__name__
+            session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
+            log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
+            write_record(folder, record)
+            exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
+            raise
+        total = time.perf_counter() - t_start + prepare_seconds
+        _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
+        write_record(folder, record)
+        log.info("run completed: %s", json.dumps(counts))
+        if not keep_parts:
+            for part in list_parts(parts_dir):
+                part.path.unlink()
+            with contextlib.suppress(OSError):
+                parts_dir.rmdir()
+    return RunResult(folder, record)
+
+
+def start_run(
+    scene_path: str | Path,
+    *,
+    samples: int | None = None,
+    seed: int | None = None,
+    chunk_size: int | None = None,
+    out: str | Path = DEFAULT_OUT,
+    run_dir: str | Path | None = None,
+    dask: str | None = None,
+    threads: int | None = None,
+    argv: Sequence[str] | None = None,
+    loader: Loader | None = None,
+    solve: SolveFn | None = None,
+    progress: bool | None = None,
+    keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
+) -> RunResult:
+    """Run a scene into a new run folder (``mcchain run``).
+
+    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices) happens
+    before the folder is created: a bad input raises ``SceneError``/``RunError`` and writes
+    nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
+    """
+    t0 = time.perf_counter()
+    if run_dir is not None:
+        check_new_run_dir(run_dir)
+    _check_threads(threads, dask)
+    job = prepare_job(scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader)
+    check_live(rerun, job.nsample)
+    prepare_seconds = time.perf_counter() - t0
+    folder = create_run_folder(out, job.scene_name, run_dir)
+    with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
+        f.write(job.scene_text)
+    argv = list(sys.argv if argv is None else argv)
+    record = _new_record(job, folder, argv, Path(scene_path))
+    return execute(
+        job,
+        folder,
+        record,
+        argv=argv,
+        dask=dask,
+        threads=threads,
+        solve=solve,
+        progress=progress,
+        keep_parts=keep_parts,
+        prepare_seconds=prepare_seconds,
+        rerun=rerun,
+    )
+
+
+def resume_run(
+    run: str | Path,
+    *,
+    dask: str | None = None,
+    threads: int | None = None,
+    argv: Sequence[str] | None = None,
+    loader: Loader | None = None,
+    solve: SolveFn | None = None,
+    progress: bool | None = None,
+    keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
+) -> RunResult:
+    """Complete an interrupted or failed run: compute only its missing chunks.
+
+    The scene is read back from the folder's ``scene.toml`` with the recorded sample count,
+    seed and chunk size, so the final ``ensemble.nc`` equals an uninterrupted run's.
+    ``rerun`` streams the selected samples of the chunks computed now (those computed
+    before are named in the summary: replay them with ``mcchain show``).
+    """
+    t0 = time.perf_counter()
+    folder = resolve_run(run)
+    record = read_record(folder)
+    if record.get("status") == COMPLETED and (folder / ENSEMBLE).exists():
+        raise RunError(f"{run}: already completed")
+    if is_locked(folder):
+        raise RunError(f"{run}: the run is being executed by another process")
+    _check_threads(threads, dask)
+    job = prepare_job(
+        folder / SCENE_COPY,
+        samples=int(record["samples"]),
+        seed=record.get("seed"),
+        chunk_size=int(record["chunk_size"]),
+        loader=loader,
+    )
+    if job.nsample != record["samples"]:
+        raise RunError(
+            f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
+        )
+    check_live(rerun, job.nsample)
+    argv = list(sys.argv if argv is None else argv)
+    return execute(
+        job,
+        folder,
+        record,
+        argv=argv,
+        dask=dask,
+        threads=threads,
+        solve=solve,
+        progress=progress,
+        keep_parts=keep_parts,
+        prepare_seconds=time.perf_counter() - t0,
+        rerun=rerun,
+    )
+
+
+def _check_threads(threads: int | None, dask: str | None) -> None:
+    check_positive("--threads", threads)
+    if dask is not None and dask != "local" and not re.match(r"^[a-z0-9+]+://", dask):
+        raise RunError(
+            f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {dask!r}"
+        )
+    if threads is not None and dask is None:
+        import numba
+
+        limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+        if threads > limit:
+            raise RunError(f"--threads: at most {limit} on this machine, got {threads}")

@@ -1,0 +1,174 @@
+"""The job of a run: the scene, its compiled model and the resolved settings.
+
+:func:`prepare_job` loads, compiles and checks a scene and writes nothing; the
+:class:`Job` it returns is everything a run computes from, independent of how (chunk size,
+threads, scheduler) it is executed. :func:`resolved_settings` is what ``ensemble.nc``
+stores of the settings, and :meth:`Job.attributes` its global attributes.
+
+This module imports only the standard library at import time; the scene module and the
+statics checks are imported by :func:`default_loader`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mcchain import __version__
+from mcchain.errors import RunError
+
+if TYPE_CHECKING:
+    from mcchain.model import Model
+
+Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
+"""``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
+
+
+@dataclass
+class Job:
+    """Everything a run computes from, independent of how it is executed.
+
+    Attributes:
+        scene: the validated scene (``mcchain.scene.Scene``).
+        model: the compiled model of all samples.
+        scene_text: the scene file's text (copied to ``scene.toml``, stored in attributes).
+        scene_name: ``[scene] name``.
+        nsample: number of samples.
+        seed: sampling seed (``None`` without ``[sample]``).
+        chunk_size: samples per chunk (execution only: never changes the data).
+        history_dtype, compression, complevel: ``[storage]`` settings.
+        steps_per_sample: integration steps per sample (``None`` without ``[simulate]``).
+        settings: resolved settings stored in ``ensemble.nc`` (no execution details).
+    """
+
+    scene: Any
+    model: Model
+    scene_text: str
+    scene_name: str
+    nsample: int
+    seed: int | None
+    chunk_size: int
+    history_dtype: str
+    compression: str
+    complevel: int
+    steps_per_sample: int | None = None
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
+        """Global attributes of ``ensemble.nc`` (and of every part file)."""
+        return {
+            "Conventions": "CF-1.10",
+            "title": f"mcchain ensemble of scene {self.scene_name}",
+            "source": f"mcchain {__version__}",
+            "scene_name": self.scene_name,
+            "scene": self.scene_text,
+            "settings": json.dumps(self.settings, sort_keys=True),
+            "seed": "none" if self.seed is None else int(self.seed),
+            "sample_count": int(self.nsample),
+            "mcchain_version": __version__,
+            "versions": json.dumps(dict(versions), sort_keys=True),
+        }
+
+
+def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[Any, Model]:
+    """Load, compile and check a scene with the real scene module and statics checks."""
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers.statics import check_scene
+
+    scene = load_scene(path)
+    model = compile_model(scene, nsample=samples, seed=seed)
+    check_scene(model)
+    return scene, model
+
+
+def _section(scene: Any, name: str) -> Any:
+    return getattr(scene, name, None)
+
+
+def _dump(obj: Any) -> Any:
+    if hasattr(obj, "model_dump"):
+        return obj.model_dump(mode="json")
+    return obj
+
+
+def resolved_settings(scene: Any, nsample: int, seed: int | None) -> dict[str, Any]:
+    """The scene with every default filled in, the sample count and the seed.
+
+    Execution details (chunk size, threads, scheduler) are left out on purpose: they never
+    change the data and must not change the file.
+    """
+    data = _dump(scene)
+    data = dict(data) if isinstance(data, Mapping) else {}
+    data.pop("text", None)
+    storage = data.get("storage")
+    if isinstance(storage, Mapping):
+        data["storage"] = {k: v for k, v in storage.items() if k != "chunk_size"}
+    return {"scene": data, "samples": int(nsample), "seed": seed}
+
+
+def _steps_per_sample(scene: Any) -> int | None:
+    sim = _section(scene, "simulate")
+    t_end, dt = getattr(sim, "t_end", None), getattr(sim, "dt", None)
+    if not t_end or not dt:
+        return None
+    return round(float(t_end) / float(dt))
+
+
+def check_positive(name: str, value: int | None) -> None:
+    """``value`` is ``None`` or an integer >= 1; else a :class:`RunError` naming ``name``."""
+    if value is not None and (not isinstance(value, int) or value < 1):
+        raise RunError(f"{name}: must be an integer >= 1, got {value!r}")
+
+
+def prepare_job(
+    scene_path: str | Path,
+    *,
+    samples: int | None = None,
+    seed: int | None = None,
+    chunk_size: int | None = None,
+    loader: Loader | None = None,
+) -> Job:
+    """Load, compile and check a scene; nothing is written.
+
+    Raises:
+        SceneError: a bad scene (one line naming the key).
+        RunError: a bad argument.
+    """
+    check_positive("--samples", samples)
+    check_positive("--chunk-size", chunk_size)
+    if seed is not None and (not isinstance(seed, int) or seed < 0):
+        raise RunError(f"--seed: must be an integer >= 0, got {seed!r}")
+    path = Path(scene_path)
+    scene, model = (loader or default_loader)(path, samples, seed)
+    from mcchain.scene.models import Storage
+
+    # A scene without ``[storage]`` (a fake) gets the schema's defaults.
+    storage = _section(scene, "storage") or Storage()
+    chunk = chunk_size or storage.chunk_size
+    check_positive("storage.chunk_size", chunk)
+    effective_seed: Any = model.meta.get("seed", seed)
+    if effective_seed is None:
+        effective_seed = getattr(_section(scene, "sample"), "seed", None)
+    effective_seed = None if effective_seed is None else int(effective_seed)
+    text = getattr(scene, "text", None)
+    if text is None:
+        text = path.read_text(encoding="utf-8")
+    name = getattr(_section(scene, "scene"), "name", None) or path.stem
+    nsample = int(model.nsample)
+    return Job(
+        scene=scene,
+        model=model,
+        scene_text=text,
+        scene_name=str(name),
+        nsample=nsample,
+        seed=effective_seed,
+        chunk_size=int(chunk),
+        history_dtype=str(storage.history_dtype),
+        compression=str(storage.compression),
+        complevel=int(storage.complevel),
+        steps_per_sample=_steps_per_sample(scene),
+        settings=resolved_settings(scene, nsample, effective_seed),
+    )
