@@ -1,4 +1,4 @@
-"""Per-sample status bits (DESIGN §5), shared by kernels, solvers and the ensemble.
+"""Per-sample status bits, shared by kernels, solvers and the ensemble.
 
 Kernels never raise: they OR these bits into a per-sample ``status`` array (uint32) and fill
 the sample's outputs with NaN. Kernels use the plain ``int`` constants below (numba reads

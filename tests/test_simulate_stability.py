@@ -7,7 +7,12 @@ import pytest
 
 from mcchain.solvers.simulate import simulate
 from mcchain.status import DIVERGED, SINGULAR
-from mcchain.testing.closed_forms import imaginary_axis_limit, parallelogram_closed_form
+from mcchain.testing.closed_forms import (
+    G,
+    clearance_bar_pulsations,
+    imaginary_axis_limit,
+    parallelogram_closed_form,
+)
 from mcchain.testing.scenes import scene_model
 
 LIMIT_TOL = 0.10  # issue 3: measured RK4 limit within 10 % of 2√2 / p_max
@@ -17,10 +22,9 @@ PARALLELOGRAM_TOL = 1e-6  # m, issue 3
 PARALLELOGRAM_ENERGY = 1e-8  # relative drift, issue 3
 
 
-def _p_max(c: float, m=2.0, J=1 / 6, half=0.5, g=9.81) -> float:
-    """Largest root of c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0 (DESIGN §3)."""
-    roots = np.roots([c * J, -g * (m * half**2 + J + m * c * half), m * g**2 * half])
-    return float(np.sqrt(roots.real.max()))
+def _p_max(c: float) -> float:
+    """The clearance bar's rolling pulsation (the larger root of its quartic)."""
+    return float(clearance_bar_pulsations(2.0, 1 / 6, 0.5, G, c)[1])
 
 
 def _trial(method: str, dt: float, steps: int = STEPS):

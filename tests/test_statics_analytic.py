@@ -1,4 +1,4 @@
-"""Equilibria and eigenpulsations of the seed bar against the closed forms of DESIGN §3,
+"""Equilibria and eigenpulsations of the seed bar against their closed forms,
 on every sample of 1000-sample sweeps over clearance and mass."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ INERTIA = 2.0 * (2 * HALF_LENGTH) ** 2 / 12.0  # homogeneous bar of mass 2 kg, l
 
 
 def bar_scene(clearance: float | None, tip_force: float = 0.0, count: int = 1000) -> str:
-    """The seed bar (DESIGN §4 example) with a sweep over mass (and clearance if any)."""
+    """The seed bar (the scene-format example) with a sweep over mass (and clearance if any)."""
     joint = (
         "" if clearance is None else f"clearance = {clearance}\neccentricity = -1.5707963267948966"
     )

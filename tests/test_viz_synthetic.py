@@ -3,7 +3,7 @@
 Two bars hang from the ground: ``crank`` on a clearance joint ``O`` (radial clearance c,
 sampled) and ``bar`` on an ideal joint ``A`` at the crank's far end; a force ``tip`` acts at
 the bar's end and a spring ``s1`` ties the bar to the ground. The dataset has the variables,
-dims and coordinates of DESIGN §5 with prescribed (not simulated) motions, so the viz code can
+dims and coordinates of the ensemble with prescribed (not simulated) motions, so the viz code can
 be tested before the solvers exist; its positions satisfy the joint constraints exactly.
 Other viz tests import the builders from here.
 """
@@ -15,8 +15,8 @@ import xarray as xr
 
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, Model, constraint_rows
 from mcchain.status import CONTACT_LOST, EQUILIBRIUM_NOT_CONVERGED, FLAG_MASKS, FLAG_MEANINGS
+from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 
-G = 9.81
 HALF = 0.5  # half length l of each bar, m
 J_BAR = 2.0 / 12.0  # centroidal inertia of a 1 m, 2 kg bar, kg m^2 (kept fixed when m varies)
 PARAM_PATHS = ("joint.O.clearance", "body.bar.mass")
@@ -38,15 +38,8 @@ design = "{design}"
 def pulsations(
     c: np.ndarray | float, m: np.ndarray | float, l: float = HALF, J: float = J_BAR
 ) -> np.ndarray:
-    """Both roots p (ascending) of the clearance bar's quartic (DESIGN §3),
-    c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0, in a form stable as c -> 0."""
-    c, m = np.broadcast_arrays(np.asarray(c, float), np.asarray(m, float))
-    b = G * (m * l**2 + J + m * c * l)
-    root = np.sqrt(b**2 - 4.0 * c * J * m * G**2 * l)
-    low = 2.0 * m * G**2 * l / (b + root)
-    with np.errstate(divide="ignore"):
-        high = np.where(c > 0, (b + root) / (2.0 * np.where(c > 0, c, 1.0) * J), np.inf)
-    return np.sqrt(np.stack([low, high], axis=-1))
+    """Both roots p (ascending) of the clearance bar's quartic."""
+    return clearance_bar_pulsations(m, J, l, G, c)
 
 
 def make_model(params: np.ndarray) -> Model:

@@ -1,4 +1,4 @@
-"""The ensemble's variables, declared once (DESIGN §5), and Datasets built from them.
+"""The ensemble's variables, declared once, and Datasets built from them.
 
 Every variable an analysis may store is a :class:`VariableSpec` in :data:`VARIABLES`: its
 name, dims, CF ``units`` and ``long_name``, a dtype rule and the analysis that produces it.
@@ -46,7 +46,7 @@ class VariableSpec:
     """Declaration of one ensemble variable.
 
     Attributes:
-        name: netCDF variable name (DESIGN §5).
+        name: netCDF variable name (a contract with users: never renamed).
         dims: dimension names, ``sample`` first.
         units: CF units string.
         long_name: CF long_name.

@@ -1,4 +1,4 @@
-"""Applied forces of one sample: gravity, constant loads, linear spring-dampers. DESIGN §2.
+"""Applied forces of one sample: gravity, constant loads, linear spring-dampers.
 
 ``F`` is the generalised force vector (3 nbody,) [N, N, N m]*; ``K_out += −∂F/∂q`` adds the
 load stiffness used by equilibrium Newton and the eigen step (at q̇ = 0, where dampers add

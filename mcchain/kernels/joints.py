@@ -1,4 +1,4 @@
-"""Constraints of one sample: joints (ideal, clearance) and drivers. DESIGN §2.
+"""Constraints of one sample: joints (ideal, clearance) and drivers.
 
 All functions take the kernel model ``km`` (:class:`mcchain.model.KernelModel`), the sample
 index ``s`` (parameters are read with the broadcast index ``a[s % a.shape[0]]``) and the

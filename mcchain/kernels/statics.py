@@ -379,7 +379,7 @@ def _scaled_step_norm(step, n, size, fscale, lscale):
 
 @njit(**JIT)
 def equilibrium_one(km, s, q, lam, tol, max_iter, history):
-    """Newton on (q, λ) for Φ(q) = 0, Bᵀλ = F(q) (DESIGN §2), from q, in place.
+    """Newton on (q, λ) for Φ(q) = 0, Bᵀλ = F(q), from q, in place.
 
     Jacobian [[K, Bᵀ], [B, 0]] with K = ∂(Bᵀλ)/∂q − ∂F/∂q (exact). λ starts from the least
     squares fit of Bᵀλ = F. Globalisation: the step is capped (MAX_ROTATION_STEP, one length
@@ -596,7 +596,8 @@ def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history
 # --------------------------------------------------------------------------------------
 @njit(**JIT)
 def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
-    """Eigenpulsations about the equilibrium (q, λ) of sample ``s`` (DESIGN §2.2).
+    """Eigenpulsations about the equilibrium (q, λ) of sample ``s``: (Nᵀ K N) v = p² (Nᵀ M N) v,
+    N a null-space basis of B.
 
     N spans the null space of B (QR of Bᵀ with pivoting); (NᵀKN) v = p² (NᵀMN) v is
     reduced with the Cholesky factor L of NᵀMN to the symmetric C = L⁻¹ NᵀKN L⁻ᵀ and solved

@@ -1,8 +1,8 @@
 """Python drivers of the analyses: allocate arrays, call kernels, decode status bits.
 
 :func:`solve_chunk` is the one entry point the run machinery calls for a chunk of samples:
-it runs exactly the analyses the scene's sections ask for (DESIGN §4) and returns arrays
-keyed by ensemble variable name (DESIGN §5), sample axis first.
+it runs exactly the analyses the scene's sections ask for and returns arrays
+keyed by ensemble variable name, sample axis first.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Contract of :func:`simulate`:
 
-1. Equations (DESIGN §2): M q̈ + Bᵀλ = F(q, q̇, t), Φ(q, t) = 0, with M diagonal, in
+1. Equations: M q̈ + Bᵀλ = F(q, q̇, t), Φ(q, t) = 0, with M diagonal, in
    absolute coordinates. Index-1 methods solve B q̈ = γ − 2αΦ̇ − β²Φ (Baumgarte, α and β
    from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
    method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.

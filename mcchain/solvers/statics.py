@@ -1,6 +1,6 @@
 """Static analyses: assembly, equilibrium and eigenpulsations for a batch of samples.
 
-Contract (DESIGN §2, §5):
+Contract:
 
 1. :func:`assemble` projects every sample's initial state onto the constraints (positions
    that already satisfy them are kept bit for bit).
@@ -40,7 +40,8 @@ class EquilibriumResult:
 
     Attributes:
         q: (nsample, 3 nbody) configuration, NaN where failed.
-        lam: (nsample, ncon) multipliers (DESIGN §2 sign convention).
+        lam: (nsample, ncon) multipliers; the force body a exerts on body b at joint k is
+            −λ_k (ideal) or −λ_k e_k (clearance).
         joint_force: (nsample, njoint, 2) force on body b by body a, N.
         contact_force: (nsample, njoint) λ of clearance joints, NaN for ideal ones, N.
         iterations: (nsample,) Newton iterations to reach the tolerance.
@@ -114,7 +115,7 @@ def solve_equilibrium(
 
 
 def solve_modes(model: Model, equilibrium: EquilibriumResult, shapes: bool = False) -> ModesResult:
-    """Eigenpulsations about each sample's equilibrium (DESIGN §2.2)."""
+    """Eigenpulsations about each sample's equilibrium (the paper's linear vibrations)."""
     nsample = model.nsample
     omega = np.full((nsample, model.nmode), np.nan)
     shape_rows = nsample if shapes else 1

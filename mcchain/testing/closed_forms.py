@@ -35,14 +35,17 @@ def clearance_bar_pulsations(m, J, l, g, c) -> np.ndarray:
     """Both roots p > 0 of c J p⁴ − g (m l² + J + m c l) p² + m g² l = 0, ascending on the last
     axis (rad/s): the pendulum and the journal rolling in its bearing.
 
-    The quadratic in p² is solved without cancellation (the small root from the product of
-    the roots)."""
+    The quadratic in p² is solved without cancellation (the small root as 2C / (b + √Δ)), so
+    it holds as c -> 0, where the high root goes to infinity (inf at c = 0) and the low one to
+    the ideal pin's pulsation."""
     m, J, l, g, c = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (m, J, l, g, c)))
     a = c * J
     b = g * (m * l * l + J + m * c * l)
     cc = m * g * g * l
-    big = (b + np.sqrt(b * b - 4 * a * cc)) / (2 * a)
-    small = cc / (a * big)
+    root = np.sqrt(b * b - 4 * a * cc)
+    small = 2 * cc / (b + root)
+    with np.errstate(divide="ignore"):
+        big = np.where(a > 0, (b + root) / (2 * np.where(a > 0, a, 1.0)), np.inf)
     return np.sqrt(np.stack([small, big], axis=-1))
 
 

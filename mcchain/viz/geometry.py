@@ -11,7 +11,7 @@ through those points:
 Sampled geometry (``joint.B.points[1][0]`` varied) is honoured: every function takes the
 model *row* of the sample, read with the broadcast index ``row % a.shape[0]``.
 
-World positions follow DESIGN §2: a local point ``s`` on body ``i`` is at
+World positions: a local point ``s`` on body ``i`` is at
 ``r_i + A(θ_i) s``; the ground (index ``GROUND``) is fixed, ``r = 0``, ``θ = 0``.
 """
 
