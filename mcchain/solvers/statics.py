@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcchain.errors import SceneError
+from mcchain.kernels import assembly
 from mcchain.kernels import statics as kernels
 from mcchain.model import JointKind, Model
 from mcchain.scene.models import Equilibrium
@@ -82,7 +83,7 @@ def assemble(model: Model, status: np.ndarray | None = None) -> Assembled:
     q = np.array(np.broadcast_to(model.q0, (nsample, model.ndof)), dtype=np.float64)
     v = np.array(np.broadcast_to(model.v0, (nsample, model.ndof)), dtype=np.float64)
     status = _status_or_new(status, nsample)
-    kernels.assemble_batch(model.kernel_arrays(), q, v, status)
+    assembly.assemble_batch(model.kernel_arrays(), q, v, status)
     return Assembled(q=q, v=v, status=status)
 
 
