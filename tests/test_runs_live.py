@@ -88,6 +88,7 @@ def streamed(swing: Path, plain: Path) -> tuple[Path, Path, str]:
     return run, rrd, out.getvalue()
 
 
+@pytest.mark.slow  # a real four-bar run streamed to rerun
 def test_rerun__streams_samples_0_and_3_only_with_the_ensembles_values(
     streamed: tuple[Path, Path, str],
 ) -> None:
@@ -108,6 +109,7 @@ def test_rerun__streams_samples_0_and_3_only_with_the_ensembles_values(
     assert not (run / runs.LIVE_RRD).exists()  # --rerun-save: nothing in the folder
 
 
+@pytest.mark.slow  # a real four-bar run streamed to rerun
 def test_rerun__ensemble_is_byte_identical_to_a_run_without_it(
     streamed: tuple[Path, Path, str], plain: Path
 ) -> None:
@@ -115,6 +117,7 @@ def test_rerun__ensemble_is_byte_identical_to_a_run_without_it(
     assert sorted(p.name for p in streamed[0].iterdir()) == sorted(p.name for p in plain.iterdir())
 
 
+@pytest.mark.slow  # a real four-bar run streamed to rerun
 def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     swing: Path, plain: Path, tmp_path: Path
 ) -> None:
@@ -145,6 +148,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     assert "samples 0 were computed before this session" in (run / "run.log").read_text()
 
 
+@pytest.mark.slow  # a real four-bar run streamed to rerun
 def test_rerun__dask_logs_the_chunks_as_they_reach_the_client(
     swing: Path, plain: Path, tmp_path: Path
 ) -> None:

@@ -28,6 +28,8 @@ from mcchain.ensemble.registry import validate_dataset
 from mcchain.parallel import WORKER_ENV
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 
+pytestmark = pytest.mark.slow  # end to end through the CLI with real solvers, Dask and kills
+
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 SWEEP = REPO / "configs" / "clearance-sweep.toml"
 

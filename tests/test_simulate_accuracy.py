@@ -11,6 +11,10 @@ from mcchain.testing.dense import _body, _param, clearance_angle
 from mcchain.testing.minimal import clearance_bar_minimal, double_pendulum_minimal
 from mcchain.testing.scenes import scene_model
 
+pytestmark = (
+    pytest.mark.slow
+)  # convergence orders and references: minutes of integration at tight tolerances
+
 ORDER_SLACK = 0.3  # fitted slope within ±0.3 of the theoretical order
 MINIMAL_TOL = 1e-9  # m: radau (index 1, absolute coordinates) vs a minimal-coordinate Radau
 ENERGY_TOL = 1e-9  # relative drift over 2 s, rk4 at dt 1e-5 (issue 3)

@@ -81,6 +81,7 @@ def _parallelogram(method: str, dt: float = 1e-4, t_end: float = 1.0):
     return out, err, flats
 
 
+@pytest.mark.slow  # a full parallelogram swing
 def test_rk4_projection__passes_the_flat_parallelogram():
     out, err, flats = _parallelogram("rk4-projection")
     e = out["energy"][0]
@@ -89,6 +90,7 @@ def test_rk4_projection__passes_the_flat_parallelogram():
     assert np.abs(e - e[0]).max() <= PARALLELOGRAM_ENERGY * abs(e[0])
 
 
+@pytest.mark.slow  # a full parallelogram swing per method
 @pytest.mark.parametrize("method", ["rk4", "rk45", "generalized-alpha"])
 def test_other_methods__match_the_parallelogram_or_flag_singular(method):
     out, err, _ = _parallelogram(method)

@@ -132,6 +132,7 @@ def test_statics__tip_load_equilibrium(tip_force):
     )
 
 
+@pytest.mark.slow  # iteration histories of many samples
 @pytest.mark.parametrize(
     ("clearance", "max_iterations"), [(None, 4), (1e-2, 6), (1e-3, 6), (1e-4, 12)]
 )

@@ -24,6 +24,7 @@ EQUILIBRIUM_ATOL = 1e-9
 FAILED = Status.ASSEMBLY_FAILED | Status.EQUILIBRIUM_NOT_CONVERGED | Status.SINGULAR
 
 
+@pytest.mark.slow  # statics of random chains against scipy root
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     nbody=st.integers(1, 4),
