@@ -102,12 +102,18 @@ def _seed(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="mcchain", description=__doc__.splitlines()[0])
+    parser = _Parser(
+        prog="mcchain",
+        description=__doc__.splitlines()[0],
+        epilog="Scene file format (every key, unit and default): docs/scenes.md",
+    )
     parser.add_argument("--version", action="version", version=f"mcchain {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="run a scene into a new run folder, or resume a run")
-    run.add_argument("scene", nargs="?", metavar="SCENE.toml", help="scene file")
+    run.add_argument(
+        "scene", nargs="?", metavar="SCENE.toml", help="scene file (format: docs/scenes.md)"
+    )
     run.add_argument("--samples", type=_positive, metavar="N", help="override [sample] count")
     run.add_argument("--seed", type=_seed, metavar="S", help="override [sample] seed")
     run.add_argument(
