@@ -59,6 +59,12 @@ BAD = [
     ("unknown-section", BASE + "[solver]\n", "solver", "unknown section"),
     ("unknown-scene-key", _with('name = "t"', 'name = "t"\ng = 1'), "scene.g", "unknown key"),
     ("missing-mass", _with("mass = 2.0\n", ""), "body.bar.mass", "missing required key"),
+    (
+        "typo-not-missing",
+        _with("mass = 2.0", "masss = 2.0"),
+        "body.bar.masss",
+        "unknown key (did you mean `mass`? expected one of: name, mass,",
+    ),
     ("missing-body", '[scene]\nname = "x"\n', "body", "missing required key"),
     ("no-bodies", "body = []\n", "body", "expected at least 1 item, got 0"),
     ("body-not-array", _with("[[body]]", "[body]"), "body", "expected an array of tables [[body]]"),

@@ -7,6 +7,7 @@ number, got the string 'x'").
 
 from __future__ import annotations
 
+import difflib
 import types
 from typing import Annotated, Any, Union, get_args, get_origin
 
@@ -23,12 +24,24 @@ def format_validation_error(exc: ValidationError, data: Any, section: str | None
     ``exc`` comes from validating a whole scene (``data``), or from validating one settings
     ``section`` alone (``data`` is then that section's table).
     """
-    err = exc.errors(include_url=False)[0]
+    err = _first_error(exc.errors(include_url=False))
     loc = tuple(err["loc"])
     if section is not None:
         loc, data = (section, *loc), {section: data}
     path = loc_path(loc, data)
     return f"{path}: {_reason(err, loc)}"
+
+
+def _first_error(errors: list[Any]) -> Any:
+    """The error to report: the first, except that an unknown key beside a missing one in the
+    same table comes first (``masss = 2.0`` is a typo of ``mass``, not a missing ``mass``)."""
+    first = errors[0]
+    if first["type"] == "missing":
+        parent = tuple(first["loc"])[:-1]
+        for err in errors:
+            if err["type"] == "extra_forbidden" and tuple(err["loc"])[:-1] == parent:
+                return err
+    return first
 
 
 def loc_path(loc: tuple[str | int, ...], data: Any) -> str:
@@ -126,7 +139,9 @@ def _reason(err: Any, loc: tuple[str | int, ...]) -> str:
         if parent is Distribution:
             return f"unknown distribution (expected one of: {', '.join(allowed)})"
         what = "section" if parent is Scene else "key"
-        return f"unknown {what} (expected one of: {', '.join(allowed)})"
+        close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
+        hint = f"did you mean `{close[0]}`? " if close else ""
+        return f"unknown {what} ({hint}expected one of: {', '.join(allowed)})"
     if kind in ("float_type", "float_parsing"):
         return f"expected a number, got {_describe(value)}"
     if kind == "finite_number":
