@@ -60,6 +60,24 @@ BAD = [
     ("unknown-scene-key", _with('name = "t"', 'name = "t"\ng = 1'), "scene.g", "unknown key"),
     ("missing-mass", _with("mass = 2.0\n", ""), "body.bar.mass", "missing required key"),
     (
+        "eccentricity-on-ideal-joint",
+        BASE + "eccentricity = 0.5\n",
+        "joint.O.eccentricity",
+        "only a clearance joint has one (its clearance is 0 and not sampled)",
+    ),
+    (
+        "dt-past-t_end",
+        BASE + "[simulate]\nt_end = 0.1\ndt = 0.2\n",
+        "simulate.dt",
+        "must be <= t_end (0.1), got 0.2",
+    ),
+    (
+        "output_dt-past-t_end",
+        BASE + "[simulate]\nt_end = 0.1\ndt = 0.01\noutput_dt = 0.5\n",
+        "simulate.output_dt",
+        "must be <= t_end (0.1), got 0.5",
+    ),
+    (
         "typo-not-missing",
         _with("mass = 2.0", "masss = 2.0"),
         "body.bar.masss",

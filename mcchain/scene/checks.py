@@ -124,8 +124,21 @@ def check_scene(scene: Scene) -> None:
             if reason is not None:
                 raise SceneError(f"sample.count: {reason}")
 
+    sampled = set(targets) if scene.sample is not None else set()
+    for i, joint in enumerate(scene.joint):
+        clearance_joint = joint.clearance > 0 or f"joint.{joint.name}.clearance" in sampled
+        if joint.eccentricity is not None and not clearance_joint:
+            raise SceneError(
+                f"{_item(scene, 'joint', i)}.eccentricity: only a clearance joint has one "
+                "(its clearance is 0 and not sampled)"
+            )
+
     if scene.simulate is not None:
         sim = scene.simulate
+        for key in ("dt", "output_dt"):
+            value = getattr(sim, key)
+            if value is not None and value > sim.t_end:
+                raise SceneError(f"simulate.{key}: must be <= t_end ({sim.t_end!r}), got {value!r}")
         for path in sim.perturb:
             try:
                 parse_path(scene, path, {"body": PERTURB_KEYS})
