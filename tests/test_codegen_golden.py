@@ -1,4 +1,5 @@
-"""codegen: the generated lane-kernel text, pinned by SHA-256 for three topologies.
+"""codegen: the generated lane-kernel text, pinned by SHA-256 for three topologies and
+each variant of the module (the functions one method calls).
 
 A move or rename inside the generator must leave these hashes alone; a change of the generated
 text updates them in the same commit and says so. The work-row length is pinned to 4 (AVX2)
@@ -8,11 +9,12 @@ so the hashes do not depend on the CPU that runs the test.
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 import pytest
 
-from mcchain.codegen.generate import generate_source
+from mcchain.codegen.generate import VARIANTS, generate_source
 from mcchain.codegen.topology import Topology
 from mcchain.scene import compile_model, load_scene, load_scene_text
 from mcchain.testing.factory import chain_scene_text
@@ -21,9 +23,24 @@ CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row length
 
 GOLDEN = {
-    "double-pendulum-clearance": "75dcdbe6938be5bfa45aefbb6833100c2a4d70eb6a347699baae2b1e139a1504",
-    "fourbar-clearance": "41102c11dde47f48b92ae901244bd2fba7b46f2c7a991eb38457aab95fcb0910",
-    "chain4-mixed-spring": "07dd0ee49716890803ca7b2b666fbc5e13d6d567f93cdc4f4e6edc91823fdff3",
+    "double-pendulum-clearance": {
+        "accel": "6cb53eabfc03d163c19da3f95a32cceb15054540a36a8d89e1cd2ebecfc849b7",
+        "rk4": "3500754744007b06c701976d70e0ce8021d6aaafb4df646725e77443a5a94851",
+        "rk4-projection": "8a470c61ea4e88bf2ae2d7abfdd10997f51f3985501d0490b879b7cab50947ac",
+        "rk45": "972588362712db1c828e2f5c3e985a89b81f1ee80548c695621cc79008aa6a03",
+    },
+    "fourbar-clearance": {
+        "accel": "591c2ff2a891bbf23eb1ef4a26700485c5979dee9fa144b26809f6b47515a400",
+        "rk4": "e10f036f5725a851cf0e12dc508163c5241297926d584b0c3b65748da796fdad",
+        "rk4-projection": "a12235e909c60f691d76cc0843e231d402591c0e614bb2c78a3bd3f708899b5b",
+        "rk45": "721d00f5a926077355a829a35aea240bb1b9977d0f1781623bbac1aae8ebe454",
+    },
+    "chain4-mixed-spring": {
+        "accel": "a88e7a8157a86e4e8f7931acabc9df69ea4ed2cfcac5abbf7b9c59e4d16ab96c",
+        "rk4": "9fd93db1041e8a99b0e5a11b4c3cbc56c0a64e437384f60124a18e13c691a2b1",
+        "rk4-projection": "04e84cd5acb474b0d73ba2dd27a289d6d427c7b0c3a37b1e7071dab5dfc432a3",
+        "rk45": "a22292d1c22c40599079155d6ae617d37bcad383f60e8a649fb88640cd79e2d4",
+    },
 }
 
 
@@ -34,7 +51,32 @@ def _topology(name: str) -> Topology:
     return Topology.from_model(compile_model(load_scene(CONFIGS / f"{name}.toml")))
 
 
-@pytest.mark.parametrize("name", list(GOLDEN))
-def test_generate_source__text_matches_the_golden_hash(name):
-    source = generate_source(_topology(name), lmax=LMAX_PINNED)
-    assert hashlib.sha256(source.encode()).hexdigest() == GOLDEN[name]
+@pytest.mark.parametrize(
+    ("name", "variant"), [(name, v) for name, hashes in GOLDEN.items() for v in hashes]
+)
+def test_generate_source__text_matches_the_golden_hash(name, variant):
+    source = generate_source(_topology(name), variant, lmax=LMAX_PINNED)
+    assert hashlib.sha256(source.encode()).hexdigest() == GOLDEN[name][variant]
+
+
+def test_generate_source__every_variant_is_pinned():
+    assert all(set(hashes) == set(VARIANTS) for hashes in GOLDEN.values())
+
+
+FUNCTIONS = {
+    "accel": {"accel", "outputs"},
+    "rk4": {"erk_run", "erk_group", "group_outputs_erk"},
+    "rk4-projection": {
+        "erk_project_run",
+        "erk_project_group",
+        "group_outputs_erkp",
+        "group_project_erkp",
+    },
+    "rk45": {"adaptive_run", "adaptive_group", "group_outputs_dp", "group_first_stage_dp"},
+}
+
+
+@pytest.mark.parametrize("variant", list(FUNCTIONS))
+def test_generate_source__a_variant_holds_only_the_functions_it_calls(variant):
+    source = generate_source(_topology("fourbar-clearance"), variant, lmax=LMAX_PINNED)
+    assert set(re.findall(r"^def (\w+)\(", source, re.MULTILINE)) == FUNCTIONS[variant]

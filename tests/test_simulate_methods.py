@@ -87,7 +87,7 @@ def test_accel__matches_dense_kkt(name):
     """Generated lane evaluation == dense KKT solve, with Baumgarte, at random states."""
     model = scene_model(name)
     topo = Topology.from_model(model)
-    module = lane_kernels(topo)
+    module = lane_kernels(topo, "accel")
     rng = np.random.default_rng(7)
     n = 5
     Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
@@ -218,7 +218,7 @@ def test_radau__reports_the_steps_scipy_takes():
     model = scene_model("clearance_bar")
     sim = dict(t_end=0.05, dt=0.01, method="radau", rtol=1e-8, atol=1e-10)
     steps = simulate(model, sim, diagnostics=True)["steps"]
-    module = lane_kernels(Topology.from_model(model))
+    module = lane_kernels(Topology.from_model(model), "accel")
     P = pack_parameters(model)[:, :1].copy()
     alpha, beta = DEFAULT_BAUMGARTE
     n = model.ndof

@@ -20,5 +20,6 @@ Modules, one job each:
 * ``schedule``: demand-order scheduling of the generated lane loops.
 * ``cache``: the on-disk cache of generated modules, and loading one.
 * ``generate``: :func:`~mcchain.codegen.generate.generate_source` and
-  :func:`~mcchain.codegen.generate.lane_kernels`, the entry points.
+  :func:`~mcchain.codegen.generate.lane_kernels`, the entry points, per topology and variant
+  (the functions one method calls: ``accel``, ``rk4``, ``rk4-projection``, ``rk45``).
 """

@@ -1,5 +1,7 @@
-"""The lane-kernel module of a topology: its source text and the loaded module.
+"""The lane-kernel modules of a topology: their source text and the loaded modules.
 
+One module per variant (:data:`VARIANTS`: ``accel``, ``rk4``, ``rk4-projection``, ``rk45``),
+holding only the functions that variant's entry points call.
 :func:`generate_source` fills the templates (``templates.py``) with the emitter's blocks
 (``emitter.py``) for the work-array rows of ``layout.py``, then schedules the lane loops
 (``schedule.py``); :func:`lane_kernels` writes the text to the cache and imports it
@@ -19,7 +21,7 @@ from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.layout import LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
-from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY
+from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY, Tableau
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 
@@ -244,43 +246,65 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     }
 
 
-def generate_source(topo: Topology, lmax: int = LMAX) -> str:
-    """Source of the lane-kernel module of ``topo`` (RK4 and Dormand–Prince stage counts)
-    for work rows ``lmax`` doubles long (default: this CPU's SIMD register)."""
-    parts = [templates.HEADER, f"# topology: {topo!r}\n", ROW_MEANINGS]
-    for tableau, users in (
-        (RK4, "accel, outputs, erk_run, erk_project_run"),
-        (DOPRI5, "adaptive_run"),
-    ):
-        parts.append(
-            Layout(topo, tableau.nstage, lmax).row_map(f"{users} ({tableau.nstage} stages)")
-        )
-    sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
-    assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    erk_plain = templates.ERK_KERNEL.replace(templates.PROJECT_CALL, "") + templates.OUTPUT_HELPER
-    for template, tableau, suffix in (
-        (templates.ACCEL_KERNEL, RK4, ""),
-        (templates.OUTPUT_KERNEL, RK4, ""),
-        # Two variants, so that plain RK4 never compiles the (large) projection code.
-        (erk_plain, RK4, "erk"),
-        (templates.ERK_KERNEL.replace("erk_", "erk_project_") + templates.HELPERS, RK4, "erkp"),
-        (templates.ADAPTIVE_KERNEL + templates.HELPERS, DOPRI5, "dp"),
-    ):
-        lay = Layout(topo, tableau.nstage, lmax)
-        blocks = _blocks(topo, tableau.nstage, lay)
-        tokens = {**_tokens(topo, tableau.nstage, lay), "SUFFIX": suffix}
-        parts.append(schedule_lane_loops(_fill(template, blocks, tokens, lay)))
+_ERK_PLAIN = templates.ERK_KERNEL.replace(templates.PROJECT_CALL, "")
+_ERK_PROJECT = templates.ERK_KERNEL.replace("erk_", "erk_project_")
+
+VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
+    # variant: (what it holds, its tableau (None: no work rows), suffix, templates)
+    "accel": (
+        "accel, outputs (the radau right-hand side and its outputs)",
+        None,
+        "",
+        (templates.ACCEL_KERNEL, templates.OUTPUT_KERNEL),
+    ),
+    "rk4": ("erk_run", RK4, "erk", (_ERK_PLAIN, templates.OUTPUT_HELPER)),
+    "rk4-projection": (
+        "erk_project_run",
+        RK4,
+        "erkp",
+        (_ERK_PROJECT, templates.OUTPUT_HELPER, templates.PROJECT_HELPER),
+    ),
+    "rk45": (
+        "adaptive_run",
+        DOPRI5,
+        "dp",
+        (templates.ADAPTIVE_KERNEL, templates.OUTPUT_HELPER, templates.FIRST_STAGE_HELPER),
+    ),
+}
+"""The variants of a topology's lane-kernel module: each holds only the functions that its
+entry points call, so a scene run with ``rk4`` compiles no projection or adaptive code."""
+
+
+def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
+    """Source of the lane-kernel module of ``topo`` for ``variant`` (a key of
+    :data:`VARIANTS`), for work rows ``lmax`` doubles long (default: this CPU's SIMD
+    register)."""
+    users, tableau, suffix, parts_of = VARIANTS[variant]
+    parts = [templates.HEADER, f"# topology: {topo!r}\n# variant: {variant}\n"]
+    nstage = RK4.nstage if tableau is None else tableau.nstage
+    lay = Layout(topo, nstage, lmax)
+    if tableau is not None:
+        parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
+    if tableau is RK4:
+        sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
+        assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
+    blocks = _blocks(topo, nstage, lay)
+    tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
+    parts.append(schedule_lane_loops(_fill("\n".join(parts_of), blocks, tokens, lay)))
     return "\n".join(parts)
 
 
-_MODULES: dict[Topology, ModuleType] = {}
+_MODULES: dict[tuple[Topology, str], ModuleType] = {}
 
 
-def lane_kernels(topo: Topology) -> ModuleType:
-    """The compiled lane kernels of a topology: ``accel``, ``outputs``, ``erk_run``,
-    ``adaptive_run`` (numba compiles each on first call; machine code cached on disk)."""
-    module = _MODULES.get(topo)
+def lane_kernels(topo: Topology, variant: str) -> ModuleType:
+    """The compiled lane kernels of a topology for one :data:`VARIANTS` key (``accel`` and
+    ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``). numba compiles each on
+    first call; the machine code is cached on disk beside the module, under a file name
+    that starts with the variant."""
+    module = _MODULES.get((topo, variant))
     if module is None:
-        module = load_module(generate_source(topo))
-        _MODULES[topo] = module
+        prefix = "mcchain_gen_" + variant.replace("-", "_")
+        module = load_module(generate_source(topo, variant), prefix=prefix)
+        _MODULES[(topo, variant)] = module
     return module

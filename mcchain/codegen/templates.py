@@ -326,10 +326,7 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@store_outputs
 '''
 
-HELPERS = (
-    OUTPUT_HELPER
-    + '''
-
+PROJECT_HELPER = '''
 @njit(**JIT)
 def group_project_SUFFIX(W, nl, tp, ptol, max_newton, tau):
     """Project q onto Φ(q, tp) = 0 (Newton, M-weighted minimum-norm steps; stops at
@@ -349,8 +346,9 @@ def group_project_SUFFIX(W, nl, tp, ptol, max_newton, tau):
             nact += 1 if @[act] > 0.0 else 0
         if nact == 0:
             break
+'''
 
-
+FIRST_STAGE_HELPER = '''
 @njit(**JIT)
 def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
     """Stage 0 at each lane's start (adaptive methods: later steps reuse their last stage)."""
@@ -365,4 +363,3 @@ def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
         @@store_stage
         @@accept_zero
 '''
-)

@@ -296,12 +296,14 @@ class _Run:
     lanes: int = 1
 
 
-def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+def _lane_setup(run: _Run, variant: str) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """The lane kernels of ``variant`` (see ``mcchain.codegen.generate.VARIANTS``), the packed
+    parameters and the start state as (ndof, nsample) columns."""
     from mcchain.codegen.generate import lane_kernels
     from mcchain.codegen.topology import Topology, pack_parameters
 
     topo = Topology.from_model(run.model)
-    module = lane_kernels(topo)
+    module = lane_kernels(topo, variant)
     P = pack_parameters(run.model, topo)
     Q0 = np.ascontiguousarray(run.q.T)
     V0 = np.ascontiguousarray(run.v.T)
@@ -311,7 +313,7 @@ def _lane_setup(run: _Run) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
 def _run_erk(run: _Run, project: bool) -> None:
     from mcchain.kernels.tableaux import RK4
 
-    module, P, Q0, V0 = _lane_setup(run)
+    module, P, Q0, V0 = _lane_setup(run, "rk4-projection" if project else "rk4")
     s = run.settings
     alpha, beta = (0.0, 0.0) if project else s.baumgarte
     nstep = (len(run.time) - 1) * run.every
@@ -335,7 +337,7 @@ def _run_rk4_projection(run: _Run) -> None:
 def _run_rk45(run: _Run) -> None:
     from mcchain.kernels.tableaux import DOPRI5
 
-    module, P, Q0, V0 = _lane_setup(run)
+    module, P, Q0, V0 = _lane_setup(run, "rk45")
     s = run.settings
     alpha, beta = s.baumgarte
     nsteps = np.zeros(run.model.nsample, np.int64)
@@ -357,7 +359,7 @@ def _run_radau(run: _Run) -> None:
     """scipy's Radau on the index-1 equations, one sample at a time (the slow reference)."""
     from scipy.integrate import solve_ivp
 
-    module, P_all, _, _ = _lane_setup(run)
+    module, P_all, _, _ = _lane_setup(run, "accel")
     s = run.settings
     alpha, beta = s.baumgarte
     model = run.model
