@@ -27,19 +27,19 @@ GOLDEN = {
         "accel": "6cb53eabfc03d163c19da3f95a32cceb15054540a36a8d89e1cd2ebecfc849b7",
         "rk4": "3500754744007b06c701976d70e0ce8021d6aaafb4df646725e77443a5a94851",
         "rk4-projection": "8a470c61ea4e88bf2ae2d7abfdd10997f51f3985501d0490b879b7cab50947ac",
-        "rk45": "972588362712db1c828e2f5c3e985a89b81f1ee80548c695621cc79008aa6a03",
+        "rk45": "872e6bd7254dca9ddf1ced87b227a98d39a9916ba6724234c60870a4559fd462",
     },
     "fourbar-clearance": {
         "accel": "591c2ff2a891bbf23eb1ef4a26700485c5979dee9fa144b26809f6b47515a400",
         "rk4": "e10f036f5725a851cf0e12dc508163c5241297926d584b0c3b65748da796fdad",
         "rk4-projection": "a12235e909c60f691d76cc0843e231d402591c0e614bb2c78a3bd3f708899b5b",
-        "rk45": "721d00f5a926077355a829a35aea240bb1b9977d0f1781623bbac1aae8ebe454",
+        "rk45": "8a563cd684d33602772e7df643927541ec7d25b40734071f2dbd27e5d4fedb0a",
     },
     "chain4-mixed-spring": {
         "accel": "a88e7a8157a86e4e8f7931acabc9df69ea4ed2cfcac5abbf7b9c59e4d16ab96c",
         "rk4": "9fd93db1041e8a99b0e5a11b4c3cbc56c0a64e437384f60124a18e13c691a2b1",
         "rk4-projection": "04e84cd5acb474b0d73ba2dd27a289d6d427c7b0c3a37b1e7071dab5dfc432a3",
-        "rk45": "a22292d1c22c40599079155d6ae617d37bcad383f60e8a649fb88640cd79e2d4",
+        "rk45": "833f096f5a5adab0e885dbf2ce93680cd9ba952e1baf06812e744cf721de66a2",
     },
 }
 

@@ -207,9 +207,10 @@ def test_demand_order__same_stores_as_written():
     assert np.array_equal(_run_lane_body(demand_order(body), W.copy()), expected)
 
 
-def test_radau__reports_the_steps_scipy_takes():
-    """``steps`` of radau (diagnostics) = the accepted steps of scipy's Radau on the same
-    index-1 right-hand side, integrated here without output times."""
+def test_radau__reports_the_steps_and_evaluations_scipy_takes():
+    """``steps`` and ``evaluations`` of radau (diagnostics) = the accepted steps and ``nfev``
+    of scipy's Radau on the same index-1 right-hand side, integrated here without output
+    times; ``rejected_steps`` is -1 (scipy does not count them)."""
     from scipy.integrate import solve_ivp
 
     from mcchain.scene.models import DEFAULT_BAUMGARTE
@@ -217,7 +218,8 @@ def test_radau__reports_the_steps_scipy_takes():
 
     model = scene_model("clearance_bar")
     sim = dict(t_end=0.05, dt=0.01, method="radau", rtol=1e-8, atol=1e-10)
-    steps = simulate(model, sim, diagnostics=True)["steps"]
+    res = simulate(model, sim, diagnostics=True)
+    steps = res["steps"]
     module = lane_kernels(Topology.from_model(model), "accel")
     P = pack_parameters(model)[:, :1].copy()
     alpha, beta = DEFAULT_BAUMGARTE
@@ -233,3 +235,52 @@ def test_radau__reports_the_steps_scipy_takes():
     sol = solve_ivp(rhs, (0.0, 0.05), y0, method="Radau", rtol=1e-8, atol=1e-10)
     assert sol.status == 0 and steps.shape == (1,)
     assert steps[0] == len(sol.t) - 1 > 5
+    assert res["evaluations"][0] == sol.nfev
+    assert res["rejected_steps"][0] == -1
+    assert all(res[k].dtype == np.int64 for k in ("steps", "rejected_steps", "evaluations"))
+
+
+DIAGNOSTICS = ("steps", "rejected_steps", "evaluations")
+
+
+@pytest.mark.parametrize("method", ["rk4", "rk4-projection", "generalized-alpha"])
+def test_diagnostics__fixed_step_counts_are_exact(method):
+    """Fixed steps: t_end / dt accepted steps, none rejected; RK4 evaluates 4 stages a step
+    and stage 0 once more at t_end; generalized-α one residual at the start and at least one
+    per step (Newton), at most ``max_newton``. A sample failed on entry counts nothing."""
+    from mcchain.status import ASSEMBLY_FAILED
+
+    model = scene_model("clearance_bar", nsample=2)
+    sim = dict(t_end=0.05, dt=1e-3, method=method, max_newton=20)
+    status = np.array([0, ASSEMBLY_FAILED], np.uint32)
+    res = simulate(model, sim, status=status, diagnostics=True)
+    nstep = 50
+    assert res["status"][0] == 0
+    for key in DIAGNOSTICS:
+        assert res[key].dtype == np.int64 and res[key].shape == (2,)
+        assert res[key][1] == 0
+    assert res["steps"][0] == nstep and res["rejected_steps"][0] == 0
+    if method == "generalized-alpha":
+        assert 1 + nstep <= res["evaluations"][0] <= 1 + 20 * nstep
+    else:
+        assert res["evaluations"][0] == 4 * nstep + 1
+
+
+def test_diagnostics__rk45_counts_attempts_and_fsal_stages(monkeypatch):
+    """rk45: accepted + rejected = the attempts its step limit counts (a limit of that many
+    passes, one fewer flags DIVERGED); evaluations = 1 + 6 per attempt (7 stages, the last
+    reused as the next first: FSAL)."""
+    import mcchain.solvers.simulate as simulate_module
+    from mcchain.status import DIVERGED
+
+    model = scene_model("clearance_bar")
+    sim = dict(t_end=0.05, dt=0.05, output_dt=0.05, method="rk45", rtol=1e-9, atol=1e-11)
+    res = simulate(model, sim, diagnostics=True)
+    steps, rejected = int(res["steps"][0]), int(res["rejected_steps"][0])
+    attempts = steps + rejected
+    assert res["status"][0] == 0 and steps > 5 and rejected > 0
+    assert res["evaluations"][0] == 1 + (DOPRI5.nstage - 1) * attempts
+    monkeypatch.setattr(simulate_module, "ADAPTIVE_MAX_STEPS", attempts)
+    assert simulate(model, sim)["status"][0] == 0
+    monkeypatch.setattr(simulate_module, "ADAPTIVE_MAX_STEPS", attempts - 1)
+    assert simulate(model, sim)["status"][0] & DIVERGED

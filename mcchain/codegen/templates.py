@@ -182,7 +182,7 @@ PROJECT_CALL = """
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
                  out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-                 status, t_div, t_sing, t_cl, nsteps_out"""
+                 status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
 ADAPTIVE_KERNEL = (
     f'''
@@ -192,7 +192,9 @@ def adaptive_run({_ADAPTIVE_ARGS}):
 
     Every lane has its own time and step; a step never crosses the lane's next output time
     and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
-    ``max_steps`` attempts is flagged DIVERGED.
+    ``max_steps`` attempts is flagged DIVERGED. Per sample: accepted steps, rejected steps
+    and stage evaluations (the first stage, then NSTAGE - 1 per attempt: FSAL) into
+    ``nsteps_out``, ``nrejected_out``, ``nevals_out``.
     """
     lanes = max(1, min(lanes, LMAXV))
     ngroup = (Q0.shape[1] + lanes - 1) // lanes
@@ -211,6 +213,8 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
     + """
         iout = np.zeros(lanes, np.int64)
         nstp = np.zeros(lanes, np.int64)
+        nrej = np.zeros(lanes, np.int64)
+        nev = np.zeros(lanes, np.int64)
         run = np.zeros(lanes, np.bool_)
         hl = np.zeros(lanes)
         for l in range(nl):
@@ -218,6 +222,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
             @[hs] = 0.0
             hl[l] = h0
             run[l] = True
+            nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
         # First stage at the start; later steps reuse the last stage (FSAL).
         group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
         while True:
@@ -257,7 +262,9 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                         out_cerr[s0 + l, it] = np.nan
                         out_en[s0 + l, it] = np.nan
                     run[l] = False
-                    nsteps_out[s0 + l] = nstp[l]
+                    nsteps_out[s0 + l] = nstp[l] - nrej[l]
+                    nrejected_out[s0 + l] = nrej[l]
+                    nevals_out[s0 + l] = nev[l]
                 else:
                     nrun += 1
             if nrun == 0:
@@ -285,6 +292,8 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                     dst = (K0ROW + 2 * NDOF * s + i) * LMAXV
                     for l in range(nl):
                         W[dst + l] = W[src + l]
+                for l in range(nl):
+                    nev[l] += 1 if run[l] else 0
             # Error estimate, acceptance, next step.
             for l in range(nl):
                 if not run[l]:
@@ -307,6 +316,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                     hl[l] = max(hl[l], hh * fac) if cut else hh * fac
                 else:
                     hl[l] = hh * fac
+                    nrej[l] += 1
                 if (not (hl[l] >= hmin)) or nstp[l] > max_steps:
                     @[chk] = np.inf"""
     + _GROUP_FINISH

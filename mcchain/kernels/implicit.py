@@ -40,7 +40,7 @@ from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 def generalized_alpha_run(
     km, Q0, V0, t0, h, nstep, out_every, ncon, alpha_m, alpha_f, gam, beta, ctol, tau,
     max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-    status, t_div, t_sing, t_cl,
+    status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for every sample.
 
@@ -49,6 +49,8 @@ def generalized_alpha_run(
     from the joints' second derivatives and the load stiffness), constraint rows and λ
     scaled by β′ (Arnold & Brüls §3.3). LU with partial pivoting; a pivot ≤ ``tau`` × the
     largest entry flags SINGULAR, no convergence in ``max_newton`` iterations DIVERGED.
+    Per sample: the steps completed (``nsteps_out``) and the residual evaluations, one for
+    the start's index-1 solve and one per Newton iteration (``nevals_out``).
     """
     nsample, ndof = Q0.shape
     nsys = ndof + ncon
@@ -85,6 +87,8 @@ def generalized_alpha_run(
         for r in range(ncon):
             lam[r] = rhs[ndof + r]
         written = 0  # output times written so far; after a failure the rest are NaN
+        nst = 0
+        nev = 1  # the start's index-1 solve
         for n in range(nstep + 1):
             t = t0 + n * h
             constraint_residual(km, s, q, t, phi)
@@ -131,6 +135,7 @@ def generalized_alpha_run(
             singular = False
             pivot = np.inf
             for _ in range(max_newton):
+                nev += 1
                 applied_forces(km, s, q, v, F)
                 constraint_residual(km, s, q, tn, phi)
                 constraint_jacobian(km, s, q, B)
@@ -189,8 +194,11 @@ def generalized_alpha_run(
             for i in range(ndof):
                 acc[i] += (1.0 - alpha_f) / (1.0 - alpha_m) * qdd[i]
                 acc[i] -= (1.0 - alpha_f) / (1.0 - alpha_m) * qdd_old[i]
+            nst += 1
         _nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         status[s] = st
+        nsteps_out[s] = nst
+        nevals_out[s] = nev
 
 
 @njit(**JIT)

@@ -293,6 +293,9 @@ class _Run:
     t_div: np.ndarray
     t_sing: np.ndarray
     t_cl: np.ndarray
+    steps: np.ndarray  # (nsample,) int64 diagnostics, see simulate()
+    rejected_steps: np.ndarray
+    evaluations: np.ndarray
     lanes: int = 1
 
 
@@ -317,6 +320,11 @@ def _run_erk(run: _Run, project: bool) -> None:
     s = run.settings
     alpha, beta = (0.0, 0.0) if project else s.baumgarte
     nstep = (len(run.time) - 1) * run.every
+    # Every lane runs every step (a failed one with NaN, in lockstep): stages per step, and
+    # stage 0 once more at the end for the last outputs.
+    integrated = (run.status & FAILURE_BITS) == 0
+    run.steps[integrated] = nstep
+    run.evaluations[integrated] = RK4.nstage * nstep + 1
     (module.erk_project_run if project else module.erk_run)(
         P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
@@ -340,15 +348,14 @@ def _run_rk45(run: _Run) -> None:
     module, P, Q0, V0 = _lane_setup(run, "rk45")
     s = run.settings
     alpha, beta = s.baumgarte
-    nsteps = np.zeros(run.model.nsample, np.int64)
     module.adaptive_run(
         P, Q0, V0, 0.0, run.time, min(s.dt, s.output_dt), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        run.status, run.t_div, run.t_sing, run.t_cl, nsteps,
+        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.rejected_steps,
+        run.evaluations,
     )  # fmt: skip
-    run.out["_steps"] = nsteps
 
 
 class _Singular(Exception):
@@ -369,8 +376,8 @@ def _run_radau(run: _Run) -> None:
     lam = np.zeros((ncon, 1))
     chk = np.zeros(1)
     sing = np.zeros(1)
-    nsteps = np.zeros(n, np.int64)
-    run.out["_steps"] = nsteps
+    nsteps = run.steps
+    run.rejected_steps[:] = -1  # scipy's Radau does not count them
     for i in range(n):
         if run.status[i] & FAILURE_BITS:
             for array in flat:
@@ -383,7 +390,8 @@ def _run_radau(run: _Run) -> None:
             nsteps[i] += 1
             return 1.0
 
-        def rhs(t: float, y: np.ndarray, P: np.ndarray = P) -> np.ndarray:
+        def rhs(t: float, y: np.ndarray, P: np.ndarray = P, i: int = i) -> np.ndarray:
+            run.evaluations[i] += 1
             Q = np.ascontiguousarray(y[:ndof, None])
             V = np.ascontiguousarray(y[ndof:, None])
             module.accel(P, Q, V, t, 2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
@@ -397,12 +405,13 @@ def _run_radau(run: _Run) -> None:
                 rhs, (0.0, float(run.time[-1])), y0, method="Radau", t_eval=run.time,
                 rtol=s.rtol, atol=s.atol, events=count_step,
             )  # fmt: skip
-            nsteps[i] -= 1
+            run.evaluations[i] = sol.nfev
             ys, ok = sol.y, sol.status == 0
             fail_bit, fail_time = DIVERGED, (sol.t[-1] if len(sol.t) else 0.0)
         except _Singular as exc:
             ys, ok = np.zeros((2 * ndof, 0)), False
             fail_bit, fail_time = SINGULAR, float(exc.args[0])
+        nsteps[i] -= 1  # the event's evaluation at the start
         nt = ys.shape[1]
         Q = np.ascontiguousarray(ys[:ndof])
         V = np.ascontiguousarray(ys[ndof:])
@@ -469,7 +478,7 @@ def _run_generalized_alpha(run: _Run) -> None:
         run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
         s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        run.status, run.t_div, run.t_sing, run.t_cl,
+        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations,
     )  # fmt: skip
 
 
@@ -524,8 +533,21 @@ def simulate(
             not integrated.
         lanes: instances per lane group of the lane kernels (1..LMAX; default LMAX, one
             SIMD register of doubles: see ``mcchain.codegen.layout.LMAX``).
-        diagnostics: also return ``steps`` (nsample,), the accepted steps each sample took
-            (rk45 and radau).
+        diagnostics: also return, per sample, int64 (nsample,): ``steps`` (accepted
+            steps), ``rejected_steps`` and ``evaluations`` (right-hand-side evaluations).
+            rk4, rk4-projection: ``steps`` = t_end / dt for every integrated sample (a
+            failed one is carried to the end with NaN), ``rejected_steps`` 0,
+            ``evaluations`` 4 per step + 1 (stage 0 at t_end, for the last outputs; the
+            projection's Newton iterations evaluate Φ, not accelerations, and are not
+            counted). rk45: accepted and rejected attempts up to the end or the failure;
+            ``evaluations`` 1 (the first stage) + 6 per attempt (7 stages, the last one is
+            the next step's first: FSAL). radau: scipy's accepted steps and its ``nfev``
+            (its finite-difference Jacobian's evaluations not included; a sample stopped
+            by a singular evaluation reports every call up to it); ``rejected_steps`` -1,
+            scipy does not count them. generalized-alpha: the steps completed (up to a
+            failure), ``rejected_steps`` 0, ``evaluations`` 1 (the start's index-1 solve) +
+            one residual per Newton iteration. Samples failed on entry: all 0 (radau's
+            ``rejected_steps`` -1).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
@@ -553,16 +575,20 @@ def simulate(
         t_div=np.full(n, np.nan),
         t_sing=np.full(n, np.nan),
         t_cl=np.full(n, np.nan),
+        steps=np.zeros(n, np.int64),
+        rejected_steps=np.zeros(n, np.int64),
+        evaluations=np.zeros(n, np.int64),
         lanes=int(lanes),
     )
     if n:
         METHODS[settings.method].run(run)
-    steps = out.pop("_steps", None)
     result = {"time": time, **out}
     result["status"] = run.status
     result["diverged_time"] = run.t_div
     result["singular_time"] = run.t_sing
     result["contact_lost_time"] = run.t_cl
-    if diagnostics and steps is not None:
-        result["steps"] = steps
+    if diagnostics:
+        result["steps"] = run.steps
+        result["rejected_steps"] = run.rejected_steps
+        result["evaluations"] = run.evaluations
     return result
