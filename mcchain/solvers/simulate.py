@@ -63,44 +63,6 @@ ADAPTIVE_MAX_STEPS = 10_000_000
 
 
 @dataclass(frozen=True)
-class Settings:
-    """The validated ``[simulate]`` section with ``output_dt`` and ``baumgarte`` resolved."""
-
-    t_end: float
-    dt: float
-    method: str
-    output_dt: float
-    start: str
-    perturb: dict[str, float]
-    rtol: float
-    atol: float
-    rho_inf: float
-    baumgarte: tuple[float, float]
-    constraint_tolerance: float
-    max_newton: int
-
-    @classmethod
-    def resolve(cls, sim: Simulate | Mapping[str, Any]) -> Settings:
-        """The settings of a validated ``[simulate]`` section (a dict is validated by the
-        schema first, so defaults and ranges are the schema's)."""
-        sim = load_section(Simulate, "simulate", sim)
-        return cls(
-            t_end=sim.t_end,
-            dt=sim.dt,
-            method=sim.method,
-            output_dt=sim.output_step,
-            start=sim.start,
-            perturb=dict(sim.perturb),
-            rtol=sim.rtol,
-            atol=sim.atol,
-            rho_inf=sim.rho_inf,
-            baumgarte=sim.gains,
-            constraint_tolerance=sim.constraint_tolerance,
-            max_newton=sim.max_newton,
-        )
-
-
-@dataclass(frozen=True)
 class Method:
     """One row of :data:`METHODS`."""
 
@@ -114,20 +76,20 @@ class Method:
 # Output times and the start state
 
 
-def output_times(settings: Settings) -> tuple[np.ndarray, int]:
+def output_times(settings: Simulate) -> tuple[np.ndarray, int]:
     """Output times (0, output_dt, …, ≤ t_end) and, for fixed steps, steps per output."""
-    ratio = settings.output_dt / settings.dt
+    ratio = settings.output_step / settings.dt
     every = round(ratio)
     if METHODS[settings.method].fixed_step and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
         raise SceneError(
             f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
-            f"{settings.method!r}, got {settings.output_dt:g}"
+            f"{settings.method!r}, got {settings.output_step:g}"
         )
-    ntime = math.floor(settings.t_end / settings.output_dt * (1 + 1e-12)) + 1
+    ntime = math.floor(settings.t_end / settings.output_step * (1 + 1e-12)) + 1
     if METHODS[settings.method].fixed_step:
         # (i · every) · dt: the very float the kernels compute as the time of step i · every.
         return (np.arange(ntime) * every) * settings.dt, every
-    return np.arange(ntime) * settings.output_dt, max(every, 1)
+    return np.arange(ntime) * settings.output_step, max(every, 1)
 
 
 _PERTURB = re.compile(
@@ -162,7 +124,7 @@ def perturbation_index(model: Model, path: str) -> tuple[str, int]:
 
 def start_state(
     model: Model,
-    settings: Settings,
+    settings: Simulate,
     q_start: np.ndarray | None = None,
     v_start: np.ndarray | None = None,
     status: np.ndarray | None = None,
@@ -283,7 +245,7 @@ def _flat_outputs(out: dict[str, np.ndarray], n: int, ntime: int) -> tuple[np.nd
 @dataclass
 class _Run:
     model: Model
-    settings: Settings
+    settings: Simulate
     q: np.ndarray  # (nsample, ndof) start
     v: np.ndarray
     time: np.ndarray
@@ -318,7 +280,7 @@ def _run_erk(run: _Run, project: bool) -> None:
 
     module, P, Q0, V0 = _lane_setup(run, "rk4-projection" if project else "rk4")
     s = run.settings
-    alpha, beta = (0.0, 0.0) if project else s.baumgarte
+    alpha, beta = (0.0, 0.0) if project else s.gains
     nstep = (len(run.time) - 1) * run.every
     # Every lane runs every step (a failed one with NaN, in lockstep): stages per step, and
     # stage 0 once more at the end for the last outputs.
@@ -347,9 +309,9 @@ def _run_rk45(run: _Run) -> None:
 
     module, P, Q0, V0 = _lane_setup(run, "rk45")
     s = run.settings
-    alpha, beta = s.baumgarte
+    alpha, beta = s.gains
     module.adaptive_run(
-        P, Q0, V0, 0.0, run.time, min(s.dt, s.output_dt), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
+        P, Q0, V0, 0.0, run.time, min(s.dt, s.output_step), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
@@ -368,7 +330,7 @@ def _run_radau(run: _Run) -> None:
 
     module, P_all, _, _ = _lane_setup(run, "accel")
     s = run.settings
-    alpha, beta = s.baumgarte
+    alpha, beta = s.gains
     model = run.model
     ndof, ncon, n = model.ndof, max(model.ncon, 1), model.nsample
     flat = _flat_outputs(run.out, n, len(run.time))
@@ -553,7 +515,7 @@ def simulate(
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
-    settings = Settings.resolve(sim)
+    settings = load_section(Simulate, "simulate", sim)
     from mcchain.codegen.layout import LMAX
 
     lanes = LMAX if lanes is None else lanes
