@@ -38,6 +38,39 @@ LAW_CODES: dict[str, int] = {
 LAW_NAMES: dict[int, str] = {code: name for name, code in LAW_CODES.items()}
 """Integer code → scene spelling."""
 
+DAMPED_LAWS = ("lankarani-nikravesh", "flores", "hunt-crossley")
+"""The laws whose damping needs a coefficient of restitution."""
+
+LINK = 0
+"""Joint model: the massless link |d| = c (the paper's model), a constraint row."""
+CONTACT = 1
+"""Joint model: the contact law from t = 0 (free flight and impacts), no constraint row."""
+AUTO = 2
+"""Joint model: the link while λ > 0, the contact law from the first λ ≤ 0 on."""
+
+MODEL_CODES: dict[str, int] = {"link": LINK, "contact": CONTACT, "auto": AUTO}
+"""Scene spelling of ``[[joint]] model`` → the integer code in ``Model.joint_model``."""
+
+MODEL_NAMES: dict[int, str] = {code: name for name, code in MODEL_CODES.items()}
+"""Integer code → scene spelling."""
+
+MODE_LINK = 0
+"""``contact_mode`` output: the joint is the link (constraint row active)."""
+MODE_CONTACT = 1
+"""``contact_mode`` output: the contact law is active and the journal presses (δ > 0)."""
+MODE_FREE = 2
+"""``contact_mode`` output: the contact law is active and the journal flies free (δ ≤ 0)."""
+
+CONTACT_SUMMARY = ("nim", "pkf", "pkd", "tff", "tse")
+"""Per-joint summaries the lane kernels keep for each contact-law joint, in the order of
+their ``sum_ct`` columns: impacts, peak contact force, peak penetration, free-flight time,
+first separation time."""
+
+CONTACT_STEP_LIMIT = 0.5
+"""Largest ω_c h a fixed-step method may take in contact (ω_c = √(∂F_n/∂δ / m*), m* the
+journal's effective mass along n): RK4 loses ~1e-4 of the contact energy per step there and
+takes ≥ 6 steps per contact; past it a sample is flagged ``contact_step_too_large``."""
+
 FRICTION_V0 = 1e-4
 """Tangential speed (m/s) below which the regularised Coulomb friction is zero (Ambrósio's
 ``v0``). Chosen here, not taken from a paper: well under the sliding speeds of a journal."""

@@ -70,6 +70,8 @@ class KernelModel(NamedTuple):
     joint_body_b: np.ndarray
     joint_kind: np.ndarray
     joint_row: np.ndarray
+    joint_model: np.ndarray
+    joint_contact_law: np.ndarray
     driver_body: np.ndarray
     driver_row: np.ndarray
     force_body: np.ndarray
@@ -82,6 +84,10 @@ class KernelModel(NamedTuple):
     joint_point_b: np.ndarray
     joint_clearance: np.ndarray
     joint_eccentricity: np.ndarray
+    joint_contact_stiffness: np.ndarray
+    joint_contact_exponent: np.ndarray
+    joint_contact_restitution: np.ndarray
+    joint_contact_friction: np.ndarray
     driver_angle0: np.ndarray
     driver_omega: np.ndarray
     force_point: np.ndarray
@@ -120,6 +126,10 @@ class Model:
         joint_body_b: (njoint,) int64 journal body index.
         joint_kind: (njoint,) int64 :class:`JointKind` values.
         joint_row: (njoint,) int64 first constraint row of each joint.
+        joint_model: (njoint,) int64 model of a clearance joint in time histories
+            (:data:`mcchain.contact.MODEL_CODES`: 0 link, 1 contact, 2 auto; 0 for ideal
+            joints). Statics and modes always use the link.
+        joint_contact_law: (njoint,) int64 contact law code (:data:`mcchain.contact.LAW_CODES`).
         driver_body: (ndriver,) int64 driven body.
         driver_row: (ndriver,) int64 constraint row of each driver.
         force_body: (nforce,) int64 loaded body.
@@ -131,6 +141,10 @@ class Model:
             (a) and journal (b) bodies, m.
         joint_clearance: (*, njoint) radial clearance c, m (ignored for ideal joints).
         joint_eccentricity: (*, njoint) initial direction α of d, rad; NaN: from positions.
+        joint_contact_stiffness: (*, njoint) K of the contact law, N/m^exponent.
+        joint_contact_exponent: (*, njoint) exponent m of the contact law.
+        joint_contact_restitution: (*, njoint) coefficient of restitution e.
+        joint_contact_friction: (*, njoint) Coulomb coefficient μ.
         driver_angle0: (*, ndriver) θ_0, rad.
         driver_omega: (*, ndriver) ω, rad/s.
         force_point: (*, nforce, 2) local application point, m.
@@ -181,6 +195,27 @@ class Model:
     q0: np.ndarray
     v0: np.ndarray
     meta: dict[str, object] = field(default_factory=dict)
+    # The contact law (optional: None gives link joints, an unset law).
+    joint_model: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_law: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_stiffness: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_exponent: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_restitution: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_friction: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        njoint = len(self.joint_names)
+        defaults = {
+            "joint_model": np.zeros(njoint, dtype=np.int64),
+            "joint_contact_law": np.zeros(njoint, dtype=np.int64),
+            "joint_contact_stiffness": np.full((1, njoint), np.nan),
+            "joint_contact_exponent": np.full((1, njoint), 1.5),
+            "joint_contact_restitution": np.ones((1, njoint)),
+            "joint_contact_friction": np.zeros((1, njoint)),
+        }
+        for name, value in defaults.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -222,6 +257,11 @@ class Model:
     def has_clearance(self) -> bool:
         return bool(np.any(self.joint_kind == JointKind.CLEARANCE))
 
+    @property
+    def has_contact(self) -> bool:
+        """Whether a clearance joint may use the contact law in time histories."""
+        return bool(np.any(self.joint_model != 0))
+
     # -- arrays for kernels ----------------------------------------------------------------
     def kernel_arrays(self) -> KernelModel:
         """The arrays as one :class:`KernelModel`, contiguous with the dtypes kernels expect."""
@@ -255,6 +295,8 @@ _TOPOLOGY_FIELDS = frozenset(
         "joint_body_b",
         "joint_kind",
         "joint_row",
+        "joint_model",
+        "joint_contact_law",
         "driver_body",
         "driver_row",
         "force_body",

@@ -37,21 +37,30 @@ from mcchain.model import JointKind
 
 @dataclass(frozen=True)
 class Domain:
-    """The allowed values of a parameter: ``> low`` (open) or ``>= low``."""
+    """The allowed values of a parameter: ``> low`` (open) or ``>= low``, and ``<= high``
+    when ``high`` is given."""
 
     low: float
     open_low: bool
+    high: float | None = None
 
     @property
     def text(self) -> str:
-        return f"{'>' if self.open_low else '>='} {self.low!r}"
+        text = f"{'>' if self.open_low else '>='} {self.low!r}"
+        return text if self.high is None else f"{text} and <= {self.high!r}"
 
     def contains(self, values: Any) -> Any:
-        return values > self.low if self.open_low else values >= self.low
+        ok = values > self.low if self.open_low else values >= self.low
+        return ok if self.high is None else ok & (values <= self.high)
 
 
 POSITIVE = Domain(0.0, True)
 NON_NEGATIVE = Domain(0.0, False)
+UNIT_INTERVAL = Domain(0.0, True, 1.0)
+
+CONTACT_JOINTS = "contact"
+"""``packed_for`` of the contact-law rows: packed only for clearance joints whose model is
+``contact`` or ``auto`` (:data:`mcchain.contact.MODEL_CODES`)."""
 
 
 @dataclass(frozen=True)
@@ -70,7 +79,8 @@ class Parameter:
             ``field[3 * body + dof + k]``.
         slots: packed slot names, one per element, ``{i}`` the item index.
         inverse_slots: packed slots holding 1 / value (after the item's plain slots).
-        packed_for: pack the slots only for joints of this kind.
+        packed_for: pack the slots only for joints of this kind, or, with
+            :data:`CONTACT_JOINTS`, only for joints that may use the contact law.
         unset: the Model value of an optional key the scene leaves out (None in the scene
             model); NaN where the compiler derives it (from positions, or the body's angle).
     """
@@ -84,7 +94,7 @@ class Parameter:
     dof: int | None = None
     slots: tuple[str, ...] = ()
     inverse_slots: tuple[str, ...] = ()
-    packed_for: JointKind | None = None
+    packed_for: JointKind | str | None = None
     unset: float | None = None
 
     @property
@@ -116,6 +126,16 @@ class Parameter:
         if self.kind == "scene":
             return self.shape
         return (nitem, *self.shape)
+
+    def scene_value(self, item: Any) -> Any:
+        """The key's value in a scene item (a pydantic model), None when not given; a dotted
+        key (``contact.stiffness``) reads the sub-table (absent: None)."""
+        *tables, key = self.key.split(".")
+        for table in tables:
+            item = getattr(item, table)
+            if item is None:
+                return None
+        return getattr(item, key)
 
     def read(self, model: Any, item: int, sample: int = 0) -> np.ndarray:
         """The value of item ``item`` in ``model`` (a Model) at ``sample``, shaped ``shape``."""
@@ -153,6 +173,15 @@ TABLE: tuple[Parameter, ...] = (
       slots=("cl{i}",), packed_for=JointKind.CLEARANCE),
     _P("joint", "eccentricity",     (),     "joint_eccentricity",    "rad",     None,
       unset=_NAN),
+    # The contact law of a clearance joint (``[joint.contact]``); K unset: from the materials.
+    _P("joint", "contact.stiffness", (),   "joint_contact_stiffness", "N m-1.5", POSITIVE,
+      slots=("K{i}",), packed_for=CONTACT_JOINTS, unset=_NAN),
+    _P("joint", "contact.exponent", (),    "joint_contact_exponent", "1",       POSITIVE,
+      slots=("mx{i}",), packed_for=CONTACT_JOINTS, unset=1.5),
+    _P("joint", "contact.restitution", (), "joint_contact_restitution", "1",    UNIT_INTERVAL,
+      slots=("er{i}",), packed_for=CONTACT_JOINTS, unset=1.0),
+    _P("joint", "contact.friction", (),    "joint_contact_friction", "1",       NON_NEGATIVE,
+      slots=("mu{i}",), packed_for=CONTACT_JOINTS, unset=0.0),
     _P("driver", "angle0",          (),     "driver_angle0",         "rad",     None,
       slots=("th0_{i}",), unset=_NAN),
     _P("driver", "omega",           (),     "driver_omega",          "rad s-1", None,
@@ -190,7 +219,8 @@ def rows_of(kind: str) -> list[Parameter]:
 def param_units(path: str) -> str:
     """CF units of a sampled parameter path (``body.bar.mass`` -> ``kg``), ``1`` if unknown."""
     parts = [part.strip('"') for part in path.split("[", 1)[0].split(".")]
-    row = PARAMETERS.get((parts[0], parts[-1]))
+    key = parts[-1] if parts[0] == "scene" else ".".join(parts[2:])
+    row = PARAMETERS.get((parts[0], key))
     return row.units if row is not None else "1"
 
 
@@ -206,13 +236,21 @@ class Slot(NamedTuple):
 
 
 def packed_slots(
-    joint_kind: Sequence[int], nbody: int, ndriver: int, nforce: int, nspring: int
+    joint_kind: Sequence[int],
+    nbody: int,
+    ndriver: int,
+    nforce: int,
+    nspring: int,
+    joint_model: Sequence[int] | None = None,
 ) -> list[Slot]:
     """The rows of ``P`` for a topology, in order: kinds in table order, then items in order;
     per item, every row's plain slots in table order, then the inverse slots.
 
-    A joint row with ``packed_for`` is packed only for joints of that kind.
+    A joint row with ``packed_for`` is packed only for joints of that kind (or, for
+    :data:`CONTACT_JOINTS`, whose ``joint_model`` is not the link; default: every joint is).
     """
+    contact = [m != 0 for m in joint_model] if joint_model is not None else []
+    contact += [False] * (len(joint_kind) - len(contact))
     counts = {"scene": 1, "body": nbody, "joint": len(joint_kind), "driver": ndriver}
     counts |= {"force": nforce, "spring": nspring}
     out: list[Slot] = []
@@ -222,7 +260,10 @@ def packed_slots(
             plain: list[Slot] = []
             inverse: list[Slot] = []
             for row in rows:
-                if row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
+                if row.packed_for == CONTACT_JOINTS:
+                    if not contact[i]:
+                        continue
+                elif row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
                     continue
                 for names, target, inv in (
                     (row.slots, plain, False),
@@ -238,7 +279,13 @@ def packed_slots(
 
 
 def packed_slot_names(
-    joint_kind: Sequence[int], nbody: int, ndriver: int, nforce: int, nspring: int
+    joint_kind: Sequence[int],
+    nbody: int,
+    ndriver: int,
+    nforce: int,
+    nspring: int,
+    joint_model: Sequence[int] | None = None,
 ) -> list[str]:
     """The names of the rows of ``P`` (see :func:`packed_slots`), in order."""
-    return [s.name for s in packed_slots(joint_kind, nbody, ndriver, nforce, nspring)]
+    slots = packed_slots(joint_kind, nbody, ndriver, nforce, nspring, joint_model)
+    return [s.name for s in slots]

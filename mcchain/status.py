@@ -18,6 +18,7 @@ SINGULAR = 4
 DIVERGED = 8
 CONTACT_LOST = 16
 UNSTABLE_EQUILIBRIUM = 32
+CONTACT_STEP_TOO_LARGE = 64
 
 STATUS_DTYPE = np.uint32
 
@@ -31,6 +32,7 @@ class Status(enum.IntFlag):
     DIVERGED = DIVERGED
     CONTACT_LOST = CONTACT_LOST
     UNSTABLE_EQUILIBRIUM = UNSTABLE_EQUILIBRIUM
+    CONTACT_STEP_TOO_LARGE = CONTACT_STEP_TOO_LARGE
 
     @property
     def meaning(self) -> str:
@@ -55,9 +57,13 @@ _MESSAGES = {
     Status.DIVERGED: "non-finite state or constraint error past tolerance",
     Status.CONTACT_LOST: "a clearance joint needs λ ≤ 0 (continuous contact broken)",
     Status.UNSTABLE_EQUILIBRIUM: "an eigenpulsation has p² < 0 (unstable equilibrium)",
+    Status.CONTACT_STEP_TOO_LARGE: "the fixed step is too large for a contact's stiffness "
+    "(use rk45 or a smaller dt)",
 }
 
-FAILURE_BITS = ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR | DIVERGED
+FAILURE_BITS = (
+    ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR | DIVERGED | CONTACT_STEP_TOO_LARGE
+)
 """Bits after which a sample's values are NaN; the others are warnings."""
 
 FLAG_MASKS = np.array([flag.value for flag in Status], dtype=STATUS_DTYPE)

@@ -24,6 +24,14 @@ DESIGN_VARIABLES = {
     "driver_torque": ("sample", "time", "driver"),
     "constraint_error": ("sample", "time"),
     "energy": ("sample", "time"),
+    # The contact law (issue 11's contract).
+    "penetration": ("sample", "time", "joint"),
+    "contact_mode": ("sample", "time", "joint"),
+    "peak_contact_force": ("sample", "joint"),
+    "impact_count": ("sample", "joint"),
+    "max_penetration": ("sample", "joint"),
+    "free_flight_time": ("sample", "joint"),
+    "first_separation_time": ("sample", "joint"),
     "status": ("sample",),
 }
 EXTRAS = {
@@ -41,6 +49,7 @@ HISTORIES = {
     "driver_torque",
     "constraint_error",
     "energy",
+    "penetration",
 }
 
 

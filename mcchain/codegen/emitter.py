@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mcchain.codegen.topology import Topology
+from mcchain.contact import FLORES, HUNT_CROSSLEY, LANKARANI_NIKRAVESH
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL
 
 # ---------------------------------------------------------------------------------------------
@@ -143,6 +144,33 @@ class Emitter:
         self._rows_cache: list[dict[int, Coef]] | None = None
         names = {i: f"p_{name}" for name, i in self.slots.items()}
         self._where: Callable[[int], str] = names.__getitem__  # before load_params: the names
+        # Contact-law joints: joint -> its constraint row; the per-lane state they read
+        # (fm: law active, ins: in contact at the step's start, vi: approach speed δ̇⁻).
+        self.contact_row = {k: topo.joint_row[k] for k in topo.contact_joints}
+        self._contact_state: Callable[[str, int], str] = lambda name, k: "0.0"
+
+    def contact_source(self, where: Callable[[str, int], str]) -> None:
+        """Where the contact state ``fm``/``ins``/``vi`` of joint k is read (default 0: the
+        link, as in the Python-facing kernels)."""
+        self._contact_state = where
+
+    def _load_contact_state(self, *names: str) -> None:
+        for k in self.contact_row:
+            self.emit(*(f"{n}{k} = {self._contact_state(n, k)}" for n in names))
+
+    def _row_law(self, r: int) -> str | None:
+        """``fm{k}`` (1 while the law replaces the link, else 0) for the row of a contact
+        joint, None for the other rows.
+
+        Every blend between the link and the law is a select on it (``x if fm == 0.0 else
+        y``), never a product by 0/1: under fastmath "contract" LLVM may fuse a product by
+        1.0 with the next addition and round once where the link alone rounds twice, and
+        the model auto must give the link's values bit for bit while the link holds.
+        """
+        for k, row in self.contact_row.items():
+            if row == r:
+                return f"fm{k}"
+        return None
 
     # -- plumbing --------------------------------------------------------------------------
     def emit(self, *lines: str) -> None:
@@ -274,7 +302,13 @@ class Emitter:
                 self.emit(f"phid{r} = {v}{i} - p_om{d}")
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
-        self.emit("phimax = 0.0", *(f"phimax = max(phimax, abs(phi{r}))" for r in range(topo.ncon)))
+        terms = []
+        for r in range(topo.ncon):
+            law = self._row_law(r)
+            terms.append(
+                f"abs(phi{r})" if law is None else f"(abs(phi{r}) if {law} == 0.0 else 0.0)"
+            )
+        self.emit("phimax = 0.0", *(f"phimax = max(phimax, {t})" for t in terms))
 
     def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
         """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
@@ -388,13 +422,26 @@ class Emitter:
         # Entries of S in the permuted numbering (i, j: positions), lower part.
         pos = {r: i for i, r in enumerate(order)}
         S: dict[tuple[int, int], str] = {}
+        # A row whose joint is under the contact law (fm = 1) is replaced by λ_r = F_n:
+        # its S row and column become the unit vector (so the factors keep their pattern)
+        # and the coupling S_jr F_n moves to the right-hand side (:meth:`acceleration`). In
+        # link mode (fm = 0) the selects give the values of the link alone.
+        self.coupling: dict[tuple[int, int], str] = {}
         for ri in range(n):
             for rj in pattern[ri]:
                 i, j = pos[ri], pos[rj]
                 if j > i:
                     continue
                 terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
-                self.emit(f"S{i}_{j} = {_sum(terms)}")
+                laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
+                if not laws:
+                    self.emit(f"S{i}_{j} = {_sum(terms)}")
+                else:
+                    self.emit(f"Sx{i}_{j} = {_sum(terms)}")
+                    self.coupling[ri, rj] = self.coupling[rj, ri] = f"Sx{i}_{j}"
+                    held = " + ".join(laws) + " == 0.0"
+                    unit = "1.0" if i == j else "0.0"
+                    self.emit(f"S{i}_{j} = Sx{i}_{j} if {held} else {unit}")
                 S[i, j] = f"S{i}_{j}"
         # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
         L: set[tuple[int, int]] = set()
@@ -469,6 +516,7 @@ class Emitter:
         ``bbeta2`` (β²) and ``tau`` (pivot tolerance) too.
         """
         topo = self.topo
+        self._load_contact_state("fm", "ins", "vi")
         self.bodies()
         self.joints()
         self.constraint_values(t=t)
@@ -486,12 +534,69 @@ class Emitter:
             else:
                 a0[c] = ("p_gx", "p_gy", 0.0)[k]
         rows = self.rows()
+        for k in self.contact_row:
+            self.contact_law(k)
         for r, row in enumerate(rows):
             terms = [_mul(val, a0[c]) for c, val in row.items()]
-            self.emit(f"rhs{r} = {_sum(terms)} - gam{r}")
+            law = self._row_law(r)
+            if law is None:
+                self.emit(f"rhs{r} = {_sum(terms)} - gam{r}")
+            else:
+                k = next(j for j, rr in self.contact_row.items() if rr == r)
+                self.emit(f"rhs{r} = ({_sum(terms)} - gam{r}) if {law} == 0.0 else fn{k}")
         self.schur_factor()
+        for k, rk in self.contact_row.items():
+            for r in range(len(rows)):
+                if r != rk and (r, rk) in self.coupling:
+                    moved = f"rhs{r} - fn{k} * {self.coupling[r, rk]}"
+                    self.emit(f"rhs{r} = rhs{r} if fm{k} == 0.0 else {moved}")
+        self.contact_stiffness_check()
         self.schur_solve("rhs", "lam")
         self.apply_wt("lam", "qdd", a0)
+
+    def contact_law(self, k: int) -> None:
+        """The normal force of contact joint ``k`` (after :meth:`constraint_values` with v):
+        ``pen{k}`` δ, ``pdot{k}`` δ̇, ``fn{k}`` F_n (mcchain.kernels.contact.normal_force),
+        and ``kc{k}`` = fm ∂F_n/∂δ (for the step-size check only).
+
+        D comes from the approach speed δ̇⁻ of the contact in progress (``vi``, located when
+        it began) or, in a step that started in free flight, from the current δ̇: the
+        contact's first instants, where the onset is located only at the step's end.
+        """
+        r = self.contact_row[k]
+        law = self.topo.joint_law[k]
+        self.emit(
+            f"pen{k} = rho{k} - p_cl{k}",
+            f"pdot{k} = phid{r}",
+            f"pp{k} = max(pen{k}, 0.0)",
+            f"pw{k} = pp{k} ** p_mx{k}",
+        )
+        chi = {
+            LANKARANI_NIKRAVESH: f"0.75 * (1.0 - p_er{k} * p_er{k})",
+            FLORES: f"1.6 * (1.0 - p_er{k}) / p_er{k}",
+            HUNT_CROSSLEY: f"1.5 * (1.0 - p_er{k})",
+        }.get(law)
+        if chi is None:
+            self.emit(f"sdm{k} = 1.0")
+        else:
+            self.emit(
+                f"rr{k} = ins{k} * vi{k} + (1.0 - ins{k}) * pdot{k}",
+                f"dmp{k} = ({chi}) / rr{k} if rr{k} > 1e-200 else 0.0",
+                f"sdm{k} = max(1.0 + dmp{k} * pdot{k}, 0.0)",
+            )
+        self.emit(
+            f"fn{k} = p_K{k} * pw{k} * sdm{k}",
+            f"kc{k} = fm{k} * p_K{k} * p_mx{k} * (pw{k} / pp{k} if pp{k} > 0.0 else 0.0) * sdm{k}",
+        )
+
+    def contact_stiffness_check(self) -> None:
+        """``wc2`` = max over contact joints of ∂F_n/∂δ · S_rr (S_rr = 1/m*, the inverse
+        effective mass along n): the square of the contact's linearised pulsation."""
+        if not self.contact_row:
+            return
+        self.emit("wc2 = 0.0")
+        for k, r in self.contact_row.items():
+            self.emit(f"wc2 = max(wc2, kc{k} * {self.coupling[r, r]})")
 
     def projection_terms(self, t: str = "t") -> None:
         """Position and velocity corrections of a projection step at (q, v, t).
@@ -499,9 +604,15 @@ class Emitter:
         ``dq{i}`` = −M⁻¹Bᵀ S⁻¹ Φ (Gauss–Newton in the M metric), ``dv{i}`` = −M⁻¹Bᵀ S⁻¹ Φ̇,
         plus ``phimax`` and ``sing`` (see :meth:`schur_factor`).
         """
+        self._load_contact_state("fm")
         self.bodies()
         self.joints()
         self.constraint_values(t=t)
+        for k, r in self.contact_row.items():  # no correction along a row under the law
+            self.emit(
+                f"phi{r} = phi{r} if fm{k} == 0.0 else 0.0",
+                f"phid{r} = phid{r} if fm{k} == 0.0 else 0.0",
+            )
         self.schur_factor()
         self.schur_solve("phi", "mu")
         self.schur_solve("phid", "nu")
@@ -512,6 +623,7 @@ class Emitter:
         """Output quantities at (q, v, λ): ``jfx{k}``, ``jfy{k}``, ``cf{k}``, ``dtq{d}``,
         ``energy``, ``phimax``. Needs ``lam{r}`` in scope."""
         topo = self.topo
+        self._load_contact_state("fm")
         self.bodies()
         self.joints()
         self.constraint_values(t=t, v=None)
@@ -519,6 +631,11 @@ class Emitter:
             r = topo.joint_row[k]
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"jfx{k} = -lam{r}", f"jfy{k} = -lam{r + 1}", f"cf{k} = math.nan")
+            elif k in self.contact_row:
+                # Under the law λ_r is F_n ≥ 0; at the switch from the link, the link's last λ
+                # (≤ 0) is not a contact force.
+                cf = f"lam{r} if fm{k} == 0.0 else max(lam{r}, 0.0)"
+                self.emit(f"cf{k} = {cf}", f"jfx{k} = -cf{k} * ex{k}", f"jfy{k} = -cf{k} * ey{k}")
             else:
                 self.emit(
                     f"jfx{k} = -lam{r} * ex{k}", f"jfy{k} = -lam{r} * ey{k}", f"cf{k} = lam{r}"
@@ -546,4 +663,14 @@ class Emitter:
                 f"uy{s} = sb{s}Y - sa{s}Y",
                 f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
                 f"energy += 0.5 * p_k{s} * st{s} * st{s}",
+            )
+        # Contact joints: δ, the mode (0 link, 1 contact, 2 free) and the elastic energy
+        # K δ^(m+1) / (m+1) stored in the contact.
+        for k in self.contact_row:
+            self.emit(
+                f"pen{k} = rho{k} - p_cl{k}",
+                f"pp{k} = max(pen{k}, 0.0)",
+                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0) * 1.0)",
+                f"eel{k} = p_K{k} * pp{k} ** (p_mx{k} + 1.0) / (p_mx{k} + 1.0)",
+                f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )

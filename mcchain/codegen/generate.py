@@ -18,11 +18,18 @@ import numpy as np
 from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.emitter import Emitter
-from mcchain.codegen.layout import LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
+from mcchain.contact import AUTO, CONTACT, CONTACT_STEP_LIMIT, CONTACT_SUMMARY
 from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY, Tableau
-from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
+from mcchain.status import (
+    CONTACT_LOST,
+    CONTACT_STEP_TOO_LARGE,
+    DIVERGED,
+    FAILURE_BITS,
+    SINGULAR,
+)
 
 
 def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: Layout) -> str:
@@ -94,6 +101,8 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     # Lane kernels: everything in W.
     em.load_params(lambda k: at("P", k))
     block("load_params")
+    cj = {k: j for j, k in enumerate(topo.contact_joints)}
+    em.contact_source(lambda name, k: at(name, cj[k]))
     em.emit(
         *(f"q{i} = {at('q', i)}" for i in range(ndof)),
         *(f"v{i} = {at('v', i)}" for i in range(ndof)),
@@ -127,6 +136,10 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('chkc')} = phimax + prb * 0.0",
         f"{at('sgc')} = sing",
     )
+    for k, j in cj.items():
+        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}")
+    if cj:
+        em.emit(f"{at('wca')} = max({at('wca')}, wc2)")
     block("store_stage")
     em.emit(
         *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(ndof)),
@@ -143,7 +156,10 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("kill_lane")
     for row, name in (("lam", "contact_check"), ("lamc", "contact_check_c")):
         lines = []
+        law_rows = {topo.joint_row[k] for k in topo.contact_joints}
         for r in topo.clearance_rows:
+            if r in law_rows:  # the contact_lost flag is the link's only
+                continue
             lines += [
                 f"if {at(row, r)} <= 0.0 and (st[l] & CONTACT_BIT) == 0:",
                 "    st[l] |= CONTACT_BIT",
@@ -165,6 +181,11 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     store += [f"out_dtq[s0 + l, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
     # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
     store += ["out_cerr[s0 + l, it] = phimax + energy * 0.0", "out_en[s0 + l, it] = energy"]
+    for k, j in cj.items():
+        store += [
+            f"out_ct[s0 + l, it, {2 * j}] = pen{k}",
+            f"out_ct[s0 + l, it, {2 * j + 1}] = mode{k}",
+        ]
     em.emit(*store)
     block("store_outputs")
     em.emit(
@@ -219,6 +240,124 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('sg')} = {at('sga')}",
     )
     block("accept")
+    b.update(_contact_blocks(topo, lay, b["kill_lane"]))
+    return b
+
+
+_CONTACT_BLOCKS = (
+    "contact_setup",
+    "contact_finish",
+    "contact_step_c",
+    "contact_start",
+    "contact_switch",
+    "contact_accept",
+    "contact_dead",
+)
+
+
+def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
+    """The scalar per-lane code of contact-law joints: start values, the switch from the
+    link (model auto), located onsets and separations, summaries; empty without them."""
+    joints = topo.contact_joints
+    if not joints:
+        return dict.fromkeys(_CONTACT_BLOCKS, "")
+    at = lay.at
+
+    def indent(lines: list[str], n: int = 4) -> list[str]:
+        return [" " * n + line for line in lines]
+
+    def switch(j: int, k: int, lamrow: str, t: str, d1: str) -> list[str]:
+        """Model auto: the law from the first λ ≤ 0 on, starting from the link's state."""
+        if topo.joint_model[k] != AUTO:
+            return []
+        r = topo.joint_row[k]
+        return [
+            f"if {at('fm', j)} == 0.0 and {at(lamrow, r)} <= 0.0:",
+            f"    {at('fm', j)} = 1.0",
+            f"    {at('vi', j)} = 0.0",
+            f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
+            f"    if {at('tse', j)} != {at('tse', j)}:",
+            f"        {at('tse', j)} = {t}",
+        ]
+
+    def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str) -> list[str]:
+        """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
+        (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peaks."""
+        r = topo.joint_row[k]
+        d0, r0 = at("pd", j), at("pr", j)
+        return [
+            f"if {at('fm', j)} == 1.0:",
+            f"    if {d0} <= 0.0 and {d1} > 0.0:",
+            f"        th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
+            f"        {at('vi', j)} = rate",
+            f"        {at('nim', j)} += 1.0",
+            f"        {at('tff', j)} += th * {h}",
+            f"    elif {d0} > 0.0 and {d1} <= 0.0:",
+            f"        th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
+            f"        {at('tff', j)} += (1.0 - th) * {h}",
+            f"        if {at('tse', j)} != {at('tse', j)}:",
+            f"            {at('tse', j)} = {t} - {h} + th * {h}",
+            f"    elif {d0} <= 0.0:",
+            f"        {at('tff', j)} += {h}",
+            f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
+            f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
+            f"{at('pkf', j)} = max({at('pkf', j)}, {at(lamrow, r)})",
+            f"{d0} = {d1}",
+            f"{r0} = {r1}",
+        ]
+
+    b: dict[str, str] = {}
+    setup = ["for l in range(nl):"]
+    for j, k in enumerate(joints):
+        law_from_start = "1.0" if topo.joint_model[k] == CONTACT else "0.0"
+        setup += indent([f"{at('fm', j)} = {law_from_start}"])
+        setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
+    b["contact_setup"] = "\n".join(setup)
+    finish = ["for l in range(nl):", "    dead = (st[l] & FAILBITS) != 0"]
+    for j in range(len(joints)):
+        for m, name in enumerate(CONTACT_SUMMARY):
+            col = len(CONTACT_SUMMARY) * j + m
+            finish.append(f"    sum_ct[s0 + l, {col}] = np.nan if dead else {at(name, j)}")
+    b["contact_finish"] = "\n".join(finish)
+
+    # Fixed step: at each step's start (stage 0 evaluated there), after the failure checks.
+    body = []
+    for j, k in enumerate(joints):
+        d1, r1 = at("pdc", j), at("prc", j)
+        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "h", d1, r1)
+    b["contact_step_c"] = "\n".join(
+        [
+            "if (st[l] & FAILBITS) == 0:",
+            f"    if h * h * {at('wca')} > CONTACT_LIMIT2:",
+            "        st[l] |= CONTACT_STEP_BIT",
+            *indent(kill.splitlines(), 8),
+            "    else:",
+            *indent(body, 8),
+            f"{at('wca')} = 0.0",
+        ]
+    )
+
+    # Adaptive: the state after the first stage; the switch at each accepted state (top of
+    # the loop); onsets and separations at each accepted step.
+    start = ["for l in range(nl):"]
+    for j in range(len(joints)):
+        start += indent(
+            [
+                f"{at('pd', j)} = {at('pdc', j)}",
+                f"{at('pr', j)} = {at('prc', j)}",
+                f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 else 0.0",
+            ]
+        )
+    b["contact_start"] = "\n".join(start)
+    top = []
+    for j, k in enumerate(joints):
+        top += switch(j, k, "lam", at("tl"), at("pd", j))
+    b["contact_switch"] = "\n".join(["if alive:", *indent(top or ["pass"])])
+    accept = []
+    for j, k in enumerate(joints):
+        accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
+    b["contact_accept"] = "\n".join(accept)
+    b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
     return b
 
 
@@ -240,6 +379,8 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "DIVERGED_BIT": str(DIVERGED),
         "SINGULAR_BIT": str(SINGULAR),
         "CONTACT_BIT": str(CONTACT_LOST),
+        "CONTACT_STEP_BIT": str(CONTACT_STEP_TOO_LARGE),
+        "CONTACT_LIMIT2": repr(CONTACT_STEP_LIMIT**2),
         "SAFETY": repr(SAFETY),
         "MIN_FACTOR": repr(MIN_FACTOR),
         "MAX_FACTOR": repr(MAX_FACTOR),
@@ -285,13 +426,38 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     lay = Layout(topo, nstage, lmax)
     if tableau is not None:
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
+    if topo.contact_joints:
+        if tableau is not None:
+            parts.append(CONTACT_ROW_MEANINGS)
+        parts.append(_contact_functions())
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     blocks = _blocks(topo, nstage, lay)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
-    parts.append(schedule_lane_loops(_fill("\n".join(parts_of), blocks, tokens, lay)))
+    text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
+    parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)
+
+
+def _contact_functions() -> str:
+    """The source of the contact kernels the lane kernels call, copied into the generated
+    module from :mod:`mcchain.kernels.contact`.
+
+    Copied, not imported: numba's cache of a generated module is keyed by the module's own
+    file, so a change of a function it imported would not reach the cached machine code;
+    with the source in the text, such a change makes a new module (its name is the text's
+    hash).
+    """
+    import inspect
+
+    from mcchain.kernels import contact
+
+    parts = []
+    for kernel in (contact._hermite, contact.contact_crossing):
+        source = inspect.getsource(kernel.py_func)
+        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
+    return "\n\n".join(parts)
 
 
 _MODULES: dict[tuple[Topology, str], ModuleType] = {}

@@ -42,6 +42,18 @@ ROW_MEANINGS = """\
 """
 """Legend of the row map written into the header of a generated module."""
 
+CONTACT_ROWS = ("fm", "ins", "vi", "pd", "pr", "pdc", "prc", "nim", "pkf", "pkd", "tff", "tse")
+"""Rows of W per contact-law joint (one row per such joint each), after the others."""
+
+CONTACT_ROW_MEANINGS = """\
+# Contact-law joints, one row each: fm law active (0 link, 1 law); ins in contact at the
+# step's start; vi approach speed of the contact in progress; pd, pr penetration and its rate
+# at the accepted state; pdc, prc the same at the current stage; nim impacts; pkf peak contact
+# force; pkd peak penetration; tff free-flight time; tse first separation time; wca largest
+# (contact pulsation)^2 since the last check.
+"""
+"""Legend of the contact rows, written only into modules that have them."""
+
 
 class Layout:
     """Rows of the flat work array W (each ``lmax`` long, default :data:`LMAX`) of one
@@ -68,6 +80,11 @@ class Layout:
         self.add("lamc", ncon1)
         for name in ("chk", "sg", "chkc", "sgc", "sga", "act", "pmax", "hs", "tl"):
             self.add(name, 1)
+        ncj = len(topo.contact_joints)
+        if ncj:
+            for name in CONTACT_ROWS:
+                self.add(name, ncj)
+            self.add("wca", 1)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -90,6 +90,7 @@ _GROUP_SETUP = """
             for i in range(NDOF):
                 W[(QROW + i) * LMAXV + l] = np.nan if dead else Q0[i, s0 + l]
                 W[(VROW + i) * LMAXV + l] = np.nan if dead else V0[i, s0 + l]
+        @@contact_setup
 """
 
 _GROUP_FINISH = """
@@ -98,11 +99,12 @@ _GROUP_FINISH = """
             t_div[s0 + l] = tdv[l]
             t_sing[s0 + l] = tsg[l]
             t_cl[s0 + l] = tcl[l]
+        @@contact_finish
 """
 
 _ERK_ARGS = """P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
-            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
+            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT,
             status, t_div, t_sing, t_cl"""
 
 ERK_KERNEL = (
@@ -161,10 +163,11 @@ def erk_group(g, {_ERK_ARGS}):
                         @@kill_lane
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
+                    @@contact_step_c
                 if n % out_every == 0:
                     group_outputs_SUFFIX(
                         W, 0, nl, s0, n // out_every, t, LAMCROW, out_q, out_v, out_jf, out_cf,
-                        out_dtq, out_cerr, out_en,
+                        out_dtq, out_cerr, out_en@CT,
                     )
             if n == nstep:
                 break
@@ -181,7 +184,7 @@ PROJECT_CALL = """
 
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
-                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
+                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT,
                  status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
 ADAPTIVE_KERNEL = (
@@ -225,6 +228,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
             nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
         # First stage at the start; later steps reuse the last stage (FSAL).
         group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
+        @@contact_start
         while True:
             # Failures, contact and outputs at each lane's current (accepted) state.
             nrun = 0
@@ -245,10 +249,11 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                 elif (st[l] & CONTACT_BIT) == 0:
                     ts = @[tl]
                     @@contact_check
+                @@contact_switch
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
                     group_outputs_SUFFIX(
                         W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,
-                        out_dtq, out_cerr, out_en,
+                        out_dtq, out_cerr, out_en@CT,
                     )
                     iout[l] += 1
                 if iout[l] >= nout or not alive:
@@ -261,6 +266,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                         out_dtq[s0 + l, it, :] = np.nan
                         out_cerr[s0 + l, it] = np.nan
                         out_en[s0 + l, it] = np.nan
+                        @@contact_dead
                     run[l] = False
                     nsteps_out[s0 + l] = nstp[l] - nrej[l]
                     nrejected_out[s0 + l] = nrej[l]
@@ -310,6 +316,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                 landed = hh == target - @[tl]
                 cut = hh < hl[l]
                 if ok:
+                    @@contact_accept
                     @@accept
                     @[tl] = target if landed else @[tl] + hh
                     # A step cut short to land on an output time keeps the controller's step.
@@ -326,7 +333,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
 OUTPUT_HELPER = '''
 @njit(**JIT)
 def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
-                         out_dtq, out_cerr, out_en):
+                         out_dtq, out_cerr, out_en@CT):
     """Outputs of lanes lo..hi-1 at time t_now into history index ``it``."""
     for l in range(lo, hi):
         @@load_params

@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from mcchain.model import JointKind, Model, constraint_rows
 from mcchain.parameters import Slot, packed_slots
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Topology:
     """The structure of a model that generated code depends on (never parameter values).
 
@@ -32,6 +32,17 @@ class Topology:
     force_body: tuple[int, ...]
     spring_a: tuple[int, ...]
     spring_b: tuple[int, ...]
+    joint_model: tuple[int, ...] = ()
+    joint_law: tuple[int, ...] = ()
+
+    def __repr__(self) -> str:
+        # The contact fields only when a joint uses the law: the text of every generated
+        # module without contact (it starts with this repr) is unchanged by their addition.
+        names = [f.name for f in fields(self)]
+        if not self.contact_joints:
+            names = [n for n in names if n not in ("joint_model", "joint_law")]
+        items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
+        return f"Topology({items})"
 
     @classmethod
     def from_model(cls, model: Model) -> Topology:
@@ -47,6 +58,8 @@ class Topology:
             force_body=t(model.force_body),
             spring_a=t(model.spring_body_a),
             spring_b=t(model.spring_body_b),
+            joint_model=t(model.joint_model),
+            joint_law=t(model.joint_contact_law),
         )
 
     @property
@@ -83,10 +96,20 @@ class Topology:
             if kind == JointKind.CLEARANCE
         )
 
+    @property
+    def contact_joints(self) -> tuple[int, ...]:
+        """The joints that may use the contact law (model contact or auto)."""
+        return tuple(k for k, m in enumerate(self.joint_model) if m != 0)
+
     def packed(self) -> list[Slot]:
         """The rows of ``P``, in order (:func:`mcchain.parameters.packed_slots`)."""
         return packed_slots(
-            self.joint_kind, self.nbody, self.ndriver, len(self.force_body), len(self.spring_a)
+            self.joint_kind,
+            self.nbody,
+            self.ndriver,
+            len(self.force_body),
+            len(self.spring_a),
+            self.joint_model,
         )
 
     def slots(self) -> dict[str, int]:

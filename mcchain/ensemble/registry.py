@@ -38,7 +38,7 @@ XY_NAMES = ("x", "y")
 ANALYSES = ("sample", "equilibrium", "modes", "simulate", "always")
 """Who produces a variable: the sampler, an analysis section of the scene, or every run."""
 
-DTYPE_RULES = ("float64", "history", "uint32", "int32", "bool")
+DTYPE_RULES = ("float64", "history", "uint32", "int32", "int8", "bool")
 
 
 @dataclass(frozen=True)
@@ -168,9 +168,28 @@ VARIABLES: dict[str, VariableSpec] = {
             "contact_force",
             ("sample", "time", "joint"),
             "N",
-            "contact force lambda of clearance joints (NaN for ideal joints)",
+            "normal contact force of clearance joints: lambda of the link, F_n >= 0 of the "
+            "contact law (NaN for ideal joints)",
             "history",
             "simulate",
+        ),
+        _v(
+            "penetration",
+            ("sample", "time", "joint"),
+            "m",
+            "penetration |d| - c of joints with a contact law (NaN for the others)",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "contact_mode",
+            ("sample", "time", "joint"),
+            "1",
+            "model in use at joints with a contact law (-1 for the others and after a failure)",
+            "int8",
+            "simulate",
+            flag_values=np.array([0, 1, 2], dtype=np.int8),
+            flag_meanings="link contact free",
         ),
         _v(
             "driver_torque",
@@ -189,6 +208,46 @@ VARIABLES: dict[str, VariableSpec] = {
             "simulate",
         ),
         _v("energy", _ST, "J", "kinetic + potential energy", "history", "simulate"),
+        _v(
+            "peak_contact_force",
+            ("sample", "joint"),
+            "N",
+            "largest contact force over the history (joints with a contact law; NaN others)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "impact_count",
+            ("sample", "joint"),
+            "1",
+            "impacts (located contact onsets) at joints with a contact law (-1 for the others)",
+            "int32",
+            "simulate",
+        ),
+        _v(
+            "max_penetration",
+            ("sample", "joint"),
+            "m",
+            "largest penetration under the contact law (0 if never in contact; NaN others)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "free_flight_time",
+            ("sample", "joint"),
+            "s",
+            "time the journal flew free inside the clearance (NaN for joints without a law)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "first_separation_time",
+            ("sample", "joint"),
+            "s",
+            "first time the journal left the bearing wall (NaN if never)",
+            "float64",
+            "simulate",
+        ),
         _v(
             "diverged_time",
             _S,
@@ -280,7 +339,7 @@ def coerce_outputs(
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         target = spec.storage_dtype(history_dtype)
-        if spec.dtype in ("uint32", "int32"):
+        if spec.dtype in ("uint32", "int32", "int8"):
             if arr.dtype.kind not in "iub":
                 raise ValueError(f"{name}: integer array expected, got {arr.dtype}")
             if arr.size and (arr.min() < np.iinfo(target).min or arr.max() > np.iinfo(target).max):

@@ -10,7 +10,14 @@ from __future__ import annotations
 
 from mcchain.errors import SceneError
 from mcchain.parameters import PARAMETERS
-from mcchain.scene.models import FIXED_STEP_METHODS, GROUND_NAME, Scene, saltelli_count_error
+from mcchain.scene.models import (
+    CONTACT_METHODS,
+    FIXED_STEP_METHODS,
+    GROUND_NAME,
+    Joint,
+    Scene,
+    saltelli_count_error,
+)
 from mcchain.scene.paths import (
     PARAM_SHAPES,
     PERTURB_KEYS,
@@ -114,11 +121,12 @@ def check_scene(scene: Scene) -> None:
             targets[canonical] = path
             domain = PARAMETERS[ref.kind, ref.key].domain
             bounds = dist.bounds()
-            if domain is not None and bounds is not None and not domain.contains(bounds[0]):
-                raise SceneError(
-                    f"{where}.{dist.kind}: can give {bounds[0]!r}, but {ref.key} must be "
-                    f"{domain.text}"
-                )
+            for bound in bounds or ():
+                if domain is not None and not domain.contains(bound):
+                    raise SceneError(
+                        f"{where}.{dist.kind}: can give {bound!r}, but {ref.key} must be "
+                        f"{domain.text}"
+                    )
         if scene.sample.design == "saltelli":
             reason = saltelli_count_error(len(scene.sample.vary), scene.sample.count)
             if reason is not None:
@@ -126,12 +134,14 @@ def check_scene(scene: Scene) -> None:
 
     sampled = set(targets) if scene.sample is not None else set()
     for i, joint in enumerate(scene.joint):
+        where = _item(scene, "joint", i)
         clearance_joint = joint.clearance > 0 or f"joint.{joint.name}.clearance" in sampled
         if joint.eccentricity is not None and not clearance_joint:
             raise SceneError(
-                f"{_item(scene, 'joint', i)}.eccentricity: only a clearance joint has one "
+                f"{where}.eccentricity: only a clearance joint has one "
                 "(its clearance is 0 and not sampled)"
             )
+        _check_contact(scene, where, joint, clearance_joint, sampled)
 
     if scene.simulate is not None:
         sim = scene.simulate
@@ -155,3 +165,52 @@ def check_scene(scene: Scene) -> None:
                     f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
                     f"method {sim.method!r}, got {sim.output_dt!r}"
                 )
+
+
+def _check_contact(
+    scene: Scene, where: str, joint: Joint, clearance_joint: bool, sampled: set[str]
+) -> None:
+    """``model`` and ``[joint.contact]`` of one joint against its clearance, the sampled
+    contact keys and the simulation method."""
+    contact = joint.contact
+    if contact is not None and not clearance_joint:
+        raise SceneError(
+            f"{where}.contact: only a clearance joint has a contact law (its clearance is 0 "
+            "and not sampled)"
+        )
+    if joint.model in ("contact", "auto"):
+        if not clearance_joint:
+            raise SceneError(
+                f"{where}.model: {joint.model!r} needs a clearance joint (clearance > 0 or sampled)"
+            )
+        if contact is None:
+            raise SceneError(
+                f"{where}.model: {joint.model!r} needs a [joint.contact] table (the law and "
+                "its stiffness)"
+            )
+    if contact is not None and contact.friction > 0:
+        raise SceneError(
+            f"{where}.contact.friction: friction in clearance joints is not available yet; "
+            "use 0 (frictionless contact)"
+        )
+    prefix = f"joint.{joint.name}.contact."
+    for path in sorted(p for p in sampled if p.startswith(prefix)):
+        key = path[len(prefix) :]
+        if contact is None or joint.resolved_model == "link":
+            raise SceneError(
+                f"sample.vary.{quote_key(path)}: joint {joint.name!r} uses the link model, "
+                "which has no contact law (give it a [joint.contact] table and model "
+                '"contact" or "auto")'
+            )
+        if key == "stiffness" and contact.stiffness is None:
+            raise SceneError(
+                f"sample.vary.{quote_key(path)}: the stiffness of joint {joint.name!r} comes "
+                "from its radius and materials; give `stiffness` in [joint.contact] to sample it"
+            )
+    sim = scene.simulate
+    if sim is not None and joint.resolved_model != "link" and sim.method not in CONTACT_METHODS:
+        raise SceneError(
+            f"simulate.method: {sim.method!r} cannot integrate the contact law of joint "
+            f"{joint.name!r} (model {joint.resolved_model!r}); use one of "
+            f'{", ".join(CONTACT_METHODS)}, or model "link"'
+        )

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from mcchain.contact import LAW_CODES, LINK, MODEL_CODES, internal_cylinder_stiffness
 from mcchain.errors import SceneError
 from mcchain.model import GROUND, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
@@ -101,6 +102,18 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         dtype=np.int64,
     )
     joint_row, driver_row = constraint_rows(kind, len(scene.driver))
+    joint_model = np.array(
+        [
+            MODEL_CODES[j.resolved_model] if kind[k] == JointKind.CLEARANCE else LINK
+            for k, j in enumerate(scene.joint)
+        ],
+        dtype=np.int64,
+    )
+    joint_law = np.array(
+        [LAW_CODES[j.contact.law] if j.contact is not None else 0 for j in scene.joint],
+        dtype=np.int64,
+    )
+    _contact_stiffness(scene, arrays, nsample)
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
 
@@ -120,6 +133,8 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         joint_body_b=topo([j.bodies[1] for j in scene.joint]),
         joint_kind=kind,
         joint_row=joint_row,
+        joint_model=joint_model,
+        joint_contact_law=joint_law,
         driver_body=topo([d.body for d in scene.driver]),
         driver_row=driver_row,
         force_body=topo([f.body for f in scene.force]),
@@ -154,7 +169,7 @@ def _base_arrays(scene: Scene) -> dict[str, np.ndarray]:
             if name not in arrays:
                 arrays[name] = np.zeros((1, *row.field_shape(len(items))), dtype=np.float64)
         for i, item in enumerate(items):
-            value = getattr(item, row.key)
+            value = row.scene_value(item)
             values = np.broadcast_to(np.asarray(row.unset if value is None else value), row.shape)
             for idx in row.elements:
                 name, at = row.model_index(i, idx)
@@ -227,3 +242,27 @@ def _derived_defaults(
         if per_sample and rest.shape[0] != nsample:
             rest = arrays["spring_rest_length"] = np.repeat(rest, nsample, axis=0)
         rest[:, s] = length if per_sample else length[0]
+
+
+def _contact_stiffness(scene: Scene, arrays: dict[str, np.ndarray], nsample: int) -> None:
+    """K of each ``[joint.contact]`` given by radius and materials instead of ``stiffness``:
+    internal cylindrical contact (:func:`mcchain.contact.internal_cylinder_stiffness`), per
+    sample when the clearance is sampled."""
+    for k, joint in enumerate(scene.joint):
+        contact = joint.contact
+        if contact is None or contact.stiffness is not None:
+            continue
+        assert contact.radius and contact.youngs_modulus and contact.poisson_ratio is not None
+        clearance = arrays["joint_clearance"][:, k]
+        stiffness = np.array(
+            [
+                internal_cylinder_stiffness(
+                    contact.radius, float(c), contact.youngs_modulus, contact.poisson_ratio
+                )
+                for c in clearance
+            ]
+        )
+        target = arrays["joint_contact_stiffness"]
+        if clearance.shape[0] != target.shape[0]:
+            target = arrays["joint_contact_stiffness"] = np.repeat(target, nsample, axis=0)
+        target[:, k] = stiffness

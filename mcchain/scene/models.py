@@ -114,6 +114,66 @@ class Body(_Section):
 
 
 # -- [[joint]] -----------------------------------------------------------------------------
+class Contact(_Section):
+    """``[joint.contact]``: the contact law of a clearance joint (see docs/contact.md).
+
+    F_n = K δ^m (1 + D δ̇) for a penetration δ = |d| − c > 0 (clipped at F_n ≥ 0), 0 in free
+    flight; D is fixed at each contact's onset from the restitution and the approach speed.
+    """
+
+    law: Literal["hertz", "lankarani-nikravesh", "flores", "hunt-crossley"] = Field(
+        default="lankarani-nikravesh",
+        description='"hertz" (elastic), "lankarani-nikravesh" (default), "flores" or '
+        '"hunt-crossley": the hysteresis damping D of the law.',
+    )
+    stiffness: Num | None = Field(
+        default=None,
+        gt=0,
+        description="K, N/m^exponent; required unless ``radius``, ``youngs_modulus`` and "
+        "``poisson_ratio`` are given (then K of internal cylindrical contact, exponent 1.5).",
+    )
+    exponent: Num = Field(default=1.5, gt=0, description="m; default 1.5 (Hertz).")
+    restitution: Num | None = Field(
+        default=None,
+        gt=0,
+        le=1,
+        description="coefficient of restitution e, (0, 1]; required by the damped laws, "
+        "ignored by hertz.",
+    )
+    friction: Num = Field(
+        default=0.0,
+        ge=0,
+        description="Coulomb coefficient μ (regularised, Ambrósio); default 0 (none).",
+    )
+    radius: Num | None = Field(
+        default=None, gt=0, description="journal radius R, m (gives K with the materials)."
+    )
+    youngs_modulus: Num | None = Field(
+        default=None, gt=0, description="Young's modulus E of journal and bearing, Pa."
+    )
+    poisson_ratio: Num | None = Field(
+        default=None, gt=-1, le=0.5, description="Poisson's ratio ν of journal and bearing."
+    )
+
+    @model_validator(mode="after")
+    def _stiffness_given_once(self) -> Contact:
+        materials = (self.radius, self.youngs_modulus, self.poisson_ratio)
+        given = [m is not None for m in materials]
+        if self.stiffness is not None and any(given):
+            raise ValueError(
+                "give `stiffness`, or `radius`, `youngs_modulus` and `poisson_ratio`, not both"
+            )
+        if self.stiffness is None and not all(given):
+            raise ValueError(
+                "needs `stiffness`, or all of `radius`, `youngs_modulus` and `poisson_ratio`"
+            )
+        if self.stiffness is None and self.exponent != 1.5:
+            raise ValueError("K from `radius` and the materials is for `exponent = 1.5`")
+        if self.law != "hertz" and self.restitution is None:
+            raise ValueError(f"law {self.law!r} needs `restitution` (e in (0, 1])")
+        return self
+
+
 class Joint(_Section):
     """``[[joint]]``: a revolute joint, ideal (``clearance = 0``) or with radial clearance."""
 
@@ -139,8 +199,26 @@ class Joint(_Section):
         description="initial direction α of d (journal centre minus bearing centre), global, "
         "rad; default: from the positions (NaN in the model). Ignored by ideal joints.",
     )
+    model: Literal["link", "contact", "auto"] | None = Field(
+        default=None,
+        description='clearance joints in ``[simulate]``: "link" (the massless link, held '
+        'while it pushes), "contact" (the contact law throughout: free flight and impacts) '
+        'or "auto" (the link until its force λ first reaches 0, then the contact law); '
+        'default "auto" with a ``[joint.contact]`` table, else "link". Statics and modes '
+        "always use the link.",
+    )
+    contact: Contact | None = Field(
+        default=None, description="``[joint.contact]``: the contact law; default none."
+    )
 
     _auto_name: bool = PrivateAttr(default=False)
+
+    @property
+    def resolved_model(self) -> str:
+        """``model`` resolved: as given, else ``"auto"`` with a contact table, else ``"link"``."""
+        if self.model is not None:
+            return self.model
+        return "auto" if self.contact is not None else "link"
 
 
 # -- [[driver]] ----------------------------------------------------------------------------
@@ -408,6 +486,8 @@ class Modes(_Section):
 
 SIMULATE_METHODS = ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau")
 FIXED_STEP_METHODS = ("rk4", "rk4-projection", "generalized-alpha")
+CONTACT_METHODS = ("rk45", "rk4", "rk4-projection")
+"""The methods that integrate the contact law of a clearance joint (model contact or auto)."""
 
 
 class Simulate(_Section):

@@ -28,11 +28,20 @@ SCENE_MODELS: dict[str, type[BaseModel]] = {
 }
 """The scene model of each kind of :data:`mcchain.parameters.TABLE`."""
 
+
+def _keys_of(kind: str, model: type[BaseModel]) -> dict[str, tuple[int, ...]]:
+    """The sampled keys of one kind, in the order its scene model declares them; a sub-table
+    (``[joint.contact]``) contributes dotted keys (``contact.stiffness``) at its place."""
+    keys: dict[str, tuple[int, ...]] = {}
+    for key in model.model_fields:
+        if (kind, key) in PARAMETERS:
+            keys[key] = PARAMETERS[kind, key].shape
+        keys |= {row.key: row.shape for row in rows_of(kind) if row.key.startswith(key + ".")}
+    return keys
+
+
 PARAM_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {
-    kind: {
-        key: PARAMETERS[kind, key].shape for key in model.model_fields if (kind, key) in PARAMETERS
-    }
-    for kind, model in SCENE_MODELS.items()
+    kind: _keys_of(kind, model) for kind, model in SCENE_MODELS.items()
 }
 """For each kind, the keys a sampled path may name and their array shapes (the rows of
 :data:`mcchain.parameters.TABLE`, listed in the order the scene model declares its keys)."""
@@ -96,9 +105,9 @@ def parse_path(scene: Scene, path: str, shapes: dict[str, dict[str, tuple[int, .
         kind, name, index, key = "scene", "", 0, parts[1]
     elif parts[0] in shapes:
         kind = parts[0]
-        if len(parts) != 3 or not parts[1] or not parts[2]:
+        if len(parts) < 3 or not all(parts[1:]):
             raise ValueError(f"expected `{kind}.<name>.<key>`")
-        name, key = parts[1], parts[2]
+        name, key = parts[1], ".".join(parts[2:])
         names = _names_of(scene, kind)
         if name not in names:
             what = "driver (named by its body)" if kind == "driver" else kind

@@ -43,10 +43,11 @@ from typing import Any
 
 import numpy as np
 
+from mcchain.contact import CONTACT_SUMMARY
 from mcchain.errors import SceneError
 from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.scene.loading import load_section
-from mcchain.scene.models import Simulate
+from mcchain.scene.models import CONTACT_METHODS, Simulate
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 SINGULAR_PIVOT = 1e-8
@@ -259,6 +260,17 @@ class _Run:
     rejected_steps: np.ndarray
     evaluations: np.ndarray
     lanes: int = 1
+    # Contact-law joints (lane kernels' extra outputs): per output time δ and the mode of
+    # each (sample, time, 2 ncj); per sample the summaries (sample, 5 ncj), see
+    # mcchain.codegen.generate.CONTACT_SUMMARY. Empty without such joints.
+    contact_history: np.ndarray | None = None
+    contact_summary: np.ndarray | None = None
+
+    def contact_args(self) -> tuple[np.ndarray, ...]:
+        """The contact arrays the lane kernels take after the histories (none without)."""
+        if self.contact_history is None or self.contact_summary is None:
+            return ()
+        return (self.contact_history, self.contact_summary)
 
 
 def _lane_setup(run: _Run, variant: str) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
@@ -291,7 +303,7 @@ def _run_erk(run: _Run, project: bool) -> None:
         P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
         run.status, run.t_div, run.t_sing, run.t_cl,
     )  # fmt: skip
 
@@ -315,8 +327,8 @@ def _run_rk45(run: _Run) -> None:
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.rejected_steps,
-        run.evaluations,
+        *run.contact_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
+        run.rejected_steps, run.evaluations,
     )  # fmt: skip
 
 
@@ -444,6 +456,36 @@ def _run_generalized_alpha(run: _Run) -> None:
     )  # fmt: skip
 
 
+def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
+    """The contact-law outputs by ensemble variable, every joint (the others: NaN, or -1
+    for the integer ones), from the lane kernels' contact arrays."""
+    model, n, ntime = run.model, run.model.nsample, len(run.time)
+    assert run.contact_history is not None and run.contact_summary is not None
+    joints = np.flatnonzero(model.joint_model)
+    pen = np.full((n, ntime, model.njoint), np.nan, dtype=history_dtype)
+    mode = np.full((n, ntime, model.njoint), -1, dtype=np.int8)
+    hist = run.contact_history.reshape(n, ntime, len(joints), 2)
+    pen[:, :, joints] = hist[..., 0]
+    mode[:, :, joints] = np.where(np.isnan(hist[..., 0]), -1, hist[..., 1]).astype(np.int8)
+    summary = run.contact_summary.reshape(n, len(joints), len(CONTACT_SUMMARY))
+    columns = dict(zip(CONTACT_SUMMARY, np.moveaxis(summary, 2, 0), strict=True))
+    out: dict[str, np.ndarray] = {"penetration": pen, "contact_mode": mode}
+    for name, column in (
+        ("peak_contact_force", "pkf"),
+        ("max_penetration", "pkd"),
+        ("free_flight_time", "tff"),
+        ("first_separation_time", "tse"),
+    ):
+        values = np.full((n, model.njoint), np.nan)
+        values[:, joints] = columns[column]
+        out[name] = values
+    impacts = np.full((n, model.njoint), -1, dtype=np.int32)
+    counted = columns["nim"]
+    impacts[:, joints] = np.where(np.isnan(counted), -1, counted).astype(np.int32)
+    out["impact_count"] = impacts
+    return out
+
+
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
@@ -521,10 +563,17 @@ def simulate(
     lanes = LMAX if lanes is None else lanes
     if not 1 <= int(lanes) <= LMAX:
         raise ValueError(f"lanes: must be in 1..{LMAX} (the lane kernels' work rows), got {lanes}")
+    if model.has_contact and settings.method not in CONTACT_METHODS:
+        names = [model.joint_names[k] for k in np.flatnonzero(model.joint_model)]
+        raise SceneError(
+            f"simulate.method: {settings.method!r} cannot integrate the contact law of joint "
+            f"{names[0]!r}; use one of {', '.join(CONTACT_METHODS)}"
+        )
     time, every = output_times(settings)
     q, v, status = start_state(model, settings, q_start, v_start, status)
     out = _allocate(model, len(time), history_dtype)
     n = model.nsample
+    ncj = int(np.count_nonzero(model.joint_model))
     run = _Run(
         model=model,
         settings=settings,
@@ -542,9 +591,14 @@ def simulate(
         evaluations=np.zeros(n, np.int64),
         lanes=int(lanes),
     )
+    if ncj:
+        run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
+        run.contact_summary = np.full((n, len(CONTACT_SUMMARY) * ncj), np.nan)
     if n:
         METHODS[settings.method].run(run)
     result = {"time": time, **out}
+    if ncj:
+        result.update(_contact_outputs(run, history_dtype))
     result["status"] = run.status
     result["diverged_time"] = run.t_div
     result["singular_time"] = run.t_sing
