@@ -175,14 +175,25 @@ def one_dof_roots(p: float, zeta: float) -> tuple[float, float]:
 def test_damped_modes__decoupled_overdamped_modes_pair_their_own_roots():
     """Two overdamped modes whose real roots interleave (−0.5, −2 and −0.27, −14.7 for
     p = 1, 2): pairing by eigenvector gives each its own roots, so ζ is exact; mode order
-    is ascending |s| = p; an untouched third mode keeps ±5i exactly."""
-    omega = np.array([[1.0, 2.0, 5.0]])
-    D = np.diag([2.0 * 1.25 * 1.0, 2.0 * 3.75 * 2.0, 0.0])[None]
+    is ascending |s| = p. In one batch with an all-underdamped sample and a mixed one (the
+    batched path, grouped by number of real roots), and with an untouched third mode, which
+    keeps ±5i exactly (the deflated path)."""
     assert one_dof_roots(1.0, 1.25)[0] < one_dof_roots(2.0, 3.75)[1]  # interleaved
-    result = damped_modes(omega, D)
-    np.testing.assert_array_equal(result.damped_omega, [[0.0, 0.0, 5.0]])
-    np.testing.assert_allclose(result.damping_ratio[0, :2], [1.25, 3.75], rtol=1e-13)
-    assert result.damping_ratio[0, 2] == 0.0
+    omega = np.array([[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]])
+    zeta = np.array([[1.25, 3.75], [0.3, 3.75], [0.3, 0.2]])
+    D = 2.0 * zeta[:, :, None] * omega[:, :, None] * np.eye(2)
+    batch = damped_modes(omega, D)
+    np.testing.assert_allclose(batch.damping_ratio, zeta, rtol=1e-13)
+    expected = np.where(zeta < 1.0, omega * np.sqrt(np.abs(1.0 - zeta**2)), 0.0)
+    np.testing.assert_allclose(batch.damped_omega, expected, rtol=1e-13)
+    assert np.all(batch.damped_omega[zeta > 1.0] == 0.0)
+    for s in range(3):
+        alone = damped_modes(omega[s : s + 1], D[s : s + 1])
+        np.testing.assert_array_equal(alone.damping_ratio[0], batch.damping_ratio[s])
+    third = damped_modes(np.array([[1.0, 2.0, 5.0]]), np.pad(D[:1], ((0, 0), (0, 1), (0, 1))))
+    np.testing.assert_array_equal(third.damped_omega, [[0.0, 0.0, 5.0]])
+    np.testing.assert_allclose(third.damping_ratio[0, :2], [1.25, 3.75], rtol=1e-13)
+    assert third.damping_ratio[0, 2] == 0.0
 
 
 def test_damped_modes__order_follows_magnitude_when_damping_reorders_modes():

@@ -68,19 +68,22 @@ def damped_modes(omega: np.ndarray, damping: np.ndarray | None) -> DampedModes:
         return DampedModes(damped_omega, ratio)
     p2 = np.sign(omega[coupled]) * omega[coupled] ** 2
     D = damping[coupled]
-    roots = np.linalg.eigvals(companion(p2, D))
-    # the common case, vectorised: every mode touched by a damper and underdamped
+    A = companion(p2, D)
+    roots = np.linalg.eigvals(A)
     scale = np.abs(D).max(axis=(1, 2))
     untouched = (np.abs(D).max(axis=2) <= UNTOUCHED_RTOL * scale[:, None]).any(axis=1)
+    # the common case needs no eigenvectors: every mode touched by a damper and underdamped
     simple = ~untouched & (roots.imag != 0.0).all(axis=1)
     if simple.any():
-        upper = np.take_along_axis(roots[simple], np.argsort(-roots[simple].imag, axis=1), 1)
-        upper = upper[:, :nmode]
-        upper = np.take_along_axis(upper, np.argsort(np.abs(upper), axis=1, kind="stable"), 1)
-        damped_omega[coupled[simple]] = upper.imag
-        ratio[coupled[simple]] = -upper.real / np.abs(upper)
-    for k in np.flatnonzero(~simple):
-        damped_omega[coupled[k]], ratio[coupled[k]] = _one_sample(omega[coupled[k]], D[k])
+        upper = _upper_roots(roots[simple], nmode)
+        _store(coupled[simple], *_modes(upper, np.conj(upper)), damped_omega, ratio)
+    # real roots, every mode touched: batched eig, roots paired by eigenvector
+    full = ~simple & ~untouched
+    if full.any():
+        full_roots, vectors = np.linalg.eig(A[full])
+        _store(coupled[full], *_modes(*_pairs(full_roots, vectors[:, :nmode])), damped_omega, ratio)
+    for k in np.flatnonzero(untouched):
+        damped_omega[coupled[k]], ratio[coupled[k]] = _deflated(omega[coupled[k]], D[k])
     return DampedModes(damped_omega, ratio)
 
 
@@ -94,41 +97,88 @@ def companion(p2: np.ndarray, damping: np.ndarray) -> np.ndarray:
     return A
 
 
-def _one_sample(omega: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(damped_omega, damping_ratio) of one sample with real roots or untouched modes."""
-    nmode = omega.shape[0]
-    key = np.empty(nmode)
-    damped_omega = np.empty(nmode)
-    ratio = np.empty(nmode)
+def _store(
+    rows: np.ndarray,
+    key: np.ndarray,
+    damped: np.ndarray,
+    zeta: np.ndarray,
+    damped_omega_out: np.ndarray,
+    ratio_out: np.ndarray,
+) -> None:
+    """Write modes (len(rows), f) into ``rows`` of the outputs in ascending ``key``."""
+    order = np.argsort(key, axis=1, kind="stable")
+    damped_omega_out[rows] = np.take_along_axis(damped, order, 1)
+    ratio_out[rows] = np.take_along_axis(zeta, order, 1)
+
+
+def _upper_roots(roots: np.ndarray, count: int) -> np.ndarray:
+    """The ``count`` roots of largest imaginary part of each row (..., 2f)."""
+    return np.take_along_axis(roots, np.argsort(-roots.imag, axis=-1, kind="stable"), -1)[
+        ..., :count
+    ]
+
+
+def _modes(s1: np.ndarray, s2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(signed |s|, damped_omega, damping_ratio) of modes with roots s1, s2 (any shape)."""
+    product = (s1 * s2).real
+    total = (s1 + s2).real
+    root = np.sqrt(np.abs(product))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zeta = np.where(product > 0.0, -total / (2.0 * root), np.nan)
+    zero = (product == 0.0) & (total <= 0.0)  # a zero mode: damped (0, −d) or not (0, 0)
+    zeta = np.where(zero, np.where(total < 0.0, np.inf, 0.0), zeta)
+    return np.sign(product) * root, np.abs(s1.imag), zeta
+
+
+def _pairs(roots: np.ndarray, shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The f roots pairs (s1, s2), each (nsample, f), of a batch of companion solutions.
+
+    Args:
+        roots: (nsample, 2f); shapes: (nsample, f, 2f) their eigenvectors ξ by column.
+    """
+    nsample, f = shapes.shape[:2]
+    snap = np.abs(roots) <= ZERO_ROOT_RTOL * np.abs(roots).max(axis=1, keepdims=True)
+    roots = np.where(snap, 0.0, roots)
+    real = roots.imag == 0.0
+    nreal = real.sum(axis=1)
+    s1 = np.empty((nsample, f), dtype=complex)
+    s2 = np.empty((nsample, f), dtype=complex)
+    for count in np.unique(nreal):
+        rows = np.flatnonzero(nreal == count)
+        ncomplex = f - count // 2
+        upper = _upper_roots(roots[rows], ncomplex)
+        s1[rows, :ncomplex] = upper
+        s2[rows, :ncomplex] = np.conj(upper)
+        # real roots by |s|, each (smallest first) paired with the most parallel remaining ξ
+        order = np.argsort(np.where(real[rows], np.abs(roots[rows]), np.inf), axis=1)
+        order = order[:, :count]
+        values = np.take_along_axis(roots[rows], order, 1)
+        xi = np.take_along_axis(shapes[rows], order[:, None, :], 2)
+        xi = xi / np.linalg.norm(xi, axis=1, keepdims=True)
+        cosine = np.abs(np.einsum("sik,sil->skl", xi.conj(), xi))
+        free = np.ones((rows.size, count), dtype=bool)
+        pick = np.arange(rows.size)
+        for slot in range(ncomplex, f):
+            first = np.argmax(free, axis=1)
+            free[pick, first] = False
+            second = np.argmax(np.where(free, cosine[pick, first], -1.0), axis=1)
+            free[pick, second] = False
+            s1[rows, slot] = values[pick, first]
+            s2[rows, slot] = values[pick, second]
+    return s1, s2
+
+
+def _deflated(omega: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(damped_omega, damping_ratio) of one sample with modes no damper touches: those keep
+    their undamped roots ±ip exactly, the others solve their own quadratic problem."""
     row = np.abs(D).max(axis=1)
-    untouched = row <= UNTOUCHED_RTOL * row.max()
-    # modes no damper touches: their undamped roots ±ip, exactly
-    key[untouched] = omega[untouched]
-    damped_omega[untouched] = np.maximum(omega[untouched], 0.0)
-    ratio[untouched] = np.where(omega[untouched] >= 0.0, 0.0, np.nan)
-    kept = np.flatnonzero(~untouched)
+    kept = np.flatnonzero(row > UNTOUCHED_RTOL * row.max())
+    key = omega.copy()
+    damped_omega = np.maximum(omega, 0.0)
+    ratio = np.where(omega >= 0.0, 0.0, np.nan)
     p2 = np.sign(omega[kept]) * omega[kept] ** 2
     roots, vectors = np.linalg.eig(companion(p2, D[np.ix_(kept, kept)]))
-    roots = np.where(np.abs(roots) <= ZERO_ROOT_RTOL * np.abs(roots).max(), 0.0, roots)
-    pairs = [(root, np.conj(root)) for root in roots if root.imag > 0.0]
-    real = [int(i) for i in np.argsort(np.abs(roots)) if roots[i].imag == 0.0]
-    shapes = vectors[: kept.size]  # ξ of each root, by column
-    while real:
-        first = real.pop(0)
-        a = shapes[:, first] / np.linalg.norm(shapes[:, first])
-        cosines = [abs(np.vdot(a, shapes[:, j])) / np.linalg.norm(shapes[:, j]) for j in real]
-        second = real.pop(int(np.argmax(cosines)))
-        pairs.append((roots[first], roots[second]))
-    for slot, (s1, s2) in zip(kept, pairs, strict=True):
-        product = float((s1 * s2).real)
-        total = float((s1 + s2).real)
-        key[slot] = np.sign(product) * np.sqrt(abs(product))
-        damped_omega[slot] = abs(s1.imag)
-        if product > 0.0:
-            ratio[slot] = -total / (2.0 * np.sqrt(product))
-        elif product == 0.0 and total <= 0.0:
-            ratio[slot] = np.inf if total < 0.0 else 0.0
-        else:
-            ratio[slot] = np.nan
+    modes = _modes(*_pairs(roots[None], vectors[None, : kept.size]))
+    key[kept], damped_omega[kept], ratio[kept] = (m[0] for m in modes)
     order = np.argsort(key, kind="stable")
     return damped_omega[order], ratio[order]
