@@ -37,6 +37,8 @@ DESIGN_VARIABLES = {
 EXTRAS = {
     "iterations": ("sample",),
     "mode_shape": ("sample", "mode", "body", "dof"),
+    "damped_omega": ("sample", "mode"),
+    "damping_ratio": ("sample", "mode"),
     "diverged_time": ("sample",),
     "singular_time": ("sample",),
     "contact_lost_time": ("sample",),
@@ -78,7 +80,14 @@ def test_registry__dtype_rules() -> None:
         if name in HISTORIES:
             assert spec.storage_dtype("float32") == np.float32
             assert spec.storage_dtype("float64") == np.float64
-        elif name in ("parameters", "q_eq", "joint_force_eq", "omega", "mode_shape"):
+        elif name in (
+            "parameters",
+            "q_eq",
+            "joint_force_eq",
+            "omega",
+            "mode_shape",
+            "damped_omega",
+        ):
             assert spec.storage_dtype("float32") == np.float64
     assert VARIABLES["status"].storage_dtype() == np.uint32
 

@@ -551,7 +551,7 @@ def test_load_scene__section_defaults() -> None:
     assert (scene.sample.count, scene.sample.seed, scene.sample.design) == (1000, 0, "random")
     assert scene.sample.vary == {}
     assert (scene.equilibrium.tolerance, scene.equilibrium.max_iterations) == (1e-10, 50)
-    assert scene.modes.shapes is False
+    assert scene.modes.shapes is True  # mode_shape is stored for every [modes] run
     sim = scene.simulate
     assert (sim.method, sim.start, sim.output_dt, sim.output_step) == ("rk4", "scene", None, 0.01)
     assert (sim.rtol, sim.atol, sim.rho_inf) == (1e-8, 1e-10, 0.8)

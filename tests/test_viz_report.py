@@ -288,3 +288,19 @@ def test_sobol__saltelli_design_needs_its_layout() -> None:
         y = pulsations(*bad.T)[:, 0]
         reason = report.sobol_indices(bad, {"ω0": y}, names, design="saltelli")
         assert isinstance(reason, str) and 'design "saltelli" without its layout' in reason
+
+
+def test_omega_histogram__labels_hz_and_overlays_damped_pulsations() -> None:
+    """Each panel: a title with the mean in rad/s and in Hz (÷ 2π), a top axis in Hz, and,
+    with dampers (damped_omega ≠ omega), a second histogram of the damped pulsations."""
+    omega = np.array([[2 * np.pi, 20.0], [2 * np.pi, 22.0]])
+    ds = xr.Dataset(
+        {"omega": (("sample", "mode"), omega), "damped_omega": (("sample", "mode"), 0.9 * omega)},
+        coords={"sample": [0, 1], "mode": [0, 1]},
+    )
+    first = report.omega_histogram_figure(ds).axes[0]
+    assert first.get_title() == "ω0: mean 6.283 rad/s (1 Hz), sd 0 (0 Hz)"
+    assert [c.get_xlabel() for c in first.child_axes] == ["Hz"]
+    assert [t.get_text() for t in first.get_legend().get_texts()] == ["undamped ω", "damped |Im s|"]
+    undamped = ds.assign(damped_omega=ds["omega"])
+    assert report.omega_histogram_figure(undamped).axes[0].get_legend() is None

@@ -91,6 +91,8 @@ def _v(
 _MIXED_Q = "m (x, y), rad (theta)"
 _MIXED_V = "m s-1 (x, y), rad s-1 (theta)"
 _S = ("sample",)
+_DAMPED_OMEGA = "damped pulsations |Im s| of the modes with the dampers (0: real roots)"
+_DAMPING_RATIO = "damping ratios -(s1 + s2)/(2 sqrt(s1 s2)) = -Re s/|s| (>= 1: overdamped)"
 _ST = ("sample", "time")
 
 VARIABLES: dict[str, VariableSpec] = {
@@ -146,11 +148,13 @@ VARIABLES: dict[str, VariableSpec] = {
             "float64",
             "modes",
         ),
+        _v("damped_omega", ("sample", "mode"), "rad s-1", _DAMPED_OMEGA, "float64", "modes"),
+        _v("damping_ratio", ("sample", "mode"), "1", _DAMPING_RATIO, "float64", "modes"),
         _v(
             "mode_shape",
             ("sample", "mode", "body", "dof"),
-            "1",
-            "mode shapes z = N v",
+            "kg-1/2 (x, y), kg-1/2 m-1 (theta)",
+            "undamped mode shapes z = N v, mass-normalised: z^T M z = 1",
             "float64",
             "modes",
         ),

@@ -166,6 +166,28 @@ def _damper_column(K_out, damping, isotropic, ex, ey, col, omega, px, py, a, b, 
 
 
 @njit(**JIT)
+def damping_matrix_add(km, s, q, scale, C_out):
+    """C += scale · (−∂F/∂q̇), the dampers' velocity derivative at q (exact; symmetric, ≥ 0).
+
+    F is linear in q̇: a damper adds c gᵀg with g = e·∂u/∂q (along the spring, rest length
+    > 0) or c (gₓᵀgₓ + g_yᵀg_y) (isotropic, rest length 0).
+    """
+    for k in range(km.spring_body_a.shape[0]):
+        damping = scale * km.spring_damping[s % km.spring_damping.shape[0], k]
+        if damping == 0.0:
+            continue
+        a = km.spring_body_a[k]
+        b = km.spring_body_b[k]
+        pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
+        if km.spring_rest_length[s % km.spring_rest_length.shape[0], k] == 0.0:
+            add_pair_outer(C_out, damping, a, b, 1.0, 0.0, pax, pay, pbx, pby)
+            add_pair_outer(C_out, damping, a, b, 0.0, 1.0, pax, pay, pbx, pby)
+        else:
+            length = math.hypot(ux, uy)
+            add_pair_outer(C_out, damping, a, b, ux / length, uy / length, pax, pay, pbx, pby)
+
+
+@njit(**JIT)
 def applied_stiffness_add(km, s, q, K_out):
     """K += −∂F/∂q at q̇ = 0 (exact; symmetric since every load here is conservative).
 

@@ -1,4 +1,5 @@
-"""Batch kernels of the static analyses: equilibrium (Newton) and eigenpulsations.
+"""Batch kernels of the static analyses: equilibrium (Newton), eigenpulsations and the
+modal damping of the damped modes.
 
 Each ``*_one`` function treats one sample and returns status bits; each ``*_batch``
 function loops ``prange`` over samples and calls it. No reductions across samples, so a
@@ -25,6 +26,7 @@ from mcchain.kernels.config import JIT, PJIT
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
+    damping_matrix_add,
     mass_diagonal,
     potential_energy,
 )
@@ -502,6 +504,41 @@ def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out
             omega_out[s, :] = np.nan
             if want_shapes:
                 shapes_out[s] = np.nan
+
+
+@njit(**PJIT)
+def modal_damping_batch(km, q_eq, shapes, damping_out):
+    """Modal damping D = Z C Zᵀ of every sample: the dampers' C = −∂F/∂q̇ at the equilibrium
+    seen by its mass-normalised mode shapes Z (Z M Zᵀ = I, Z K Zᵀ = diag p²), so the damped
+    modes solve the f × f quadratic problem (s² I + s D + diag p²) ξ = 0.
+
+    Args:
+        q_eq: (nsample, 3 nbody) equilibria.
+        shapes: (nsample, nmode, 3 nbody) mode shapes from :func:`modes_batch`.
+        damping_out: (nsample, nmode, nmode) D, 1/s; NaN where the shapes are NaN.
+    """
+    n = q_eq.shape[1]
+    f = shapes.shape[1]
+    for sample in prange(q_eq.shape[0]):
+        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+        Z = shapes[s]
+        if np.isnan(Z).any() or np.isnan(q_eq[s]).any():
+            damping_out[s] = np.nan
+            continue
+        C = np.zeros((n, n))
+        damping_matrix_add(km, s, q_eq[s], 1.0, C)
+        CZ = np.zeros((n, f))  # C Zᵀ
+        for k in range(n):
+            for j in range(f):
+                for col in range(n):
+                    CZ[k, j] += C[k, col] * Z[j, col]
+        for i in range(f):
+            for j in range(i + 1):
+                acc = 0.0
+                for k in range(n):
+                    acc += Z[i, k] * CZ[k, j] + Z[j, k] * CZ[k, i]
+                damping_out[s, i, j] = 0.5 * acc  # symmetric to the last bit
+                damping_out[s, j, i] = 0.5 * acc
 
 
 @njit(**PJIT)

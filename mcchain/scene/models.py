@@ -481,7 +481,10 @@ class Modes(_Section):
     """``[modes]``: eigenpulsations about the equilibrium. The equilibrium is computed for
     them even without ``[equilibrium]`` (which then only sets the Newton settings)."""
 
-    shapes: bool = Field(default=False, description="store the mode shapes; default false.")
+    shapes: bool = Field(
+        default=True,
+        description="store the mode shapes (mode_shape); default true, false to skip them.",
+    )
 
 
 SIMULATE_METHODS = ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau")

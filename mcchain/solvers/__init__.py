@@ -19,8 +19,8 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
 
     1. Assembly of the initial state (always).
     2. ``[equilibrium]`` or ``[modes]``: Newton equilibrium, then the eigen step, which
-       also decides ``stable``; ``omega`` (and ``mode_shape``) are stored only with
-       ``[modes]``.
+       also decides ``stable``; ``omega``, ``damped_omega``, ``damping_ratio`` and
+       ``mode_shape`` (unless ``shapes = false``) are stored only with ``[modes]``.
     3. ``[simulate]``: time integration from the assembled state or the equilibrium.
 
     Returns:
@@ -36,7 +36,7 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
         settings = scene.equilibrium
         equilibrium = solve_equilibrium(model, assembled.q, assembled.status, settings)
         want_shapes = scene.modes is not None and scene.modes.shapes
-        modes = solve_modes(model, equilibrium, shapes=want_shapes)
+        modes = solve_modes(model, equilibrium, shapes=want_shapes, damped=scene.modes is not None)
         status |= modes.status
         out["q_eq"] = equilibrium.q.reshape(nsample, model.nbody, 3)
         out["joint_force_eq"] = equilibrium.joint_force
@@ -44,6 +44,9 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
         out["iterations"] = equilibrium.iterations
         if scene.modes is not None:
             out["omega"] = modes.omega
+            assert modes.damped_omega is not None and modes.damping_ratio is not None
+            out["damped_omega"] = modes.damped_omega
+            out["damping_ratio"] = modes.damping_ratio
             if modes.shapes is not None:
                 out["mode_shape"] = modes.shapes.reshape(nsample, model.nmode, model.nbody, 3)
     if scene.simulate is not None:

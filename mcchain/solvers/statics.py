@@ -6,7 +6,8 @@ Contract:
    that already satisfy them are kept bit for bit).
 2. :func:`solve_equilibrium` runs Newton on (q, λ) from the assembled positions.
 3. :func:`solve_modes` reduces (K, M) to the null space of B and returns the signed
-   eigenpulsations p (rad/s, ascending) and optionally the mode shapes.
+   eigenpulsations p (rad/s, ascending), optionally the mode shapes, and the damped modes
+   (the quadratic problem with the dampers' C, :mod:`mcchain.solvers.damped`).
 4. Failed samples are NaN with their status bits set; nothing raises for a bad sample.
    :func:`check_scene` raises :class:`~mcchain.errors.SceneError` for a scene whose
    *nominal* instance cannot run at all (redundant constraints, no assembly).
@@ -14,7 +15,7 @@ Contract:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,6 +24,7 @@ from mcchain.kernels import assembly
 from mcchain.kernels import statics as kernels
 from mcchain.model import JointKind, Model
 from mcchain.scene.models import Equilibrium
+from mcchain.solvers.damped import damped_modes
 from mcchain.status import STATUS_DTYPE, Status
 
 
@@ -69,12 +71,16 @@ class ModesResult:
         shapes: (nsample, nmode, 3 nbody) mass-normalised mode shapes, or None.
         stable: (nsample,) bool, no p² < 0 (False where failed).
         status: (nsample,) uint32 status bits.
+        damped_omega: (nsample, nmode) |Im s| of the damped modes, rad/s, or None.
+        damping_ratio: (nsample, nmode) ζ of the damped modes (see :mod:`.damped`), or None.
     """
 
     omega: np.ndarray
     shapes: np.ndarray | None
     stable: np.ndarray
     status: np.ndarray
+    damped_omega: np.ndarray | None = None
+    damping_ratio: np.ndarray | None = None
 
 
 def assemble(model: Model, status: np.ndarray | None = None) -> Assembled:
@@ -115,18 +121,31 @@ def solve_equilibrium(
     return EquilibriumResult(q, lam, joint_force, contact_force, iterations, history, status)
 
 
-def solve_modes(model: Model, equilibrium: EquilibriumResult, shapes: bool = False) -> ModesResult:
-    """Eigenpulsations about each sample's equilibrium (the paper's linear vibrations)."""
+def solve_modes(
+    model: Model, equilibrium: EquilibriumResult, shapes: bool = False, damped: bool = False
+) -> ModesResult:
+    """Eigenpulsations about each sample's equilibrium (the paper's linear vibrations); the
+    mode shapes if ``shapes``; the damped modes if ``damped`` (equal to the undamped ones
+    for a scene without dampers, springs with ``damping``)."""
     nsample = model.nsample
     omega = np.full((nsample, model.nmode), np.nan)
-    shape_rows = nsample if shapes else 1
+    has_dampers = damped and bool(np.any(model.spring_damping))
+    want_shapes = shapes or has_dampers  # the damped problem is posed in the modal basis
+    shape_rows = nsample if want_shapes else 1
     shape_array = np.full((shape_rows, model.nmode, model.ndof), np.nan)
     status = equilibrium.status.copy()
-    kernels.modes_batch(
-        model.kernel_arrays(), equilibrium.q, equilibrium.lam, shapes, omega, shape_array, status
-    )
+    km = model.kernel_arrays()
+    kernels.modes_batch(km, equilibrium.q, equilibrium.lam, want_shapes, omega, shape_array, status)
     stable = (status & (Status.UNSTABLE_EQUILIBRIUM | _FAILED)) == 0
-    return ModesResult(omega, shape_array if shapes else None, stable, status)
+    modal_damping = None
+    if has_dampers:
+        modal_damping = np.full((nsample, model.nmode, model.nmode), np.nan)
+        kernels.modal_damping_batch(km, equilibrium.q, shape_array, modal_damping)
+    result = ModesResult(omega, shape_array if shapes else None, stable, status)
+    if not damped:
+        return result
+    roots = damped_modes(omega, modal_damping)
+    return replace(result, damped_omega=roots.damped_omega, damping_ratio=roots.damping_ratio)
 
 
 _FAILED = Status.ASSEMBLY_FAILED | Status.EQUILIBRIUM_NOT_CONVERGED | Status.SINGULAR

@@ -5,11 +5,12 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
 ``RUN/report``):
 
 ==============================  ==========================================================
-``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``)
+``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``), in rad/s
+                                and Hz, with ``damped_omega`` overlaid if it differs
 ``scatter_<result>.png``        each result against each sampled parameter, with a
                                 least-squares trend line and Pearson's r (components
                                 constant over the samples are named, not drawn); results are
-                                ``omega`` (modes), ``q_eq`` (body, dof),
+                                ``omega`` (modes; a Hz axis beside rad/s), ``q_eq`` (body, dof),
                                 ``joint_force_eq`` (magnitude per joint) and
                                 ``peak_contact_force`` (max |λ| over time per clearance
                                 joint)
@@ -166,10 +167,21 @@ def _save(fig: Figure, path: Path) -> Path:
 
 
 def omega_histogram(ds: xr.Dataset, path: Path) -> Path | str:
-    """Histogram of each eigenpulsation."""
+    """Histogram of each eigenpulsation (rad/s below, Hz above), with the damped pulsations
+    overlaid when the run has dampers."""
     if "omega" not in ds.data_vars or not ds.sizes.get("mode", 0):
         return "the run has no eigenpulsations ([modes] absent)"
+    return _save(omega_histogram_figure(ds), path)
+
+
+def omega_histogram_figure(ds: xr.Dataset) -> Figure:
+    """The figure of :func:`omega_histogram`."""
     omega = np.asarray(ds["omega"].transpose("sample", "mode").values, float)
+    damped = None
+    if "damped_omega" in ds.data_vars:
+        damped = np.asarray(ds["damped_omega"].transpose("sample", "mode").values, float)
+        if np.array_equal(damped, np.maximum(omega, 0.0), equal_nan=True):
+            damped = None  # no dampers: nothing to add
     nrow, ncol = _grid(omega.shape[1])
     fig, axes = _figure(nrow, ncol)
     for k, ax in enumerate(axes.flat):
@@ -178,15 +190,37 @@ def omega_histogram(ds: xr.Dataset, path: Path) -> Path | str:
             continue
         w = omega[:, k][np.isfinite(omega[:, k])]
         if len(w):
-            ax.hist(w, bins=min(60, max(5, int(np.sqrt(len(w))))), color="C0", alpha=0.85)
-            ax.set_title(f"ω{k}: mean {w.mean():.4g}, sd {w.std():.3g}", fontsize=9)
+            bins = min(60, max(5, int(np.sqrt(len(w)))))
+            ax.hist(w, bins=bins, color="C0", alpha=0.85, label="undamped ω")
+            if damped is not None:
+                wd = damped[:, k][np.isfinite(damped[:, k])]
+                ax.hist(wd, bins=bins, color="C1", alpha=0.6, label="damped |Im s|")
+                ax.legend(fontsize=7, frameon=False)
+            ax.set_title(f"ω{k}: {_in_hz(w)}", fontsize=9)
         else:
             ax.text(0.5, 0.5, "no finite value", ha="center", transform=ax.transAxes)
             ax.set_title(f"ω{k}", fontsize=9)
         ax.set_xlabel("rad/s")
         ax.set_ylabel("samples")
+        ax.secondary_xaxis("top", functions=(_to_hz, _to_rad_s)).set_xlabel("Hz", fontsize=8)
     fig.suptitle(f"eigenpulsations, {omega.shape[0]} samples")
-    return _save(fig, path)
+    return fig
+
+
+def _to_hz(omega: Any) -> Any:
+    """rad/s -> Hz (arrays or scalars)."""
+    return omega / (2.0 * np.pi)
+
+
+def _to_rad_s(frequency: Any) -> Any:
+    """Hz -> rad/s (arrays or scalars)."""
+    return frequency * (2.0 * np.pi)
+
+
+def _in_hz(w: np.ndarray) -> str:
+    """'mean … rad/s (… Hz), sd … rad/s (… Hz)' of finite pulsations ``w``."""
+    mean, sd = float(w.mean()), float(w.std())
+    return f"mean {mean:.4g} rad/s ({_to_hz(mean):.4g} Hz), sd {sd:.3g} ({_to_hz(sd):.3g} Hz)"
 
 
 def _trend(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float] | None:
@@ -237,6 +271,10 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
                 ax.set_xlabel(paths[j], fontsize=8)
             if j == 0:
                 ax.set_ylabel(result.labels[k], fontsize=8)
+            if j == nparam - 1 and result.units == "rad/s":
+                hz = ax.secondary_yaxis("right", functions=(_to_hz, _to_rad_s))
+                hz.set_ylabel("Hz", fontsize=8)
+                hz.tick_params(labelsize=7)
             ax.tick_params(labelsize=7)
     title = f"{result.name} ({result.units}) against the sampled parameters, {n} samples"
     if constant:
