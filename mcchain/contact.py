@@ -66,6 +66,21 @@ CONTACT_SUMMARY = ("nim", "pkf", "pkd", "tff", "tse")
 their ``sum_ct`` columns: impacts, peak contact force, peak penetration, free-flight time,
 first separation time."""
 
+RESEAT_RATE = 0.1
+"""Model auto goes back to the link when the journal is quasi-statically pressed on the wall:
+|δ̇| ≤ RESEAT_RATE ω_c δ (the normal motion's kinetic energy ≤ 1 % of the contact's
+oscillation energy at amplitude δ; a rebound has |δ̇| ≈ ω_c δ_max; a journal sliding on the
+wall of a swinging mechanism shows 0.005–0.03 from its slowly varying load), with δ > 0 and
+F_n > 0, ..."""
+RESEAT_PERIODS = 5.0
+"""... continuously for RESEAT_PERIODS periods 2π/ω_c of the contact's linearised oscillation
+(the rebounds have died out). Then q and v are projected onto the link (M-orthogonal), which
+cannot add kinetic energy and drops the elastic energy K δ^(m+1)/(m+1)."""
+RESEAT_TOLERANCE = 1e-13
+"""max |Φ| (m, rad) at which the projection of a re-seat stops iterating."""
+RESEAT_NEWTON = 20
+"""Newton iterations of that projection at most."""
+
 CONTACT_STEP_LIMIT = 0.5
 """Largest ω_c h a fixed-step method may take in contact (ω_c = √(∂F_n/∂δ / m*), m* the
 journal's effective mass along n): RK4 loses ~1e-4 of the contact energy per step there and

@@ -38,10 +38,10 @@ GOLDEN = {
         "rk45": "d7a44c9c37e34f990579bd3b1b0e967e968cb55cac99cdf6b96291c7f420893d",
     },
     "fourbar-clearance-auto": {
-        "accel": "f28e47f65532006115a247fa6084473528dee2cc13a49105afc421584d2f52ee",
-        "rk4": "d0c0ee9481c8e687dfa120ee1968217be35a999fc352edc088dc7f0d281e6d75",
-        "rk4-projection": "e81280b357cd7d154292b417f8b734e7e29b4fdb1329bc6be759afa57f3f013d",
-        "rk45": "fe2202c789e021ee12154ad0b2a9b2ce79018b0cf396f78eb7cd4b21129d60c1",
+        "accel": "081fdeaa5ecded731c227635a6c584d3e769216d7c3ab70239734da2a362b569",
+        "rk4": "1c47f78e599dc99e93616ef002cefdfe28140cd456ff1ca8b82107e89d1c4992",
+        "rk4-projection": "afd3f9aa307c791cbf5f6bd0d6b2ef6683ec935a0a23c505549bf69a30d43edb",
+        "rk45": "5211f3c9ccf219f755da455de99c51082ae894af873f23a6e17dda230a24d360",
     },
     "chain4-mixed-spring": {
         "accel": "a88e7a8157a86e4e8f7931acabc9df69ea4ed2cfcac5abbf7b9c59e4d16ab96c",

@@ -208,7 +208,8 @@ def test_auto__equals_the_link_until_the_link_lets_go(method):
             scale = np.max(np.abs(b[np.isfinite(b)]))
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * scale, err_msg=name)
         assert np.all(auto["contact_mode"][s, before, 2] == 0)
-        assert np.all(auto["contact_mode"][s, ~before, 2] >= 1)
+        # the law from the switch on (later re-seats may put the joint back on the link)
+        assert auto["contact_mode"][s, np.argmax(~before), 2] >= 1
     assert np.all(auto["contact_force"][:, :, 2] >= 0.0)
     assert np.all(auto["impact_count"][:, 2] >= 1)
 
@@ -248,3 +249,27 @@ def test_contact__converges_to_the_link_as_the_stiffness_grows():
     print("max |q - q_link| (m):", ", ".join(f"{e:.2e}" for e in errors), "rates", rates)
     assert errors[-1] < 1e-6
     assert np.all(rates > 0.55)
+
+
+def test_auto__reseats_on_the_link_without_adding_energy():
+    """A damped journal (model auto) bounces, settles on the bottom of its bearing and goes
+    back to the link; the total energy (with the elastic energy under the law) never grows,
+    across the switches included."""
+    text = journal_scene(
+        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3,
+        output_dt=1e-4, rtol=1e-10, atol=1e-13,
+    )  # fmt: skip
+    out = run(text)
+    assert out["status"][0] == 0
+    mode = out["contact_mode"][0, :, 0]
+    reseats = np.flatnonzero((mode[:-1] >= 1) & (mode[1:] == 0))
+    assert reseats.size >= 1
+    assert mode[-1] == 0  # seated: sliding back and forth on the link at the bottom
+    energy = out["energy"][0]
+    scale = MASS * GRAVITY * 2 * CLEARANCE
+    growth = np.max(np.diff(energy)) / scale
+    at_switch = np.max(energy[reseats + 1] - energy[reseats]) / scale
+    print(f"{reseats.size} re-seat(s); energy growth per output at most {growth:.1e}, "
+          f"across a re-seat {at_switch:.1e} of m g 2c")  # fmt: skip
+    assert at_switch <= 1e-9
+    assert growth <= 1e-7

@@ -596,7 +596,7 @@ class Emitter:
             return
         self.emit("wc2 = 0.0")
         for k, r in self.contact_row.items():
-            self.emit(f"wc2 = max(wc2, kc{k} * {self.coupling[r, r]})")
+            self.emit(f"wj{k} = kc{k} * {self.coupling[r, r]}", f"wc2 = max(wc2, wj{k})")
 
     def projection_terms(self, t: str = "t") -> None:
         """Position and velocity corrections of a projection step at (q, v, t).

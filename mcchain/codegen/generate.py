@@ -10,6 +10,7 @@ holding only the functions that variant's entry points call.
 
 from __future__ import annotations
 
+import math
 import re
 from types import ModuleType
 
@@ -21,7 +22,16 @@ from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
-from mcchain.contact import AUTO, CONTACT, CONTACT_STEP_LIMIT, CONTACT_SUMMARY
+from mcchain.contact import (
+    AUTO,
+    CONTACT,
+    CONTACT_STEP_LIMIT,
+    CONTACT_SUMMARY,
+    RESEAT_NEWTON,
+    RESEAT_PERIODS,
+    RESEAT_RATE,
+    RESEAT_TOLERANCE,
+)
 from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY, Tableau
 from mcchain.status import (
     CONTACT_LOST,
@@ -137,7 +147,7 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('sgc')} = sing",
     )
     for k, j in cj.items():
-        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}")
+        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}")
     if cj:
         em.emit(f"{at('wca')} = max({at('wca')}, wc2)")
     block("store_stage")
@@ -218,6 +228,14 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('pmax')} = phimax",
     )
     block("apply_projection")
+    # Kinetic energy of the lane and the velocities scaled by ``scale`` (re-seat).
+    em.emit("ke = 0.0")
+    for body in range(topo.nbody):
+        vx, vy, w = f"v{3 * body}", f"v{3 * body + 1}", f"v{3 * body + 2}"
+        em.emit(f"ke += 0.5 * (p_m{body} * ({vx} * {vx} + {vy} * {vy}) + p_J{body} * {w} * {w})")
+    block("kinetic")
+    em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(ndof)))
+    block("scale_velocity")
     # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)).
     em.emit("en = 0.0")
     for i in range(ndof):
@@ -252,6 +270,8 @@ _CONTACT_BLOCKS = (
     "contact_switch",
     "contact_accept",
     "contact_dead",
+    "contact_reseat_erk",
+    "contact_reseat",
 )
 
 
@@ -280,6 +300,25 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        {at('tse', j)} = {t}",
         ]
 
+    def reseat(j: int, k: int, lamrow: str, h: str, d1: str, r1: str) -> list[str]:
+        """Model auto: back to the link once pressed quasi-statically for a dwell
+        (mcchain.contact.RESEAT_RATE, RESEAT_PERIODS); the lane is then projected."""
+        if topo.joint_model[k] != AUTO:
+            return []
+        r = topo.joint_row[k]
+        wj, dwl = at("wjc", j), at("dwl", j)
+        slow = f"abs({r1}) <= {RESEAT_RATE!r} * wn * {d1}"
+        return [
+            f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
+            f"if {d1} > 0.0 and {at(lamrow, r)} > 0.0 and {slow}:",
+            f"    {dwl} += {h}",
+            f"    if {dwl} * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
+            f"        {dwl} = -1.0",  # marked: group_reseat puts it on the link
+            f"        {at('rsw')} = 1.0",
+            "else:",
+            f"    {dwl} = 0.0",
+        ]
+
     def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str) -> list[str]:
         """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
         (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peaks."""
@@ -301,6 +340,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        {at('tff', j)} += {h}",
             f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
             f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
+            *indent(reseat(j, k, lamrow, h, d1, r1)),
             f"{at('pkf', j)} = max({at('pkf', j)}, {at(lamrow, r)})",
             f"{d0} = {d1}",
             f"{r0} = {r1}",
@@ -358,6 +398,21 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
     b["contact_accept"] = "\n".join(accept)
     b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
+    reseats = any(topo.joint_model[k] == AUTO for k in joints)
+    marks = []
+    for j in range(len(joints)):
+        marks += [
+            f"if {at('dwl', j)} < 0.0:",
+            f"    {at('fm', j)} = 0.0",
+            f"    {at('dwl', j)} = 0.0",
+        ]
+    b["reseat_marks"] = "\n".join(marks)
+    b["contact_reseat_erk"] = (
+        "group_reseat_SUFFIX(W, nl, t + h, A, balpha2, bbeta2, tau, False)" if reseats else ""
+    )
+    b["contact_reseat"] = (
+        "group_reseat_SUFFIX(W, nl, 0.0, A, balpha2, bbeta2, tau, True)" if reseats else ""
+    )
     return b
 
 
@@ -381,6 +436,9 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "CONTACT_BIT": str(CONTACT_LOST),
         "CONTACT_STEP_BIT": str(CONTACT_STEP_TOO_LARGE),
         "CONTACT_LIMIT2": repr(CONTACT_STEP_LIMIT**2),
+        "RESEAT_TOL": repr(RESEAT_TOLERANCE),
+        "RESEAT_NEWTON": str(RESEAT_NEWTON),
+        "DRIVEN": str(bool(topo.ndriver)),
         "SAFETY": repr(SAFETY),
         "MIN_FACTOR": repr(MIN_FACTOR),
         "MAX_FACTOR": repr(MAX_FACTOR),
@@ -435,6 +493,8 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     blocks = _blocks(topo, nstage, lay)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
+    if tableau is not None and any(m == AUTO for m in topo.joint_model):
+        parts_of = (*parts_of, templates.RESEAT_HELPER)
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)

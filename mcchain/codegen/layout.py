@@ -42,15 +42,20 @@ ROW_MEANINGS = """\
 """
 """Legend of the row map written into the header of a generated module."""
 
-CONTACT_ROWS = ("fm", "ins", "vi", "pd", "pr", "pdc", "prc", "nim", "pkf", "pkd", "tff", "tse")
+CONTACT_ROWS = (
+    "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
+    "nim", "pkf", "pkd", "tff", "tse",
+)  # fmt: skip
 """Rows of W per contact-law joint (one row per such joint each), after the others."""
 
 CONTACT_ROW_MEANINGS = """\
 # Contact-law joints, one row each: fm law active (0 link, 1 law); ins in contact at the
 # step's start; vi approach speed of the contact in progress; pd, pr penetration and its rate
-# at the accepted state; pdc, prc the same at the current stage; nim impacts; pkf peak contact
-# force; pkd peak penetration; tff free-flight time; tse first separation time; wca largest
-# (contact pulsation)^2 since the last check.
+# at the accepted state; pdc, prc the same at the current stage; wjc the contact's pulsation^2
+# at the current stage; dwl time pressed quasi-statically (model auto: re-seat); nim impacts;
+# pkf peak contact force; pkd peak penetration; tff free-flight time; tse first separation
+# time; wca largest (contact pulsation)^2 since the last check; rsw lane to re-seat; e0 its
+# energy before the re-seat.
 """
 """Legend of the contact rows, written only into modules that have them."""
 
@@ -85,6 +90,8 @@ class Layout:
             for name in CONTACT_ROWS:
                 self.add(name, ncj)
             self.add("wca", 1)
+            self.add("rsw", 1)
+            self.add("e0", 1)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

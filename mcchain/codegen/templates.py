@@ -174,7 +174,8 @@ def erk_group(g, {_ERK_ARGS}):
             for l in range(nl):
                 @@combine
             if project:
-                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)"""
+                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)
+            @@contact_reseat_erk"""
     + _GROUP_FINISH
 )
 
@@ -275,6 +276,7 @@ def adaptive_group(g, {_ADAPTIVE_ARGS}):
                     nrun += 1
             if nrun == 0:
                 break
+            @@contact_reseat
             # One attempted step on every running lane: stages 1 .. NSTAGE-1.
             for l in range(nl):
                 if run[l]:
@@ -363,6 +365,76 @@ def group_project_SUFFIX(W, nl, tp, ptol, max_newton, tau):
             nact += 1 if @[act] > 0.0 else 0
         if nact == 0:
             break
+'''
+
+RESEAT_HELPER = '''
+@njit(**JIT)
+def group_reseat_SUFFIX(W, nl, t_now, A, balpha2, bbeta2, tau, refresh):
+    """Lanes flagged ``rsw``: each joint marked (``dwl`` < 0, model auto, pressed
+    quasi-statically) goes back to the link. q is projected onto Φ(q, t) = 0 and v onto
+    Φ̇ = 0 (M-orthogonal, as group_project): the velocity step cannot add kinetic energy,
+    but the position step moves the journal in by δ against the load that presses it, which
+    adds up to m/(m+1) F_n δ more than the elastic energy it drops; without drivers that
+    excess is taken from the kinetic energy (v scaled), so a re-seat never adds energy. With
+    ``refresh`` the lanes' first stage is recomputed at the new state (adaptive: FSAL). t is
+    ``t_now`` (fixed step), or each lane's own time with ``refresh``."""
+    nrs = 0
+    for l in range(nl):
+        nrs += 1 if @[rsw] > 0.0 else 0
+    if nrs == 0:
+        return
+    for l in range(nl):
+        if @[rsw] > 0.0:
+            t_now = @[tl] if refresh else t_now
+            @@load_params
+            @@load_state
+            @@load_lam
+            @@outputs
+            @[e0] = energy
+            @@reseat_marks
+        @[act] = @[rsw]
+        @[pmax] = np.inf
+    for itn in range(RESEAT_NEWTON + 1):
+        last = 1.0 if itn == RESEAT_NEWTON else 0.0
+        ptol = RESEAT_TOL
+        for l in range(nl):
+            tp = @[tl] if refresh else t_now
+            @@load_params
+            @@load_state
+            @@projection
+            @@apply_projection
+        nact = 0
+        for l in range(nl):
+            nact += 1 if @[act] > 0.0 else 0
+        if nact == 0:
+            break
+    for l in range(nl):
+        if @[rsw] > 0.0 and not DRIVEN:
+            t_now = @[tl] if refresh else t_now
+            @@load_params
+            @@load_state
+            @@load_lam
+            @@outputs
+            excess = energy - @[e0]
+            @@kinetic
+            if excess > 0.0 and ke > excess:
+                scale = math.sqrt((ke - excess) / ke)
+                @@scale_velocity
+    if refresh:
+        s = 0
+        @@stage_coefs_zero
+        for l in range(nl):
+            if @[rsw] == 0.0:
+                continue
+            ts = @[tl]
+            @@stage_coefs_per_lane
+            @@load_params
+            @@load_stage
+            @@accel_stage
+            @@store_stage
+            @@accept_zero
+    for l in range(nl):
+        @[rsw] = 0.0
 '''
 
 FIRST_STAGE_HELPER = '''
