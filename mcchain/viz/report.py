@@ -48,6 +48,7 @@ import numpy as np
 
 from mcchain.ensemble.queries import dim_names, peak_abs_over_time, run_design
 from mcchain.status import Status, counts
+from mcchain.viz.figures import block, figure, grid, save
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -61,15 +62,12 @@ CONSTANT_RTOL = 1e-9
 """A result component whose spread is below this (relative, floor 1) is constant: not drawn."""
 MAX_ENVELOPE_TIMES = 400
 """Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
-BLOCK_BYTES = 64 * 2**20
-"""Memory budget of one block read from the ensemble."""
 SOBOL_RESAMPLES = 200
 """Bootstrap resamples of SALib's confidence intervals."""
 MIN_RBD_SAMPLES = 64
 """Fewest samples for RBD-FAST first-order indices (its harmonics need a few per period)."""
 SOBOL_SEED = 12345
 """Seed of SALib's bootstrap, so reports are reproducible."""
-DPI = 100
 
 
 @dataclass
@@ -104,13 +102,6 @@ class SobolIndices:
 
 
 # -- reading -----------------------------------------------------------------------------------
-def _block(ds: xr.Dataset, name: str, axis: str) -> int:
-    """How many entries along ``axis`` fit in :data:`BLOCK_BYTES` of float64."""
-    da = ds[name]
-    per = 8 * int(np.prod([da.sizes[d] for d in da.dims if d != axis], dtype=np.int64))
-    return max(1, BLOCK_BYTES // max(per, 1))
-
-
 def results(ds: xr.Dataset) -> list[Result]:
     """The per-sample results present in the ensemble (see the module docstring)."""
     out: list[Result] = []
@@ -132,7 +123,7 @@ def results(ds: xr.Dataset) -> list[Result]:
             )
         )
     if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
-        peak = peak_abs_over_time(ds, "contact_force", _block(ds, "contact_force", "sample"))
+        peak = peak_abs_over_time(ds, "contact_force", block(ds, "contact_force", "sample"))
         keep = np.isfinite(peak).any(axis=0) if peak.ndim == 2 else np.zeros(0, bool)
         if keep.any():
             names = [j for j, k in zip(dim_names(ds, "joint"), keep, strict=True) if k]
@@ -148,30 +139,12 @@ def results(ds: xr.Dataset) -> list[Result]:
 
 
 # -- figures -----------------------------------------------------------------------------------
-def _figure(nrow: int, ncol: int, w: float = 3.2, h: float = 2.5) -> tuple[Figure, np.ndarray]:
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(max(4.0, w * ncol), max(3.0, h * nrow)), dpi=DPI, layout="constrained")
-    axes = np.asarray(fig.subplots(nrow, ncol, squeeze=False))
-    return fig, axes
-
-
-def _grid(n: int, max_col: int = 4) -> tuple[int, int]:
-    ncol = min(n, max_col)
-    return (n + ncol - 1) // ncol, ncol
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
-    return path
-
-
 def omega_histogram(ds: xr.Dataset, path: Path) -> Path | str:
     """Histogram of each eigenpulsation (rad/s below, Hz above), with the damped pulsations
     overlaid when the run has dampers."""
     if "omega" not in ds.data_vars or not ds.sizes.get("mode", 0):
         return "the run has no eigenpulsations ([modes] absent)"
-    return _save(omega_histogram_figure(ds), path)
+    return save(omega_histogram_figure(ds), path)
 
 
 def omega_histogram_figure(ds: xr.Dataset) -> Figure:
@@ -182,8 +155,8 @@ def omega_histogram_figure(ds: xr.Dataset) -> Figure:
         damped = np.asarray(ds["damped_omega"].transpose("sample", "mode").values, float)
         if np.array_equal(damped, np.maximum(omega, 0.0), equal_nan=True):
             damped = None  # no dampers: nothing to add
-    nrow, ncol = _grid(omega.shape[1])
-    fig, axes = _figure(nrow, ncol)
+    nrow, ncol = grid(omega.shape[1])
+    fig, axes = figure(nrow, ncol)
     for k, ax in enumerate(axes.flat):
         if k >= omega.shape[1]:
             ax.set_visible(False)
@@ -253,7 +226,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     shown = np.arange(n)
     if n > MAX_SCATTER_POINTS:
         shown = np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER_POINTS, replace=False))
-    fig, axes = _figure(len(rows), nparam, w=2.8, h=2.2)
+    fig, axes = figure(len(rows), nparam, w=2.8, h=2.2)
     alpha = float(np.clip(200.0 / max(len(shown), 1), 0.08, 0.8))
     for i, k in enumerate(rows):
         y = result.values[:, k]
@@ -280,7 +253,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     if constant:
         title += "\nconstant (not drawn): " + ", ".join(constant)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def _envelope(ds: xr.Dataset, name: str, reduce: Callable[[np.ndarray], np.ndarray]) -> Any:
@@ -288,7 +261,7 @@ def _envelope(ds: xr.Dataset, name: str, reduce: Callable[[np.ndarray], np.ndarr
     da = ds[name].transpose("time", "sample", ...)
     nt = ds.sizes["time"]
     idx = np.unique(np.linspace(0, nt - 1, min(nt, MAX_ENVELOPE_TIMES)).round().astype(int))
-    step = _block(ds, name, "time")
+    step = block(ds, name, "time")
     parts = []
     for start in range(0, len(idx), step):
         a = reduce(np.asarray(da.isel(time=idx[start : start + step]).values, float))
@@ -317,8 +290,8 @@ def reaction_envelopes(ds: xr.Dataset, path: Path) -> Path | str:
         q, time = _envelope(ds, "driver_torque", lambda a: a)
         for k, d in enumerate(dim_names(ds, "driver")):
             panels.append((f"driver torque {d}", q[..., k], time, "N m"))
-    nrow, ncol = _grid(len(panels), 2)
-    fig, axes = _figure(nrow, ncol, w=4.5, h=2.6)
+    nrow, ncol = grid(len(panels), 2)
+    fig, axes = figure(nrow, ncol, w=4.5, h=2.6)
     for ax, (title, quant, t, units) in zip(axes.flat, panels, strict=False):
         ax.fill_between(t, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
         ax.plot(t, quant[1], color="C0", lw=1.2, label="median")
@@ -329,7 +302,7 @@ def reaction_envelopes(ds: xr.Dataset, path: Path) -> Path | str:
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     fig.suptitle(f"reactions over time, {ds.sizes['sample']} samples")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
@@ -339,7 +312,7 @@ def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
     t_lost = np.asarray(ds["contact_lost_time"].values, float)
     ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(len(t_lost))
     lost = np.isfinite(t_lost)
-    fig, axes = _figure(1, 2, w=4.5, h=3.2)
+    fig, axes = figure(1, 2, w=4.5, h=3.2)
     ax = axes[0, 0]
     ax.scatter(t_lost[lost], ids[lost], s=8, color="C3")
     ax.set_xlabel("contact_lost_time (s)")
@@ -359,7 +332,7 @@ def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
     ax.set_ylabel("% of samples")
     ax.set_ylim(-2, 102)
     ax.set_title("samples that lost contact by time t", fontsize=9)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
@@ -369,7 +342,7 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
     c = counts(np.asarray(ds["status"].values))
     names = ["ok", *(flag.meaning for flag in Status)]
     values = [c[n] for n in names]
-    fig, axes = _figure(1, 1, w=7.0, h=3.6)
+    fig, axes = figure(1, 1, w=7.0, h=3.6)
     ax = axes[0, 0]
     colors = ["C2"] + ["C3" if f.value & 0b1111 else "C1" for f in Status]
     bars = ax.bar(range(len(names)), values, color=colors)
@@ -377,7 +350,7 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
     ax.set_xticks(range(len(names)), [n.replace("_", "\n") for n in names], fontsize=8)
     ax.set_ylabel("samples")
     ax.set_title(f"status of {len(np.asarray(ds['status'].values))} samples (flags may overlap)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- Sobol -------------------------------------------------------------------------------------
@@ -548,8 +521,8 @@ def sobol_figure(
             for j, name in enumerate(names):
                 values = (f"{v[j]:.6g}" for v in (s.S1, s.S1_conf, s.ST, s.ST_conf))
                 writer.writerow([s.output, name, s.method, *values])
-    nrow, ncol = _grid(len(found), 3)
-    fig, axes = _figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
+    nrow, ncol = grid(len(found), 3)
+    fig, axes = figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
     x = np.arange(len(names))
     for ax, s in zip(axes.flat, found, strict=False):
         ax.bar(x - 0.2, s.S1, 0.4, yerr=s.S1_conf, capsize=2, label="first order S1")
@@ -568,7 +541,7 @@ def sobol_figure(
     else:
         how = "SALib sobol on Saltelli's layout"
     fig.suptitle(f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}", fontsize=10)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- command -----------------------------------------------------------------------------------
