@@ -44,14 +44,24 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mcchain.ensemble.queries import dim_names, peak_abs_over_time, run_design
+from mcchain.ensemble.queries import dim_names, run_design
 from mcchain.status import Status, counts
-from mcchain.viz.figures import block, figure, grid, save
+from mcchain.viz.contact import joint_models
+from mcchain.viz.figures import figure, grid, save
 from mcchain.viz.history import contact_loss, reaction_envelopes
+from mcchain.viz.report_contact import (
+    impact_scatter,
+    orbit_figure,
+    param_axis,
+    peak_contact_forces,
+    peak_force_scatter,
+)
 
 if TYPE_CHECKING:
     import xarray as xr
     from matplotlib.figure import Figure
+
+    from mcchain.model import Model
 
 log = logging.getLogger(__name__)
 
@@ -99,8 +109,9 @@ class SobolIndices:
 
 
 # -- reading -----------------------------------------------------------------------------------
-def results(ds: xr.Dataset) -> list[Result]:
-    """The per-sample results present in the ensemble (see the module docstring)."""
+def results(ds: xr.Dataset, models: list[str | None] | None = None) -> list[Result]:
+    """The per-sample results present in the ensemble (see the module docstring);
+    ``models``: :func:`mcchain.viz.contact.joint_models` (default: from the data)."""
     out: list[Result] = []
     if "omega" in ds.data_vars and ds.sizes.get("mode", 0):
         omega = np.asarray(ds["omega"].transpose("sample", "mode").values, float)
@@ -119,19 +130,11 @@ def results(ds: xr.Dataset) -> list[Result]:
                 "N",
             )
         )
-    if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
-        peak = peak_abs_over_time(ds, "contact_force", block(ds, "contact_force", "sample"))
-        keep = np.isfinite(peak).any(axis=0) if peak.ndim == 2 else np.zeros(0, bool)
-        if keep.any():
-            names = [j for j, k in zip(dim_names(ds, "joint"), keep, strict=True) if k]
-            out.append(
-                Result(
-                    "peak_contact_force",
-                    tuple(f"peak |λ {j}|" for j in names),
-                    peak[:, keep],
-                    "N",
-                )
-            )
+    peak_labels, peaks, _ = peak_contact_forces(ds, models or joint_models(ds))
+    keep = np.isfinite(peaks).any(axis=0)
+    if keep.any():
+        chosen = tuple(label for label, k in zip(peak_labels, keep, strict=True) if k)
+        out.append(Result("peak_contact_force", chosen, peaks[:, keep], "N"))
     return out
 
 
@@ -223,6 +226,9 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     shown = np.arange(n)
     if n > MAX_SCATTER_POINTS:
         shown = np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER_POINTS, replace=False))
+    axes_of = [param_axis(path, params[:, j]) for j, path in enumerate(paths)]
+    xlabels = [label for label, _ in axes_of]
+    params = params * np.array([scale for _, scale in axes_of])
     fig, axes = figure(len(rows), nparam, w=2.8, h=2.2)
     alpha = float(np.clip(200.0 / max(len(shown), 1), 0.08, 0.8))
     for i, k in enumerate(rows):
@@ -238,7 +244,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
                 ax.plot(xs, a + b * xs, color="C3", lw=1.5, label=f"r = {r:+.2f}")
                 ax.legend(loc="best", fontsize=7, frameon=False)
             if i == len(rows) - 1:
-                ax.set_xlabel(paths[j], fontsize=8)
+                ax.set_xlabel(xlabels[j], fontsize=8)
             if j == 0:
                 ax.set_ylabel(result.labels[k], fontsize=8)
             if j == nparam - 1 and result.units == "rad/s":
@@ -463,8 +469,19 @@ def sobol_figure(
 
 
 # -- command -----------------------------------------------------------------------------------
-def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = None) -> Report:
-    """Write every figure the ensemble allows into ``out_dir`` (created if needed)."""
+def make_report(
+    ds: xr.Dataset,
+    out_dir: str | Path,
+    *,
+    design: str | None = None,
+    model: Model | None = None,
+) -> Report:
+    """Write every figure the ensemble allows into ``out_dir`` (created if needed).
+
+    ``model``: the model of the samples (row = global sample index), which gives the joint
+    points of the journal orbit and the model (link, contact, auto) of each clearance joint;
+    ``None``: the orbit is skipped and the models are inferred from the data.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = Report()
@@ -477,13 +494,23 @@ def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = Non
             report.skipped[name] = produced
 
     record("omega_histogram.png", omega_histogram(ds, out / "omega_histogram.png"))
-    found = results(ds)
+    models = joint_models(ds, model)
+    found = results(ds, models)
     if not found:
         record("scatter_*.png", "the run has no equilibrium, mode or contact result")
     for result in found:
         name = f"scatter_{result.name}.png"
-        record(name, scatter(ds, result, out / name))
-    record("reaction_envelopes.png", reaction_envelopes(ds, out / "reaction_envelopes.png"))
+        if result.name == "peak_contact_force":
+            record(name, peak_force_scatter(ds, out / name, models))
+        else:
+            record(name, scatter(ds, result, out / name))
+    name = "scatter_impact_count.png"
+    record(name, impact_scatter(ds, out / name))
+    record("journal_orbit.png", orbit_figure(ds, model, out / "journal_orbit.png", models))
+    record(
+        "reaction_envelopes.png",
+        reaction_envelopes(ds, out / "reaction_envelopes.png", models),
+    )
     record("contact_loss.png", contact_loss(ds, out / "contact_loss.png"))
     record("status_counts.png", status_counts(ds, out / "status_counts.png"))
     record(
@@ -496,9 +523,16 @@ def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = Non
 def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     """``mcchain report``: every figure of a run folder (path or id under ``runs/``) into
     ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
+    from mcchain.ensemble.describe import stored_model
+    from mcchain.errors import McchainError
     from mcchain.runs import open_run, resolve_run
 
     folder = resolve_run(run)
     ds = open_run(folder)
     target = Path(out) if out else folder / "report"
-    return make_report(ds, target, design=run_design(folder, ds))
+    try:
+        model = stored_model(ds)
+    except McchainError as err:  # an ensemble without a usable scene: draw what needs none
+        log.info("report: the run's model cannot be rebuilt (%s)", err)
+        model = None
+    return make_report(ds, target, design=run_design(folder, ds), model=model)
