@@ -125,15 +125,19 @@ class Orbit:
     clearance: np.ndarray
 
 
-def sample_orbit(ds: xr.Dataset, model: Model, pos: int, row: int) -> Orbit | None:
+def sample_orbit(
+    ds: xr.Dataset, model: Model, pos: int, row: int, q: np.ndarray | None = None
+) -> Orbit | None:
     """The orbit of the sample at position ``pos`` of ``ds`` (model row ``row``), from its
-    positions ``q`` and the model's joint points; ``None`` if the run has no history or the
-    model no clearance joint."""
+    positions ``q`` (T, nbody, 3) (read from ``ds`` when not given) and the model's joint
+    points; ``None`` if the run has no history or the model no clearance joint."""
     joints = np.flatnonzero(np.asarray(model.joint_kind) == JOINT_CLEARANCE)
     if "q" not in ds.data_vars or not len(joints):
         return None
     time = np.asarray(ds["time"].values, dtype=np.float64)
-    q = np.asarray(ds["q"].isel(sample=pos).transpose("time", "body", "dof").values, np.float64)
+    if q is None:
+        da = ds["q"].isel(sample=pos).transpose("time", "body", "dof")
+        q = np.asarray(da.values, dtype=np.float64)
     offset = geometry.normalised_offsets(model, row, q)[:, joints]
     mode = None
     if "contact_mode" in ds.data_vars:
