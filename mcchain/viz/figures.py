@@ -48,3 +48,8 @@ def save(fig: Figure, path: Path) -> Path:
     """Write ``fig`` as a PNG at :data:`DPI`; returns ``path``."""
     fig.savefig(path, dpi=DPI)
     return path
+
+
+def save_or_reason(found: Figure | str, path: Path) -> Path | str:
+    """Save a figure (returns ``path``), or pass on the reason why there is none."""
+    return found if isinstance(found, str) else save(found, path)

@@ -19,10 +19,11 @@ import numpy as np
 
 from mcchain.ensemble.queries import dim_names
 from mcchain.viz.contact import FAILED, LINK, LINK_LOST, STATE_COLORS, STATES, joint_models
-from mcchain.viz.figures import block, figure, grid, save
+from mcchain.viz.figures import block, figure, grid, save, save_or_reason
 
 if TYPE_CHECKING:
     import xarray as xr
+    from matplotlib.figure import Figure
 
 MAX_ENVELOPE_TIMES = 400
 """Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
@@ -89,6 +90,13 @@ def _state_shares(ds: xr.Dataset, joint: int, idx: np.ndarray, lost: np.ndarray)
 def reaction_envelopes(
     ds: xr.Dataset, path: Path, models: list[str | None] | None = None
 ) -> Path | str:
+    """``reaction_envelopes.png``: :func:`reaction_envelopes_figure`, saved."""
+    return save_or_reason(reaction_envelopes_figure(ds, models), path)
+
+
+def reaction_envelopes_figure(
+    ds: xr.Dataset, models: list[str | None] | None = None
+) -> Figure | str:
     """Median and 5–95 % band over the samples of every reaction over time.
 
     Titles say which model a clearance joint's reactions come from (``models``:
@@ -157,7 +165,7 @@ def reaction_envelopes(
             "from their contact_lost_time on (shaded)"
         )
     fig.suptitle(title, fontsize=10)
-    return save(fig, path)
+    return fig
 
 
 def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:

@@ -7,23 +7,31 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
 ==============================  ==========================================================
 ``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``), in rad/s
                                 and Hz, with ``damped_omega`` overlaid if it differs
-``scatter_<result>.png``        each result against each sampled parameter, with a
-                                least-squares trend line and Pearson's r (components
-                                constant over the samples are named, not drawn); results are
-                                ``omega`` (modes; a Hz axis beside rad/s), ``q_eq`` (body, dof),
-                                ``joint_force_eq`` (magnitude per joint) and
-                                ``peak_contact_force`` (max |λ| over time per clearance
-                                joint)
-``reaction_envelopes.png``      per joint |f| over time (and λ of clearance joints, driver
-                                torques): median and 5–95 % band over the samples
+``scatter_<result>.png``        each result against each sampled parameter (axes named
+                                ``key item [units]``), with a least-squares trend line and
+                                Pearson's r (components constant over the samples are named,
+                                not drawn); results are ``omega`` (modes; a Hz axis beside
+                                rad/s), ``q_eq`` (body, dof), ``joint_force_eq`` (magnitude
+                                per joint)
+contact figures                 ``scatter_peak_contact_force.png``: peak normal force per
+                                clearance joint against each sampled parameter;
+                                ``scatter_impact_count.png``: impacts per joint with a
+                                contact law; ``journal_orbit.png``: the journal in its
+                                clearance circle for the worst samples (all three:
+                                :mod:`mcchain.viz.report_contact`)
+``reaction_envelopes.png``      per joint |f| over time (and the normal force of clearance
+                                joints, driver torques): median and 5–95 % band over the
+                                samples, titled with each joint's model; ``contact_lost``
+                                samples left out after their ``contact_lost_time``
+                                (:mod:`mcchain.viz.history`)
 ``contact_loss.png``            which samples lost contact, and when
                                 (``contact_lost_time``), with the fraction lost by time t
 ``status_counts.png``           how many samples carry each status flag
-``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and peak |λ|,
-                                for a ``design = "saltelli"`` or ``"sobol"`` run only:
-                                first- and total-order (``SALib.analyze.sobol``) when the
-                                samples have Saltelli's layout (rows A, AB_1..AB_D[,
-                                BA_1..BA_D], B per base point, as
+``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
+                                contact force, for a ``design = "saltelli"`` or
+                                ``"sobol"`` run only: first- and total-order
+                                (``SALib.analyze.sobol``) when the samples have Saltelli's
+                                layout (rows A, AB_1..AB_D[, BA_1..BA_D], B per base point, as
                                 ``SALib.sample.sobol.sample`` makes them, and as
                                 ``design = "saltelli"`` makes them without the BA rows);
                                 for plain scrambled Sobol' points, first-order only
@@ -47,14 +55,14 @@ import numpy as np
 from mcchain.ensemble.queries import dim_names, run_design
 from mcchain.status import Status, counts
 from mcchain.viz.contact import joint_models
-from mcchain.viz.figures import figure, grid, save
+from mcchain.viz.figures import figure, grid, save, save_or_reason
 from mcchain.viz.history import contact_loss, reaction_envelopes
 from mcchain.viz.report_contact import (
-    impact_scatter,
+    impact_figure,
     orbit_figure,
     param_axis,
     peak_contact_forces,
-    peak_force_scatter,
+    peak_force_figure,
 )
 
 if TYPE_CHECKING:
@@ -501,12 +509,14 @@ def make_report(
     for result in found:
         name = f"scatter_{result.name}.png"
         if result.name == "peak_contact_force":
-            record(name, peak_force_scatter(ds, out / name, models))
+            record(name, save_or_reason(peak_force_figure(ds, models), out / name))
         else:
             record(name, scatter(ds, result, out / name))
-    name = "scatter_impact_count.png"
-    record(name, impact_scatter(ds, out / name))
-    record("journal_orbit.png", orbit_figure(ds, model, out / "journal_orbit.png", models))
+    for name, found_figure in (
+        ("scatter_impact_count.png", impact_figure(ds)),
+        ("journal_orbit.png", orbit_figure(ds, model, models)),
+    ):
+        record(name, save_or_reason(found_figure, out / name))
     record(
         "reaction_envelopes.png",
         reaction_envelopes(ds, out / "reaction_envelopes.png", models),

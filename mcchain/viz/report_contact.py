@@ -21,7 +21,6 @@ Parameter axes are named ``key item [units]`` (``clearance B [mm]``, ``restituti
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,7 +28,7 @@ import numpy as np
 from mcchain.ensemble.queries import dim_names, largest, peak_abs_over_time, sample_ids
 from mcchain.parameters import param_units
 from mcchain.viz import contact
-from mcchain.viz.figures import block, figure, save
+from mcchain.viz.figures import block, figure
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -166,7 +165,7 @@ def parameter_scatter(
     return fig
 
 
-def peak_force_scatter(ds: xr.Dataset, path: Path, models: list[str | None]) -> Path | str:
+def peak_force_figure(ds: xr.Dataset, models: list[str | None]) -> Figure | str:
     """``scatter_peak_contact_force.png`` (see the module docstring)."""
     labels, peaks, joints = peak_contact_forces(ds, models)
     rows = [
@@ -176,11 +175,10 @@ def peak_force_scatter(ds: xr.Dataset, path: Path, models: list[str | None]) -> 
     ]
     if not rows:
         return "the run has no contact force history of a clearance joint"
-    found = parameter_scatter(ds, rows, "N", "peak contact force against the sampled parameters")
-    return found if isinstance(found, str) else save(found, path)
+    return parameter_scatter(ds, rows, "N", "peak contact force against the sampled parameters")
 
 
-def impact_scatter(ds: xr.Dataset, path: Path) -> Path | str:
+def impact_figure(ds: xr.Dataset) -> Figure | str:
     """``scatter_impact_count.png`` (see the module docstring)."""
     if "impact_count" not in ds.data_vars:
         return "the run has no impact_count (no joint with a contact law)"
@@ -194,8 +192,7 @@ def impact_scatter(ds: xr.Dataset, path: Path) -> Path | str:
     if not rows:
         return "no joint has a contact law"
     title = "impacts (located contact onsets) against the sampled parameters"
-    found = parameter_scatter(ds, rows, "-", title)
-    return found if isinstance(found, str) else save(found, path)
+    return parameter_scatter(ds, rows, "-", title)
 
 
 # -- journal orbit -----------------------------------------------------------------------------
@@ -229,10 +226,9 @@ def _draw_orbit(ax: Axes, offset: np.ndarray, state: np.ndarray) -> set[int]:
 def orbit_figure(
     ds: xr.Dataset,
     model: Model | None,
-    path: Path,
     models: list[str | None],
     count: int = ORBIT_SAMPLES,
-) -> Path | str:
+) -> Figure | str:
     """``journal_orbit.png``: the journal orbit of the ``count`` samples with the largest
     peak force at each clearance joint (:func:`peak_contact_forces`), one row per joint."""
     if model is None:
@@ -287,4 +283,4 @@ def orbit_figure(
         f"the {ncol} samples with the largest peak force",
         fontsize=10,
     )
-    return save(fig, path)
+    return fig
