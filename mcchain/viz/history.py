@@ -76,7 +76,7 @@ def model_tag(model: str | None) -> str:
     return " — contact law" + ("" if model == "contact law" else f" ({model})")
 
 
-def _state_shares(ds: xr.Dataset, joint: int, idx: np.ndarray, lost: np.ndarray) -> np.ndarray:
+def state_shares(ds: xr.Dataset, joint: int, idx: np.ndarray, lost: np.ndarray) -> np.ndarray:
     """(len(STATES), len(idx)) share of the samples in each state of :data:`STATES` at a
     joint with a contact law, at the times ``idx``."""
     mode = np.asarray(ds["contact_mode"].isel(time=idx, joint=joint).transpose("time", "sample"))
@@ -130,7 +130,7 @@ def reaction_envelopes_figure(
     shares = []
     if "contact_mode" in ds.data_vars:
         law = [k for k, m in enumerate(models) if m not in (None, "link")]
-        shares = [(k, _state_shares(ds, k, idx, lost)) for k in law]
+        shares = [(k, state_shares(ds, k, idx, lost)) for k in law]
     nrow, ncol = grid(len(panels) + len(shares), 2)
     fig, axes = figure(nrow, ncol, w=4.5, h=2.6)
     nlost = int(np.isfinite(lost).sum())
