@@ -41,7 +41,7 @@ def orbit_closed_form(ntime: int = NTIME, nsample: int = NSAMPLE) -> dict[str, n
     """The prescribed orbit: time (T,), radius ratio ρ (n, T), angle φ (n, T), mode (n, T)."""
     t = np.arange(ntime) * DT
     s = np.arange(nsample)[:, None]
-    separated = t >= T_SEPARATE + 0.05 * (s % 3)
+    separated = t >= separation_times(nsample)[:, None]
     flying = np.sin(20.0 * t + s) > 0.3
     mode = np.where(separated, np.where(flying, contact.FREE, contact.CONTACT), contact.LINK)
     rho = np.where(mode == contact.FREE, 0.6 + 0.3 * np.sin(7.0 * t + s), 1.0)
@@ -50,6 +50,11 @@ def orbit_closed_form(ntime: int = NTIME, nsample: int = NSAMPLE) -> dict[str, n
     if nsample > FAILED_SAMPLE:
         mode[FAILED_SAMPLE, t >= FAIL_TIME] = -1
     return {"time": t, "rho": rho, "phi": phi, "mode": mode.astype(np.int8)}
+
+
+def separation_times(nsample: int) -> np.ndarray:
+    """(n,) s: when each sample leaves the link (see :func:`orbit_closed_form`)."""
+    return T_SEPARATE + 0.05 * (np.arange(nsample) % 3)
 
 
 def make_contact_params(n: int = NSAMPLE, seed: int = 3) -> np.ndarray:
@@ -95,6 +100,7 @@ def make_contact_dataset(params: np.ndarray, ntime: int = NTIME) -> xr.Dataset:
         peak_contact_force=(("sample", "joint"), per_joint(300.0 * np.sqrt(c / 1e-4), np.nan)),
         impact_count=(("sample", "joint"), per_joint(impacts, -1)),
         max_penetration=(("sample", "joint"), per_joint(PRESS * c, np.nan)),
+        first_separation_time=(("sample", "joint"), per_joint(separation_times(n), np.nan)),
         contact_lost_time=(("sample",), np.full(n, np.nan)),
         status=(("sample",), status),
     )
@@ -316,6 +322,22 @@ def test_reaction_envelopes__link_samples_left_out_after_contact_lost() -> None:
     np.testing.assert_allclose(median, np.nanmedian(lam, axis=0), rtol=1e-12)
     assert "samples left out (contact_lost)" in [t.get_text() for t in ax.get_legend().texts]
     assert "1 samples lost contact under the link model" in fig.get_suptitle()
+
+
+def test_contact_loss__first_separations_under_the_law(contact_run: Any) -> None:
+    ds, _, _ = contact_run
+    fig = history.contact_loss_figure(ds)
+    assert not isinstance(fig, str)
+    scatter_ax, share_ax = fig.axes
+    assert scatter_ax.get_title() == (
+        f"0 of {NSAMPLE} samples: contact_lost (link model)\n"
+        f"{NSAMPLE} of {NSAMPLE} samples: first separation (contact law)"
+    )
+    separated = share_ax.lines[1]
+    assert separated.get_label() == "first separation (contact law)"
+    time, expected = ds["time"].values, separation_times(NSAMPLE)
+    share = (time[:, None] >= expected[None, :]).mean(axis=1)
+    np.testing.assert_allclose(separated.get_ydata(), 100.0 * share)
 
 
 # -- show -----------------------------------------------------------------------------------------

@@ -5,7 +5,8 @@ joints, driver torques), median and 5–95 % band over the samples, each titled 
 that produced it (link, or contact law and its model); samples flagged ``contact_lost`` are
 left out after their ``contact_lost_time`` and those times shaded; the state of each joint
 with a contact law (link, contact, free, ...) as shares of the samples over time.
-``contact_loss.png``: which samples lost contact under the link model, and when.
+``contact_loss.png``: which samples lost contact under the link model, and when (and when
+joints with a contact law first separated).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from mcchain.ensemble.queries import dim_names
 from mcchain.viz.contact import FAILED, LINK, LINK_LOST, STATE_COLORS, STATES, joint_models
-from mcchain.viz.figures import block, figure, grid, save, save_or_reason
+from mcchain.viz.figures import block, figure, grid, save_or_reason
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -169,30 +170,50 @@ def reaction_envelopes_figure(
 
 
 def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
-    """Which samples lost contact at a clearance joint, and when."""
+    """``contact_loss.png``: :func:`contact_loss_figure`, saved."""
+    return save_or_reason(contact_loss_figure(ds), path)
+
+
+def contact_loss_figure(ds: xr.Dataset) -> Figure | str:
+    """Which samples lost contact at a clearance joint, and when: ``contact_lost_time`` under
+    the link model and, for joints with a contact law, the first separation (the earliest
+    ``first_separation_time`` over a sample's joints)."""
     if "contact_lost_time" not in ds.data_vars:
         return "the run has no contact_lost_time (no clearance joint or no [simulate])"
-    t_lost = np.asarray(ds["contact_lost_time"].values, float)
-    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(len(t_lost))
-    lost = np.isfinite(t_lost)
+    events = [("contact_lost (link model)", np.asarray(ds["contact_lost_time"].values, float))]
+    if "first_separation_time" in ds.data_vars:
+        first = ds["first_separation_time"].transpose("sample", "joint").values
+        with warnings.catch_warnings():  # samples that never separated: NaN quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            separated = np.nanmin(np.asarray(first, float), axis=1, initial=np.inf)
+        events.append(
+            ("first separation (contact law)", np.where(separated < np.inf, separated, np.nan))
+        )
+    n = len(events[0][1])
+    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(n)
+    if "time" in ds.coords and ds.sizes.get("time", 0):
+        time = np.asarray(ds["time"].values, float)
+    else:
+        time = np.unique(np.concatenate([t[np.isfinite(t)] for _, t in events] + [np.zeros(1)]))
     fig, axes = figure(1, 2, w=4.5, h=3.2)
+    counts = []
+    for (label, t), color in zip(events, ("C3", "C2"), strict=False):
+        at = np.isfinite(t)
+        counts.append(f"{int(at.sum())} of {n} samples: {label}")
+        axes[0, 0].scatter(t[at], ids[at], s=8, color=color, label=label)
+        frac = np.searchsorted(np.sort(t[at]), time, side="right") / max(n, 1)
+        axes[0, 1].step(time, 100.0 * frac, where="post", color=color, label=label)
     ax = axes[0, 0]
-    ax.scatter(t_lost[lost], ids[lost], s=8, color="C3")
-    ax.set_xlabel("contact_lost_time (s)")
+    ax.set_xlabel("time (s)")
     ax.set_ylabel("sample")
     if len(ids):
         ax.set_ylim(float(ids.min()) - 0.5, float(ids.max()) + 0.5)
-    ax.set_title(f"{int(lost.sum())} of {len(t_lost)} samples lost contact", fontsize=9)
-    if "time" in ds.coords and ds.sizes.get("time", 0):
-        time = np.asarray(ds["time"].values, float)
-        ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
-    else:
-        time = np.sort(t_lost[lost]) if lost.any() else np.zeros(1)
+    ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
+    ax.set_title("\n".join(counts), fontsize=9)
     ax = axes[0, 1]
-    frac = np.searchsorted(np.sort(t_lost[lost]), time, side="right") / max(len(t_lost), 1)
-    ax.step(time, 100.0 * frac, where="post", color="C3")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("% of samples")
     ax.set_ylim(-2, 102)
     ax.set_title("samples that lost contact by time t", fontsize=9)
-    return save(fig, path)
+    ax.legend(fontsize=7, frameon=False, loc="upper left")
+    return fig
