@@ -112,6 +112,7 @@ def test_e2e__report_writes_every_figure_the_run_allows(
         "scatter_q_eq.png",
         "scatter_joint_force_eq.png",
         "scatter_peak_contact_force.png",
+        "journal_orbit.png",
         "reaction_envelopes.png",
         "contact_loss.png",
         "status_counts.png",

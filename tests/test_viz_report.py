@@ -104,6 +104,8 @@ def test_report__skips_what_the_run_lacks_and_says_why(tmp_path: Path) -> None:
     }
     assert set(result.skipped) == {
         "omega_histogram.png",
+        "scatter_impact_count.png",
+        "journal_orbit.png",
         "reaction_envelopes.png",
         "contact_loss.png",
         "sobol.png",

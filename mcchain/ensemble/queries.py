@@ -5,7 +5,8 @@
 * picking samples: by index (``--samples``), by ``--worst VARIABLE:N`` (largest peak
   ``|VARIABLE|``, :func:`peak_abs`), by ``--status FLAG`` (:func:`status_mask`), all in
   :func:`select_samples`;
-* peaks over time per component (:func:`peak_abs_over_time`);
+* peaks over time per component (:func:`peak_abs_over_time`), the largest values
+  (:func:`largest`);
 * the run's ``[sample] design`` (:func:`run_design`).
 
 A lazy ensemble is read in blocks of samples, never whole. Errors are
@@ -115,6 +116,15 @@ def peak_abs(ds: xr.Dataset, variable: str, block: int = PEAK_BLOCK) -> np.ndarr
     return peak
 
 
+def largest(values: np.ndarray, n: int) -> np.ndarray:
+    """Positions of the ``n`` largest finite ``values`` (nsample,), largest first (ties in
+    sample order); NaN values are never picked, so fewer than ``n`` may come back."""
+    values = np.asarray(values, dtype=np.float64)
+    finite = np.isfinite(values)
+    order = np.argsort(-np.where(finite, values, -np.inf), kind="stable")
+    return order[: min(n, int(finite.sum()))]
+
+
 def status_mask(ds: xr.Dataset, names: str) -> np.ndarray:
     known = {flag.meaning: int(flag.value) for flag in Status}
     status = np.asarray(ds["status"].values, dtype=np.int64)
@@ -159,10 +169,8 @@ def select_samples(
             candidates &= status_mask(ds, status)
         if worst is not None:
             variable, n = parse_worst(worst)
-            peak = peak_abs(ds, variable)
-            candidates &= np.isfinite(peak)
-            order = np.argsort(-np.where(candidates, peak, -np.inf), kind="stable")
-            picked = [int(ids[i]) for i in order[: min(n, int(candidates.sum()))]]
+            peak = np.where(candidates, peak_abs(ds, variable), np.nan)
+            picked = [int(ids[i]) for i in largest(peak, n)]
         else:
             where = np.flatnonzero(candidates)
             if len(where) > limit:

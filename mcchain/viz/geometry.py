@@ -210,3 +210,18 @@ def characteristic_length(model: Model, row: int = 0) -> float:
         if model.joint_body_a[k] == GROUND:
             extent = max(extent, float(np.linalg.norm(jpa[k])))
     return extent if extent > 0.0 else 1.0
+
+
+def normalised_offsets(model: Model, row: int, q: np.ndarray) -> np.ndarray:
+    """The journal orbit: ``d / c`` of every joint over the poses ``q`` (T, nbody, 3).
+
+    ``d`` = journal centre − bearing centre (world frame, :func:`joint_track`), ``c`` the
+    joint's radial clearance, so the clearance circle is the unit circle (|d|/c > 1 is a
+    penetration under a contact law). Returns (T, njoint, 2), dimensionless; NaN for ideal
+    joints.
+    """
+    jt = joint_track(model, row, q, 1.0)
+    clearance = _at(model.joint_clearance, row).reshape(-1)[: model.njoint]
+    is_clear = (np.asarray(model.joint_kind) == JOINT_CLEARANCE) & (clearance > 0.0)
+    scale = np.where(is_clear, clearance, np.nan)
+    return (jt.journal - jt.bearing) / scale[None, :, None]

@@ -22,6 +22,12 @@ Entities (``{i}`` is the global sample index, names are escaped entity-path part
 ``sample/{i}/mechanism/clearance/...``   ``journal`` Points2D, ``offset`` Arrows2D and
                                          ``bearing`` LineStrips2D (circle of radius c),
                                          all magnified (see ``--magnify``)
+``sample/{i}/orbit/{joint}/...``         the journal orbit d / c of a clearance joint
+                                         (:mod:`mcchain.viz.contact`): ``circle``
+                                         LineStrips2D (static, the unit circle),
+                                         ``path`` Points2D (static, every time) and
+                                         ``journal`` Points2D (now), coloured by state
+                                         (link, contact, free, link after contact lost)
 ``sample/{i}/joint_force/{joint}``       Scalars [x, y] (N)
 ``sample/{i}/contact_force/{joint}``     Scalars λ of clearance joints (N)
 ``sample/{i}/driver_torque/{driver}``    Scalars (N m)
@@ -58,7 +64,7 @@ from mcchain.ensemble.queries import DEFAULT_LIMIT, positions, sample_ids, selec
 from mcchain.errors import RunError
 from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.status import Status
-from mcchain.viz import geometry
+from mcchain.viz import contact, geometry
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -69,6 +75,8 @@ if TYPE_CHECKING:
 APPLICATION_ID = "mcchain"
 DEFAULT_MAGNIFY = 100.0
 """Default magnification of clearance offsets: 0.1 mm is drawn as 1 cm."""
+ORBIT_SPACING = 2.5
+"""Distance between the orbit diagrams of a sample's clearance joints (in clearances)."""
 FORCE_ARROW_FRACTION = 0.3
 """Default force scale: the largest force shown is drawn this fraction of the mechanism size."""
 
@@ -382,6 +390,10 @@ def _log_one(
                 recording=rec,
             )
 
+    orbit = contact.sample_orbit(ds, model, pos, row, track.q) if "q" in ds.data_vars else None
+    if orbit is not None:
+        _log_orbit(f"{root}/orbit", orbit, times, rec, rr)
+
     # scalar plots ---------------------------------------------------------------------------
     def scalars(path: str, values: np.ndarray, names: list[str] | None = None) -> None:
         if names is not None:
@@ -406,6 +418,39 @@ def _log_one(
         scalars(f"{root}/energy", track.energy, ["energy"])
     if track.constraint_error is not None:
         scalars(f"{root}/constraint_error", track.constraint_error, ["max |Φ|"])
+
+
+def _log_orbit(
+    path: str, orbit: contact.Orbit, times: list[Any], rec: rr.RecordingStream | None, rr: Any
+) -> None:
+    """The journal orbit d / c of each clearance joint under ``path/{joint}``: the unit
+    clearance circle and the whole orbit (static), the journal now (over time), coloured by
+    state (:data:`mcchain.viz.contact.STATES`); joint k is drawn ORBIT_SPACING · k to the
+    right, y negated as in the mechanism view."""
+    circle = geometry.circles(np.zeros((1, 2)), 1.0, 91)[0]
+    for at, name in enumerate(orbit.names):
+        shift = np.array([ORBIT_SPACING * at, 0.0])
+        where = f"{path}/{_part(name)}"
+        offset = _flip(orbit.offset[:, at]) + shift
+        colors = contact.STATE_COLORS[orbit.state[:, at]]
+        c_mm = 1e3 * float(orbit.clearance[at])
+        rr.log(
+            f"{where}/circle",
+            rr.LineStrips2D([circle + shift], colors=JOINT_COLOR, radii=-1.0,
+                            labels=[f"{name}: c = {c_mm:.4g} mm"]),
+            static=True, recording=rec,
+        )  # fmt: skip
+        rr.log(f"{where}/path", rr.Points2D(offset, colors=colors, radii=-1.5), static=True,
+               recording=rec)  # fmt: skip
+        rr.log(f"{where}/journal", rr.Points2D.from_fields(radii=-6.0), static=True, recording=rec)
+        rr.send_columns(
+            f"{where}/journal",
+            indexes=times,
+            columns=rr.Points2D.columns(positions=offset, colors=colors).partition(
+                [1] * len(offset)
+            ),
+            recording=rec,
+        )
 
 
 # -- blueprint and recording -------------------------------------------------------------------
@@ -457,10 +502,27 @@ def make_blueprint(
         ds, model, [s for s in samples if s in present], magnify, model_offset
     )
     bounds = rrb.VisualBounds2D(x_range=x_range, y_range=y_range)
-    mechanisms = [
+    mechanisms: list[Any] = [
         rrb.Spatial2DView(origin=f"/sample/{s}/mechanism", name=f"sample {s}", visual_bounds=bounds)
         for s in samples
     ]
+    nclear = int(np.sum(np.asarray(model.joint_kind) == JOINT_CLEARANCE))
+    if nclear and "q" in ds.data_vars:  # the journal orbit beside each mechanism
+        orbit_bounds = rrb.VisualBounds2D(
+            x_range=[-1.3, ORBIT_SPACING * (nclear - 1) + 1.3], y_range=[-1.3, 1.3]
+        )
+        mechanisms = [
+            rrb.Horizontal(
+                view,
+                rrb.Spatial2DView(
+                    origin=f"/sample/{s}/orbit",
+                    name=f"sample {s}: orbit d / c",
+                    visual_bounds=orbit_bounds,
+                ),
+                column_shares=[3, 1],
+            )
+            for s, view in zip(samples, mechanisms, strict=True)
+        ]
     infos = [rrb.TextDocumentView(origin=f"/sample/{s}/info", name=f"sample {s}") for s in samples]
 
     def series(name: str, what: str) -> rrb.TimeSeriesView:

@@ -7,23 +7,31 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
 ==============================  ==========================================================
 ``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``), in rad/s
                                 and Hz, with ``damped_omega`` overlaid if it differs
-``scatter_<result>.png``        each result against each sampled parameter, with a
-                                least-squares trend line and Pearson's r (components
-                                constant over the samples are named, not drawn); results are
-                                ``omega`` (modes; a Hz axis beside rad/s), ``q_eq`` (body, dof),
-                                ``joint_force_eq`` (magnitude per joint) and
-                                ``peak_contact_force`` (max |λ| over time per clearance
-                                joint)
-``reaction_envelopes.png``      per joint |f| over time (and λ of clearance joints, driver
-                                torques): median and 5–95 % band over the samples
+``scatter_<result>.png``        each result against each sampled parameter (axes named
+                                ``key item [units]``), with a least-squares trend line and
+                                Pearson's r (components constant over the samples are named,
+                                not drawn); results are ``omega`` (modes; a Hz axis beside
+                                rad/s), ``q_eq`` (body, dof), ``joint_force_eq`` (magnitude
+                                per joint)
+contact figures                 ``scatter_peak_contact_force.png``: peak normal force per
+                                clearance joint against each sampled parameter;
+                                ``scatter_impact_count.png``: impacts per joint with a
+                                contact law; ``journal_orbit.png``: the journal in its
+                                clearance circle for the worst samples (all three:
+                                :mod:`mcchain.viz.report_contact`)
+``reaction_envelopes.png``      per joint |f| over time (and the normal force of clearance
+                                joints, driver torques): median and 5–95 % band over the
+                                samples, titled with each joint's model; ``contact_lost``
+                                samples left out after their ``contact_lost_time``
+                                (:mod:`mcchain.viz.history`)
 ``contact_loss.png``            which samples lost contact, and when
                                 (``contact_lost_time``), with the fraction lost by time t
 ``status_counts.png``           how many samples carry each status flag
-``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and peak |λ|,
-                                for a ``design = "saltelli"`` or ``"sobol"`` run only:
-                                first- and total-order (``SALib.analyze.sobol``) when the
-                                samples have Saltelli's layout (rows A, AB_1..AB_D[,
-                                BA_1..BA_D], B per base point, as
+``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
+                                contact force, for a ``design = "saltelli"`` or
+                                ``"sobol"`` run only: first- and total-order
+                                (``SALib.analyze.sobol``) when the samples have Saltelli's
+                                layout (rows A, AB_1..AB_D[, BA_1..BA_D], B per base point, as
                                 ``SALib.sample.sobol.sample`` makes them, and as
                                 ``design = "saltelli"`` makes them without the BA rows);
                                 for plain scrambled Sobol' points, first-order only
@@ -38,20 +46,30 @@ from __future__ import annotations
 
 import csv
 import logging
-import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mcchain.ensemble.queries import dim_names, peak_abs_over_time, run_design
+from mcchain.ensemble.queries import dim_names, run_design
 from mcchain.status import Status, counts
+from mcchain.viz.contact import joint_models
+from mcchain.viz.figures import figure, grid, save, save_or_reason
+from mcchain.viz.history import contact_loss, reaction_envelopes
+from mcchain.viz.report_contact import (
+    impact_figure,
+    orbit_figure,
+    param_axis,
+    peak_contact_forces,
+    peak_force_figure,
+)
 
 if TYPE_CHECKING:
     import xarray as xr
     from matplotlib.figure import Figure
+
+    from mcchain.model import Model
 
 log = logging.getLogger(__name__)
 
@@ -59,17 +77,12 @@ MAX_SCATTER_POINTS = 4000
 """Points drawn per scatter panel (a fixed random subset; trends use every sample)."""
 CONSTANT_RTOL = 1e-9
 """A result component whose spread is below this (relative, floor 1) is constant: not drawn."""
-MAX_ENVELOPE_TIMES = 400
-"""Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
-BLOCK_BYTES = 64 * 2**20
-"""Memory budget of one block read from the ensemble."""
 SOBOL_RESAMPLES = 200
 """Bootstrap resamples of SALib's confidence intervals."""
 MIN_RBD_SAMPLES = 64
 """Fewest samples for RBD-FAST first-order indices (its harmonics need a few per period)."""
 SOBOL_SEED = 12345
 """Seed of SALib's bootstrap, so reports are reproducible."""
-DPI = 100
 
 
 @dataclass
@@ -104,15 +117,9 @@ class SobolIndices:
 
 
 # -- reading -----------------------------------------------------------------------------------
-def _block(ds: xr.Dataset, name: str, axis: str) -> int:
-    """How many entries along ``axis`` fit in :data:`BLOCK_BYTES` of float64."""
-    da = ds[name]
-    per = 8 * int(np.prod([da.sizes[d] for d in da.dims if d != axis], dtype=np.int64))
-    return max(1, BLOCK_BYTES // max(per, 1))
-
-
-def results(ds: xr.Dataset) -> list[Result]:
-    """The per-sample results present in the ensemble (see the module docstring)."""
+def results(ds: xr.Dataset, models: list[str | None] | None = None) -> list[Result]:
+    """The per-sample results present in the ensemble (see the module docstring);
+    ``models``: :func:`mcchain.viz.contact.joint_models` (default: from the data)."""
     out: list[Result] = []
     if "omega" in ds.data_vars and ds.sizes.get("mode", 0):
         omega = np.asarray(ds["omega"].transpose("sample", "mode").values, float)
@@ -131,47 +138,21 @@ def results(ds: xr.Dataset) -> list[Result]:
                 "N",
             )
         )
-    if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
-        peak = peak_abs_over_time(ds, "contact_force", _block(ds, "contact_force", "sample"))
-        keep = np.isfinite(peak).any(axis=0) if peak.ndim == 2 else np.zeros(0, bool)
-        if keep.any():
-            names = [j for j, k in zip(dim_names(ds, "joint"), keep, strict=True) if k]
-            out.append(
-                Result(
-                    "peak_contact_force",
-                    tuple(f"peak |λ {j}|" for j in names),
-                    peak[:, keep],
-                    "N",
-                )
-            )
+    peak_labels, peaks, _ = peak_contact_forces(ds, models or joint_models(ds))
+    keep = np.isfinite(peaks).any(axis=0)
+    if keep.any():
+        chosen = tuple(label for label, k in zip(peak_labels, keep, strict=True) if k)
+        out.append(Result("peak_contact_force", chosen, peaks[:, keep], "N"))
     return out
 
 
 # -- figures -----------------------------------------------------------------------------------
-def _figure(nrow: int, ncol: int, w: float = 3.2, h: float = 2.5) -> tuple[Figure, np.ndarray]:
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(max(4.0, w * ncol), max(3.0, h * nrow)), dpi=DPI, layout="constrained")
-    axes = np.asarray(fig.subplots(nrow, ncol, squeeze=False))
-    return fig, axes
-
-
-def _grid(n: int, max_col: int = 4) -> tuple[int, int]:
-    ncol = min(n, max_col)
-    return (n + ncol - 1) // ncol, ncol
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
-    return path
-
-
 def omega_histogram(ds: xr.Dataset, path: Path) -> Path | str:
     """Histogram of each eigenpulsation (rad/s below, Hz above), with the damped pulsations
     overlaid when the run has dampers."""
     if "omega" not in ds.data_vars or not ds.sizes.get("mode", 0):
         return "the run has no eigenpulsations ([modes] absent)"
-    return _save(omega_histogram_figure(ds), path)
+    return save(omega_histogram_figure(ds), path)
 
 
 def omega_histogram_figure(ds: xr.Dataset) -> Figure:
@@ -182,8 +163,8 @@ def omega_histogram_figure(ds: xr.Dataset) -> Figure:
         damped = np.asarray(ds["damped_omega"].transpose("sample", "mode").values, float)
         if np.array_equal(damped, np.maximum(omega, 0.0), equal_nan=True):
             damped = None  # no dampers: nothing to add
-    nrow, ncol = _grid(omega.shape[1])
-    fig, axes = _figure(nrow, ncol)
+    nrow, ncol = grid(omega.shape[1])
+    fig, axes = figure(nrow, ncol)
     for k, ax in enumerate(axes.flat):
         if k >= omega.shape[1]:
             ax.set_visible(False)
@@ -253,7 +234,10 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     shown = np.arange(n)
     if n > MAX_SCATTER_POINTS:
         shown = np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER_POINTS, replace=False))
-    fig, axes = _figure(len(rows), nparam, w=2.8, h=2.2)
+    axes_of = [param_axis(path, params[:, j]) for j, path in enumerate(paths)]
+    xlabels = [label for label, _ in axes_of]
+    params = params * np.array([scale for _, scale in axes_of])
+    fig, axes = figure(len(rows), nparam, w=2.8, h=2.2)
     alpha = float(np.clip(200.0 / max(len(shown), 1), 0.08, 0.8))
     for i, k in enumerate(rows):
         y = result.values[:, k]
@@ -268,7 +252,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
                 ax.plot(xs, a + b * xs, color="C3", lw=1.5, label=f"r = {r:+.2f}")
                 ax.legend(loc="best", fontsize=7, frameon=False)
             if i == len(rows) - 1:
-                ax.set_xlabel(paths[j], fontsize=8)
+                ax.set_xlabel(xlabels[j], fontsize=8)
             if j == 0:
                 ax.set_ylabel(result.labels[k], fontsize=8)
             if j == nparam - 1 and result.units == "rad/s":
@@ -280,86 +264,7 @@ def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
     if constant:
         title += "\nconstant (not drawn): " + ", ".join(constant)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
-
-
-def _envelope(ds: xr.Dataset, name: str, reduce: Callable[[np.ndarray], np.ndarray]) -> Any:
-    """Quantiles (3, ntime_shown, ncomp) of ``reduce(block)`` over samples, and the times."""
-    da = ds[name].transpose("time", "sample", ...)
-    nt = ds.sizes["time"]
-    idx = np.unique(np.linspace(0, nt - 1, min(nt, MAX_ENVELOPE_TIMES)).round().astype(int))
-    step = _block(ds, name, "time")
-    parts = []
-    for start in range(0, len(idx), step):
-        a = reduce(np.asarray(da.isel(time=idx[start : start + step]).values, float))
-        a = a.reshape(a.shape[0], a.shape[1], -1)  # (time, sample, comp)
-        with warnings.catch_warnings():  # all-NaN columns (failed samples) give NaN quietly
-            warnings.simplefilter("ignore", RuntimeWarning)
-            parts.append(np.nanquantile(a, [0.05, 0.5, 0.95], axis=1))
-    time = np.asarray(ds["time"].values, float)[idx]
-    return np.concatenate(parts, axis=1), time
-
-
-def reaction_envelopes(ds: xr.Dataset, path: Path) -> Path | str:
-    """Median and 5–95 % band over the samples of every reaction over time."""
-    if "time" not in ds.dims or "joint_force" not in ds.data_vars:
-        return "the run has no time history of joint forces ([simulate] absent)"
-    panels: list[tuple[str, np.ndarray, np.ndarray, str]] = []
-    q, time = _envelope(ds, "joint_force", lambda a: np.hypot(a[..., 0], a[..., 1]))
-    for k, j in enumerate(dim_names(ds, "joint")):
-        panels.append((f"|f {j}|", q[..., k], time, "N"))
-    if "contact_force" in ds.data_vars:
-        q, time = _envelope(ds, "contact_force", lambda a: a)
-        for k, j in enumerate(dim_names(ds, "joint")):
-            if np.isfinite(q[..., k]).any():
-                panels.append((f"λ {j} (contact)", q[..., k], time, "N"))
-    if "driver_torque" in ds.data_vars and ds.sizes.get("driver", 0):
-        q, time = _envelope(ds, "driver_torque", lambda a: a)
-        for k, d in enumerate(dim_names(ds, "driver")):
-            panels.append((f"driver torque {d}", q[..., k], time, "N m"))
-    nrow, ncol = _grid(len(panels), 2)
-    fig, axes = _figure(nrow, ncol, w=4.5, h=2.6)
-    for ax, (title, quant, t, units) in zip(axes.flat, panels, strict=False):
-        ax.fill_between(t, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
-        ax.plot(t, quant[1], color="C0", lw=1.2, label="median")
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel(units)
-        ax.legend(fontsize=7, frameon=False)
-    for ax in list(axes.flat)[len(panels) :]:
-        ax.set_visible(False)
-    fig.suptitle(f"reactions over time, {ds.sizes['sample']} samples")
-    return _save(fig, path)
-
-
-def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
-    """Which samples lost contact at a clearance joint, and when."""
-    if "contact_lost_time" not in ds.data_vars:
-        return "the run has no contact_lost_time (no clearance joint or no [simulate])"
-    t_lost = np.asarray(ds["contact_lost_time"].values, float)
-    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(len(t_lost))
-    lost = np.isfinite(t_lost)
-    fig, axes = _figure(1, 2, w=4.5, h=3.2)
-    ax = axes[0, 0]
-    ax.scatter(t_lost[lost], ids[lost], s=8, color="C3")
-    ax.set_xlabel("contact_lost_time (s)")
-    ax.set_ylabel("sample")
-    if len(ids):
-        ax.set_ylim(float(ids.min()) - 0.5, float(ids.max()) + 0.5)
-    ax.set_title(f"{int(lost.sum())} of {len(t_lost)} samples lost contact", fontsize=9)
-    if "time" in ds.coords and ds.sizes.get("time", 0):
-        time = np.asarray(ds["time"].values, float)
-        ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
-    else:
-        time = np.sort(t_lost[lost]) if lost.any() else np.zeros(1)
-    ax = axes[0, 1]
-    frac = np.searchsorted(np.sort(t_lost[lost]), time, side="right") / max(len(t_lost), 1)
-    ax.step(time, 100.0 * frac, where="post", color="C3")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("% of samples")
-    ax.set_ylim(-2, 102)
-    ax.set_title("samples that lost contact by time t", fontsize=9)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
@@ -369,7 +274,7 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
     c = counts(np.asarray(ds["status"].values))
     names = ["ok", *(flag.meaning for flag in Status)]
     values = [c[n] for n in names]
-    fig, axes = _figure(1, 1, w=7.0, h=3.6)
+    fig, axes = figure(1, 1, w=7.0, h=3.6)
     ax = axes[0, 0]
     colors = ["C2"] + ["C3" if f.value & 0b1111 else "C1" for f in Status]
     bars = ax.bar(range(len(names)), values, color=colors)
@@ -377,7 +282,7 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
     ax.set_xticks(range(len(names)), [n.replace("_", "\n") for n in names], fontsize=8)
     ax.set_ylabel("samples")
     ax.set_title(f"status of {len(np.asarray(ds['status'].values))} samples (flags may overlap)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- Sobol -------------------------------------------------------------------------------------
@@ -548,8 +453,8 @@ def sobol_figure(
             for j, name in enumerate(names):
                 values = (f"{v[j]:.6g}" for v in (s.S1, s.S1_conf, s.ST, s.ST_conf))
                 writer.writerow([s.output, name, s.method, *values])
-    nrow, ncol = _grid(len(found), 3)
-    fig, axes = _figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
+    nrow, ncol = grid(len(found), 3)
+    fig, axes = figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
     x = np.arange(len(names))
     for ax, s in zip(axes.flat, found, strict=False):
         ax.bar(x - 0.2, s.S1, 0.4, yerr=s.S1_conf, capsize=2, label="first order S1")
@@ -568,12 +473,23 @@ def sobol_figure(
     else:
         how = "SALib sobol on Saltelli's layout"
     fig.suptitle(f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}", fontsize=10)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- command -----------------------------------------------------------------------------------
-def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = None) -> Report:
-    """Write every figure the ensemble allows into ``out_dir`` (created if needed)."""
+def make_report(
+    ds: xr.Dataset,
+    out_dir: str | Path,
+    *,
+    design: str | None = None,
+    model: Model | None = None,
+) -> Report:
+    """Write every figure the ensemble allows into ``out_dir`` (created if needed).
+
+    ``model``: the model of the samples (row = global sample index), which gives the joint
+    points of the journal orbit and the model (link, contact, auto) of each clearance joint;
+    ``None``: the orbit is skipped and the models are inferred from the data.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = Report()
@@ -586,13 +502,25 @@ def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = Non
             report.skipped[name] = produced
 
     record("omega_histogram.png", omega_histogram(ds, out / "omega_histogram.png"))
-    found = results(ds)
+    models = joint_models(ds, model)
+    found = results(ds, models)
     if not found:
         record("scatter_*.png", "the run has no equilibrium, mode or contact result")
     for result in found:
         name = f"scatter_{result.name}.png"
-        record(name, scatter(ds, result, out / name))
-    record("reaction_envelopes.png", reaction_envelopes(ds, out / "reaction_envelopes.png"))
+        if result.name == "peak_contact_force":
+            record(name, save_or_reason(peak_force_figure(ds, models), out / name))
+        else:
+            record(name, scatter(ds, result, out / name))
+    for name, found_figure in (
+        ("scatter_impact_count.png", impact_figure(ds)),
+        ("journal_orbit.png", orbit_figure(ds, model, models)),
+    ):
+        record(name, save_or_reason(found_figure, out / name))
+    record(
+        "reaction_envelopes.png",
+        reaction_envelopes(ds, out / "reaction_envelopes.png", models),
+    )
     record("contact_loss.png", contact_loss(ds, out / "contact_loss.png"))
     record("status_counts.png", status_counts(ds, out / "status_counts.png"))
     record(
@@ -605,9 +533,16 @@ def make_report(ds: xr.Dataset, out_dir: str | Path, *, design: str | None = Non
 def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     """``mcchain report``: every figure of a run folder (path or id under ``runs/``) into
     ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
+    from mcchain.ensemble.describe import stored_model
+    from mcchain.errors import McchainError
     from mcchain.runs import open_run, resolve_run
 
     folder = resolve_run(run)
     ds = open_run(folder)
     target = Path(out) if out else folder / "report"
-    return make_report(ds, target, design=run_design(folder, ds))
+    try:
+        model = stored_model(ds)
+    except McchainError as err:  # an ensemble without a usable scene: draw what needs none
+        log.info("report: the run's model cannot be rebuilt (%s)", err)
+        model = None
+    return make_report(ds, target, design=run_design(folder, ds), model=model)

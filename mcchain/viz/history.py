@@ -1,0 +1,219 @@
+"""Report figures of the time histories: reaction envelopes and contact loss.
+
+``reaction_envelopes.png``: per joint |f| over time (and the normal contact force of clearance
+joints, driver torques), median and 5–95 % band over the samples, each titled with the model
+that produced it (link, or contact law and its model); samples flagged ``contact_lost`` are
+left out after their ``contact_lost_time`` and those times shaded; the state of each joint
+with a contact law (link, contact, free, ...) as shares of the samples over time.
+``contact_loss.png``: which samples lost contact under the link model, and when (and when
+joints with a contact law first separated).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mcchain.ensemble.queries import dim_names
+from mcchain.viz.contact import FAILED, LINK, LINK_LOST, STATE_COLORS, STATES, joint_models
+from mcchain.viz.figures import block, figure, grid, save_or_reason
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.figure import Figure
+
+MAX_ENVELOPE_TIMES = 400
+"""Time points at which envelopes are evaluated (evenly strided; a plot needs no more)."""
+
+
+def _shown_times(ds: xr.Dataset) -> np.ndarray:
+    """Indices of the (at most :data:`MAX_ENVELOPE_TIMES`, evenly strided) times drawn."""
+    nt = ds.sizes["time"]
+    return np.unique(np.linspace(0, nt - 1, min(nt, MAX_ENVELOPE_TIMES)).round().astype(int))
+
+
+def _lost_times(ds: xr.Dataset) -> np.ndarray:
+    """(nsample,) ``contact_lost_time`` (NaN: never lost, or the run has none)."""
+    if "contact_lost_time" not in ds.data_vars:
+        return np.full(ds.sizes["sample"], np.nan)
+    return np.asarray(ds["contact_lost_time"].transpose("sample").values, np.float64)
+
+
+def _envelope(
+    ds: xr.Dataset,
+    name: str,
+    reduce: Callable[[np.ndarray], np.ndarray],
+    idx: np.ndarray,
+    lost: np.ndarray,
+) -> np.ndarray:
+    """Quantiles (3, len(idx), ncomp) over the samples of ``reduce(values)`` at the times
+    ``idx``, leaving out each sample from its ``lost`` time (``contact_lost_time``) on."""
+    da = ds[name].transpose("time", "sample", ...)
+    time = np.asarray(ds["time"].values, float)
+    step = block(ds, name, "time")
+    parts = []
+    for start in range(0, len(idx), step):
+        at = idx[start : start + step]
+        a = reduce(np.asarray(da.isel(time=at).values, float))
+        a = a.reshape(a.shape[0], a.shape[1], -1)  # (time, sample, comp)
+        a[time[at][:, None] >= lost[None, :]] = np.nan  # the link pulled: not physical
+        with warnings.catch_warnings():  # all-NaN columns (failed samples) give NaN quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            parts.append(np.nanquantile(a, [0.05, 0.5, 0.95], axis=1))
+    return np.concatenate(parts, axis=1)
+
+
+def model_tag(model: str | None) -> str:
+    """What a panel title says of a joint's model: ``" — link"``, ``" — contact law
+    (auto)"``, ... (:func:`mcchain.viz.contact.joint_models`); ``""`` for ideal joints."""
+    if model is None:
+        return ""
+    if model == "link":
+        return " — link"
+    return " — contact law" + ("" if model == "contact law" else f" ({model})")
+
+
+def state_shares(ds: xr.Dataset, joint: int, idx: np.ndarray, lost: np.ndarray) -> np.ndarray:
+    """(len(STATES), len(idx)) share of the samples in each state of :data:`STATES` at a
+    joint with a contact law, at the times ``idx``."""
+    mode = np.asarray(ds["contact_mode"].isel(time=idx, joint=joint).transpose("time", "sample"))
+    time = np.asarray(ds["time"].values, float)[idx]
+    after = time[:, None] >= lost[None, :]
+    states = np.where(mode < 0, FAILED, mode)
+    states = np.where((states == LINK) & after, LINK_LOST, states)
+    return np.stack([(states == code).mean(axis=1) for code in range(len(STATES))])
+
+
+def reaction_envelopes(
+    ds: xr.Dataset, path: Path, models: list[str | None] | None = None
+) -> Path | str:
+    """``reaction_envelopes.png``: :func:`reaction_envelopes_figure`, saved."""
+    return save_or_reason(reaction_envelopes_figure(ds, models), path)
+
+
+def reaction_envelopes_figure(
+    ds: xr.Dataset, models: list[str | None] | None = None
+) -> Figure | str:
+    """Median and 5–95 % band over the samples of every reaction over time.
+
+    Titles say which model a clearance joint's reactions come from (``models``:
+    :func:`mcchain.viz.contact.joint_models`, default from the data). A sample flagged
+    ``contact_lost`` is left out from its ``contact_lost_time`` on (the link then pulls: not
+    physical); the times where some sample is left out are shaded. For each joint with a
+    contact law, a panel shows the share of the samples in each state over time.
+    """
+    if "time" not in ds.dims or "joint_force" not in ds.data_vars:
+        return "the run has no time history of joint forces ([simulate] absent)"
+    models = models if models is not None else joint_models(ds)
+    joints = dim_names(ds, "joint")
+    idx, lost = _shown_times(ds), _lost_times(ds)
+    time = np.asarray(ds["time"].values, float)[idx]
+    masked = (time[:, None] >= lost[None, :]).mean(axis=1)
+    panels: list[tuple[str, np.ndarray, str]] = []
+    q = _envelope(ds, "joint_force", lambda a: np.hypot(a[..., 0], a[..., 1]), idx, lost)
+    for k, j in enumerate(joints):
+        panels.append((f"|f {j}|{model_tag(models[k])}", q[..., k], "N"))
+    if "contact_force" in ds.data_vars:
+        q = _envelope(ds, "contact_force", lambda a: a, idx, lost)
+        for k, j in enumerate(joints):
+            if not np.isfinite(q[..., k]).any():
+                continue
+            what = {"link": "λ", "contact": "F_n"}.get(str(models[k]), "λ (link) / F_n (law)")
+            panels.append((f"{what} {j}{model_tag(models[k])}", q[..., k], "N"))
+    if "driver_torque" in ds.data_vars and ds.sizes.get("driver", 0):
+        q = _envelope(ds, "driver_torque", lambda a: a, idx, lost)
+        for k, d in enumerate(dim_names(ds, "driver")):
+            panels.append((f"driver torque {d}", q[..., k], "N m"))
+    shares = []
+    if "contact_mode" in ds.data_vars:
+        law = [k for k, m in enumerate(models) if m not in (None, "link")]
+        shares = [(k, state_shares(ds, k, idx, lost)) for k in law]
+    nrow, ncol = grid(len(panels) + len(shares), 2)
+    fig, axes = figure(nrow, ncol, w=4.5, h=2.6)
+    nlost = int(np.isfinite(lost).sum())
+    for ax, (title, quant, units) in zip(axes.flat, panels, strict=False):
+        ax.fill_between(time, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
+        ax.plot(time, quant[1], color="C0", lw=1.2, label="median")
+        if nlost:
+            ax.fill_between(
+                time, 0, 1, where=masked > 0, transform=ax.get_xaxis_transform(),
+                color="C3", alpha=0.12, lw=0, label="samples left out (contact_lost)",
+            )  # fmt: skip
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel(units)
+        ax.legend(fontsize=7, frameon=False)
+    for ax, (k, share) in zip(list(axes.flat)[len(panels) :], shares, strict=False):
+        seen = [code for code in range(len(STATES)) if share[code].any()]
+        colors = [STATE_COLORS[code] / 255.0 for code in seen]
+        labels = [STATES[code] for code in seen]
+        ax.stackplot(time, 100.0 * share[seen], colors=colors, labels=labels, alpha=0.85)
+        ax.set_title(f"state of {joints[k]}{model_tag(models[k])}", fontsize=9)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("% of samples")
+        ax.set_ylim(0, 100)
+        ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    for ax in list(axes.flat)[len(panels) + len(shares) :]:
+        ax.set_visible(False)
+    title = f"reactions over time, {ds.sizes['sample']} samples"
+    if nlost:
+        title += (
+            f"\n{nlost} samples lost contact under the link model (λ ≤ 0 needed): left out "
+            "from their contact_lost_time on (shaded)"
+        )
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
+    """``contact_loss.png``: :func:`contact_loss_figure`, saved."""
+    return save_or_reason(contact_loss_figure(ds), path)
+
+
+def contact_loss_figure(ds: xr.Dataset) -> Figure | str:
+    """Which samples lost contact at a clearance joint, and when: ``contact_lost_time`` under
+    the link model and, for joints with a contact law, the first separation (the earliest
+    ``first_separation_time`` over a sample's joints)."""
+    if "contact_lost_time" not in ds.data_vars:
+        return "the run has no contact_lost_time (no clearance joint or no [simulate])"
+    events = [("contact_lost (link model)", np.asarray(ds["contact_lost_time"].values, float))]
+    if "first_separation_time" in ds.data_vars:
+        first = ds["first_separation_time"].transpose("sample", "joint").values
+        with warnings.catch_warnings():  # samples that never separated: NaN quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            separated = np.nanmin(np.asarray(first, float), axis=1, initial=np.inf)
+        events.append(
+            ("first separation (contact law)", np.where(separated < np.inf, separated, np.nan))
+        )
+    n = len(events[0][1])
+    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(n)
+    if "time" in ds.coords and ds.sizes.get("time", 0):
+        time = np.asarray(ds["time"].values, float)
+    else:
+        time = np.unique(np.concatenate([t[np.isfinite(t)] for _, t in events] + [np.zeros(1)]))
+    fig, axes = figure(1, 2, w=4.5, h=3.2)
+    counts = []
+    for (label, t), color in zip(events, ("C3", "C2"), strict=False):
+        at = np.isfinite(t)
+        counts.append(f"{int(at.sum())} of {n} samples: {label}")
+        axes[0, 0].scatter(t[at], ids[at], s=8, color=color, label=label)
+        frac = np.searchsorted(np.sort(t[at]), time, side="right") / max(n, 1)
+        axes[0, 1].step(time, 100.0 * frac, where="post", color=color, label=label)
+    ax = axes[0, 0]
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("sample")
+    if len(ids):
+        ax.set_ylim(float(ids.min()) - 0.5, float(ids.max()) + 0.5)
+    ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
+    ax.set_title("\n".join(counts), fontsize=9)
+    ax = axes[0, 1]
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("% of samples")
+    ax.set_ylim(-2, 102)
+    ax.set_title("samples that lost contact by time t", fontsize=9)
+    ax.legend(fontsize=7, frameon=False, loc="upper left")
+    return fig
