@@ -274,6 +274,13 @@ def packed_slots(
                     for template, idx in zip(names, row.elements, strict=True):
                         field, at = row.model_index(i, idx)
                         target.append(Slot(template.format(i=i), field, at, inv))
+            if kind == "joint" and contact[i]:
+                # The law and the model (contact or auto) are data too: one module serves
+                # them all. Their Model arrays have no sample axis (topology).
+                plain += [
+                    Slot(f"lw{i}", "joint_contact_law", (i,), False),
+                    Slot(f"md{i}", "joint_model", (i,), False),
+                ]
             out += plain + inverse
     return out
 

@@ -38,10 +38,10 @@ GOLDEN = {
         "rk45": "d7a44c9c37e34f990579bd3b1b0e967e968cb55cac99cdf6b96291c7f420893d",
     },
     "fourbar-clearance-auto": {
-        "accel": "081fdeaa5ecded731c227635a6c584d3e769216d7c3ab70239734da2a362b569",
-        "rk4": "1c47f78e599dc99e93616ef002cefdfe28140cd456ff1ca8b82107e89d1c4992",
-        "rk4-projection": "afd3f9aa307c791cbf5f6bd0d6b2ef6683ec935a0a23c505549bf69a30d43edb",
-        "rk45": "5211f3c9ccf219f755da455de99c51082ae894af873f23a6e17dda230a24d360",
+        "accel": "a715a9651145fd12b8b4c0e79de9d61f6191c6ba8ff355cd428145f2196144a3",
+        "rk4": "de261761965f70a00be5dc233aad572c30809555955480bf685647851bd97086",
+        "rk4-projection": "ea3dd2f83caaf0db43075118d4ec296bee49a889820061b93e77e9e49edacd34",
+        "rk45": "8be23fd268cfde8c3c67bb4efed6325f8499c5bfdfd50af02dedd0d334502b59",
     },
     "chain4-mixed-spring": {
         "accel": "a88e7a8157a86e4e8f7931acabc9df69ea4ed2cfcac5abbf7b9c59e4d16ab96c",

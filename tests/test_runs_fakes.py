@@ -11,8 +11,6 @@ import filecmp
 import json
 import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -313,67 +311,3 @@ def test_progress__chunks_rate_and_eta_on_a_terminal_only(
     quiet.update(10)
     quiet.close()
     assert capsys.readouterr().err == ""
-
-
-MEMORY_SCRIPT = """
-import resource, sys, json
-from pathlib import Path
-import netCDF4, numpy, xarray, tqdm
-from test_runs_support import fake_loader, fake_solve, write_fake_scene
-from mcchain import execution, parallel
-from mcchain.ensemble import io, registry
-def peak():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-tmp, count, chunk, steps = Path(sys.argv[1]), *map(int, sys.argv[2:5])
-imports = peak()
-sizes = {}
-for name, n in (("medium", count // 5), ("big", count)):
-    scene = write_fake_scene(tmp / f"{name}.toml", count=n, steps=steps,
-                             storage={"compression": "zstd"})
-    result = execution.start_run(scene, out=tmp / name, chunk_size=chunk, loader=fake_loader,
-                            solve=fake_solve, progress=False)
-    sizes[name] = peak()
-print(json.dumps({"imports": imports, **sizes,
-                  "file": (result.folder / "ensemble.nc").stat().st_size,
-                  "merge": result.record["merge"], "timings": result.record["timings"]}))
-"""
-
-
-@pytest.mark.slow
-def test_memory__1e5_samples_with_histories_stay_within_a_chunk_bound(tmp_path: Path) -> None:
-    """Peak RSS of a 10⁵-sample run with histories is O(chunk), far below the ensemble.
-
-    Uses the fake solver (float64 histories, like the real one, cast to float32 to store);
-    the real simulate engine is measured by benchmarks/bench_runs.py.
-    """
-    count, chunk, steps = 100_000, 500, 100
-    proc = subprocess.run(
-        [sys.executable, "-c", MEMORY_SCRIPT, str(tmp_path), str(count), str(chunk), str(steps)],
-        env=env(),
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=600,
-    )
-    m = json.loads(proc.stdout.strip().splitlines()[-1])
-    # float32 bytes of one sample's histories: q, v (6 each), joint_force (4), contact (2),
-    # driver torque, constraint error, energy (1 each) per output time.
-    per_sample = steps * (6 + 6 + 4 + 2 + 1 + 1 + 1) * 4
-    ensemble_bytes = count * per_sample
-    chunk_bytes = chunk * per_sample
-    # The fake solver holds ~10 float64 chunk-sized arrays (20 float32 chunks), one chunk
-    # waits for the writer while the next is computed; the merge copies 16 MiB blocks
-    # (twice: read pieces, concatenated) and keeps <= 16 parts open (~2 MiB each).
-    bound = 28 * chunk_bytes + 96 * 2**20
-    run_peak = m["big"] - m["imports"]
-    print(
-        f"peak above imports {run_peak / 2**20:.0f} MiB (bound {bound / 2**20:.0f} MiB), "
-        f"at 1/5 the samples {(m['medium'] - m['imports']) / 2**20:.0f} MiB, "
-        f"ensemble {ensemble_bytes / 2**20:.0f} MiB, merge {m['merge']['mb_per_s']:.0f} MB/s"
-    )
-    assert bound < ensemble_bytes / 3
-    assert run_peak < bound
-    # Five times the samples need no more memory, but for the model's per-sample
-    # parameter arrays (~100 B per sample) and allocator noise.
-    assert m["big"] - m["medium"] < 8 * 2**20 + 128 * (count - count // 5)
-    assert m["file"] > ensemble_bytes / 4  # really written (zstd on smooth data)

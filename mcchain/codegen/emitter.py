@@ -564,26 +564,19 @@ class Emitter:
         contact's first instants, where the onset is located only at the step's end.
         """
         r = self.contact_row[k]
-        law = self.topo.joint_law[k]
         self.emit(
             f"pen{k} = rho{k} - p_cl{k}",
             f"pdot{k} = phid{r}",
             f"pp{k} = max(pen{k}, 0.0)",
             f"pw{k} = pp{k} ** p_mx{k}",
+            # χ(e) of the law (its code is data, so one module serves every law)
+            f"chi{k} = (0.75 * (1.0 - p_er{k} * p_er{k}) if p_lw{k} == {LANKARANI_NIKRAVESH!r}.0"
+            f" else (1.6 * (1.0 - p_er{k}) / p_er{k} if p_lw{k} == {FLORES!r}.0"
+            f" else (1.5 * (1.0 - p_er{k}) if p_lw{k} == {HUNT_CROSSLEY!r}.0 else 0.0)))",
+            f"rr{k} = ins{k} * vi{k} + (1.0 - ins{k}) * pdot{k}",
+            f"dmp{k} = chi{k} / rr{k} if rr{k} > 1e-200 else 0.0",
+            f"sdm{k} = max(1.0 + dmp{k} * pdot{k}, 0.0)",
         )
-        chi = {
-            LANKARANI_NIKRAVESH: f"0.75 * (1.0 - p_er{k} * p_er{k})",
-            FLORES: f"1.6 * (1.0 - p_er{k}) / p_er{k}",
-            HUNT_CROSSLEY: f"1.5 * (1.0 - p_er{k})",
-        }.get(law)
-        if chi is None:
-            self.emit(f"sdm{k} = 1.0")
-        else:
-            self.emit(
-                f"rr{k} = ins{k} * vi{k} + (1.0 - ins{k}) * pdot{k}",
-                f"dmp{k} = ({chi}) / rr{k} if rr{k} > 1e-200 else 0.0",
-                f"sdm{k} = max(1.0 + dmp{k} * pdot{k}, 0.0)",
-            )
         self.emit(
             f"fn{k} = p_K{k} * pw{k} * sdm{k}",
             f"kc{k} = fm{k} * p_K{k} * p_mx{k} * (pw{k} / pp{k} if pp{k} > 0.0 else 0.0) * sdm{k}",

@@ -282,17 +282,20 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     if not joints:
         return dict.fromkeys(_CONTACT_BLOCKS, "")
     at = lay.at
+    slots = topo.slots()
 
     def indent(lines: list[str], n: int = 4) -> list[str]:
         return [" " * n + line for line in lines]
 
+    def model(k: int) -> str:
+        """The joint's model code (contact or auto) from the lane's parameters."""
+        return at("P", slots[f"md{k}"])
+
     def switch(j: int, k: int, lamrow: str, t: str, d1: str) -> list[str]:
         """Model auto: the law from the first λ ≤ 0 on, starting from the link's state."""
-        if topo.joint_model[k] != AUTO:
-            return []
         r = topo.joint_row[k]
         return [
-            f"if {at('fm', j)} == 0.0 and {at(lamrow, r)} <= 0.0:",
+            f"if {at('fm', j)} == 0.0 and {at(lamrow, r)} <= 0.0 and {model(k)} == {AUTO!r}.0:",
             f"    {at('fm', j)} = 1.0",
             f"    {at('vi', j)} = 0.0",
             f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
@@ -303,14 +306,13 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     def reseat(j: int, k: int, lamrow: str, h: str, d1: str, r1: str) -> list[str]:
         """Model auto: back to the link once pressed quasi-statically for a dwell
         (mcchain.contact.RESEAT_RATE, RESEAT_PERIODS); the lane is then projected."""
-        if topo.joint_model[k] != AUTO:
-            return []
         r = topo.joint_row[k]
         wj, dwl = at("wjc", j), at("dwl", j)
         slow = f"abs({r1}) <= {RESEAT_RATE!r} * wn * {d1}"
+        pressed = f"{d1} > 0.0 and {at(lamrow, r)} > 0.0 and {model(k)} == {AUTO!r}.0"
         return [
             f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
-            f"if {d1} > 0.0 and {at(lamrow, r)} > 0.0 and {slow}:",
+            f"if {pressed} and {slow}:",
             f"    {dwl} += {h}",
             f"    if {dwl} * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
             f"        {dwl} = -1.0",  # marked: group_reseat puts it on the link
@@ -349,7 +351,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     b: dict[str, str] = {}
     setup = ["for l in range(nl):"]
     for j, k in enumerate(joints):
-        law_from_start = "1.0" if topo.joint_model[k] == CONTACT else "0.0"
+        law_from_start = f"1.0 if {model(k)} == {CONTACT!r}.0 else 0.0"
         setup += indent([f"{at('fm', j)} = {law_from_start}"])
         setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
     b["contact_setup"] = "\n".join(setup)
@@ -398,7 +400,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
     b["contact_accept"] = "\n".join(accept)
     b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
-    reseats = any(topo.joint_model[k] == AUTO for k in joints)
+    reseats = True  # whether a joint is auto is data (its md slot), not topology
     marks = []
     for j in range(len(joints)):
         marks += [
@@ -493,7 +495,7 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     blocks = _blocks(topo, nstage, lay)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
-    if tableau is not None and any(m == AUTO for m in topo.joint_model):
+    if tableau is not None and topo.contact_joints:
         parts_of = (*parts_of, templates.RESEAT_HELPER)
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))

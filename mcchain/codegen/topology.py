@@ -33,14 +33,13 @@ class Topology:
     spring_a: tuple[int, ...]
     spring_b: tuple[int, ...]
     joint_model: tuple[int, ...] = ()
-    joint_law: tuple[int, ...] = ()
 
     def __repr__(self) -> str:
         # The contact fields only when a joint uses the law: the text of every generated
         # module without contact (it starts with this repr) is unchanged by their addition.
         names = [f.name for f in fields(self)]
         if not self.contact_joints:
-            names = [n for n in names if n not in ("joint_model", "joint_law")]
+            names = [n for n in names if n != "joint_model"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -58,8 +57,9 @@ class Topology:
             force_body=t(model.force_body),
             spring_a=t(model.spring_body_a),
             spring_b=t(model.spring_body_b),
-            joint_model=t(model.joint_model),
-            joint_law=t(model.joint_contact_law),
+            # 1 where the joint may use the contact law: whether from the start or after the
+            # link lets go (model contact or auto) is a parameter of the lanes, as the law.
+            joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
         )
 
     @property
@@ -124,6 +124,8 @@ def pack_parameters(model: Model, topology: Topology | None = None) -> np.ndarra
     P = np.empty((len(slots), model.nsample), dtype=np.float64)
     for row, slot in enumerate(slots):
         arr = np.asarray(getattr(model, slot.field), dtype=np.float64)
+        if arr.ndim == len(slot.at):  # a topology array (no sample axis): the same for all
+            arr = arr[np.newaxis]
         index: tuple[slice | int, ...] = (slice(None), *slot.at)
         column = arr[index]
         P[row] = np.broadcast_to(1.0 / column if slot.inverse else column, (model.nsample,))
