@@ -240,9 +240,27 @@ def _dask_task(
     return start, stop, outputs, seconds
 
 
+DASK_EXTRA = "pip install 'mcchain[cluster]'"
+"""How to install the optional Dask dependency."""
+
+
+def require_dask() -> None:
+    """Raise ``RunError`` naming ``--dask`` and the extra to install if dask.distributed
+    cannot be imported."""
+    from mcchain.errors import RunError
+
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        raise RunError(
+            f"--dask: needs dask.distributed, which is not installed ({DASK_EXTRA})"
+        ) from None
+
+
 @contextmanager
 def dask_client(address: str, workers: int | None = None) -> Iterator[Any]:
     """A Dask client: a fresh LocalCluster for ``"local"``, else the scheduler at ``address``."""
+    require_dask()
     from dask.distributed import Client, LocalCluster
 
     if address == "local":
