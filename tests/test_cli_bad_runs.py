@@ -6,9 +6,13 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from test_cli_commands import CLEARANCE_BAR, Ran, assert_usage_error, in_process
+from test_runs_support import fake_loader, fake_solve, write_fake_scene
+
+from mcchain import execution
 
 
 @pytest.fixture
@@ -16,6 +20,31 @@ def mcchain(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> Callable[..., Ran]:
     return in_process(monkeypatch, capsys)
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative path -> bytes)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def failed_fake_run(tmp_path: Path) -> Path:
+    """A fake run of 30 samples whose second chunk of 10 failed (one part file kept)."""
+    calls = 0
+
+    def solve(model: Any, scene: Any) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls == 3:  # warm-up, chunk 0, then chunk 1 fails
+            raise FloatingPointError("boom")
+        return fake_solve(model, scene)
+
+    scene = write_fake_scene(tmp_path / "s.toml", count=30)
+    with pytest.raises(FloatingPointError):
+        execution.start_run(
+            scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve
+        )
+    (folder,) = (tmp_path / "runs").iterdir()
+    return folder
 
 
 def test_cli_run__missing_dask_names_the_extra_to_install(
@@ -28,3 +57,28 @@ def test_cli_run__missing_dask_names_the_extra_to_install(
         proc = mcchain("run", CLEARANCE_BAR, "--dask", address, "--out", "runs", cwd=tmp_path)
         assert_usage_error(proc, "--dask: needs dask.distributed", "pip install 'mcchain[cluster]'")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_run__unreachable_scheduler_is_one_line_and_leaves_no_folder(
+    mcchain: Callable[..., Ran], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mcchain import parallel
+
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 0.5)  # port 1 refuses at once anyway
+    address = "tcp://127.0.0.1:1"
+    proc = mcchain("run", CLEARANCE_BAR, "--dask", address, "--out", "runs", cwd=tmp_path)
+    assert_usage_error(proc, f"--dask: no Dask scheduler answers at {address}")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_resume__unreachable_scheduler_leaves_the_run_as_it_was(
+    mcchain: Callable[..., Ran], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mcchain import parallel
+
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 0.5)
+    folder = failed_fake_run(tmp_path)
+    before = snapshot(folder)
+    proc = mcchain("run", "--resume", folder, "--dask", "tcp://127.0.0.1:1", cwd=tmp_path)
+    assert_usage_error(proc, "--dask: no Dask scheduler answers at tcp://127.0.0.1:1")
+    assert snapshot(folder) == before
