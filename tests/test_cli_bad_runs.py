@@ -3,6 +3,7 @@ reason, exit code 2, and nothing written — no run folder, no changed ``run.jso
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -82,3 +83,43 @@ def test_cli_resume__unreachable_scheduler_leaves_the_run_as_it_was(
     proc = mcchain("run", "--resume", folder, "--dask", "tcp://127.0.0.1:1", cwd=tmp_path)
     assert_usage_error(proc, "--dask: no Dask scheduler answers at tcp://127.0.0.1:1")
     assert snapshot(folder) == before
+
+
+def completed_fake_run(tmp_path: Path, count: int = 12) -> Path:
+    """A completed fake run of ``count`` samples in chunks of 5."""
+    scene = write_fake_scene(tmp_path / "s.toml", count=count, steps=4)
+    return execution.start_run(
+        scene,
+        out=tmp_path / "runs",
+        chunk_size=5,
+        loader=fake_loader,
+        solve=fake_solve,
+        progress=False,
+    ).folder
+
+
+@pytest.mark.parametrize(
+    ("out", "fragment"),
+    [
+        ("blocker", "--out: blocker is a file, not a folder"),
+        ("blocker/report", "--out: cannot create the folder blocker/report (Not a directory)"),
+    ],
+)
+def test_cli_report__unwritable_out_is_one_line_and_writes_nothing(
+    mcchain: Callable[..., Ran], tmp_path: Path, out: str, fragment: str
+) -> None:
+    folder = completed_fake_run(tmp_path)
+    (tmp_path / "blocker").write_text("a file")
+    before, files = snapshot(folder), sorted(p.name for p in tmp_path.iterdir())
+    assert_usage_error(mcchain("report", folder, "--out", out, cwd=tmp_path), fragment)
+    assert snapshot(folder) == before and (tmp_path / "blocker").read_text() == "a file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == files
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder")
+def test_cli_report__read_only_out_is_one_line(mcchain: Callable[..., Ran], tmp_path: Path) -> None:
+    folder = completed_fake_run(tmp_path)
+    (tmp_path / "locked").mkdir(mode=0o500)
+    proc = mcchain("report", folder, "--out", "locked", cwd=tmp_path)
+    assert_usage_error(proc, "--out: cannot write into locked (permission denied)")
+    assert list((tmp_path / "locked").iterdir()) == []
