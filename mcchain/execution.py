@@ -498,11 +498,17 @@ def resume_run(
 
 
 def _check_threads(threads: int | None, dask: str | None) -> None:
+    """``--threads`` and ``--dask`` (dask installed, its scheduler answering), checked
+    before anything is written."""
     check_positive("--threads", threads)
     if dask is not None and dask != "local" and not re.match(r"^[a-z0-9+]+://", dask):
         raise RunError(
             f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {dask!r}"
         )
+    if dask is not None:
+        from mcchain.parallel import check_scheduler
+
+        check_scheduler(dask)
     if threads is not None and dask is None:
         import numba
 

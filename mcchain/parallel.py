@@ -240,9 +240,50 @@ def _dask_task(
     return start, stop, outputs, seconds
 
 
+CONNECT_TIMEOUT = 5.0
+"""Seconds to wait for a Dask scheduler to answer (a first contact: it answers in ms)."""
+
+DASK_EXTRA = "pip install 'mcchain[cluster]'"
+"""How to install the optional Dask dependency."""
+
+
+def require_dask() -> None:
+    """Raise ``RunError`` naming ``--dask`` and the extra to install if dask.distributed
+    cannot be imported."""
+    from mcchain.errors import RunError
+
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        raise RunError(
+            f"--dask: needs dask.distributed, which is not installed ({DASK_EXTRA})"
+        ) from None
+
+
+def check_scheduler(address: str, timeout: float | None = None) -> None:
+    """Raise ``RunError`` naming ``--dask`` if dask is missing or, for an address other than
+    ``"local"``, no scheduler answers there within ``timeout`` s (default
+    :data:`CONNECT_TIMEOUT`). Called before a run writes anything."""
+    from mcchain.errors import RunError
+
+    require_dask()
+    if address == "local":
+        return
+    from dask.distributed import Client
+
+    wait = CONNECT_TIMEOUT if timeout is None else timeout
+    try:
+        client = Client(address, timeout=wait)
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).strip() or type(exc).__name__
+        raise RunError(f"--dask: no Dask scheduler answers at {address} ({reason})") from None
+    client.close()
+
+
 @contextmanager
 def dask_client(address: str, workers: int | None = None) -> Iterator[Any]:
     """A Dask client: a fresh LocalCluster for ``"local"``, else the scheduler at ``address``."""
+    require_dask()
     from dask.distributed import Client, LocalCluster
 
     if address == "local":
@@ -262,7 +303,7 @@ def dask_client(address: str, workers: int | None = None) -> Iterator[Any]:
             client.close()
             cluster.close()
     else:
-        client = Client(address, timeout=30)
+        client = Client(address, timeout=CONNECT_TIMEOUT)
         try:
             yield client
         finally:
