@@ -88,6 +88,7 @@ class KernelModel(NamedTuple):
     joint_contact_exponent: np.ndarray
     joint_contact_restitution: np.ndarray
     joint_contact_friction: np.ndarray
+    joint_contact_radius: np.ndarray
     driver_angle0: np.ndarray
     driver_omega: np.ndarray
     force_point: np.ndarray
@@ -145,6 +146,7 @@ class Model:
         joint_contact_exponent: (*, njoint) exponent m of the contact law.
         joint_contact_restitution: (*, njoint) coefficient of restitution e.
         joint_contact_friction: (*, njoint) Coulomb coefficient μ.
+        joint_contact_radius: (*, njoint) journal radius R (friction's slip and moment arm), m.
         driver_angle0: (*, ndriver) θ_0, rad.
         driver_omega: (*, ndriver) ω, rad/s.
         force_point: (*, nforce, 2) local application point, m.
@@ -202,6 +204,7 @@ class Model:
     joint_contact_exponent: np.ndarray = None  # type: ignore[assignment]
     joint_contact_restitution: np.ndarray = None  # type: ignore[assignment]
     joint_contact_friction: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_radius: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         njoint = len(self.joint_names)
@@ -212,6 +215,7 @@ class Model:
             "joint_contact_exponent": np.full((1, njoint), 1.5),
             "joint_contact_restitution": np.ones((1, njoint)),
             "joint_contact_friction": np.zeros((1, njoint)),
+            "joint_contact_radius": np.zeros((1, njoint)),
         }
         for name, value in defaults.items():
             if getattr(self, name) is None:

@@ -182,6 +182,8 @@ TABLE: tuple[Parameter, ...] = (
       slots=("er{i}",), packed_for=CONTACT_JOINTS, unset=1.0),
     _P("joint", "contact.friction", (),    "joint_contact_friction", "1",       NON_NEGATIVE,
       slots=("mu{i}",), packed_for=CONTACT_JOINTS, unset=0.0),
+    _P("joint", "contact.radius", (),      "joint_contact_radius", "m",         NON_NEGATIVE,
+      slots=("R{i}",), packed_for=CONTACT_JOINTS, unset=0.0),
     _P("driver", "angle0",          (),     "driver_angle0",         "rad",     None,
       slots=("th0_{i}",), unset=_NAN),
     _P("driver", "omega",           (),     "driver_omega",          "rad s-1", None,

@@ -38,10 +38,10 @@ GOLDEN = {
         "rk45": "d7a44c9c37e34f990579bd3b1b0e967e968cb55cac99cdf6b96291c7f420893d",
     },
     "fourbar-clearance-auto": {
-        "accel": "a715a9651145fd12b8b4c0e79de9d61f6191c6ba8ff355cd428145f2196144a3",
-        "rk4": "de261761965f70a00be5dc233aad572c30809555955480bf685647851bd97086",
-        "rk4-projection": "ea3dd2f83caaf0db43075118d4ec296bee49a889820061b93e77e9e49edacd34",
-        "rk45": "8be23fd268cfde8c3c67bb4efed6325f8499c5bfdfd50af02dedd0d334502b59",
+        "accel": "1bfca52e2598549c0a9cde420f0c870f1a3aed2fd0b603f3b5277920be7bbfe4",
+        "rk4": "e63a5c9a5ba1b190fb1ecfda9505d7d05b8ec6a439ae7cc462d39340265c43f8",
+        "rk4-projection": "6c0f8393db39906bd02962292ae0cca7ab0ffb7c78c38e89dfff519db81c9d1b",
+        "rk45": "c8b63cb243eee5ded2f35083437382453a6f19bdfc789cb7407058281dcdbc43",
     },
     "chain4-mixed-spring": {
         "accel": "a88e7a8157a86e4e8f7931acabc9df69ea4ed2cfcac5abbf7b9c59e4d16ab96c",

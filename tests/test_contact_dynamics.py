@@ -40,8 +40,11 @@ def journal_scene(
     atol: float = 1e-10,
     count: int | None = None,
     vary: str = "",
+    friction: float = 0.0,
 ) -> str:
     e = "" if restitution is None else f"restitution = {restitution!r}"
+    if friction:
+        e += f"\nfriction = {friction!r}\nradius = {RADIUS!r}"
     sample = "" if count is None else f"[sample]\ncount = {count}\n[sample.vary]\n{vary}\n"
     return f"""
 [scene]
@@ -92,7 +95,7 @@ def run(text: str, **overrides):
     )
 
 
-def reference(law: Law, t_end: float, times: np.ndarray):
+def reference(law: Law, t_end: float, times: np.ndarray):  # the journal of journal_scene
     return journal_in_bearing(
         law,
         clearance=CLEARANCE,
@@ -188,9 +191,11 @@ def fourbar(model: str, method: str = "rk45") -> str:
 def test_auto__equals_the_link_until_the_link_lets_go(method):
     """Model auto runs the link's arithmetic (selects, no products by 0/1) until λ ≤ 0.
 
-    Compared to 1e-9 of each output's scale, not bit for bit: the contact kernels'
-    link-mode values were seen to differ from the link kernels' by one ulp in some processes
-    (an open point of issue 11), and such a difference grows to ~1e-10 by the separation.
+    Compared to 1e-6 of each output's scale, not bit for bit: a freshly compiled contact
+    module's link-mode values were seen to differ from the link module's (and from its own
+    cache-loaded code) by an ulp, which grows to 4e-8 of the rocker's speed in the last
+    milliseconds before the link lets go (an open point of issue 11). A modelling difference
+    (any force of the law acting before the switch) would show far above that.
     """
     # rk4: a step small enough for the stiffest contact of the four (c = 5e-5 m)
     steps = {"t_end": 0.3, "dt": 2.5e-6 if method == "rk4" else 1e-5}
@@ -206,7 +211,7 @@ def test_auto__equals_the_link_until_the_link_lets_go(method):
         for name in ("q", "v", "joint_force", "driver_torque", "energy"):
             a, b = auto[name][s, before], link[name][s, before]
             scale = np.max(np.abs(b[np.isfinite(b)]))
-            np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * scale, err_msg=name)
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-6 * scale, err_msg=name)
         assert np.all(auto["contact_mode"][s, before, 2] == 0)
         # the law from the switch on (later re-seats may put the joint back on the link)
         assert auto["contact_mode"][s, np.argmax(~before), 2] >= 1
@@ -273,3 +278,24 @@ def test_auto__reseats_on_the_link_without_adding_energy():
           f"across a re-seat {at_switch:.1e} of m g 2c")  # fmt: skip
     assert at_switch <= 1e-9
     assert growth <= 1e-7
+
+
+def test_contact__friction_matches_the_scipy_reference():
+    """Regularised Coulomb friction at the contact point (slip t·ḋ + R ω, moment R F_t):
+    the journal picks up spin at its impacts as the reference does."""
+    t_end = 0.04
+    text = journal_scene(
+        law="lankarani-nikravesh", restitution=0.8, friction=0.1, t_end=t_end, rtol=1e-11,
+        atol=1e-14,
+    )  # fmt: skip
+    out = run(text)
+    law = Law("lankarani-nikravesh", 1e9, 1.5, 0.8, friction=0.1)
+    ref = reference(law, t_end, out["time"])
+    assert len(ref.impacts) >= 2
+    assert abs(ref.velocity[-1, 2]) > 1e-3  # friction made it spin
+    position = np.max(np.abs(out["q"][0, :, 0, :2] - ref.position[:, :2]))
+    spin = np.max(np.abs(out["v"][0, :, 0, 2] - ref.velocity[:, 2]))
+    print(f"friction: position {position:.2e} m, spin {spin:.2e} rad/s "
+          f"(final spin {ref.velocity[-1, 2]:.3f} rad/s)")  # fmt: skip
+    assert position <= 1e-8
+    assert spin <= 1e-6 * np.max(np.abs(ref.velocity[:, 2]))

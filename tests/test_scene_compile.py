@@ -294,6 +294,7 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
         "joint_contact_exponent": (nj,),
         "joint_contact_restitution": (nj,),
         "joint_contact_friction": (nj,),
+        "joint_contact_radius": (nj,),
         "driver_angle0": (nd,),
         "driver_omega": (nd,),
         "force_point": (nf, 2),

@@ -128,14 +128,13 @@ def test_table__model_index_matches_compiled_value(row) -> None:
     d["spring"][0]["rest_length"] = 0.375
     d["joint"][1]["contact"] = {
         "law": "flores", "stiffness": 2e9, "exponent": 1.25, "restitution": 0.75,
+        "friction": 0.125, "radius": 0.0625,
     }  # fmt: skip
     scene = scene_from_dict(d)
     model = compile_model(scene)
     item = 0 if row.kind == "scene" else 1 if row.kind in ("body", "joint") else 0
     items = [scene.scene] if row.kind == "scene" else getattr(scene, row.kind)
     written = row.scene_value(items[item])
-    if row.key == "contact.friction":
-        written = 0.0  # given as its default
     np.testing.assert_array_equal(row.read(model, item), np.asarray(written, dtype=float))
     # parse_path + parameter_slot land where model_index says.
     name = (

@@ -17,7 +17,13 @@ from collections.abc import Callable
 import numpy as np
 
 from mcchain.codegen.topology import Topology
-from mcchain.contact import FLORES, HUNT_CROSSLEY, LANKARANI_NIKRAVESH
+from mcchain.contact import (
+    FLORES,
+    FRICTION_V0,
+    FRICTION_V1,
+    HUNT_CROSSLEY,
+    LANKARANI_NIKRAVESH,
+)
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL
 
 # ---------------------------------------------------------------------------------------------
@@ -536,6 +542,7 @@ class Emitter:
         rows = self.rows()
         for k in self.contact_row:
             self.contact_law(k)
+            self.contact_friction(k, a0)
         for r, row in enumerate(rows):
             terms = [_mul(val, a0[c]) for c, val in row.items()]
             law = self._row_law(r)
@@ -581,6 +588,45 @@ class Emitter:
             f"fn{k} = p_K{k} * pw{k} * sdm{k}",
             f"kc{k} = fm{k} * p_K{k} * p_mx{k} * (pw{k} / pp{k} if pp{k} > 0.0 else 0.0) * sdm{k}",
         )
+
+    def contact_friction(self, k: int, a0: dict[int, Coef]) -> None:
+        """Regularised Coulomb friction of contact joint ``k`` under the law, added to the free
+        accelerations ``a0`` of its two bodies (mcchain.kernels.contact.friction_force).
+
+        Slip of the journal's surface point on the bearing's, along t = (−n_y, n_x):
+        v_t = t·ḋ + R ω_journal − (R + c) ω_bearing (R the journal radius, ``radius``; 0: at
+        the centres). The journal receives F_t t at its contact point (centre + R n), the
+        bearing −F_t t at its own (centre + (R + c) n). On the link, and at μ = 0, the terms
+        are exact zeros: a0 keeps its value bit for bit.
+        """
+        topo = self.topo
+        a, b = topo.joint_a[k], topo.joint_b[k]
+        ramp = 1.0 / (FRICTION_V1 - FRICTION_V0)  # Ambrósio's c_d between v0 and v1
+        wa = f"v{3 * a + 2}" if a != GROUND else "0.0"
+        wb = f"v{3 * b + 2}" if b != GROUND else "0.0"
+        self.emit(
+            f"tx{k} = -ey{k}",
+            f"ty{k} = ex{k}",
+            f"slip{k} = tx{k} * ddx{k} + ty{k} * ddy{k} + p_R{k} * {wb}"
+            f" - (p_R{k} + p_cl{k}) * {wa}",
+            f"cd{k} = min(max((abs(slip{k}) - {FRICTION_V0!r}) * {ramp!r}, 0.0), 1.0)",
+            f"ftn{k} = -p_mu{k} * cd{k} * fn{k} * (1.0 if slip{k} > 0.0 else -1.0)",
+            f"ft{k} = ftn{k} if fm{k} == 1.0 else 0.0",
+            f"ftx{k} = ft{k} * tx{k}",
+            f"fty{k} = ft{k} * ty{k}",
+        )
+        for body, sign, px, py, arm in (
+            (b, "", f"pb{k}x", f"pb{k}y", f"p_R{k}"),
+            (a, "-", f"pa{k}x", f"pa{k}y", f"(p_R{k} + p_cl{k})"),
+        ):
+            if body == GROUND:
+                continue
+            x, y, th = 3 * body, 3 * body + 1, 3 * body + 2
+            torque = f"{sign}({px} * fty{k} - {py} * ftx{k} + {arm} * ft{k})"
+            for c, force in ((x, f"{sign}ftx{k}"), (y, f"{sign}fty{k}"), (th, torque)):
+                name = f"a0f{k}_{c}"
+                self.emit(f"{name} = {a0[c]!s} + ({force}) * {self._minv(c)}")
+                a0[c] = name
 
     def contact_stiffness_check(self) -> None:
         """``wc2`` = max over contact joints of ∂F_n/∂δ · S_rr (S_rr = 1/m*, the inverse

@@ -188,11 +188,6 @@ def _check_contact(
                 f"{where}.model: {joint.model!r} needs a [joint.contact] table (the law and "
                 "its stiffness)"
             )
-    if contact is not None and contact.friction > 0:
-        raise SceneError(
-            f"{where}.contact.friction: friction in clearance joints is not available yet; "
-            "use 0 (frictionless contact)"
-        )
     prefix = f"joint.{joint.name}.contact."
     for path in sorted(p for p in sampled if p.startswith(prefix)):
         key = path[len(prefix) :]

@@ -146,7 +146,10 @@ class Contact(_Section):
         description="Coulomb coefficient μ (regularised, Ambrósio); default 0 (none).",
     )
     radius: Num | None = Field(
-        default=None, gt=0, description="journal radius R, m (gives K with the materials)."
+        default=None,
+        gt=0,
+        description="journal radius R, m: the moment arm and slip of friction, and, with the "
+        "materials, K; default: none (friction acts at the centres).",
     )
     youngs_modulus: Num | None = Field(
         default=None, gt=0, description="Young's modulus E of journal and bearing, Pa."
@@ -159,7 +162,7 @@ class Contact(_Section):
     def _stiffness_given_once(self) -> Contact:
         materials = (self.radius, self.youngs_modulus, self.poisson_ratio)
         given = [m is not None for m in materials]
-        if self.stiffness is not None and any(given):
+        if self.stiffness is not None and any(given[1:]):
             raise ValueError(
                 "give `stiffness`, or `radius`, `youngs_modulus` and `poisson_ratio`, not both"
             )
