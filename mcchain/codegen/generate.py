@@ -400,7 +400,6 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
     b["contact_accept"] = "\n".join(accept)
     b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
-    reseats = True  # whether a joint is auto is data (its md slot), not topology
     marks = []
     for j in range(len(joints)):
         marks += [
@@ -409,12 +408,9 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    {at('dwl', j)} = 0.0",
         ]
     b["reseat_marks"] = "\n".join(marks)
-    b["contact_reseat_erk"] = (
-        "group_reseat_SUFFIX(W, nl, t + h, A, balpha2, bbeta2, tau, False)" if reseats else ""
-    )
-    b["contact_reseat"] = (
-        "group_reseat_SUFFIX(W, nl, 0.0, A, balpha2, bbeta2, tau, True)" if reseats else ""
-    )
+    # Re-seats of model auto (whether a joint is auto is data: its md slot).
+    b["contact_reseat_erk"] = "group_reseat_SUFFIX(W, nl, t + h, A, balpha2, bbeta2, tau, False)"
+    b["contact_reseat"] = "group_reseat_SUFFIX(W, nl, 0.0, A, balpha2, bbeta2, tau, True)"
     return b
 
 
