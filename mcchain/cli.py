@@ -309,7 +309,7 @@ def _fmt(value: Any) -> str:
 def _units(units: str) -> str:
     """CF units as ``validate`` prints them: a ``-1`` power after a slash (``rad s-1`` ->
     ``rad/s``)."""
-    words = units.split()
+    words = [w for w in units.split() if w != "1"]  # dimensionless: no unit
     num = [w for w in words if not w.endswith("-1")]
     den = [w[:-2] for w in words if w.endswith("-1")]
     return " ".join(num) + "".join(f"/{w}" for w in den)
@@ -323,6 +323,7 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     """
     import numpy as np
 
+    from mcchain.contact import LAW_NAMES, LINK, MODEL_NAMES
     from mcchain.model import GROUND, JointKind
     from mcchain.parameters import PARAMETERS
 
@@ -335,7 +336,8 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
         """``key value units`` of each key of one item (the first sample's values)."""
         rows = [PARAMETERS[kind, key] for key in keys]
         return ", ".join(
-            f"{row.key} {_fmt(row.read(values, item))} {_units(row.units)}" for row in rows
+            f"{row.key.split('.')[-1]} {_fmt(row.read(values, item))} {_units(row.units)}".rstrip()
+            for row in rows
         )
 
     lines = [
@@ -351,9 +353,16 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
         row = int(model.joint_row[j])
         rows = f"row {row}" if kind.rows == 1 else f"rows {row}-{row + kind.rows - 1}"
         what = show("joint", j, "clearance") if kind == JointKind.CLEARANCE else "ideal"
+        law = ""
+        if int(model.joint_model[j]) != LINK:  # the contact law of [simulate]
+            law = (
+                f", model {MODEL_NAMES[int(model.joint_model[j])]}: "
+                f"{LAW_NAMES[int(model.joint_contact_law[j])]} law, "
+                + show("joint", j, "contact.stiffness", "contact.exponent", "contact.restitution")
+            )
         lines.append(
             f"  {name}: {body(int(model.joint_body_a[j]))} (bearing) - "
-            f"{body(int(model.joint_body_b[j]))} (journal), {what}, {rows}"
+            f"{body(int(model.joint_body_b[j]))} (journal), {what}, {rows}{law}"
         )
     if model.ndriver:
         lines.append("drivers:")

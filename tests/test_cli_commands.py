@@ -181,6 +181,10 @@ def test_cli_validate__four_bar_rows_and_driver(
     lines = proc.stdout.splitlines()
     assert any(line.startswith("drivers:") for line in lines)
     assert any("ideal, rows 0-1" in line for line in lines)
+    # joint B's contact law, K from its clearance (1e-4 m), pin radius and steel
+    joint_b = next(line for line in lines if line.startswith("  B:"))
+    assert "model auto: lankarani-nikravesh law, stiffness 7.65787e+10 N m-1.5" in joint_b
+    assert joint_b.endswith("exponent 1.5, restitution 0.9")
     rows = int(next(x for x in lines if x.startswith("constraint rows:")).split(":")[1])
     dof = int(next(x for x in lines if x.startswith("degrees of freedom:")).split(":")[1])
     coords = int(next(x for x in lines if x.startswith("coordinates:")).split(":")[1])
