@@ -299,3 +299,18 @@ def test_contact__friction_matches_the_scipy_reference():
           f"(final spin {ref.velocity[-1, 2]:.3f} rad/s)")  # fmt: skip
     assert position <= 1e-8
     assert spin <= 1e-6 * np.max(np.abs(ref.velocity[:, 2]))
+
+
+def test_contact__rk4_projection_keeps_the_law_rows_out_of_its_projection():
+    """rk4-projection projects q and v onto the constraints after each step: a joint under
+    the law must be left out (else the journal would be pulled back onto |d| = c)."""
+    t_end = 0.03
+    text = journal_scene(method="rk4-projection", dt=2e-6, output_dt=1e-3, t_end=t_end)
+    out = run(text)
+    assert out["status"][0] == 0
+    assert np.nanmin(out["penetration"][0, :, 0]) < -5e-5  # it really flies free
+    assert np.any(out["contact_mode"][0, :, 0] == 2)
+    ref = reference(Law("hertz", 1e9, 1.5, 1.0), t_end, out["time"])
+    error = np.max(np.abs(out["q"][0, :, 0, :2] - ref.position[:, :2]))
+    print(f"rk4-projection dt 2e-6: {error:.2e} m from the reference")
+    assert error < 1e-7
