@@ -79,11 +79,17 @@ class RunResult:
         lines = [
             f"{r['scene']}: {r['samples']} samples in {r['chunks']} chunks "
             f"({r['sessions'][-1]['chunks_computed']} computed now); {flags or 'no samples'}",
-            f"wall {t.get('total', 0):.2f} s (kernels {t.get('kernel', 0):.2f} s, "
-            f"merge {t.get('merge', 0):.2f} s); {tp.get('samples_per_s') or 0:,.0f} samples/s",
+            f"end to end {t.get('total', 0):.2f} s: prepare {t.get('prepare', 0):.2f} s, "
+            f"kernel compile or cache load {t.get('warmup', 0):.2f} s, compute "
+            f"{t.get('compute', 0):.2f} s (in the kernels {t.get('kernel', 0):.2f} s), merge "
+            f"{t.get('merge', 0):.2f} s",
+            f"compute only: {tp.get('samples_per_s') or 0:,.0f} samples/s"
+            + (
+                f", {tp['instance_steps_per_s']:.3g} instance-steps/s"
+                if tp.get("instance_steps_per_s")
+                else ""
+            ),
         ]
-        if tp.get("instance_steps_per_s"):
-            lines.append(f"{tp['instance_steps_per_s']:.3g} instance-steps/s")
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))

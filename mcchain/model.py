@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 from enum import IntEnum
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -275,6 +275,13 @@ class Model:
             dtype = np.int64 if arr.dtype.kind in "iub" else np.float64
             values[name] = np.ascontiguousarray(arr, dtype=dtype)
         return KernelModel(**values)
+
+    def kernel_model(self) -> Any:
+        """What every kernel takes as ``km``: :meth:`kernel_arrays` as one numba structure
+        (:mod:`mcchain.kernels.kernel_model`), sharing the arrays."""
+        from mcchain.kernels.kernel_model import as_struct
+
+        return as_struct(self.kernel_arrays())
 
     def select(self, start: int, stop: int) -> Model:
         """The sub-model of samples ``start:stop`` (per-sample arrays sliced, others kept)."""

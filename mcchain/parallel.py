@@ -142,6 +142,51 @@ class Progress:
             self._bar.close()
 
 
+# -- compile notice ---------------------------------------------------------------------------
+
+COMPILE_NOTICE_AFTER = 1.0
+"""Seconds of kernel warm-up after which the compile notice is printed (a warm cache loads
+in less, so a warm run prints nothing)."""
+
+
+def kernel_cache_folders() -> str:
+    """Where compiled kernels are kept, as the notice names them."""
+    from mcchain.codegen.cache import cache_dir
+
+    numba_dir = os.environ.get("NUMBA_CACHE_DIR") or "beside mcchain's sources (__pycache__)"
+    return f"numba: {numba_dir} (NUMBA_CACHE_DIR); generated: {cache_dir()} (MCCHAIN_CACHE_DIR)"
+
+
+@contextmanager
+def compile_notice(after: float = COMPILE_NOTICE_AFTER, stream: Any = None) -> Iterator[None]:
+    """Print one line on stderr if the block (the kernel warm-up) is still running after
+    ``after`` seconds: what is compiled, that it happens once, and where it is cached."""
+    import threading
+
+    stream = sys.stderr if stream is None else stream
+    t0 = time.perf_counter()
+    said = threading.Event()
+
+    def say() -> None:
+        said.set()
+        print(
+            "compiling the numba kernels of this scene's analyses and topology: once per "
+            f"installation and topology, then loaded from the cache ({kernel_cache_folders()})",
+            file=stream,
+            flush=True,
+        )
+
+    timer = threading.Timer(after, say)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        if said.is_set():
+            print(f"kernels ready in {time.perf_counter() - t0:.1f} s", file=stream, flush=True)
+
+
 # -- in-process ------------------------------------------------------------------------------
 
 
@@ -174,7 +219,8 @@ def run_local(
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
     t0 = time.perf_counter()
-    solve(warm_model(model), scene)  # compile or load the cached kernels
+    with compile_notice():
+        solve(warm_model(model), scene)  # compile or load the cached kernels
     stats.warmup = time.perf_counter() - t0
     log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)
 

@@ -92,7 +92,7 @@ SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[Heal
 @given(chains())
 def test_constraint_jacobian__matches_differences(chain):
     model, q, _, _ = chain
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     B = _jacobian(km, q, model.ncon, model.ndof)
     fd = _central(lambda x: _residual(km, x, model.ncon), q)
     _assert_close(B, fd, FD_RTOL)
@@ -108,7 +108,7 @@ def test_constraint_gamma__is_minus_bdot_qdot(chain):
     clearance joint's term (|ḋ|² − (e·ḋ)²)/|d| has derivatives growing like 1/|d|³, and a random
     state can put |d| near zero, where the difference's truncation error dominates."""
     model, q, v, _ = chain
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     gamma = np.empty(model.ncon)
     constraint_gamma(km, 0, q, v, gamma)
     h = 1e-30
@@ -122,7 +122,7 @@ def test_constraint_gamma__is_minus_bdot_qdot(chain):
 @given(chains())
 def test_stiffness__matches_differences(chain):
     model, q, _, lam = chain
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     K = np.zeros((model.ndof, model.ndof))
     constraint_hessian_add(km, 0, q, lam, K)
     applied_stiffness_add(km, 0, q, K)
@@ -146,7 +146,7 @@ def test_damper_stiffness__matches_differences_at_any_velocity(chain):
     the round-off of a central difference scales with the force differenced, so differencing
     the whole spring force would bury a small damping stiffness in noise."""
     model, q, v, _ = chain
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     K = np.zeros((model.ndof, model.ndof))
     damper_stiffness_add(km, 0, q, v, K)
     if not np.any(model.spring_damping):
@@ -158,7 +158,7 @@ def test_damper_stiffness__matches_differences_at_any_velocity(chain):
         force_value=np.zeros_like(model.force_value),
         force_torque=np.zeros_like(model.force_torque),
         spring_stiffness=np.zeros_like(model.spring_stiffness),
-    ).kernel_arrays()
+    ).kernel_model()
     K_damping_only = np.zeros((model.ndof, model.ndof))
     damper_stiffness_add(damping_only, 0, q, v, K_damping_only)
     np.testing.assert_array_equal(K_damping_only, K)  # the stiffness part plays no role
@@ -175,7 +175,7 @@ def test_damper_stiffness__matches_differences_at_any_velocity(chain):
 @given(chains())
 def test_applied_forces__match_reference_and_potential(chain):
     model, q, v, _ = chain
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     F = np.empty(model.ndof)
     applied_forces(km, 0, q, v, F)
     _assert_close(F, reference.applied_forces(model, 0, q, v), 1e-13)

@@ -11,6 +11,7 @@ import filecmp
 import json
 import os
 import signal
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ from mcchain import execution, runs
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.errors import RunError, SceneError
-from mcchain.parallel import Progress
+from mcchain.parallel import Progress, compile_notice
 
 RUN_JSON_FIELDS = {
     "id",
@@ -311,3 +312,33 @@ def test_progress__chunks_rate_and_eta_on_a_terminal_only(
     quiet.update(10)
     quiet.close()
     assert capsys.readouterr().err == ""
+
+
+class _SignallingStream:
+    """A text stream that sets an event on its first write (no clock: the test waits on it)."""
+
+    def __init__(self) -> None:
+        self.text = ""
+        self.written = threading.Event()
+
+    def write(self, text: str) -> int:
+        self.text += text
+        self.written.set()
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def test_compile_notice__one_line_naming_the_caches_while_the_kernels_compile() -> None:
+    stream = _SignallingStream()
+    with compile_notice(after=0.0, stream=stream):
+        assert stream.written.wait(60.0)  # the block outlives the delay: the notice comes
+    lines = stream.text.splitlines()
+    assert "once per installation and topology" in lines[0]
+    assert "NUMBA_CACHE_DIR" in lines[0] and "MCCHAIN_CACHE_DIR" in lines[0]
+    assert lines[1].startswith("kernels ready in ") and len(lines) == 2
+    quiet = _SignallingStream()
+    with compile_notice(after=1e9, stream=quiet):  # a warm cache: done before the delay
+        pass
+    assert quiet.text == ""

@@ -248,7 +248,7 @@ def test_damping_matrix__is_minus_velocity_derivative_of_the_forces():
     symmetric and positive semi-definite."""
     text = chain_scene_text(4, {2}, 13, springs=1) + EXTRA_DAMPERS
     model = compile_model(load_scene_text(text))
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     rng = np.random.default_rng(1)
     q = model.q0[0] + rng.normal(scale=0.05, size=model.ndof)
     v = rng.normal(scale=2.0, size=model.ndof)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from mcchain.kernels.config import LANE_JIT, LANE_PJIT
+from mcchain.kernels.config import LANE_JIT
 
 
 def _literal(value: Any) -> str:
@@ -21,13 +21,9 @@ def _literal(value: Any) -> str:
     return repr(value)
 
 
-def _options(
-    options: dict[str, Any], base: str | None = None, of: dict[str, Any] | None = None
-) -> str:
-    """``dict(k=v, ...)`` (or ``dict(base, k=v)`` for the keys that differ from ``of``)."""
-    keys = [k for k in options if of is None or k not in of or of[k] != options[k]]
-    items = [f"{k}={_literal(options[k])}" for k in keys]
-    return "dict(" + ", ".join(([base] if base else []) + items) + ")"
+def _options(options: dict[str, Any]) -> str:
+    """``dict(k=v, ...)`` as Python source."""
+    return "dict(" + ", ".join(f"{k}={_literal(v)}" for k, v in options.items()) + ")"
 
 
 HEADER = f'''\
@@ -35,7 +31,7 @@ HEADER = f'''\
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 # error_model="numpy": x / 0 gives inf/nan instead of a raise (which blocks vectorising).
 # fastmath "contract" only: a·b + c may become one fused multiply-add (≈ 1.25× faster lanes,
@@ -43,7 +39,6 @@ from numba import njit, prange
 # the failure checks, and every lane runs the same instructions: results stay bit-identical
 # across thread counts, lane counts and chunk sizes (tested).
 JIT = {_options(LANE_JIT)}
-PJIT = {_options(LANE_PJIT, "JIT", LANE_JIT)}
 '''
 
 ACCEL_KERNEL = '''
@@ -109,21 +104,13 @@ _ERK_ARGS = """P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, c
 
 ERK_KERNEL = (
     f'''
-@njit(**PJIT)
-def erk_run({_ERK_ARGS}):
-    """Fixed-step explicit Runge–Kutta (NSTAGE stages) over lane groups; see integrators.py."""
-    lanes = max(1, min(lanes, LMAXV))
-    ngroup = (Q0.shape[1] + lanes - 1) // lanes
-    for g in prange(ngroup):
-        erk_group(np.int64(g), {_ERK_ARGS})
-
-
 @njit(**JIT)
-def erk_group(g, {_ERK_ARGS}):
-    """One lane group of :func:`erk_run` (kept out of the prange body: numba's parallel
-    passes copy the loop body's IR many times, which is slow for generated code)."""
+def erk_run(g_start, g_stop, {_ERK_ARGS}):
+    """Fixed-step explicit Runge–Kutta (NSTAGE stages) on the lane groups g_start:g_stop
+    (``lanes`` samples each; threads run blocks of groups); see integrators.py."""
     nsample = Q0.shape[1]
-    if True:'''
+    lanes = max(1, min(lanes, LMAXV))
+    for g in range(g_start, g_stop):'''
     + _GROUP_SETUP
     + """
         for n in range(nstep + 1):
@@ -190,9 +177,10 @@ _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, at
 
 ADAPTIVE_KERNEL = (
     f'''
-@njit(**PJIT)
-def adaptive_run({_ADAPTIVE_ARGS}):
-    """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control.
+@njit(**JIT)
+def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
+    """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control, on the lane
+    groups g_start:g_stop (``lanes`` samples each; threads run blocks of groups).
 
     Every lane has its own time and step; a step never crosses the lane's next output time
     and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
@@ -200,19 +188,11 @@ def adaptive_run({_ADAPTIVE_ARGS}):
     and stage evaluations (the first stage, then NSTAGE - 1 per attempt: FSAL) into
     ``nsteps_out``, ``nrejected_out``, ``nevals_out``.
     """
-    lanes = max(1, min(lanes, LMAXV))
-    ngroup = (Q0.shape[1] + lanes - 1) // lanes
-    for g in prange(ngroup):
-        adaptive_group(np.int64(g), {_ADAPTIVE_ARGS})
-
-
-@njit(**JIT)
-def adaptive_group(g, {_ADAPTIVE_ARGS}):
-    """One lane group of :func:`adaptive_run`."""
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
     expo = -1.0 / (order_err + 1.0)
-    if True:'''
+    lanes = max(1, min(lanes, LMAXV))
+    for g in range(g_start, g_stop):'''
     + _GROUP_SETUP
     + """
         iout = np.zeros(lanes, np.int64)

@@ -6,8 +6,8 @@
 * assembly: every sample's initial state projected onto the constraints (positions that
   already satisfy them are kept bit for bit), velocities onto B q̇ = ν.
 
-``assemble_one`` treats one sample and returns status bits; ``assemble_batch`` loops
-``prange`` over samples. Nothing here raises.
+``assemble_one`` treats one sample and returns status bits; ``assemble_batch`` loops over
+the samples ``start:stop``. Nothing here raises.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
-from mcchain.kernels.config import JIT, PJIT
+from mcchain.kernels.config import JIT
 from mcchain.kernels.forces import (
     mass_diagonal,
 )
@@ -255,9 +255,9 @@ def assemble_one(km, s, q, v):
     return 0
 
 
-@njit(**PJIT)
-def assemble_batch(km, q_out, v_out, status_out):
-    """Assemble every sample in place.
+@njit(**JIT)
+def assemble_batch(start, stop, km, q_out, v_out, status_out):
+    """Assemble samples ``start:stop`` in place.
 
     Args:
         km: KernelModel.
@@ -265,8 +265,7 @@ def assemble_batch(km, q_out, v_out, status_out):
         v_out: (nsample, 3 nbody) initial velocities in, consistent velocities out.
         status_out: (nsample,) uint32, bits OR-ed in.
     """
-    for sample in prange(q_out.shape[0]):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         bits = assemble_one(km, s, q_out[s], v_out[s])
         if bits != 0:
             status_out[s] |= bits

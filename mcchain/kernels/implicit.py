@@ -1,4 +1,5 @@
-"""Generalized-α, index 3 (Arnold & Brüls 2007): one sample per ``prange`` iteration.
+"""Generalized-α, index 3 (Arnold & Brüls 2007): one sample at a time, over
+the samples ``start:stop`` (threads run blocks of samples).
 
 Built on the per-sample kernels of ``joints.py``, ``forces.py`` and ``linalg.py``. Rules every
 kernel keeps: no reduction across samples (sample i's history is bit-identical alone, in any
@@ -11,9 +12,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
-from mcchain.kernels.config import JIT, PJIT
+from mcchain.kernels.config import JIT
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
@@ -36,13 +37,13 @@ from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 
-@njit(**PJIT)
+@njit(**JIT)
 def generalized_alpha_run(
-    km, Q0, V0, t0, h, nstep, out_every, ncon, alpha_m, alpha_f, gam, beta, ctol, tau,
+    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, alpha_m, alpha_f, gam, beta, ctol, tau,
     max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
     status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
-    """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for every sample.
+    """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``.
 
     Each step: predict q̈_{n+1} = q̈_n, λ_{n+1} = λ_n, then Newton on the residuals
     (M q̈ + Bᵀλ − F, Φ) with the iteration matrix [[β′M + γ′C + K, Bᵀ], [B, 0]] (exact K
@@ -52,12 +53,11 @@ def generalized_alpha_run(
     Per sample: the steps completed (``nsteps_out``) and the residual evaluations, one for
     the start's index-1 solve and one per Newton iteration (``nevals_out``).
     """
-    nsample, ndof = Q0.shape
+    ndof = Q0.shape[1]
     nsys = ndof + ncon
     bp = (1.0 - alpha_m) / (beta * h * h * (1.0 - alpha_f))
     gp = gam / (beta * h)
-    for sample in prange(nsample):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             _nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             continue

@@ -1,6 +1,6 @@
 """Small dense linear algebra for one sample, written to report failure instead of raising.
 
-``np.linalg`` raises on a singular matrix, and an exception inside a ``prange`` loop is lost
+``np.linalg`` raises on a singular matrix, and a raise would end a whole block of samples
 (PERFORMANCE.md), so the batch kernels use these: each works in place on the leading
 ``n × n`` block of its arrays and returns ``False`` (or a rank) where LAPACK would raise.
 """

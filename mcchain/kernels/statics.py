@@ -2,7 +2,8 @@
 modal damping of the damped modes.
 
 Each ``*_one`` function treats one sample and returns status bits; each ``*_batch``
-function loops ``prange`` over samples and calls it. No reductions across samples, so a
+function loops over the samples ``start:stop`` and calls it (threads run blocks of samples:
+:func:`mcchain.solvers.threads.over_samples`). No reductions across samples, so a
 sample's numbers are bit-identical alone, in any chunk, with any thread count. Failed samples
 get NaN outputs and their bits (mcchain.status). Work arrays are allocated once per sample.
 Assembly and the shared Schur-complement projections are in :mod:`mcchain.kernels.assembly`.
@@ -13,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from mcchain.kernels.assembly import (
     SCHUR_PIVOT_RTOL,
@@ -22,7 +23,7 @@ from mcchain.kernels.assembly import (
     project_positions,
     schur_factor,
 )
-from mcchain.kernels.config import JIT, PJIT
+from mcchain.kernels.config import JIT
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
@@ -317,9 +318,14 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
             return EQUILIBRIUM_NOT_CONVERGED, it + 1
         if polished:
             continue
-        q[:] = q_trial
-        lam[:] = lam_trial
-        R[:] = R_trial
+        # element loops: an array-to-array slice assignment compiles numba's shape-error
+        # message formatting (3 s of a cold start)
+        for k in range(n):
+            q[k] = q_trial[k]
+        for i in range(m):
+            lam[i] = lam_trial[i]
+        for i in range(size):
+            R[i] = R_trial[i]
         norm = trial
         merit = trial_merit
         energy = potential_energy(km, s, q)
@@ -328,9 +334,11 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     return 0, iterations
 
 
-@njit(**PJIT)
-def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history_out, status_out):
-    """Equilibrium of every sample, starting from ``q_out``.
+@njit(**JIT)
+def equilibrium_batch(
+    start, stop, km, tol, max_iter, q_out, lam_out, iterations_out, history_out, status_out
+):
+    """Equilibrium of samples ``start:stop``, starting from ``q_out``.
 
     Args:
         km: KernelModel.
@@ -343,8 +351,7 @@ def equilibrium_batch(km, tol, max_iter, q_out, lam_out, iterations_out, history
             iteration (see :func:`equilibrium_one`), NaN-filled by the caller.
         status_out: (nsample,) uint32; samples already flagged are skipped (NaN).
     """
-    for sample in prange(q_out.shape[0]):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         if status_out[s] != 0:
             q_out[s, :] = np.nan
             lam_out[s, :] = np.nan
@@ -481,9 +488,9 @@ def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
     return bits
 
 
-@njit(**PJIT)
-def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out):
-    """Eigenpulsations of every sample about its equilibrium.
+@njit(**JIT)
+def modes_batch(start, stop, km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out):
+    """Eigenpulsations of samples ``start:stop`` about their equilibria.
 
     Args:
         q_eq: (nsample, 3 nbody), lam_eq: (nsample, ncon) the equilibria.
@@ -492,8 +499,7 @@ def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out
         shapes_out: (nsample, nmode, 3 nbody); any (1, nmode, 3 nbody) array if not wanted.
         status_out: (nsample,) uint32; failed samples are skipped (NaN).
     """
-    for sample in prange(q_eq.shape[0]):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         if status_out[s] & (ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR):
             omega_out[s, :] = np.nan
             continue
@@ -506,11 +512,11 @@ def modes_batch(km, q_eq, lam_eq, want_shapes, omega_out, shapes_out, status_out
                 shapes_out[s] = np.nan
 
 
-@njit(**PJIT)
-def modal_damping_batch(km, q_eq, shapes, damping_out):
-    """Modal damping D = Z C Zᵀ of every sample: the dampers' C = −∂F/∂q̇ at the equilibrium
-    seen by its mass-normalised mode shapes Z (Z M Zᵀ = I, Z K Zᵀ = diag p²), so the damped
-    modes solve the f × f quadratic problem (s² I + s D + diag p²) ξ = 0.
+@njit(**JIT)
+def modal_damping_batch(start, stop, km, q_eq, shapes, damping_out):
+    """Modal damping D = Z C Zᵀ of samples ``start:stop``: the dampers' C = −∂F/∂q̇ at the
+    equilibrium seen by their mass-normalised mode shapes Z (Z M Zᵀ = I, Z K Zᵀ = diag p²),
+    so the damped modes solve the f × f quadratic problem (s² I + s D + diag p²) ξ = 0.
 
     Args:
         q_eq: (nsample, 3 nbody) equilibria.
@@ -519,8 +525,7 @@ def modal_damping_batch(km, q_eq, shapes, damping_out):
     """
     n = q_eq.shape[1]
     f = shapes.shape[1]
-    for sample in prange(q_eq.shape[0]):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         Z = shapes[s]
         if np.isnan(Z).any() or np.isnan(q_eq[s]).any():
             damping_out[s] = np.nan
@@ -541,14 +546,13 @@ def modal_damping_batch(km, q_eq, shapes, damping_out):
                 damping_out[s, j, i] = 0.5 * acc
 
 
-@njit(**PJIT)
-def joint_forces_batch(km, q, lam, force_out, contact_out):
-    """Joint forces of every sample from (q, λ): see :func:`joints.joint_forces`.
+@njit(**JIT)
+def joint_forces_batch(start, stop, km, q, lam, force_out, contact_out):
+    """Joint forces of samples ``start:stop`` from (q, λ): see :func:`joints.joint_forces`.
 
     Args:
         q: (nsample, 3 nbody); lam: (nsample, ncon).
         force_out: (nsample, njoint, 2) N; contact_out: (nsample, njoint) N (NaN: ideal).
     """
-    for sample in prange(q.shape[0]):
-        s = np.int64(sample)  # one index type for the callees (see config.PJIT)
+    for s in range(start, stop):
         joint_forces(km, s, q[s], lam[s], force_out[s], contact_out[s])

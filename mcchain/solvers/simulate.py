@@ -48,6 +48,7 @@ from mcchain.errors import SceneError
 from mcchain.model import JOINT_CLEARANCE, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import CONTACT_METHODS, Simulate
+from mcchain.solvers.threads import over_samples
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 SINGULAR_PIVOT = 1e-8
@@ -168,7 +169,7 @@ def _project_start(
         constraint_velocity_rhs,
     )
 
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     ncon, ndof = model.ncon, model.ndof
     phi = np.zeros(ncon)
     B = np.zeros((ncon, ndof))
@@ -266,6 +267,11 @@ class _Run:
     contact_history: np.ndarray | None = None
     contact_summary: np.ndarray | None = None
 
+    @property
+    def groups(self) -> int:
+        """Lane groups of the lane kernels: ``lanes`` samples each, the last one short."""
+        return -(-self.model.nsample // self.lanes)
+
     def contact_args(self) -> tuple[np.ndarray, ...]:
         """The contact arrays the lane kernels take after the histories (none without)."""
         if self.contact_history is None or self.contact_summary is None:
@@ -299,12 +305,13 @@ def _run_erk(run: _Run, project: bool) -> None:
     integrated = (run.status & FAILURE_BITS) == 0
     run.steps[integrated] = nstep
     run.evaluations[integrated] = RK4.nstage * nstep + 1
-    (module.erk_project_run if project else module.erk_run)(
+    over_samples(
+        module.erk_project_run if project else module.erk_run, run.groups,
         P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
-        run.status, run.t_div, run.t_sing, run.t_cl,
+        run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
 
 
@@ -322,13 +329,14 @@ def _run_rk45(run: _Run) -> None:
     module, P, Q0, V0 = _lane_setup(run, "rk45")
     s = run.settings
     alpha, beta = s.gains
-    module.adaptive_run(
+    over_samples(
+        module.adaptive_run, run.groups,
         P, Q0, V0, 0.0, run.time, min(s.dt, s.output_step), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
         *run.contact_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
-        run.rejected_steps, run.evaluations,
+        run.rejected_steps, run.evaluations, min_block=1,
     )  # fmt: skip
 
 
@@ -445,9 +453,10 @@ def _run_generalized_alpha(run: _Run) -> None:
 
     s = run.settings
     coef = GeneralizedAlpha.from_rho(s.rho_inf)
-    km = run.model.kernel_arrays()
+    km = run.model.kernel_model()
     nstep = (len(run.time) - 1) * run.every
-    generalized_alpha_run(
+    over_samples(
+        generalized_alpha_run, run.model.nsample,
         km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, s.dt, nstep,
         run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
         s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,

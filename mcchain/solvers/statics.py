@@ -25,6 +25,7 @@ from mcchain.kernels import statics as kernels
 from mcchain.model import JointKind, Model
 from mcchain.scene.models import Equilibrium
 from mcchain.solvers.damped import damped_modes
+from mcchain.solvers.threads import over_samples
 from mcchain.status import STATUS_DTYPE, Status
 
 
@@ -86,10 +87,11 @@ class ModesResult:
 def assemble(model: Model, status: np.ndarray | None = None) -> Assembled:
     """Project every sample's initial positions and velocities onto the constraints."""
     nsample = model.nsample
-    q = np.array(np.broadcast_to(model.q0, (nsample, model.ndof)), dtype=np.float64)
-    v = np.array(np.broadcast_to(model.v0, (nsample, model.ndof)), dtype=np.float64)
+    # C order: a copy of a broadcast view is F-ordered, and numba compiles per layout
+    q = np.array(np.broadcast_to(model.q0, (nsample, model.ndof)), dtype=np.float64, order="C")
+    v = np.array(np.broadcast_to(model.v0, (nsample, model.ndof)), dtype=np.float64, order="C")
     status = _status_or_new(status, nsample)
-    assembly.assemble_batch(model.kernel_arrays(), q, v, status)
+    over_samples(assembly.assemble_batch, nsample, model.kernel_model(), q, v, status)
     return Assembled(q=q, v=v, status=status)
 
 
@@ -108,16 +110,19 @@ def solve_equilibrium(
     settings = Equilibrium() if settings is None else settings
     tolerance, max_iterations = settings.tolerance, settings.max_iterations
     nsample = model.nsample
-    q = np.array(q_start, dtype=np.float64, copy=True)
+    q = np.array(q_start, dtype=np.float64, copy=True, order="C")
     lam = np.full((nsample, model.ncon), np.nan)
     iterations = np.zeros(nsample, dtype=np.int64)
     history = np.full((nsample, max_iterations + 1, 2), np.nan)
     status = _status_or_new(status, nsample).copy()
-    km = model.kernel_arrays()
-    kernels.equilibrium_batch(km, tolerance, max_iterations, q, lam, iterations, history, status)
+    km = model.kernel_model()
+    over_samples(
+        kernels.equilibrium_batch, nsample,
+        km, tolerance, max_iterations, q, lam, iterations, history, status,
+    )  # fmt: skip
     joint_force = np.full((nsample, model.njoint, 2), np.nan)
     contact_force = np.full((nsample, model.njoint), np.nan)
-    kernels.joint_forces_batch(km, q, lam, joint_force, contact_force)
+    over_samples(kernels.joint_forces_batch, nsample, km, q, lam, joint_force, contact_force)
     return EquilibriumResult(q, lam, joint_force, contact_force, iterations, history, status)
 
 
@@ -134,13 +139,15 @@ def solve_modes(
     shape_rows = nsample if want_shapes else 1
     shape_array = np.full((shape_rows, model.nmode, model.ndof), np.nan)
     status = equilibrium.status.copy()
-    km = model.kernel_arrays()
-    kernels.modes_batch(km, equilibrium.q, equilibrium.lam, want_shapes, omega, shape_array, status)
+    km = model.kernel_model()
+    q = np.ascontiguousarray(equilibrium.q)
+    lam = np.ascontiguousarray(equilibrium.lam)
+    over_samples(kernels.modes_batch, nsample, km, q, lam, want_shapes, omega, shape_array, status)
     stable = (status & (Status.UNSTABLE_EQUILIBRIUM | _FAILED)) == 0
     modal_damping = None
     if has_dampers:
         modal_damping = np.full((nsample, model.nmode, model.nmode), np.nan)
-        kernels.modal_damping_batch(km, equilibrium.q, shape_array, modal_damping)
+        over_samples(kernels.modal_damping_batch, nsample, km, q, shape_array, modal_damping)
     result = ModesResult(omega, shape_array if shapes else None, stable, status)
     if not damped:
         return result
@@ -186,7 +193,7 @@ def constraint_rank(model: Model, q: np.ndarray, sample: int = 0) -> int:
     from mcchain.kernels.joints import constraint_jacobian
     from mcchain.kernels.linalg import null_space
 
-    km = model.kernel_arrays()
+    km = model.kernel_model()
     B = np.zeros((model.ncon, model.ndof))
     constraint_jacobian(km, sample, np.ascontiguousarray(q, dtype=np.float64), B)
     Q = np.empty((model.ndof, model.ndof))

@@ -1,0 +1,190 @@
+"""Time to first result: cold and warm starts of the CLI, for two commits side by side.
+
+Usage::
+
+    python benchmarks/bench_startup.py [--before REF] [--after REF] [--quick]
+
+Each commit is checked out in a temporary git worktree and run with this interpreter
+(``PYTHONPATH`` = the worktree), every command in a fresh process. "Cold" = empty numba and
+generated-code caches (``NUMBA_CACHE_DIR``, ``MCCHAIN_CACHE_DIR`` in a new folder); each later
+row reuses the caches the rows above it filled, as a user's session would:
+
+1. the Quick start's main job (``configs/clearance-sweep.toml``), cold, then warm;
+2. the first statics run of another joint mix (the ideal double pendulum, no simulation);
+3. a new simulation topology each: the double pendulum (rk4), the four-bar with its
+   clearance joint under the contact law (rk45), a 32-bar chain (rk4);
+4. ``mcchain validate`` of the Quick start's scene, warm.
+
+``--quick`` leaves out the 32-bar chain. Writes ``benchmarks/results/startup/startup.md``
+and ``startup.png`` (ratios are measured in one run: absolute times drift on a shared
+machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+OUT = REPO / "benchmarks" / "results" / "startup"
+GOALS = {
+    "quick start, cold": 15.0,
+    "quick start, warm": 1.5,
+    "other joint mix (statics), cold": 10.0,
+    "double pendulum (rk4), cold": 8.0,
+    "four-bar, contact law (rk45), cold": 8.0,
+    "32-bar chain (rk4), cold": 20.0,
+    "validate, warm": 0.5,
+}
+
+
+def _worktree(ref: str, parent: Path) -> Path:
+    sha = subprocess.run(
+        ["git", "-C", str(REPO), "rev-parse", "--short", ref],
+        check=True, capture_output=True, text=True,
+    ).stdout.strip()  # fmt: skip
+    path = parent / f"tree-{sha}"
+    subprocess.run(
+        ["git", "-C", str(REPO), "worktree", "add", "--detach", "-f", str(path), ref],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    return path
+
+
+def _scenes(tree: Path, folder: Path, quick: bool) -> dict[str, list[str]]:
+    """The command line (after ``mcchain``) of every row, scene files written to ``folder``."""
+    configs = tree / "configs"
+    pendulum = (configs / "double-pendulum.toml").read_text()
+    statics = folder / "double-pendulum-statics.toml"
+    statics.write_text(pendulum.split("[simulate]")[0].replace('"double-pendulum"', '"dp-statics"'))
+    rows = {
+        "quick start, cold": ["run", str(configs / "clearance-sweep.toml")],
+        "quick start, warm": ["run", str(configs / "clearance-sweep.toml")],
+        "other joint mix (statics), cold": ["run", str(statics)],
+        "double pendulum (rk4), cold": ["run", str(configs / "double-pendulum.toml")],
+        "four-bar, contact law (rk45), cold": ["run", str(configs / "fourbar-clearance.toml")],
+    }
+    if not quick:
+        sys.path.insert(0, str(REPO))
+        from mcchain.testing.factory import chain_scene_text
+
+        chain = folder / "chain32.toml"
+        chain.write_text(
+            chain_scene_text(
+                32, (), seed=1, equilibrium=False, modes=False,
+                simulate={"t_end": 0.05, "dt": 1e-4, "output_dt": 1e-2, "method": "rk4"},
+            )
+        )  # fmt: skip
+        rows["32-bar chain (rk4), cold"] = ["run", str(chain)]
+    rows["validate, warm"] = ["validate", str(configs / "clearance-sweep.toml")]
+    return rows
+
+
+def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, str]:
+    env = dict(os.environ)
+    env.update(
+        PYTHONPATH=str(tree),
+        NUMBA_CACHE_DIR=str(cache / "numba"),
+        MCCHAIN_CACHE_DIR=str(cache / "generated"),
+    )
+    cmd = [sys.executable, "-m", "mcchain.cli", *args]
+    if args[0] == "run":
+        cmd += ["--quiet", "--out", str(work / "runs")]
+        if "fourbar" in args[1]:
+            cmd += ["--samples", "4"]  # the compile is the point, not the 1000 samples
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(args)} failed in {tree}:\n{proc.stderr[-2000:]}")
+    return seconds, proc.stdout + proc.stderr
+
+
+def measure(tree: Path, parent: Path, quick: bool) -> dict[str, float]:
+    """Seconds of every row for the commit checked out in ``tree``."""
+    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=parent))
+    work = Path(tempfile.mkdtemp(prefix="work-", dir=parent))
+    seconds = {}
+    for name, args in _scenes(tree, work, quick).items():
+        if name == "validate, warm":
+            _time(tree, cache, work, args)  # load its kernels once
+        seconds[name], output = _time(tree, cache, work, args)
+        print(f"  {name}: {seconds[name]:.2f} s", flush=True)
+        if name == "quick start, cold":
+            print("   ", " / ".join(re.findall(r"^(?:wall|end to end).*$", output, re.M)))
+    return seconds
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", default="HEAD~1", help="the earlier commit")
+    parser.add_argument("--after", default="HEAD", help="the later commit")
+    parser.add_argument("--quick", action="store_true", help="leave out the 32-bar chain")
+    args = parser.parse_args(argv)
+    parent = Path(tempfile.mkdtemp(prefix="mcchain-startup-"))
+    results = {}
+    labels = {}
+    try:
+        for ref in (args.before, args.after):
+            tree = _worktree(ref, parent)
+            labels[ref] = tree.name.removeprefix("tree-")
+            print(f"{ref} ({labels[ref]}):", flush=True)
+            results[ref] = measure(tree, parent, args.quick)
+    finally:
+        for tree in parent.glob("tree-*"):
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)])
+    before, after = results[args.before], results[args.after]
+    b, a = labels[args.before], labels[args.after]
+    lines = [
+        f"| what | {b}, s | {a}, s | {b} / {a} | goal, s |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for name in after:
+        lines.append(
+            f"| {name} | {before[name]:.2f} | {after[name]:.2f} | "
+            f"{before[name] / after[name]:.2f}× | ≤ {GOALS[name]:g} |"
+        )
+    table = "\n".join(lines)
+    print(table)
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "startup.md").write_text(
+        f"# Start-up times: {b} against {a}\n\n"
+        f"`python benchmarks/bench_startup.py --before {args.before} --after {args.after}"
+        f"{' --quick' if args.quick else ''}`, both measured in one run on {os.cpu_count()} "
+        "cores (each row reuses the caches the rows above it filled).\n\n" + table + "\n"
+    )
+    _chart(before, after, b, a)
+    return 0
+
+
+def _chart(before: dict[str, float], after: dict[str, float], b: str, a: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    names = list(after)
+    y = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(names) + 1.2))
+    ax.barh(y - 0.2, [before[n] for n in names], 0.4, label=b, color="0.6")
+    ax.barh(y + 0.2, [after[n] for n in names], 0.4, label=a, color="C0")
+    ax.scatter([GOALS[n] for n in names], y, marker="|", s=300, color="C3", label="goal")
+    ax.set_yticks(y, names)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlabel("wall time of the command, s (log)")
+    ax.set_title("Time to first result: cold and warm starts")
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(OUT / "startup.png", dpi=120)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

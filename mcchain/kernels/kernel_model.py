@@ -1,0 +1,57 @@
+"""The kernel model as one numba structure passed by reference.
+
+Kernels read the model as ``km.<field>[...]``. A NamedTuple of 35 arrays did the same, but
+numba passes a tuple by value, flattened to about 280 scalar arguments at every call of every
+helper: that IR dominated the compile (LLVM passes and machine code were 80 s of the 128 s
+cold start of the Quick start job). A StructRef is one pointer, and its fields read the same
+way, so no kernel changes. The structure is built once per solve by :func:`as_struct`, a
+cached kernel whose field types come from the NamedTuple it is given.
+"""
+
+from __future__ import annotations
+
+from numba import njit, types
+from numba.core.extending import overload
+from numba.experimental import structref
+
+from mcchain.kernels.config import JIT
+from mcchain.model import KernelModel
+
+
+@structref.register
+class KernelModelType(types.StructRef):
+    """Numba type of the kernel model: one field per :class:`~mcchain.model.KernelModel`
+    array, same name, same array type."""
+
+
+class KernelModelStruct(structref.StructRefProxy):
+    """Python handle of a kernel model built by :func:`as_struct` (opaque: read the arrays
+    from the :class:`~mcchain.model.KernelModel` it was built from)."""
+
+
+structref.define_boxing(KernelModelType, KernelModelStruct)
+
+
+def _from_tuple(arrays):  # pragma: no cover - replaced by the overload in compiled code
+    raise NotImplementedError
+
+
+@overload(_from_tuple, jit_options=dict(JIT, cache=False))  # built inside _as_struct
+def _from_tuple_impl(arrays):
+    struct_type = KernelModelType(list(zip(arrays.fields, arrays.types, strict=True)))
+    lines = ["def build(arrays):", "    km = structref.new(struct_type)"]
+    lines += [f"    km.{name} = arrays.{name}" for name in arrays.fields]
+    lines += ["    return km"]
+    namespace = {"structref": structref, "struct_type": struct_type}
+    exec("\n".join(lines), namespace)  # one assignment per field, known only from the type
+    return namespace["build"]
+
+
+@njit(**JIT)
+def _as_struct(arrays):
+    return _from_tuple(arrays)
+
+
+def as_struct(arrays: KernelModel) -> KernelModelStruct:
+    """The kernel model that every kernel takes as ``km``, sharing the arrays of ``arrays``."""
+    return _as_struct(arrays)

@@ -1,0 +1,48 @@
+"""Blocks of samples (or lane groups) run on threads: how the kernels use every core.
+
+Every batch kernel is a serial numba function over ``start:stop`` that releases the GIL, so
+a thread pool runs contiguous blocks side by side. A ``prange`` loop did the same but made
+numba build, optimise and emit each kernel's whole call tree once more for the parallel
+body (benchmarks/results/startup.md). Samples never interact, so each sample's numbers do
+not depend on the blocks or the thread count.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numba
+
+BLOCKS_PER_THREAD = 4
+"""Blocks per thread: items differ in cost (Newton iterations, adaptive steps), so a thread
+that finishes early takes another block."""
+MIN_BLOCK = 16
+"""Fewest samples in a block of a static kernel, so a small batch stays on one thread."""
+
+
+def item_blocks(count: int, threads: int, min_block: int = 1) -> list[tuple[int, int]]:
+    """Contiguous ``(start, stop)`` blocks covering ``0:count`` for ``threads`` threads, each
+    at least ``min_block`` long (but one)."""
+    nblock = max(1, min(threads * BLOCKS_PER_THREAD, count // min_block))
+    edges = [count * k // nblock for k in range(nblock + 1)]
+    return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
+
+
+def over_samples(
+    kernel: Callable[..., Any], count: int, *args: Any, min_block: int = MIN_BLOCK
+) -> None:
+    """Call ``kernel(start, stop, *args)`` on blocks covering ``0:count`` (samples, or lane
+    groups with ``min_block=1``), on as many threads as numba may use
+    (``numba.get_num_threads()``, which ``--threads`` sets)."""
+    threads = numba.get_num_threads()
+    blocks = item_blocks(count, threads, min_block)
+    if threads == 1 or len(blocks) == 1:
+        for start, stop in blocks:
+            kernel(start, stop, *args)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(kernel, start, stop, *args) for start, stop in blocks]:
+            future.result()
