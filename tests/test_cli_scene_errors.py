@@ -54,6 +54,10 @@ CASES = {
         "negative degrees of freedom",
     ),
     "unassemblable": (_chain_with_extra_joint("[[5.0, 0.0], [0.0, 0.0]]"), "cannot be assembled"),
+    "body held by nothing": (
+        BAR + '[[body]]\nname = "loose"\nmass = 1.0\ninertia = 0.1\n',
+        "body[1]: 'loose' is not connected to the ground",
+    ),
 }
 
 

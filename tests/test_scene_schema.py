@@ -524,7 +524,8 @@ def test_load_scene__malformed_file_names_the_file(tmp_path: Path) -> None:
 
 
 def test_load_scene__defaults() -> None:
-    text = '[[body]]\nname = "b"\nmass = 1\ninertia = 2\n'
+    pin = '[[joint]]\nbodies = ["ground", "b"]\npoints = [[0, 0], [0, 0]]\n'  # held by a pin
+    text = '[[body]]\nname = "b"\nmass = 1\ninertia = 2\n' + pin
     scene = load_scene_text(text)
     assert scene.name == "scene"
     assert scene.scene.gravity == [0.0, -9.81]
@@ -533,7 +534,8 @@ def test_load_scene__defaults() -> None:
     assert isinstance(body.mass, float)
     assert body.position == [0.0, 0.0] and body.velocity == [0.0, 0.0]
     assert body.angle == 0.0 and body.angular_velocity == 0.0
-    assert scene.joint == [] and scene.driver == [] and scene.force == [] and scene.spring == []
+    assert scene.joint[0].clearance == 0.0 and scene.joint[0].name == "ground-b"
+    assert scene.driver == [] and scene.force == [] and scene.spring == []
     assert scene.sample is None and scene.equilibrium is None and scene.modes is None
     assert scene.simulate is None
     assert scene.storage.history_dtype == "float32"

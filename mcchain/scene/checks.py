@@ -40,9 +40,10 @@ def check_scene(scene: Scene) -> None:
     """Cross-reference checks the models cannot make; raise :class:`SceneError`.
 
     Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
-    drivers/forces on ground, duplicate drivers, sampled and perturbation paths, the
-    distributions' supports against the parameter's domain, a ``"saltelli"`` count against
-    the number of varied paths, ``output_dt`` against ``dt``. Kinematics are not checked.
+    bodies not connected to the ground, drivers/forces on ground, duplicate drivers, sampled
+    and perturbation paths, the distributions' supports against the parameter's domain, a
+    ``"saltelli"`` count against the number of varied paths, ``output_dt`` against ``dt``.
+    Kinematics are not checked.
     """
     bodies = scene.body_names
     known = {GROUND_NAME, *bodies}
@@ -83,6 +84,8 @@ def check_scene(scene: Scene) -> None:
             if item.bodies[0] == item.bodies[1]:
                 raise SceneError(f"{where}.bodies: joins body {item.bodies[0]!r} to itself")
         unique(kind, [str(item.name) for item in items])
+
+    _check_connected(scene)
 
     drivers: dict[str, int] = {}
     for i, driver in enumerate(scene.driver):
@@ -165,6 +168,27 @@ def check_scene(scene: Scene) -> None:
                     f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
                     f"method {sim.method!r}, got {sim.output_dt!r}"
                 )
+
+
+def _check_connected(scene: Scene) -> None:
+    """Every body must hang on the ground through joints and springs: a body held by
+    nothing falls, and its equilibrium fails with no hint of why."""
+    held = {GROUND_NAME}
+    links = [(j.bodies[0], j.bodies[1]) for j in scene.joint]
+    links += [(s.bodies[0], s.bodies[1]) for s in scene.spring]
+    grown = True
+    while grown:
+        grown = False
+        for a, b in links:
+            if (a in held) != (b in held):
+                held.update((a, b))
+                grown = True
+    for i, name in enumerate(scene.body_names):
+        if name not in held:
+            raise SceneError(
+                f"body[{i}]: {name!r} is not connected to the ground by any chain of joints "
+                "or springs (a body held by nothing falls and has no equilibrium)"
+            )
 
 
 def _check_contact(
