@@ -29,25 +29,25 @@ GOLDEN = {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
         "rk4": "9bd571752c655d8a0cc1cbdae963ce1437707e9aad88fb3b5adf5caa2e5ffb88",
         "rk4-projection": "4dfcf561a25f719ca39c0ea6f5b38d8bb00e7a375f52a048db623c8598ed3bd5",
-        "rk45": "b7dcd86411eee665bdfd19bddf2818aa997a3a6c2136f4c62e7d0d0b9ac4c59d",
+        "rk45": "0c784e6ee987ad4a83d0005654b6c7197f93f2399751675d7d030fbd7d3216bf",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
         "rk4": "effb2624d9c5e6a2519f33a60f360e4176f1f079a391b700fd088176c97be176",
         "rk4-projection": "feb2bb6879cae6250cbe01cf0127bf8b09a8a9cafef97e59b4073009d40572f9",
-        "rk45": "406fb8337c6b76375c109a7ddc7330f0b9ba1bb08d77c95b10e4ca17c2debb88",
+        "rk45": "369eaab65e8b464810771f8230faadec176d59f74b403519c49a3a4fb7ed12a2",
     },
     "fourbar-clearance-auto": {
         "accel": "86e32d2d5657cb7fd633ef2b973c48781a8539dfe3db0e50d2dfee88ac957acb",
-        "rk4": "5553b865d23a3291aa0aaa97b0b2bfec5d039f86ef7fa941efe186d49356a13b",
-        "rk4-projection": "6121cb843e941a3d50d199c16012b90fc320e87c1eff446cdde9a52187540b0f",
-        "rk45": "7274fcff2de2bf8140b863d617c3db5942e6ec8f59382f855aa9825f60181520",
+        "rk4": "c5c73b7b4a6c64462518cc0db9267f4e9169dd23eacfa64bc7018df84424d391",
+        "rk4-projection": "51c3f97f7c023600dbc4874bd8862ebfb12a96a4bf2cd102c20cd4ba408a48d8",
+        "rk45": "f396ee7fef4746568576d3734fd68f3d38696ac4dc311a77bda776ceb184477b",
     },
     "chain4-mixed-spring": {
         "accel": "60bb1204e42d054c75e3d065cdd5c38bce39cd698fcb21fb515bd8b59ea79255",
         "rk4": "6ef1c0b4b608682987c64d5d8beab2f6d744c974aadcd5c783a54c169b1abc34",
         "rk4-projection": "e014e671f9389656be3dc5b9b1401fcc37a10e1033f34c64992d09bf652ce9c8",
-        "rk45": "3f12809a73458cc57eb2b96cdd3202cbb74bdb0fbafc4a46ec5310145208dc4d",
+        "rk45": "17dd9e525dbf1ddbabe4fd939d469fbe09cd740cb059ae564c26ba2ec1602b7c",
     },
 }
 

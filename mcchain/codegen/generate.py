@@ -492,7 +492,10 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     blocks = _blocks(topo, nstage, lay)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if tableau is not None and topo.contact_joints:
-        parts_of = (*parts_of, templates.RESEAT_HELPER)
+        refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
+        parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))
+    if not topo.contact_joints:
+        parts_of = tuple(p.replace(templates.FIRST_STAGE_RESEATED, "") for p in parts_of)
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)

@@ -208,7 +208,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
             run[l] = True
             nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
         # First stage at the start; later steps reuse the last stage (FSAL).
-        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
+        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, 0.0)
         @@contact_start
         while True:
             # Failures, contact and outputs at each lane's current (accepted) state.
@@ -366,11 +366,9 @@ def group_reseat_SUFFIX(W, nl, t_now, A, balpha2, bbeta2, tau, refresh):
     for l in range(nl):
         if @[rsw] > 0.0:
             t_now = @[tl] if refresh else t_now
+            @[e0] = lane_energy_SUFFIX(W, l, t_now)
             @@load_params
             @@load_state
-            @@load_lam
-            @@outputs
-            @[e0] = energy
             @@reseat_marks
         @[act] = @[rsw]
         @[pmax] = np.inf
@@ -391,39 +389,53 @@ def group_reseat_SUFFIX(W, nl, t_now, A, balpha2, bbeta2, tau, refresh):
     for l in range(nl):
         if @[rsw] > 0.0 and not DRIVEN:
             t_now = @[tl] if refresh else t_now
+            excess = lane_energy_SUFFIX(W, l, t_now) - @[e0]
             @@load_params
             @@load_state
-            @@load_lam
-            @@outputs
-            excess = energy - @[e0]
             @@kinetic
             if excess > 0.0 and ke > excess:
                 scale = math.sqrt((ke - excess) / ke)
                 @@scale_velocity
-    if refresh:
-        s = 0
-        @@stage_coefs_zero
-        for l in range(nl):
-            if @[rsw] == 0.0:
-                continue
-            ts = @[tl]
-            @@stage_coefs_per_lane
-            @@load_params
-            @@load_stage
-            @@accel_stage
-            @@store_stage
-            @@accept_zero
+@@refresh_call
     for l in range(nl):
         @[rsw] = 0.0
+
+
+@njit(**JIT)
+def lane_energy_SUFFIX(W, lane, t_now):
+    """Mechanical energy of lane ``lane`` at its state in W, J (re-seat bookkeeping)."""
+    energy = 0.0
+    for l in range(lane, lane + 1):
+        @@load_params
+        @@load_state
+        @@load_lam
+        @@outputs
+    return energy
 '''
+
+FIRST_STAGE_RESEATED = """        if reseated > 0.0 and @[rsw] == 0.0:
+            continue
+"""
+"""The first stage's lane filter, in topologies with contact joints only (the others have no
+re-seat flags)."""
+
+RESEAT_REFRESH = """    if refresh:  # the re-seated lanes' first stage (FSAL) at their new state
+        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, 1.0)
+"""
+"""The re-seat's call of the first stage, in the adaptive variant only (the fixed-step ones
+have no first-stage helper)."""
 
 FIRST_STAGE_HELPER = '''
 @njit(**JIT)
-def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
-    """Stage 0 at each lane's start (adaptive methods: later steps reuse their last stage)."""
+def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, reseated):
+    """Stage 0 at each lane's start (adaptive methods: later steps reuse their last stage);
+    with ``reseated`` = 1.0, only at the lanes flagged ``rsw`` (just re-seated). A float, not
+    a bool: numba would compile a literal True and a literal False apart."""
     s = 0
     @@stage_coefs_zero
     for l in range(nl):
+        if reseated > 0.0 and @[rsw] == 0.0:
+            continue
         ts = @[tl]
         @@stage_coefs_per_lane
         @@load_params
