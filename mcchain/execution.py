@@ -42,6 +42,7 @@ from mcchain.runs import (
     SCENE_COPY,
     check_new_run_dir,
     create_run_folder,
+    drop_lock,
     is_locked,
     read_record,
     resolve_run,
@@ -395,6 +396,7 @@ def execute(
                 part.path.unlink()
             with contextlib.suppress(OSError):
                 parts_dir.rmdir()
+        drop_lock(folder)  # still held: a completed run keeps no lock file
     return RunResult(folder, record)
 
 

@@ -149,6 +149,13 @@ def run_lock(folder: Path) -> Iterator[None]:
         os.close(fd)
 
 
+def drop_lock(folder: Path) -> None:
+    """Remove the lock file of a completed run, while :func:`run_lock` still holds it (a
+    completed run is never executed again, so no other process waits for it)."""
+    with contextlib.suppress(FileNotFoundError):
+        (Path(folder) / LOCK).unlink()
+
+
 def is_locked(folder: Path) -> bool:
     """Whether a live process executes the run."""
     try:

@@ -76,8 +76,7 @@ def test_start_run__folder_contents_and_run_json(tmp_path: Path) -> None:
     folder = result.folder
     assert folder.parent == tmp_path / "runs"
     assert folder.name.endswith("-my-scene-1")
-    assert sorted(p.name for p in folder.iterdir()) == [
-        ".lock",
+    assert sorted(p.name for p in folder.iterdir()) == [  # no .lock once completed
         "ensemble.nc",
         "run.json",
         "run.log",
