@@ -183,6 +183,7 @@ def compile_notice(after: float = COMPILE_NOTICE_AFTER, stream: Any = None) -> I
         yield
     finally:
         timer.cancel()
+        timer.join()  # a notice being printed ends before the ready line
         if said.is_set():
             print(f"kernels ready in {time.perf_counter() - t0:.1f} s", file=stream, flush=True)
 

@@ -2,10 +2,10 @@
 
 Kernels read the model as ``km.<field>[...]``. A NamedTuple of 35 arrays did the same, but
 numba passes a tuple by value, flattened to about 280 scalar arguments at every call of every
-helper: that IR dominated the compile (LLVM passes and machine code were 80 s of the 128 s
-cold start of the Quick start job). A StructRef is one pointer, and its fields read the same
-way, so no kernel changes. The structure is built once per solve by :func:`as_struct`, a
-cached kernel whose field types come from the NamedTuple it is given.
+helper, and that IR dominated the compile time (benchmarks/results/startup/breakdown.md). A
+StructRef is one pointer, and its fields read the same way, so no kernel changes. The
+structure is built once per solve by :func:`as_struct`, a cached kernel whose field types
+come from the NamedTuple it is given.
 """
 
 from __future__ import annotations

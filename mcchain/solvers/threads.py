@@ -3,7 +3,7 @@
 Every batch kernel is a serial numba function over ``start:stop`` that releases the GIL, so
 a thread pool runs contiguous blocks side by side. A ``prange`` loop did the same but made
 numba build, optimise and emit each kernel's whole call tree once more for the parallel
-body (benchmarks/results/startup/startup.md). Samples never interact, so each sample's numbers do
+body (benchmarks/results/startup/breakdown.md). Samples never interact, so each sample's numbers do
 not depend on the blocks or the thread count.
 """
 
