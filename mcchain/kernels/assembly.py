@@ -260,7 +260,7 @@ def assemble_batch(start, stop, km, q_out, v_out, status_out):
     """Assemble samples ``start:stop`` in place.
 
     Args:
-        km: KernelModel.
+        km: the kernel model (:meth:`mcchain.model.Model.kernel_model`).
         q_out: (nsample, 3 nbody) initial positions in, assembled positions out (NaN on failure).
         v_out: (nsample, 3 nbody) initial velocities in, consistent velocities out.
         status_out: (nsample,) uint32, bits OR-ed in.

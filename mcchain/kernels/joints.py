@@ -1,6 +1,6 @@
 """Constraints of one sample: joints (ideal, clearance) and drivers.
 
-All functions take the kernel model ``km`` (:class:`mcchain.model.KernelModel`), the sample
+All functions take the kernel model ``km`` (:meth:`mcchain.model.Model.kernel_model`), the sample
 index ``s`` (parameters are read with the broadcast index ``a[s % a.shape[0]]``) and the
 coordinates ``q`` (3 nbody,) of that sample. Rows are ordered as ``km.joint_row`` /
 ``km.driver_row`` say. Nothing here allocates or raises.

@@ -319,7 +319,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
         if polished:
             continue
         # element loops: an array-to-array slice assignment compiles numba's shape-error
-        # message formatting (3 s of a cold start)
+        # message formatting (benchmarks/results/startup/breakdown.md)
         for k in range(n):
             q[k] = q_trial[k]
         for i in range(m):
@@ -341,7 +341,7 @@ def equilibrium_batch(
     """Equilibrium of samples ``start:stop``, starting from ``q_out``.
 
     Args:
-        km: KernelModel.
+        km: the kernel model (:meth:`mcchain.model.Model.kernel_model`).
         tol: scaled residual tolerance.
         max_iter: Newton iteration limit.
         q_out: (nsample, 3 nbody) start in (assembled), equilibrium out.

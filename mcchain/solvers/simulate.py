@@ -461,7 +461,7 @@ def _run_generalized_alpha(run: _Run) -> None:
         run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
         s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations,
+        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations, min_block=1,
     )  # fmt: skip
 
 
