@@ -382,18 +382,57 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     return lines
 
 
+def describe_initial_state(model: Any, assembled: Any) -> list[str]:
+    """The lines ``mcchain validate`` prints about the assembled state at t = 0 (sample 0 of
+    ``model``): each body's pose and velocity, each clearance joint's d and contact force."""
+    import numpy as np
+
+    from mcchain.kernels.joints import joint_vectors
+    from mcchain.model import JointKind
+    from mcchain.solvers.statics import start_multipliers
+
+    if int(assembled.status[0]) != 0:
+        return ["initial state: cannot be assembled"]
+    q, v = assembled.q[0], assembled.v[0]
+    lines = ["initial state at t = 0 (assembled):"]
+    for b, name in enumerate(model.body_names):
+        x, y, th = q[3 * b : 3 * b + 3]
+        vx, vy, w = v[3 * b : 3 * b + 3]
+        lines.append(
+            f"  {name}: position [{_fmt(x)}, {_fmt(y)}] m, angle {_fmt(th)} rad, "
+            f"velocity [{_fmt(vx)}, {_fmt(vy)}] m/s, angular velocity {_fmt(w)} rad/s"
+        )
+    clearance = np.flatnonzero(model.joint_kind == JointKind.CLEARANCE)
+    if clearance.size:
+        lam = start_multipliers(model, q, v)
+        km = model.kernel_model()
+        for k in clearance:
+            dx, dy = joint_vectors(km, 0, q, int(k))[4:]
+            force = float(lam[int(model.joint_row[k])])
+            state = "holds" if force > 0 else "lost at the start: the journal is pulled off"
+            lines.append(
+                f"  {model.joint_names[k]}: |d| {_fmt(float(np.hypot(dx, dy)))} m at "
+                f"{_fmt(float(np.arctan2(dy, dx)))} rad (eccentricity), contact force "
+                f"{_fmt(force)} N: contact {state}"
+            )
+    return lines
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from mcchain.job import default_loader
+    from mcchain.job import default_loader, written_state
 
     scene, model = default_loader(args.scene, None, None)
     name = getattr(getattr(scene, "scene", None), "name", args.scene)
-    nominal = None
-    if getattr(scene, "sample", None) is not None:
-        from mcchain.scene import compile_model
-
-        nominal = compile_model(scene.model_copy(update={"sample": None}))
+    written, assembled = written_state(scene)
+    nominal = written if getattr(scene, "sample", None) is not None else None
     for line in describe_model(model, name, nominal):
         print(line)
+    for line in describe_initial_state(written, assembled):
+        print(line)
+    warnings = model.meta.get("warnings") or []
+    assert isinstance(warnings, list)
+    for line in warnings:
+        print(f"warning: {line}")
     return 0
 
 

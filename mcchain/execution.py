@@ -149,6 +149,7 @@ def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -
         "merge": None,
         "sessions": [],
         "error": None,
+        "warnings": list(job.warnings),
     }
 
 
@@ -429,6 +430,8 @@ def start_run(
     _check_threads(threads, dask)
     job = prepare_job(scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader)
     check_live(rerun, job.nsample)
+    for line in job.warnings:
+        print(f"warning: {line}", file=sys.stderr)
     prepare_seconds = time.perf_counter() - t0
     folder = create_run_folder(out, job.scene_name, run_dir)
     with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:

@@ -42,6 +42,8 @@ class Job:
         history_dtype, compression, complevel: ``[storage]`` settings.
         steps_per_sample: integration steps per sample (``None`` without ``[simulate]``).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
+        warnings: lines about the scene as written, e.g. a written position that assembly
+            moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
     """
 
     scene: Any
@@ -56,6 +58,7 @@ class Job:
     complevel: int
     steps_per_sample: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
         """Global attributes of ``ensemble.nc`` (and of every part file)."""
@@ -76,12 +79,22 @@ class Job:
 def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[Any, Model]:
     """Load, compile and check a scene with the real scene module and statics checks."""
     from mcchain.scene import compile_model, load_scene
-    from mcchain.solvers.statics import check_scene
+    from mcchain.solvers.statics import check_scene, initial_state_warnings
 
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed)
     check_scene(model)
+    model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
+
+
+def written_state(scene: Any) -> tuple[Model, Any]:
+    """The scene as written (without ``[sample]``) compiled, and its assembled state."""
+    from mcchain.scene import compile_model
+    from mcchain.solvers.statics import assemble
+
+    written = compile_model(scene.model_copy(update={"sample": None}))
+    return written, assemble(written)
 
 
 def _section(scene: Any, name: str) -> Any:
@@ -115,6 +128,12 @@ def _steps_per_sample(scene: Any) -> int | None:
     if not t_end or not dt:
         return None
     return round(float(t_end) / float(dt))
+
+
+def _warnings(model: Model) -> list[str]:
+    lines = model.meta.get("warnings") or []
+    assert isinstance(lines, list)
+    return [str(line) for line in lines]
 
 
 def check_positive(name: str, value: int | None) -> None:
@@ -171,4 +190,5 @@ def prepare_job(
         complevel=int(storage.complevel),
         steps_per_sample=_steps_per_sample(scene),
         settings=resolved_settings(scene, nsample, effective_seed),
+        warnings=_warnings(model),
     )

@@ -42,7 +42,18 @@ def test_compile_model__topology_and_rows() -> None:
     for name in ("joint_body_a", "joint_kind", "joint_row", "driver_row", "force_body"):
         assert getattr(model, name).dtype == np.int64
     assert model.nsample == 1 and model.parameters.shape == (1, 0) and model.param_paths == ()
-    assert model.meta == {"scene_name": "chain", "seed": 0, "design": None, "nsample": 1}
+    assert model.meta == {
+        "scene_name": "chain",
+        "seed": 0,
+        "design": None,
+        "nsample": 1,
+        "written": {
+            "position": (True, True, True),
+            "angle": (True, True, True),
+            "velocity": (False, False, False),
+            "angular_velocity": (False, False, False),
+        },
+    }
 
 
 def test_compile_model__defaults_in_arrays() -> None:

@@ -532,8 +532,8 @@ def test_load_scene__defaults() -> None:
     body = scene.body[0]
     assert (body.mass, body.inertia) == (1.0, 2.0)
     assert isinstance(body.mass, float)
-    assert body.position == [0.0, 0.0] and body.velocity == [0.0, 0.0]
-    assert body.angle == 0.0 and body.angular_velocity == 0.0
+    assert body.position is None and body.angle is None  # placed on its joints when compiled
+    assert body.velocity == [0.0, 0.0] and body.angular_velocity == 0.0
     assert scene.joint[0].clearance == 0.0 and scene.joint[0].name == "ground-b"
     assert scene.driver == [] and scene.force == [] and scene.spring == []
     assert scene.sample is None and scene.equilibrium is None and scene.modes is None

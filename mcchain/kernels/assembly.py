@@ -19,6 +19,7 @@ from numba import njit
 
 from mcchain.kernels.config import JIT
 from mcchain.kernels.forces import (
+    applied_forces,
     mass_diagonal,
 )
 from mcchain.kernels.joints import (
@@ -42,6 +43,9 @@ SCHUR_PIVOT_RTOL = 1e-12
 """Cholesky pivot of B M⁻¹ Bᵀ below this × its largest diagonal: rank-deficient B."""
 ASSEMBLY_MAX_ITER = 50
 PROJECTION_MAX_ITER = 20
+ASSEMBLY_DAMPING = 1e-3
+"""Levenberg–Marquardt damping (relative to the largest diagonal of B M⁻¹ Bᵀ) of an
+assembly step from a configuration where B has lost rank."""
 
 
 # --------------------------------------------------------------------------------------
@@ -62,6 +66,15 @@ def length_scale(km, s):
             i = s % arr.shape[0]
             scale = max(scale, math.hypot(arr[i, k, 0], arr[i, k, 1]))
     return scale if scale > 0.0 else 1.0
+
+
+@njit(**JIT)
+def _norm(x, n):
+    """Euclidean norm of x[:n]."""
+    acc = 0.0
+    for i in range(n):
+        acc += x[i] * x[i]
+    return math.sqrt(acc)
 
 
 @njit(**JIT)
@@ -88,6 +101,28 @@ def schur_factor(B, minv, m, n, S_out):
                 acc += B[i, k] * minv[k] * B[j, k]
             S_out[i, j] = acc
             S_out[j, i] = acc
+    return cholesky(S_out, m, SCHUR_PIVOT_RTOL)
+
+
+@njit(**JIT)
+def schur_factor_damped(B, minv, m, n, S_out, damping):
+    """S = B M⁻¹ Bᵀ + ``damping`` × max diag(S) I into ``S_out``, Cholesky-factored.
+
+    The Levenberg–Marquardt form of the least-norm step: it stays defined where B loses
+    rank (a linkage written straight, at a dead point) and tends to the plain step as
+    ``damping`` → 0. False if even the damped matrix is not positive definite.
+    """
+    largest = 0.0
+    for i in range(m):
+        for j in range(i + 1):
+            acc = 0.0
+            for k in range(n):
+                acc += B[i, k] * minv[k] * B[j, k]
+            S_out[i, j] = acc
+            S_out[j, i] = acc
+        largest = max(largest, S_out[i, i])
+    for i in range(m):
+        S_out[i, i] += damping * largest
     return cholesky(S_out, m, SCHUR_PIVOT_RTOL)
 
 
@@ -171,14 +206,134 @@ def _assembly_residual(km, s, q, target, psi_out, J_out):
 
 
 @njit(**JIT)
+def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
+    """Gauss–Newton on Ψ(q) = 0 (:func:`_assembly_residual`), M-smallest steps, in place.
+
+    Returns:
+        0 converged (|Ψ| ≤ 1e-14 × ``lscale``), 1 not converged, 2 singular Jacobian.
+    """
+    n = q.shape[0]
+    ma = psi.shape[0]
+    start = np.empty(n)
+    _assembly_residual(km, s, q, target, psi, J)
+    for _it in range(ASSEMBLY_MAX_ITER):
+        if max_abs(psi, ma) <= 1e-14 * lscale:
+            return 0
+        if not schur_factor(J, minv, ma, n, S):
+            # rank lost where the guess is (bars written in line): damped steps move off it
+            if not schur_factor_damped(J, minv, ma, n, S, ASSEMBLY_DAMPING):
+                return 2
+        size = _norm(psi, ma)
+        start[:] = q
+        project_onto_rows(J, minv, ma, n, S, psi, q)
+        _assembly_residual(km, s, q, target, psi, J)
+        # Far from the solution (a rough guess, large rotations) a full step can overshoot
+        # and cycle: halve it until the residual decreases. Near it the full step is taken.
+        for _half in range(30):
+            if size <= 1e-8 * lscale or _norm(psi, ma) < size:
+                break
+            for i in range(n):
+                q[i] = start[i] + 0.5 * (q[i] - start[i])
+            _assembly_residual(km, s, q, target, psi, J)
+    return 1
+
+
+@njit(**JIT)
+def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
+    """Velocity analysis with every journal at rest in its bearing (ḋ = 0), in place.
+
+    ``J`` is the two-rows-per-joint Jacobian of :func:`_assembly_residual` at the assembled
+    positions; the M-smallest change of ``v`` that makes J v = (0, …, ω_drivers). For a
+    driven mechanism without other freedom this is the velocity analysis from the driver
+    speeds. Returns False (``v`` untouched) when J is rank-deficient.
+    """
+    ma = J.shape[0]
+    n = v.shape[0]
+    if not schur_factor(J, minv, ma, n, S):
+        return False
+    nj = km.joint_body_a.shape[0]
+    residual = np.empty(ma)
+    for i in range(ma):
+        acc = 0.0
+        for k in range(n):
+            acc += J[i, k] * v[k]
+        residual[i] = acc
+    for j in range(km.driver_body.shape[0]):
+        residual[2 * nj + j] -= km.driver_omega[s % km.driver_omega.shape[0], j]
+    project_onto_rows(J, minv, ma, n, S, residual, v)
+    return True
+
+
+@njit(**JIT)
+def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
+    """Directions of the clearance joints' d from the ideal-joint mechanism at t = 0.
+
+    Every joint is closed (d = 0) from ``q`` (M-smallest correction), the velocities are
+    analysed with the journals at rest in their bearings, and the multipliers of
+    M q̈ + Jᵀλ = F, J q̈ = γ give the force on each journal from its bearing, f = −λ. The
+    journal presses on the wall opposite to f, so u = −f/|f| (λ/|λ|): written into
+    ``target[k]`` and ``found[k] = True`` for every clearance joint whose eccentricity is
+    unset and whose force is more than 1e-9 of the largest force. ``q``, ``v`` are not
+    changed. Returns False when the ideal mechanism cannot be assembled or is redundant.
+    """
+    n = q.shape[0]
+    nj = km.joint_body_a.shape[0]
+    ma = 2 * nj + km.driver_body.shape[0]
+    qi = q.copy()
+    vi = v.copy()
+    closed = np.zeros((nj, 2))
+    psi = np.empty(ma)
+    J = np.empty((ma, n))
+    S = np.empty((ma, ma))
+    if _close_joints(km, s, qi, closed, minv, lscale, psi, J, S) != 0:
+        return False
+    _assembly_residual(km, s, qi, closed, psi, J)
+    if not _velocities_at_rest_in_bearings(km, s, J, minv, S, vi):
+        return False
+    F = np.empty(n)
+    applied_forces(km, s, qi, vi, F)
+    lam = np.zeros(ma)
+    for i in range(ma):
+        acc = 0.0
+        for k in range(n):
+            acc += J[i, k] * minv[k] * F[k]
+        lam[i] = acc
+    for k in range(nj):  # γ of an ideal joint: p_b θ̇_b² − p_a θ̇_a²; drivers: 0
+        a = km.joint_body_a[k]
+        b = km.joint_body_b[k]
+        pax, pay, pbx, pby, _, _ = joint_vectors(km, s, qi, k)
+        wa = vi[3 * a + 2] if a >= 0 else 0.0
+        wb = vi[3 * b + 2] if b >= 0 else 0.0
+        lam[2 * k] -= pbx * wb * wb - pax * wa * wa
+        lam[2 * k + 1] -= pby * wb * wb - pay * wa * wa
+    cholesky_solve(S, ma, lam)
+    fscale = max(max_abs(F, n), max_abs(lam, ma))
+    for k in range(nj):
+        if km.joint_kind[k] == JOINT_IDEAL:
+            continue
+        alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
+        if alpha == alpha:
+            continue
+        size = math.hypot(lam[2 * k], lam[2 * k + 1])
+        if size > 1e-9 * fscale and size > 0.0:
+            target[k, 0] = lam[2 * k] / size
+            target[k, 1] = lam[2 * k + 1] / size
+            found[k] = True
+    return True
+
+
+@njit(**JIT)
 def assemble_one(km, s, q, v):
     """Project q and v of sample ``s`` onto the constraints (t = 0), in place.
 
     Positions already satisfying |Φ| ≤ 1e-12 × the length scale are kept bit for bit.
-    Otherwise every clearance joint is first placed at d = c u, u from ``eccentricity``,
-    else the direction of the given d, else gravity's (a journal resting on its bearing's
-    bottom), else +x; Gauss–Newton then takes the M-smallest correction. Velocities are
-    corrected the same way onto B q̇ = ν unless they already satisfy it.
+    Otherwise every clearance joint is first placed at d = c u: u from ``eccentricity``;
+    else pressed on its bearing as the ideal-joint mechanism's force says
+    (:func:`ideal_joint_directions`); else the direction of the given d, gravity's, +x.
+    Gauss–Newton then takes the M-smallest correction. Velocities that do not satisfy
+    B q̇ = ν are replaced by the velocity analysis with every journal at rest in its
+    bearing (:func:`_velocities_at_rest_in_bearings`), or, where that has no solution, the
+    M-smallest correction onto B q̇ = ν.
 
     Returns:
         status bits (ASSEMBLY_FAILED, SINGULAR).
@@ -197,22 +352,37 @@ def assemble_one(km, s, q, v):
         minv[i] = 1.0 / minv[i]
     phi = np.empty(m)
     constraint_residual(km, s, q, 0.0, phi)
-    if not max_abs(phi, m) <= tol:
+    ma = 2 * nj + km.driver_body.shape[0]
+    psi = np.empty(ma)
+    J = np.empty((ma, n))
+    S = np.empty((ma, ma))
+    moved = not max_abs(phi, m) <= tol
+    if moved:
         # hold each clearance journal at d = c u during the projection
         target = np.zeros((nj, 2))
-        ig = s % km.gravity.shape[0]
-        gnorm = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1])
+        found = np.zeros(nj, dtype=np.bool_)
+        unset = False
         for k in range(nj):
             if km.joint_kind[k] == JOINT_IDEAL:
                 continue
             alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
-            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-            _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-            dist = math.hypot(dx, dy)
             if alpha == alpha:
                 target[k, 0] = math.cos(alpha)
                 target[k, 1] = math.sin(alpha)
-            elif dist > 1e-3 * c and dist > 0.0:
+                found[k] = True
+            else:
+                unset = True
+        if unset:
+            ideal_joint_directions(km, s, q, v, minv, lscale, target, found)
+        ig = s % km.gravity.shape[0]
+        gnorm = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1])
+        for k in range(nj):
+            if km.joint_kind[k] == JOINT_IDEAL or found[k]:
+                continue
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+            dist = math.hypot(dx, dy)
+            if dist > 1e-3 * c and dist > 0.0:
                 target[k, 0] = dx / dist
                 target[k, 1] = dy / dist
             elif gnorm > 0.0:
@@ -220,21 +390,11 @@ def assemble_one(km, s, q, v):
                 target[k, 1] = km.gravity[ig, 1] / gnorm
             else:
                 target[k, 0] = 1.0
-        ma = 2 * nj + km.driver_body.shape[0]
-        psi = np.empty(ma)
-        J = np.empty((ma, n))
-        S = np.empty((ma, ma))
-        converged = False
-        for _it in range(ASSEMBLY_MAX_ITER):
-            _assembly_residual(km, s, q, target, psi, J)
-            if max_abs(psi, ma) <= 1e-14 * lscale:
-                converged = True
-                break
-            if not schur_factor(J, minv, ma, n, S):
-                return ASSEMBLY_FAILED | SINGULAR
-            project_onto_rows(J, minv, ma, n, S, psi, q)
+        code = _close_joints(km, s, q, target, minv, lscale, psi, J, S)
+        if code == 2:
+            return ASSEMBLY_FAILED | SINGULAR
         constraint_residual(km, s, q, 0.0, phi)
-        if not converged or not max_abs(phi, m) <= tol:
+        if code != 0 or not max_abs(phi, m) <= tol:
             return ASSEMBLY_FAILED
     B = np.empty((m, n))
     constraint_jacobian(km, s, q, B)
@@ -248,10 +408,12 @@ def assemble_one(km, s, q, v):
         nu[i] = acc
         vscale = max(vscale, abs(acc))
     if vscale > 1e-12 * (1.0 + max_abs(v, n)):
-        S = np.empty((m, m))
-        if not schur_factor(B, minv, m, n, S):
-            return SINGULAR
-        project_onto_rows(B, minv, m, n, S, nu, v)
+        _assembly_residual(km, s, q, np.zeros((nj, 2)), psi, J)  # J does not depend on d's target
+        if not _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
+            Sb = np.empty((m, m))
+            if not schur_factor(B, minv, m, n, Sb):
+                return SINGULAR
+            project_onto_rows(B, minv, m, n, Sb, nu, v)
     return 0
 
 

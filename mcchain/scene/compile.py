@@ -145,9 +145,28 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
             "seed": seed,
             "design": sample.design if sample is not None else None,
             "nsample": nsample,
+            "written": _written_state(scene, paths),
         },
         **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
     )
+
+
+def _written_state(scene: Scene, paths: list[str]) -> dict[str, tuple[bool, ...]]:
+    """Per body, whether the scene gives (or samples) each part of its state at t = 0:
+    ``position``, ``angle``, ``velocity``, ``angular_velocity``. Assembly warns when it moves
+    a written one (:func:`mcchain.solvers.statics.initial_state_warnings`)."""
+    keys = ("position", "angle", "velocity", "angular_velocity")
+    return {
+        key: tuple(
+            (key in body.model_fields_set and getattr(body, key) is not None)
+            or any(
+                p == f"body.{body.name}.{key}" or p.startswith(f"body.{body.name}.{key}[")
+                for p in paths
+            )
+            for body in scene.body
+        )
+        for key in keys
+    }
 
 
 def _items(scene: Scene, kind: str) -> list[Any]:
@@ -209,6 +228,8 @@ def _derived_defaults(
     length (the distance at the initial positions)."""
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
+    _unwritten_angles(scene, arrays, index)
+    _place_on_joints(scene, arrays, index)
     q0 = arrays["q0"]
 
     def body_varied(b: int) -> bool:
@@ -242,6 +263,69 @@ def _derived_defaults(
         if per_sample and rest.shape[0] != nsample:
             rest = arrays["spring_rest_length"] = np.repeat(rest, nsample, axis=0)
         rest[:, s] = length if per_sample else length[0]
+
+
+def _rows_like(arrays: dict[str, np.ndarray], name: str, rows: int) -> np.ndarray:
+    """``arrays[name]`` with ``rows`` samples (repeated from 1 when needed)."""
+    arr = arrays[name]
+    if arr.shape[0] != rows:
+        arr = arrays[name] = np.repeat(arr, rows, axis=0)
+    return arr
+
+
+def _unwritten_angles(scene: Scene, arrays: dict[str, np.ndarray], index: dict[str, int]) -> None:
+    """A body angle the scene leaves out (NaN): its driver's ``angle0`` when given, else 0."""
+    for driver_index, driver in enumerate(scene.driver):
+        b = index[driver.body]
+        angle0 = arrays["driver_angle0"][:, driver_index]
+        if np.isnan(arrays["q0"][:, 3 * b + 2]).any() and not np.isnan(angle0).any():
+            q0 = _rows_like(arrays, "q0", max(arrays["q0"].shape[0], angle0.shape[0]))
+            q0[:, 3 * b + 2] = np.where(np.isnan(q0[:, 3 * b + 2]), angle0, q0[:, 3 * b + 2])
+    q0 = arrays["q0"]
+    angles = q0[:, 2::3]
+    angles[np.isnan(angles)] = 0.0
+
+
+def _place_on_joints(scene: Scene, arrays: dict[str, np.ndarray], index: dict[str, int]) -> None:
+    """Positions the scene leaves out (NaN), walked over the joints from ground.
+
+    A body is placed from a neighbour already placed (ground, a body with a written position,
+    or one placed before) so that their joint's two points coincide at the body's angle: an
+    ideal joint holds, a clearance joint has d = 0 until assembly sets |d| = c. A body no
+    joint reaches from a placed one stays at the origin.
+    """
+    unplaced = {
+        b for b in range(len(scene.body)) if np.isnan(arrays["q0"][:, 3 * b : 3 * b + 2]).any()
+    }
+    if not unplaced:
+        return
+    point_a, point_b = arrays["joint_point_a"], arrays["joint_point_b"]
+    q0 = _rows_like(arrays, "q0", max(arrays["q0"].shape[0], point_a.shape[0], point_b.shape[0]))
+    progress = True
+    while unplaced and progress:
+        progress = False
+        for k, joint in enumerate(scene.joint):
+            a, b = index[joint.bodies[0]], index[joint.bodies[1]]
+            for known, new, known_point, new_point in (
+                (a, b, point_a[:, k], point_b[:, k]),
+                (b, a, point_b[:, k], point_a[:, k]),
+            ):
+                if new in unplaced and known not in unplaced:
+                    theta = q0[:, 3 * new + 2]
+                    c, s = np.cos(theta), np.sin(theta)
+                    rotated = np.stack(
+                        [c * new_point[:, 0] - s * new_point[:, 1],
+                         s * new_point[:, 0] + c * new_point[:, 1]],
+                        axis=1,
+                    )  # fmt: skip
+                    centre = _world_point(q0, known, known_point) - rotated
+                    written = q0[:, 3 * new : 3 * new + 2]
+                    q0[:, 3 * new : 3 * new + 2] = np.where(np.isnan(written), centre, written)
+                    unplaced.discard(new)
+                    progress = True
+    for b in unplaced:
+        column = q0[:, 3 * b : 3 * b + 2]
+        column[np.isnan(column)] = 0.0
 
 
 def _contact_stiffness(scene: Scene, arrays: dict[str, np.ndarray], nsample: int) -> None:

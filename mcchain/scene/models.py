@@ -103,10 +103,16 @@ class Body(_Section):
     name: Name = Field(description="unique body name (not ``ground``); required.")
     mass: Num = Field(gt=0, description="mass m, kg; required, > 0.")
     inertia: Num = Field(gt=0, description="centroidal moment of inertia J, kg m²; required.")
-    position: Vec2 = Field(
-        default=[0.0, 0.0], description="centre of mass (X, Y) at t = 0, m; default [0, 0]."
+    position: Vec2 | None = Field(
+        default=None,
+        description="centre of mass (X, Y) at t = 0, m; default: placed on its joints "
+        "(from a neighbour already placed, at the body's angle).",
     )
-    angle: Num = Field(default=0.0, description="angle θ at t = 0, rad; default 0.")
+    angle: Num | None = Field(
+        default=None,
+        description="angle θ at t = 0, rad; default the driver's ``angle0`` for a driven body, "
+        "else 0.",
+    )
     velocity: Vec2 = Field(
         default=[0.0, 0.0], description="centre-of-mass velocity at t = 0, m/s; default [0, 0]."
     )

@@ -188,6 +188,106 @@ def check_scene(model: Model) -> Assembled:
     return assembled
 
 
+def _point_offsets(model: Model, body: int) -> np.ndarray:
+    """(npoint, 2) local points of a body that matter for its placement: its centre and the
+    points of its joints, m (sample 0)."""
+    points = [np.zeros(2)]
+    for k in range(model.njoint):
+        if int(model.joint_body_a[k]) == body:
+            points.append(model.joint_point_a[0, k])
+        if int(model.joint_body_b[k]) == body:
+            points.append(model.joint_point_b[0, k])
+    return np.array(points)
+
+
+def _rotated(theta: float, points: np.ndarray) -> np.ndarray:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * points[:, 0] - s * points[:, 1], s * points[:, 0] + c * points[:, 1]], 1)
+
+
+def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
+    """One line per body whose *written* state at t = 0 assembly changed noticeably.
+
+    Sample 0 of ``model`` (compile the scene without ``[sample]`` for the state as written)
+    is compared with its assembled state. A body's move is the largest displacement of its
+    centre and its joint points; it is reported when the scene wrote (or sampled) the body's
+    position or angle and the move exceeds 1e-6 of the mechanism's size plus twice the sum
+    of the clearances (a journal legitimately moves within its clearance). Velocities the
+    scene wrote are reported when the largest change of those points' velocities exceeds
+    1e-6 of the velocity scale (written speeds, driver speeds × size). Bodies whose state
+    the scene leaves out are placed and analysed silently: that is what they ask for.
+    """
+    written = model.meta.get("written")
+    if not isinstance(written, dict) or assembled.status[0] != 0:
+        return []
+    q0 = np.broadcast_to(model.q0, (model.nsample, model.ndof))[0]
+    v0 = np.broadcast_to(model.v0, (model.nsample, model.ndof))[0]
+    q, v = assembled.q[0], assembled.v[0]
+    size = max(
+        (float(np.hypot(*p)) for p in (*model.joint_point_a[0], *model.joint_point_b[0])),
+        default=1.0,
+    )
+    size = size if size > 0 else 1.0
+    clearance = model.joint_clearance[0][model.joint_kind == JointKind.CLEARANCE]
+    position_tol = 1e-6 * size + 2.0 * float(np.sum(clearance))
+    speeds = [
+        np.abs(v0).max(initial=0.0) * size,
+        np.abs(model.driver_omega[0]).max(initial=0.0) * size,
+    ]
+    velocity_tol = 1e-6 * max(*speeds, 1e-9)
+    lines = []
+    for b, name in enumerate(model.body_names):
+        points = _point_offsets(model, b)
+        if written["position"][b] or written["angle"][b]:
+            before = q0[3 * b : 3 * b + 2] + _rotated(q0[3 * b + 2], points)
+            after = q[3 * b : 3 * b + 2] + _rotated(q[3 * b + 2], points)
+            move = float(np.hypot(*(after - before).T).max())
+            centre = float(np.hypot(*(after[0] - before[0])))
+            if move > position_tol:
+                lines.append(
+                    f"body.{name}: assembly moved it by {move:.3g} m from its written state "
+                    f"(centre {centre:.3g} m, "
+                    f"angle {float(q[3 * b + 2] - q0[3 * b + 2]):+.3g} rad) to close its joints "
+                    "and drivers; check its position, angle and joint points"
+                )
+        if written["velocity"][b] or written["angular_velocity"][b]:
+            arms = _rotated(q[3 * b + 2], points)
+
+            def point_velocities(
+                state: np.ndarray, b: int = b, arms: np.ndarray = arms
+            ) -> np.ndarray:
+                x, y, w = state[3 * b : 3 * b + 3]
+                return np.stack([x - w * arms[:, 1], y + w * arms[:, 0]], 1)
+
+            change = float(np.hypot(*(point_velocities(v) - point_velocities(v0)).T).max())
+            if change > velocity_tol:
+                lines.append(
+                    f"body.{name}: assembly changed its written velocity by {change:.3g} m/s "
+                    f"(angular velocity {float(v[3 * b + 2] - v0[3 * b + 2]):+.3g} rad/s) to "
+                    "agree with the joints and drivers"
+                )
+    return lines
+
+
+def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 0) -> np.ndarray:
+    """λ (ncon,) of M q̈ + Bᵀλ = F, B q̈ = γ at t = 0 for one sample's state q, v (3 nbody,):
+    a clearance joint's λ > 0 means its journal presses on the bearing (contact holds)."""
+    from mcchain.kernels.forces import applied_forces, mass_diagonal
+    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian
+
+    km = model.kernel_model()
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    n, m = model.ndof, model.ncon
+    B, gamma, F, mass = np.zeros((m, n)), np.zeros(m), np.zeros(n), np.zeros(n)
+    constraint_jacobian(km, sample, q, B)
+    constraint_gamma(km, sample, q, v, gamma)
+    applied_forces(km, sample, q, v, F)
+    mass_diagonal(km, sample, mass)
+    kkt = np.block([[np.diag(mass), B.T], [B, np.zeros((m, m))]])
+    return np.linalg.solve(kkt, np.concatenate([F, gamma]))[n:]
+
+
 def constraint_rank(model: Model, q: np.ndarray, sample: int = 0) -> int:
     """Numerical rank of B at q (3 nbody,) for one sample, by the kernels' QR test."""
     from mcchain.kernels.joints import constraint_jacobian
