@@ -352,7 +352,13 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
         kind = JointKind(int(model.joint_kind[j]))
         row = int(model.joint_row[j])
         rows = f"row {row}" if kind.rows == 1 else f"rows {row}-{row + kind.rows - 1}"
-        what = show("joint", j, "clearance") if kind == JointKind.CLEARANCE else "ideal"
+        what = (
+            show("joint", j, "clearance")
+            if kind == JointKind.CLEARANCE
+            else f"prismatic, {show('joint', j, 'axis', 'relative_angle')}"
+            if kind == JointKind.PRISMATIC
+            else "ideal"
+        )
         law = ""
         if int(model.joint_model[j]) != LINK:  # the contact law of [simulate]
             law = (

@@ -33,11 +33,14 @@ class JointKind(IntEnum):
     """The kind of a joint, as stored in ``Model.joint_kind``; each knows its constraint rows.
 
     * ``IDEAL``: ideal revolute joint, Φ = d = 0 (two rows);
-    * ``CLEARANCE``: revolute joint with radial clearance c, Φ = |d| − c = 0 (one row).
+    * ``CLEARANCE``: revolute joint with radial clearance c, Φ = |d| − c = 0 (one row);
+    * ``PRISMATIC``: ideal prismatic (sliding) joint along the unit axis u fixed in body a,
+      Φ = (n·d, θ_b − θ_a − θ_0) with n = A_a Ω u the axis' normal (two rows).
     """
 
     IDEAL = 0
     CLEARANCE = 1
+    PRISMATIC = 2
 
     @property
     def rows(self) -> int:
@@ -45,12 +48,14 @@ class JointKind(IntEnum):
         return _JOINT_ROWS[self]
 
 
-_JOINT_ROWS = {JointKind.IDEAL: 2, JointKind.CLEARANCE: 1}
+_JOINT_ROWS = {JointKind.IDEAL: 2, JointKind.CLEARANCE: 1, JointKind.PRISMATIC: 2}
 
 JOINT_IDEAL = int(JointKind.IDEAL)
 """``JointKind.IDEAL`` as a plain int, for numba kernels (they read int module globals)."""
 JOINT_CLEARANCE = int(JointKind.CLEARANCE)
 """``JointKind.CLEARANCE`` as a plain int, for numba kernels."""
+JOINT_PRISMATIC = int(JointKind.PRISMATIC)
+"""``JointKind.PRISMATIC`` as a plain int, for numba kernels."""
 
 
 def joint_rows(joint_kind: np.ndarray) -> np.ndarray:
@@ -84,6 +89,8 @@ class KernelModel(NamedTuple):
     joint_point_b: np.ndarray
     joint_clearance: np.ndarray
     joint_eccentricity: np.ndarray
+    joint_axis: np.ndarray
+    joint_relative_angle: np.ndarray
     joint_contact_stiffness: np.ndarray
     joint_contact_exponent: np.ndarray
     joint_contact_restitution: np.ndarray
@@ -142,6 +149,10 @@ class Model:
             (a) and journal (b) bodies, m.
         joint_clearance: (*, njoint) radial clearance c, m (ignored for ideal joints).
         joint_eccentricity: (*, njoint) initial direction α of d, rad; NaN: from positions.
+        joint_axis: (*, njoint, 2) unit sliding axis of a prismatic joint in the frame of
+            its first body (the ground's: global); NaN for revolute joints.
+        joint_relative_angle: (*, njoint) θ_b − θ_a held by a prismatic joint, rad; NaN
+            for revolute joints.
         joint_contact_stiffness: (*, njoint) K of the contact law, N/m^exponent.
         joint_contact_exponent: (*, njoint) exponent m of the contact law.
         joint_contact_restitution: (*, njoint) coefficient of restitution e.
@@ -205,10 +216,15 @@ class Model:
     joint_contact_restitution: np.ndarray = None  # type: ignore[assignment]
     joint_contact_friction: np.ndarray = None  # type: ignore[assignment]
     joint_contact_radius: np.ndarray = None  # type: ignore[assignment]
+    # Prismatic joints (optional: None gives no axis, as for revolute joints).
+    joint_axis: np.ndarray = None  # type: ignore[assignment]
+    joint_relative_angle: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         njoint = len(self.joint_names)
         defaults = {
+            "joint_axis": np.full((1, njoint, 2), np.nan),
+            "joint_relative_angle": np.full((1, njoint), np.nan),
             "joint_model": np.zeros(njoint, dtype=np.int64),
             "joint_contact_law": np.zeros(njoint, dtype=np.int64),
             "joint_contact_stiffness": np.full((1, njoint), np.nan),
@@ -260,6 +276,11 @@ class Model:
     @property
     def has_clearance(self) -> bool:
         return bool(np.any(self.joint_kind == JointKind.CLEARANCE))
+
+    @property
+    def has_prismatic(self) -> bool:
+        """Whether any joint is prismatic."""
+        return bool(np.any(self.joint_kind == JointKind.PRISMATIC))
 
     @property
     def has_contact(self) -> bool:

@@ -175,6 +175,12 @@ TABLE: tuple[Parameter, ...] = (
       slots=("cl{i}",), packed_for=JointKind.CLEARANCE),
     _P("joint", "eccentricity",     (),     "joint_eccentricity",    "rad",     None,
       unset=_NAN),
+    # A prismatic joint: its sliding axis in the first body's frame (made unit when compiled)
+    # and the relative angle θ_b − θ_a it holds (unset: as written or placed).
+    _P("joint", "axis",             (2,),   "joint_axis",            "1",       None,
+      slots=("ux{i}", "uy{i}"), packed_for=JointKind.PRISMATIC, unset=_NAN),
+    _P("joint", "relative_angle",   (),     "joint_relative_angle",  "rad",     None,
+      slots=("rel{i}",), packed_for=JointKind.PRISMATIC, unset=_NAN),
     # The contact law of a clearance joint (``[joint.contact]``); K unset: from the materials.
     _P("joint", "contact.stiffness", (),   "joint_contact_stiffness", "N m-1.5", POSITIVE,
       slots=("K{i}",), packed_for=CONTACT_JOINTS, unset=_NAN),

@@ -1,5 +1,5 @@
 """Every derivative the kernels compute, against central differences and the complex-step
-reference, on random chains with mixed ideal and clearance joints (hypothesis)."""
+reference, on random chains with mixed ideal, clearance and prismatic joints (hypothesis)."""
 
 from __future__ import annotations
 
@@ -41,6 +41,7 @@ def chains(draw):
     """A random chain (1–6 bars), a random configuration, velocity and multipliers."""
     nbody = draw(st.integers(1, 6))
     clearance = draw(st.sets(st.integers(0, nbody - 1)))
+    prismatic = draw(st.sets(st.integers(0, nbody - 1))) - clearance
     seed = draw(st.integers(0, 2**31 - 1))
     text = chain_scene_text(
         nbody,
@@ -49,6 +50,7 @@ def chains(draw):
         springs=draw(st.integers(0, 2)),
         forces=draw(st.integers(0, 2)),
         driver=draw(st.booleans()),
+        prismatic_joints=prismatic,
     )
     model = compile_model(load_scene_text(text))
     rng = np.random.default_rng(seed)

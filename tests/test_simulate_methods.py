@@ -10,6 +10,7 @@ from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.errors import SceneError
 from mcchain.kernels.sincos import sincos
 from mcchain.kernels.tableaux import DOPRI5, RK4, GeneralizedAlpha
+from mcchain.model import JointKind
 from mcchain.solvers.simulate import METHODS, simulate
 from mcchain.testing.dense import energy, equations, kkt_acceleration
 from mcchain.testing.scenes import scene_model
@@ -82,7 +83,9 @@ def test_sincos__matches_numpy():
         assert abs(s - np.sin(x)) <= SINCOS_TOL and abs(c - np.cos(x)) <= SINCOS_TOL
 
 
-@pytest.mark.parametrize("name", ["loaded", "fourbar", "clearance_bar"])
+@pytest.mark.parametrize(
+    "name", ["loaded", "fourbar", "clearance_bar", "slider_crank", "telescope"]
+)
 def test_accel__matches_dense_kkt(name):
     """Generated lane evaluation == dense KKT solve, with Baumgarte, at random states."""
     model = scene_model(name)
@@ -112,9 +115,12 @@ def test_accel__matches_dense_kkt(name):
         assert en[j] == pytest.approx(energy(model, 0, Q[:, j], V[:, j]), rel=FORCE_RTOL)
     for k in range(model.njoint):
         row = model.joint_row[k]
-        if model.joint_kind[k] == 0:
+        if model.joint_kind[k] == JointKind.IDEAL:
             np.testing.assert_allclose(jf[2 * k : 2 * k + 2], -lam[row : row + 2], rtol=1e-15)
             assert np.isnan(cf[k]).all()
+        elif model.joint_kind[k] == JointKind.PRISMATIC:  # normal force; the couple in cf
+            np.testing.assert_allclose(np.hypot(*jf[2 * k : 2 * k + 2]), np.abs(lam[row]))
+            np.testing.assert_allclose(cf[k], -lam[row + 1], rtol=1e-15)
         else:
             np.testing.assert_allclose(cf[k], lam[row], rtol=1e-15)
             np.testing.assert_allclose(np.hypot(*jf[2 * k : 2 * k + 2]), np.abs(lam[row]))

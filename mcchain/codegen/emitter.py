@@ -24,7 +24,7 @@ from mcchain.contact import (
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
 )
-from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL
+from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -246,6 +246,17 @@ class Emitter:
                     f"ex{k} = dx{k} * irho{k}",
                     f"ey{k} = dy{k} * irho{k}",
                 )
+            elif topo.joint_kind[k] == JOINT_PRISMATIC:
+                # n = A_a Ω u, the axis' normal, and B's θ_a entry n·(−Ω p_a) + (Ω n)·d
+                if a == GROUND:
+                    self.emit(f"nx{k} = -p_uy{k}", f"ny{k} = p_ux{k}")
+                else:
+                    c, sn = f"cs{a}{tag}", f"sn{a}{tag}"
+                    self.emit(
+                        f"nx{k} = -{c} * p_uy{k} - {sn} * p_ux{k}",
+                        f"ny{k} = -{sn} * p_uy{k} + {c} * p_ux{k}",
+                        f"pta{k} = nx{k} * (pa{k}y + dy{k}) - ny{k} * (pa{k}x + dx{k})",
+                    )
 
     def rows(self) -> list[dict[int, Coef]]:
         """Non-zeros of each row of B as {column: coefficient} (after :meth:`joints`)."""
@@ -273,6 +284,16 @@ class Emitter:
                     for col, val in point_row(a, -1.0, wx, wy, *pa).items():
                         row[col] = val
                     rows.append({c: v for c, v in row.items() if v != 0.0})
+            elif topo.joint_kind[k] == JOINT_PRISMATIC:
+                row = point_row(b, 1.0, f"nx{k}", f"ny{k}", *pb)
+                row.update(point_row(a, -1.0, f"nx{k}", f"ny{k}", *pa))
+                angle: dict[int, Coef] = {}
+                if a != GROUND:
+                    row[3 * a + 2] = f"pta{k}"
+                    angle[3 * a + 2] = -1.0
+                if b != GROUND:
+                    angle[3 * b + 2] = 1.0
+                rows += [row, angle]
             else:
                 ex, ey = f"ex{k}", f"ey{k}"
                 row = point_row(b, 1.0, ex, ey, *pb)
@@ -296,6 +317,22 @@ class Emitter:
                 self.emit(f"phi{r} = dx{k}", f"phi{r + 1} = dy{k}")
                 if v is not None:
                     self.emit(f"phid{r} = ddx{k}", f"phid{r + 1} = ddy{k}")
+            elif topo.joint_kind[k] == JOINT_PRISMATIC:
+                a, b = topo.joint_a[k], topo.joint_b[k]
+                qa = f"{q}{3 * a + 2}" if a != GROUND else "0.0"
+                qb = f"{q}{3 * b + 2}" if b != GROUND else "0.0"
+                self.emit(
+                    f"phi{r} = nx{k} * dx{k} + ny{k} * dy{k}",
+                    f"phi{r + 1} = {qb} - {qa} - p_rel{k}",
+                )
+                if v is not None:
+                    va = f"{v}{3 * a + 2}" if a != GROUND else "0.0"
+                    vb = f"{v}{3 * b + 2}" if b != GROUND else "0.0"
+                    self.emit(
+                        f"phid{r} = nx{k} * ddx{k} + ny{k} * ddy{k} + {va} * "
+                        f"(-ny{k} * dx{k} + nx{k} * dy{k})",
+                        f"phid{r + 1} = {vb} - {va}",
+                    )
             else:
                 self.emit(f"phi{r} = rho{k} - p_cl{k}")
                 if v is not None:
@@ -336,6 +373,16 @@ class Emitter:
                 self.emit(f"cq{ax}{k} = {expr}")
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"gam{r} = cqx{k}", f"gam{r + 1} = cqy{k}")
+            elif topo.joint_kind[k] == JOINT_PRISMATIC:
+                # n·(p_b θ̇_b² − p_a θ̇_a²) + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ
+                expr = f"nx{k} * cqx{k} + ny{k} * cqy{k}"
+                if wa2:
+                    wa = f"{v}{3 * a + 2}"
+                    expr += (
+                        f" + {wa2} * (nx{k} * dx{k} + ny{k} * dy{k})"
+                        f" - 2.0 * {wa} * (-ny{k} * ddx{k} + nx{k} * ddy{k})"
+                    )
+                self.emit(f"gam{r} = {expr}", f"gam{r + 1} = 0.0")
             else:
                 self.emit(
                     f"gam{r} = ex{k} * cqx{k} + ey{k} * cqy{k} - (ddx{k} * ddx{k} + ddy{k} * ddy{k}"
@@ -670,6 +717,12 @@ class Emitter:
             r = topo.joint_row[k]
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"jfx{k} = -lam{r}", f"jfy{k} = -lam{r + 1}", f"cf{k} = math.nan")
+            elif topo.joint_kind[k] == JOINT_PRISMATIC:
+                # the normal force at b's point; the couple goes out where clearance joints
+                # put their contact force (the solver files it as joint_moment)
+                self.emit(
+                    f"jfx{k} = -lam{r} * nx{k}", f"jfy{k} = -lam{r} * ny{k}", f"cf{k} = -lam{r + 1}"
+                )
             elif k in self.contact_row:
                 # Under the law λ_r is F_n ≥ 0; at the switch from the link, the link's last λ
                 # (≤ 0) is not a contact force.

@@ -125,6 +125,15 @@ VARIABLES: dict[str, VariableSpec] = {
             "equilibrium",
         ),
         _v(
+            "joint_moment_eq",
+            ("sample", "joint"),
+            "N m",
+            "couple on body b by body a at a prismatic joint at equilibrium (NaN for revolute "
+            "joints); with joint_force_eq at b's joint point, the whole reaction",
+            "float64",
+            "equilibrium",
+        ),
+        _v(
             "iterations",
             _S,
             "1",
@@ -174,6 +183,15 @@ VARIABLES: dict[str, VariableSpec] = {
             "N",
             "normal contact force of clearance joints: lambda of the link, F_n >= 0 of the "
             "contact law (NaN for ideal joints)",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "joint_moment",
+            ("sample", "time", "joint"),
+            "N m",
+            "couple on body b by body a at a prismatic joint (NaN for revolute joints); with "
+            "joint_force at b's joint point, the whole reaction",
             "history",
             "simulate",
         ),

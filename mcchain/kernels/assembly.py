@@ -23,12 +23,17 @@ from mcchain.kernels.forces import (
     mass_diagonal,
 )
 from mcchain.kernels.joints import (
-    JOINT_IDEAL,
+    JOINT_CLEARANCE,
+    JOINT_PRISMATIC,
     _add_point_rows,
     constraint_jacobian,
     constraint_residual,
     constraint_velocity_rhs,
+    joint_separation_rate,
     joint_vectors,
+    prismatic_gamma,
+    prismatic_normal,
+    prismatic_rows,
 )
 from mcchain.kernels.linalg import (
     cholesky,
@@ -182,7 +187,8 @@ def fit_multipliers(B, minv, F, m, n, S, lam_out):
 def _assembly_residual(km, s, q, target, psi_out, J_out):
     """Ψ(q) and ∂Ψ/∂q with every clearance joint held at d = c u (two rows each).
 
-    ``target`` (njoint, 2) holds u. Rows: two per joint (joint k at 2k), then drivers.
+    ``target`` (njoint, 2) holds u. Rows: two per joint (joint k at 2k), then drivers; a
+    prismatic joint's are its own two (offset normal to the axis, relative angle).
     """
     J_out[:, :] = 0.0
     nj = km.joint_body_a.shape[0]
@@ -190,8 +196,17 @@ def _assembly_residual(km, s, q, target, psi_out, J_out):
         a = km.joint_body_a[k]
         b = km.joint_body_b[k]
         pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+        if km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, q, k)
+            psi_out[2 * k] = nx * dx + ny * dy
+            tha = q[3 * a + 2] if a >= 0 else 0.0
+            thb = q[3 * b + 2] if b >= 0 else 0.0
+            rel = km.joint_relative_angle[s % km.joint_relative_angle.shape[0], k]
+            psi_out[2 * k + 1] = thb - tha - rel
+            prismatic_rows(J_out, 2 * k, a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
+            continue
         c = 0.0
-        if km.joint_kind[k] != JOINT_IDEAL:
+        if km.joint_kind[k] == JOINT_CLEARANCE:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
         psi_out[2 * k] = dx - c * target[k, 0]
         psi_out[2 * k + 1] = dy - c * target[k, 1]
@@ -301,15 +316,22 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     for k in range(nj):  # γ of an ideal joint: p_b θ̇_b² − p_a θ̇_a²; drivers: 0
         a = km.joint_body_a[k]
         b = km.joint_body_b[k]
-        pax, pay, pbx, pby, _, _ = joint_vectors(km, s, qi, k)
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, qi, k)
         wa = vi[3 * a + 2] if a >= 0 else 0.0
         wb = vi[3 * b + 2] if b >= 0 else 0.0
-        lam[2 * k] -= pbx * wb * wb - pax * wa * wa
-        lam[2 * k + 1] -= pby * wb * wb - pay * wa * wa
+        gx = pbx * wb * wb - pax * wa * wa
+        gy = pby * wb * wb - pay * wa * wa
+        if km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, qi, k)
+            ddx, ddy = joint_separation_rate(vi, a, b, pax, pay, pbx, pby)
+            lam[2 * k] -= prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa)
+        else:
+            lam[2 * k] -= gx
+            lam[2 * k + 1] -= gy
     cholesky_solve(S, ma, lam)
     fscale = max(max_abs(F, n), max_abs(lam, ma))
     for k in range(nj):
-        if km.joint_kind[k] == JOINT_IDEAL:
+        if km.joint_kind[k] != JOINT_CLEARANCE:
             continue
         alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
         if alpha == alpha:
@@ -341,7 +363,7 @@ def assemble_one(km, s, q, v):
     n = q.shape[0]
     m = 0
     for k in range(km.joint_kind.shape[0]):
-        m += 2 if km.joint_kind[k] == JOINT_IDEAL else 1
+        m += 1 if km.joint_kind[k] == JOINT_CLEARANCE else 2
     m += km.driver_body.shape[0]
     nj = km.joint_body_a.shape[0]
     lscale = length_scale(km, s)
@@ -363,7 +385,7 @@ def assemble_one(km, s, q, v):
         found = np.zeros(nj, dtype=np.bool_)
         unset = False
         for k in range(nj):
-            if km.joint_kind[k] == JOINT_IDEAL:
+            if km.joint_kind[k] != JOINT_CLEARANCE:
                 continue
             alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
             if alpha == alpha:
@@ -377,7 +399,7 @@ def assemble_one(km, s, q, v):
         ig = s % km.gravity.shape[0]
         gnorm = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1])
         for k in range(nj):
-            if km.joint_kind[k] == JOINT_IDEAL or found[k]:
+            if km.joint_kind[k] != JOINT_CLEARANCE or found[k]:
                 continue
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)

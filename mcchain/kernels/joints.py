@@ -10,6 +10,8 @@ point, d = r_b + p_b − r_a − p_a (journal centre minus bearing centre):
 
 * ideal:      Φ = d,          rows [I, Ω p_b] on b and [−I, −Ω p_a] on a;
 * clearance:  Φ = |d| − c,    row e·∂d/∂q with e = d/|d|;
+* prismatic:  Φ = (n·d, θ_b − θ_a − θ_0), n = A_a Ω u the normal of the unit axis u fixed
+  in a: row n·∂d/∂q plus (Ω n)·d on θ_a (the normal turns with a), and the angle row;
 * driver:     Φ = θ_j − θ_0 − ω t.
 """
 
@@ -20,7 +22,9 @@ import math
 from numba import njit
 
 from mcchain.kernels.config import JIT
-from mcchain.model import JOINT_IDEAL  # numba reads module globals as compile-time constants
+
+# numba reads module globals as compile-time constants
+from mcchain.model import JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC  # noqa: F401 (re-exported)
 
 
 @njit(**JIT)
@@ -67,6 +71,14 @@ def joint_vectors(km, s, q, k):
 
 
 @njit(**JIT)
+def prismatic_normal(km, s, q, k):
+    """World normal n = A_a Ω u of prismatic joint ``k``'s unit axis u (fixed in body a)."""
+    i = s % km.joint_axis.shape[0]
+    _, _, ca, sa = body_pose(q, km.joint_body_a[k])
+    return rotate(ca, sa, -km.joint_axis[i, k, 1], km.joint_axis[i, k, 0])
+
+
+@njit(**JIT)
 def joint_separation_rate(v, a, b, pax, pay, pbx, pby):
     """ḋ = ṙ_b + Ω p_b θ̇_b − ṙ_a − Ω p_a θ̇_a, m/s."""
     vax, vay, wa = body_velocity(v, a)
@@ -85,6 +97,15 @@ def constraint_residual(km, s, q, t, phi_out):
         if km.joint_kind[k] == JOINT_IDEAL:
             phi_out[row] = dx
             phi_out[row + 1] = dy
+        elif km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, q, k)
+            a = km.joint_body_a[k]
+            b = km.joint_body_b[k]
+            tha = q[3 * a + 2] if a >= 0 else 0.0
+            thb = q[3 * b + 2] if b >= 0 else 0.0
+            phi_out[row] = nx * dx + ny * dy
+            rel = km.joint_relative_angle[s % km.joint_relative_angle.shape[0], k]
+            phi_out[row + 1] = thb - tha - rel
         else:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             phi_out[row] = math.hypot(dx, dy) - c
@@ -106,6 +127,19 @@ def _add_point_rows(B_out, row, body, sign, wx, wy, px, py):
 
 
 @njit(**JIT)
+def prismatic_rows(B_out, row, a, b, nx, ny, pax, pay, pbx, pby, dx, dy):
+    """Add the two rows of a prismatic joint to B: n·∂d/∂q with (Ω n)·d on θ_a (∂n/∂θ_a =
+    Ω n), then θ_b − θ_a."""
+    _add_point_rows(B_out, row, b, 1.0, nx, ny, pbx, pby)
+    _add_point_rows(B_out, row, a, -1.0, nx, ny, pax, pay)
+    if a >= 0:
+        B_out[row, 3 * a + 2] += -ny * dx + nx * dy
+        B_out[row + 1, 3 * a + 2] -= 1.0
+    if b >= 0:
+        B_out[row + 1, 3 * b + 2] += 1.0
+
+
+@njit(**JIT)
 def constraint_jacobian(km, s, q, B_out):
     """B = ∂Φ/∂q into ``B_out`` (ncon, 3 nbody); the array is overwritten.
 
@@ -123,6 +157,10 @@ def constraint_jacobian(km, s, q, B_out):
             _add_point_rows(B_out, row, a, -1.0, 1.0, 0.0, pax, pay)
             _add_point_rows(B_out, row + 1, b, 1.0, 0.0, 1.0, pbx, pby)
             _add_point_rows(B_out, row + 1, a, -1.0, 0.0, 1.0, pax, pay)
+        elif km.joint_kind[k] == JOINT_PRISMATIC:
+            prismatic_rows(
+                B_out, row, a, b, *prismatic_normal(km, s, q, k), pax, pay, pbx, pby, dx, dy
+            )
         else:
             dist = math.hypot(dx, dy)
             if dist > 0.0:
@@ -135,11 +173,19 @@ def constraint_jacobian(km, s, q, B_out):
 
 
 @njit(**JIT)
+def prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa):
+    """γ of a prismatic joint's offset row n·d: n·(p_b θ̇_b² − p_a θ̇_a²) (``gx``, ``gy``)
+    + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ, from n̈ = θ̈_a Ω n − θ̇_a² n and ṅ = θ̇_a Ω n."""
+    return nx * gx + ny * gy + wa * wa * (nx * dx + ny * dy) - 2.0 * wa * (-ny * ddx + nx * ddy)
+
+
+@njit(**JIT)
 def constraint_gamma(km, s, q, v, gamma_out):
     """γ = −(Ḃ q̇ + Φ_tt) into ``gamma_out`` (ncon,), so that B q̈ = γ. m/s² or rad/s².
 
     Ideal: γ = p_b θ̇_b² − p_a θ̇_a². Clearance: γ = e·(p_b θ̇_b² − p_a θ̇_a²)
-    − (|ḋ|² − (e·ḋ)²)/|d|. Drivers (θ_0 + ω t): γ = 0.
+    − (|ḋ|² − (e·ḋ)²)/|d|. Prismatic: :func:`prismatic_gamma`, 0 for the angle row.
+    Drivers (θ_0 + ω t): γ = 0.
     """
     for k in range(km.joint_body_a.shape[0]):
         a = km.joint_body_a[k]
@@ -153,6 +199,11 @@ def constraint_gamma(km, s, q, v, gamma_out):
         if km.joint_kind[k] == JOINT_IDEAL:
             gamma_out[row] = gx
             gamma_out[row + 1] = gy
+        elif km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, q, k)
+            ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
+            gamma_out[row] = prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa)
+            gamma_out[row + 1] = 0.0
         else:
             dist = math.hypot(dx, dy)
             ex = dx / dist
@@ -210,11 +261,34 @@ def add_pair_column(K_out, scale, col, a, b, wx, wy, pax, pay, pbx, pby):
 
 
 @njit(**JIT)
+def _prismatic_hessian_add(K_out, lam, a, b, nx, ny, pax, pay, pbx, pby, dx, dy):
+    """K += λ ∂²(n·d)/∂q² of a prismatic joint's offset row (its angle row is linear):
+    ∂²/∂r_b∂θ_a = Ω n, ∂²/∂r_a∂θ_a = −Ω n, ∂²/∂θ_b² = −n·p_b, ∂²/∂θ_a∂θ_b = n·p_b,
+    ∂²/∂θ_a² = −n·d − n·p_a (n turns with a: ∂n/∂θ_a = Ω n, ∂²n/∂θ_a² = −n)."""
+    npb = nx * pbx + ny * pby
+    if b >= 0:
+        K_out[3 * b + 2, 3 * b + 2] -= lam * npb
+    if a >= 0:
+        ta = 3 * a + 2
+        K_out[ta, ta] -= lam * (nx * dx + ny * dy + nx * pax + ny * pay)
+        for i, w in ((0, -ny), (1, nx)):  # Ω n
+            K_out[3 * a + i, ta] -= lam * w
+            K_out[ta, 3 * a + i] -= lam * w
+            if b >= 0:
+                K_out[3 * b + i, ta] += lam * w
+                K_out[ta, 3 * b + i] += lam * w
+        if b >= 0:
+            K_out[ta, 3 * b + 2] += lam * npb
+            K_out[3 * b + 2, ta] += lam * npb
+
+
+@njit(**JIT)
 def constraint_hessian_add(km, s, q, lam, K_out):
     """K += Σ_r λ_r ∂²Φ_r/∂q² = ∂(Bᵀλ)/∂q at fixed λ (exact second derivatives).
 
     ∂²d/∂θ_b² = −p_b and ∂²d/∂θ_a² = +p_a; a clearance row adds (λ/|d|) gᵀg with
-    g = n·∂d/∂q, n ⟂ e (the curvature of |d|). Drivers are linear in q.
+    g = n·∂d/∂q, n ⟂ e (the curvature of |d|); prismatic: :func:`_prismatic_hessian_add`.
+    Drivers are linear in q.
     """
     for k in range(km.joint_body_a.shape[0]):
         a = km.joint_body_a[k]
@@ -224,6 +298,10 @@ def constraint_hessian_add(km, s, q, lam, K_out):
         if km.joint_kind[k] == JOINT_IDEAL:
             lx = lam[row]
             ly = lam[row + 1]
+        elif km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, q, k)
+            _prismatic_hessian_add(K_out, lam[row], a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
+            continue
         else:
             dist = math.hypot(dx, dy)
             ex = dx / dist
@@ -239,12 +317,15 @@ def constraint_hessian_add(km, s, q, lam, K_out):
 
 @njit(**JIT)
 def joint_forces(km, s, q, lam, force_out, contact_out):
-    """Force on the journal body b by the bearing body a, and clearance contact forces.
+    """Force on the journal body b by the bearing body a, and each joint's scalar reaction.
 
     Args:
         lam: (ncon,) multipliers.
-        force_out: (njoint, 2) global frame, N: −λ (ideal) or −λ e (clearance).
-        contact_out: (njoint,) λ of clearance joints (> 0: real contact), NaN for ideal ones.
+        force_out: (njoint, 2) global frame, N: −λ (ideal), −λ e (clearance), −λ₁ n
+            (prismatic: normal to the axis, acting at the point on b).
+        contact_out: (njoint,) λ of clearance joints (> 0: real contact); the couple −λ₂ on
+            b by a of prismatic joints, N m (with the force at b's point, the whole
+            reaction); NaN for ideal revolute ones.
     """
     for k in range(km.joint_body_a.shape[0]):
         row = km.joint_row[k]
@@ -252,6 +333,11 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
             force_out[k, 0] = -lam[row]
             force_out[k, 1] = -lam[row + 1]
             contact_out[k] = math.nan
+        elif km.joint_kind[k] == JOINT_PRISMATIC:
+            nx, ny = prismatic_normal(km, s, q, k)
+            force_out[k, 0] = -lam[row] * nx
+            force_out[k, 1] = -lam[row] * ny
+            contact_out[k] = -lam[row + 1]
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
             dist = math.hypot(dx, dy)

@@ -32,7 +32,7 @@ from mcchain.kernels.forces import (
     potential_energy,
 )
 from mcchain.kernels.joints import (
-    JOINT_IDEAL,
+    JOINT_CLEARANCE,
     constraint_hessian_add,
     constraint_jacobian,
     constraint_residual,
@@ -108,7 +108,7 @@ def _flip_pulled_journals(km, s, q, lam):
     by translating its body (the bearing's if the journal is the ground). True if any."""
     flipped = False
     for k in range(km.joint_kind.shape[0]):
-        if km.joint_kind[k] == JOINT_IDEAL or lam[km.joint_row[k]] > 0.0:
+        if km.joint_kind[k] != JOINT_CLEARANCE or lam[km.joint_row[k]] > 0.0:
             continue
         _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
         b = km.joint_body_b[k]
@@ -367,7 +367,7 @@ def equilibrium_batch(
             continue
         # continuous contact needs λ > 0 at every clearance joint
         for k in range(km.joint_kind.shape[0]):
-            if km.joint_kind[k] != JOINT_IDEAL and not lam_out[s, km.joint_row[k]] > 0.0:
+            if km.joint_kind[k] == JOINT_CLEARANCE and not lam_out[s, km.joint_row[k]] > 0.0:
                 status_out[s] |= CONTACT_LOST
 
 

@@ -138,6 +138,7 @@ def check_scene(scene: Scene) -> None:
     sampled = set(targets) if scene.sample is not None else set()
     for i, joint in enumerate(scene.joint):
         where = _item(scene, "joint", i)
+        _check_joint_type(where, joint, sampled)
         clearance_joint = joint.clearance > 0 or f"joint.{joint.name}.clearance" in sampled
         if joint.eccentricity is not None and not clearance_joint:
             raise SceneError(
@@ -188,6 +189,29 @@ def _check_connected(scene: Scene) -> None:
             raise SceneError(
                 f"body[{i}]: {name!r} is not connected to the ground by any chain of joints "
                 "or springs (a body held by nothing falls and has no equilibrium)"
+            )
+
+
+def _check_joint_type(where: str, joint: Joint, sampled: set[str]) -> None:
+    """The keys of a prismatic joint (``axis``, ``relative_angle``) against its type."""
+    if joint.type == "revolute":
+        for key in ("axis", "relative_angle"):
+            if getattr(joint, key) is not None:
+                raise SceneError(
+                    f'{where}.{key}: only a prismatic joint has one (type = "prismatic")'
+                )
+        return
+    if joint.axis is None:
+        raise SceneError(
+            f"{where}.axis: a prismatic joint needs its sliding direction, e.g. [1.0, 0.0]"
+        )
+    if joint.axis[0] == 0.0 and joint.axis[1] == 0.0:
+        raise SceneError(f"{where}.axis: must not be [0, 0] (it gives the sliding direction)")
+    for key in ("clearance", "eccentricity", "model", "contact"):
+        given = getattr(joint, key) not in (None, 0.0) or f"joint.{joint.name}.{key}" in sampled
+        if given:
+            raise SceneError(
+                f"{where}.{key}: a prismatic joint is ideal (clearance is for revolute joints)"
             )
 
 

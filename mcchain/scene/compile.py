@@ -94,13 +94,17 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
     clearance = PARAMETERS["joint", "clearance"]
     kind = np.array(
         [
-            JointKind.CLEARANCE
+            JointKind.PRISMATIC
+            if j.type == "prismatic"
+            else JointKind.CLEARANCE
             if j.clearance > 0 or clearance.model_index(k, ()) in varied
             else JointKind.IDEAL
             for k, j in enumerate(scene.joint)
         ],
         dtype=np.int64,
     )
+    axis = arrays["joint_axis"]
+    axis /= np.hypot(axis[..., 0], axis[..., 1])[..., None]  # NaN (revolute) stays NaN
     joint_row, driver_row = constraint_rows(kind, len(scene.driver))
     joint_model = np.array(
         [
@@ -224,8 +228,9 @@ def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
 def _derived_defaults(
     scene: Scene, arrays: dict[str, np.ndarray], varied: set[Slot], nsample: int
 ) -> None:
-    """Fill defaults that follow other values: driver angle0 (the body's angle), spring rest
-    length (the distance at the initial positions)."""
+    """Fill defaults that follow other values: body angles and positions not written, driver
+    angle0 (the body's angle), a prismatic joint's relative angle (as written or placed),
+    spring rest length (the distance at the initial positions)."""
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
     _unwritten_angles(scene, arrays, index)
@@ -245,6 +250,19 @@ def _derived_defaults(
             arrays["driver_angle0"][:, d] = q0[:, 3 * b + 2]
         elif ("driver_angle0", (d,)) not in varied:
             arrays["driver_angle0"][:, d] = q0[0, 3 * b + 2]
+
+    for k, joint in enumerate(scene.joint):
+        if joint.type != "prismatic" or joint.relative_angle is not None:
+            continue
+        if ("joint_relative_angle", (k,)) in varied:
+            continue
+        a, b = index[joint.bodies[0]], index[joint.bodies[1]]
+        relative = (q0[:, 3 * b + 2] if b != GROUND else 0.0) - (
+            q0[:, 3 * a + 2] if a != GROUND else 0.0
+        )
+        relative = np.broadcast_to(relative, (q0.shape[0],))
+        target = _rows_like(arrays, "joint_relative_angle", q0.shape[0])
+        target[:, k] = relative
 
     for s, spring in enumerate(scene.spring):
         if spring.rest_length is not None or ("spring_rest_length", (s,)) in varied:

@@ -184,7 +184,8 @@ class Contact(_Section):
 
 
 class Joint(_Section):
-    """``[[joint]]``: a revolute joint, ideal (``clearance = 0``) or with radial clearance."""
+    """``[[joint]]``: a revolute joint, ideal (``clearance = 0``) or with radial clearance,
+    or an ideal prismatic (sliding) joint."""
 
     name: Name | None = Field(
         default=None,
@@ -218,6 +219,20 @@ class Joint(_Section):
     )
     contact: Contact | None = Field(
         default=None, description="``[joint.contact]``: the contact law; default none."
+    )
+    type: Literal["revolute", "prismatic"] = Field(
+        default="revolute",
+        description='"revolute" (a pin, the default) or "prismatic" (a slider: the two points '
+        "stay on a line along ``axis`` and the relative angle is held).",
+    )
+    axis: Vec2 | None = Field(
+        default=None,
+        description="sliding direction of a prismatic joint in the first body's frame "
+        "(ground: global), any non-zero length; required for a prismatic joint.",
+    )
+    relative_angle: Num | None = Field(
+        default=None,
+        description="θ_b − θ_a held by a prismatic joint, rad; default: as written or placed.",
     )
 
     _auto_name: bool = PrivateAttr(default=False)

@@ -40,6 +40,8 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
         status |= modes.status
         out["q_eq"] = equilibrium.q.reshape(nsample, model.nbody, 3)
         out["joint_force_eq"] = equilibrium.joint_force
+        if model.has_prismatic:
+            out["joint_moment_eq"] = equilibrium.joint_moment
         out["stable"] = modes.stable
         out["iterations"] = equilibrium.iterations
         if scene.modes is not None:

@@ -45,7 +45,7 @@ import numpy as np
 
 from mcchain.contact import CONTACT_SUMMARY
 from mcchain.errors import SceneError
-from mcchain.model import JOINT_CLEARANCE, Model
+from mcchain.model import JOINT_CLEARANCE, JointKind, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import CONTACT_METHODS, Simulate
 from mcchain.solvers.threads import over_samples
@@ -465,6 +465,16 @@ def _run_generalized_alpha(run: _Run) -> None:
     )  # fmt: skip
 
 
+def _prismatic_moments(model: Model, contact_force: np.ndarray) -> dict[str, np.ndarray]:
+    """``joint_moment`` (..., njoint): the couple of each prismatic joint, which the kernels
+    leave in ``contact_force``'s slot (NaN there afterwards); NaN for revolute joints."""
+    prismatic = model.joint_kind == JointKind.PRISMATIC
+    moment = np.full_like(contact_force, np.nan)
+    moment[..., prismatic] = contact_force[..., prismatic]
+    contact_force[..., prismatic] = np.nan
+    return {"joint_moment": moment}
+
+
 def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
     """The contact-law outputs by ensemble variable, every joint (the others: NaN, or -1
     for the integer ones), from the lane kernels' contact arrays."""
@@ -606,6 +616,8 @@ def simulate(
     if n:
         METHODS[settings.method].run(run)
     result = {"time": time, **out}
+    if model.has_prismatic:
+        result.update(_prismatic_moments(model, result["contact_force"]))
     if ncj:
         result.update(_contact_outputs(run, history_dtype))
     result["status"] = run.status

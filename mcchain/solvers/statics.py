@@ -47,7 +47,9 @@ class EquilibriumResult:
         lam: (nsample, ncon) multipliers; the force body a exerts on body b at joint k is
             −λ_k (ideal) or −λ_k e_k (clearance).
         joint_force: (nsample, njoint, 2) force on body b by body a, N.
-        contact_force: (nsample, njoint) λ of clearance joints, NaN for ideal ones, N.
+        contact_force: (nsample, njoint) λ of clearance joints, NaN for the others, N.
+        joint_moment: (nsample, njoint) couple on body b by body a of prismatic joints, NaN
+            for revolute ones, N m.
         iterations: (nsample,) Newton iterations to reach the tolerance.
         history: (nsample, max_iterations + 1, 2) per iteration the scaled residual norm
             and the scaled Newton step norm (NaN after the last).
@@ -61,6 +63,7 @@ class EquilibriumResult:
     iterations: np.ndarray
     history: np.ndarray
     status: np.ndarray
+    joint_moment: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -123,7 +126,13 @@ def solve_equilibrium(
     joint_force = np.full((nsample, model.njoint, 2), np.nan)
     contact_force = np.full((nsample, model.njoint), np.nan)
     over_samples(kernels.joint_forces_batch, nsample, km, q, lam, joint_force, contact_force)
-    return EquilibriumResult(q, lam, joint_force, contact_force, iterations, history, status)
+    prismatic = model.joint_kind == JointKind.PRISMATIC
+    moment = np.full_like(contact_force, np.nan)  # the kernel's slot of a prismatic couple
+    moment[:, prismatic] = contact_force[:, prismatic]
+    contact_force[:, prismatic] = np.nan
+    return EquilibriumResult(
+        q, lam, joint_force, contact_force, iterations, history, status, moment
+    )
 
 
 def solve_modes(
@@ -306,7 +315,11 @@ def describe_constraints(model: Model) -> list[tuple[str, str, int, int]]:
     rows = []
     for k, name in enumerate(model.joint_names):
         kind = JointKind(int(model.joint_kind[k]))
-        text = "ideal revolute" if kind == JointKind.IDEAL else "clearance revolute"
+        text = {
+            JointKind.IDEAL: "ideal revolute",
+            JointKind.CLEARANCE: "clearance revolute",
+            JointKind.PRISMATIC: "prismatic",
+        }[kind]
         rows.append((name, text, int(model.joint_row[k]), kind.rows))
     for j, name in enumerate(model.driver_names):
         rows.append((name, "driver", int(model.driver_row[j]), 1))

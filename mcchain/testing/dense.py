@@ -23,7 +23,7 @@ import scipy.integrate
 import scipy.linalg
 import scipy.optimize
 
-from mcchain.model import GROUND, JOINT_IDEAL, Model
+from mcchain.model import GROUND, JOINT_IDEAL, JOINT_PRISMATIC, Model
 from mcchain.testing.factory import rotation
 
 OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -58,6 +58,14 @@ def _point_velocity(q: np.ndarray, v: np.ndarray, b: int, local: np.ndarray) -> 
     return v[3 * b : 3 * b + 2] + v[3 * b + 2] * np.array([-lever[1], lever[0]])
 
 
+def _prismatic_normal(model: Model, s: int, q: np.ndarray, k: int) -> np.ndarray:
+    """n = A_a Ω u: the normal of prismatic joint k's axis u (fixed in its first body a)."""
+    u = _param(model, "joint_axis", s)[k]
+    normal = np.array([-u[1], u[0]])
+    a = model.joint_body_a[k]
+    return normal if a == GROUND else _pose(q, a)[1] @ normal
+
+
 def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarray:
     """Φ(q, t) of sample s, (ncon,)."""
     phi = np.zeros(model.ncon, dtype=q.dtype)
@@ -70,6 +78,11 @@ def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarr
         row = model.joint_row[k]
         if model.joint_kind[k] == JOINT_IDEAL:
             phi[row : row + 2] = d
+        elif model.joint_kind[k] == JOINT_PRISMATIC:
+            phi[row] = _prismatic_normal(model, s, q, k) @ d
+            angle_a = q[3 * a + 2] if a != GROUND else 0.0
+            angle_b = q[3 * b + 2] if b != GROUND else 0.0
+            phi[row + 1] = angle_b - angle_a - _param(model, "joint_relative_angle", s)[k]
         else:
             phi[row] = np.sqrt(d[0] * d[0] + d[1] * d[1]) - clearance[k]
     theta0 = _param(model, "driver_angle0", s)
@@ -209,6 +222,15 @@ def constraint_jacobian_formula(model: Model, s: int, q: np.ndarray) -> np.ndarr
         row = model.joint_row[k]
         if model.joint_kind[k] == JOINT_IDEAL:
             B[row : row + 2] = rows
+        elif model.joint_kind[k] == JOINT_PRISMATIC:
+            # product rule on n·d: n·∂d/∂q, and ∂n/∂θ_a = Ω n on θ_a
+            normal = _prismatic_normal(model, s, q, k)
+            B[row] = normal @ rows
+            if b != GROUND:
+                B[row + 1, 3 * b + 2] = 1.0
+            if a != GROUND:
+                B[row, 3 * a + 2] += (omega @ normal) @ d
+                B[row + 1, 3 * a + 2] = -1.0
         else:
             B[row] = d @ rows / np.sqrt(d[0] * d[0] + d[1] * d[1])
     for j in range(model.ndriver):
@@ -264,6 +286,24 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
             gam += list(-w)
             phi += list(d)
             phid += list(dd)
+        elif model.joint_kind[k] == JOINT_PRISMATIC:
+            # Φ = n·d with ṅ = θ̇_a Ω n, n̈ = θ̈_a Ω n − θ̇_a² n; and θ_b − θ_a − θ_0
+            normal = _prismatic_normal(model, s, q, k)
+            turn, angle = np.zeros(n), np.zeros(n)
+            if a != GROUND:
+                turn[3 * a + 2] = (OMEGA @ normal) @ d
+                angle[3 * a + 2] = -1.0
+            if b != GROUND:
+                angle[3 * b + 2] = 1.0
+            rows_B += [normal @ D + turn, angle]
+            gam += [
+                -(normal @ w) - 2 * wa * ((OMEGA @ normal) @ dd) + wa**2 * (normal @ d),
+                0.0,
+            ]
+            theta = [q[3 * x + 2] if x != GROUND else 0.0 for x in (a, b)]
+            relative = _param(model, "joint_relative_angle", s)[k]
+            phi += [normal @ d, theta[1] - theta[0] - relative]
+            phid += [wa * ((OMEGA @ normal) @ d) + normal @ dd, wb - wa]
         else:
             rho = np.linalg.norm(d)
             e = d / rho

@@ -144,12 +144,14 @@ def chain_scene_dict(
     simulate: Mapping[str, Any] | None = None,
     spread: float = 0.5,
     name: str = "chain",
+    prismatic_joints: Iterable[int] = (),
 ) -> dict[str, Any]:
     """The dict behind :func:`chain_scene_text` (same arguments)."""
     if nbody < 1:
         raise ValueError("nbody must be >= 1")
     rng = np.random.default_rng(seed)
     clearance_set = set(clearance_joints)
+    prismatic_set = set(prismatic_joints)
     if not clearance_set <= set(range(nbody)):
         raise ValueError(f"clearance_joints must be in 0..{nbody - 1}")
     lengths = rng.uniform(0.2, 1.0, nbody)
@@ -170,7 +172,11 @@ def chain_scene_dict(
                 [-float(half), 0.0],
             ],
         }
-        if k in clearance_set:
+        if k in prismatic_set:  # a slider along a random axis (not unit: compiled to unit)
+            turn = float(rng.uniform(-math.pi, math.pi))
+            joint["type"] = "prismatic"
+            joint["axis"] = [2.0 * math.cos(turn), 2.0 * math.sin(turn)]
+        elif k in clearance_set:
             c = float(rng.uniform(1e-4, 1e-3))
             journal = point + c * np.array([math.cos(th), math.sin(th)])
             joint["clearance"] = c
@@ -259,6 +265,7 @@ def chain_scene_text(
     simulate: Mapping[str, Any] | None = None,
     spread: float = 0.5,
     name: str = "chain",
+    prismatic_joints: Iterable[int] = (),
 ) -> str:
     """A random open chain of ``nbody`` bars hanging from the origin, as TOML text.
 
@@ -281,6 +288,8 @@ def chain_scene_text(
         simulate: keys of a ``[simulate]`` section (e.g. ``{"t_end": 0.1, "dt": 1e-4}``).
         spread: half-width of the random angles around hanging, rad.
         name: ``[scene] name``.
+        prismatic_joints: indices k of the joints ``J{k}`` that are prismatic instead
+            (a random, non-unit axis; the relative angle as written).
     """
     doc = chain_scene_dict(
         nbody,
@@ -297,6 +306,7 @@ def chain_scene_text(
         simulate=simulate,
         spread=spread,
         name=name,
+        prismatic_joints=prismatic_joints,
     )
     header = f"factory chain: nbody={nbody} clearance={sorted(set(clearance_joints))} seed={seed}"
     return toml_text(doc, header=header)

@@ -8,7 +8,10 @@
 * :func:`parallelogram_text` — a parallelogram four-bar with a closed form
   (:func:`mcchain.testing.closed_forms.parallelogram_closed_form`);
 * :data:`DOUBLE_PENDULUM_TEXT` and :data:`LOADED_TEXT` — the clearance double pendulum, bare
-  and with every kind of load (driver, force and couple, springs with damping).
+  and with every kind of load (driver, force and couple, springs with damping);
+* :func:`slider_crank_text` — a driven slider-crank with an offset pin and guide point
+  (prismatic joint on the ground), and :data:`TELESCOPE_TEXT` — a prismatic joint between
+  two moving bodies.
 
 :data:`SCENES` names them for :func:`scene_model`. Random scenes come from
 :mod:`mcchain.testing.factory`.
@@ -256,6 +259,97 @@ damping = 0.5
 )
 
 
+SLIDER_CRANK: dict[str, float] = dict(
+    crank=0.05, rod=0.12, m_crank=0.12, m_rod=0.2, m_slider=0.3, J_crank=1e-4, J_rod=4e-4,
+    J_slider=1e-4, pin_height=0.01, guide_point=0.02,
+)  # fmt: skip
+"""The slider-crank of :func:`slider_crank_text`: lengths m, masses kg, inertias kg m²; the
+rod's pin sits ``pin_height`` above the slider's centre, the guide holds the slider at a
+point ``guide_point`` ahead of its centre (so the guide carries a couple)."""
+
+
+def slider_crank_text(omega: float = 100.0 * math.pi, angle0: float = 0.7) -> str:
+    """A driven slider-crank (crank, connecting rod, slider on a horizontal guide through the
+    crank's pivot) written with its dimensions only: :data:`SLIDER_CRANK`, gravity −9.81,
+    crank at ``angle0`` turning at ``omega``."""
+    d = SLIDER_CRANK
+    return f"""
+[scene]
+name = "slider-crank"
+[[body]]
+name = "crank"
+mass = {_f(d["m_crank"])}
+inertia = {_f(d["J_crank"])}
+[[body]]
+name = "rod"
+mass = {_f(d["m_rod"])}
+inertia = {_f(d["J_rod"])}
+angle = -0.3
+[[body]]
+name = "slider"
+mass = {_f(d["m_slider"])}
+inertia = {_f(d["J_slider"])}
+[[joint]]
+name = "O"
+bodies = ["ground", "crank"]
+points = [[0.0, 0.0], [{_f(-d["crank"] / 2)}, 0.0]]
+[[joint]]
+name = "A"
+bodies = ["crank", "rod"]
+points = [[{_f(d["crank"] / 2)}, 0.0], [{_f(-d["rod"] / 2)}, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["rod", "slider"]
+points = [[{_f(d["rod"] / 2)}, 0.0], [0.0, {_f(d["pin_height"])}]]
+[[joint]]
+name = "P"
+type = "prismatic"
+bodies = ["ground", "slider"]
+points = [[0.0, 0.0], [{_f(d["guide_point"])}, 0.0]]
+axis = [1.0, 0.0]
+[[driver]]
+body = "crank"
+omega = {_f(omega)}
+angle0 = {_f(angle0)}
+"""
+
+
+TELESCOPE_TEXT = """
+[scene]
+name = "telescope"
+[[body]]
+name = "sleeve"
+mass = 1.0
+inertia = 0.05
+angle = -1.2
+[[body]]
+name = "rod"
+mass = 0.5
+inertia = 0.02
+angle = -1.2
+[[joint]]
+name = "O"
+bodies = ["ground", "sleeve"]
+points = [[0.0, 0.0], [-0.3, 0.0]]
+[[joint]]
+name = "T"
+type = "prismatic"
+bodies = ["sleeve", "rod"]
+points = [[0.2, 0.02], [-0.1, 0.0]]
+axis = [1.0, 0.1]
+[[spring]]
+name = "S"
+bodies = ["sleeve", "rod"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+stiffness = 400.0
+rest_length = 0.35
+damping = 0.3
+"""
+"""A pendulum whose rod slides in a sleeve along an axis turned 0.1 rad from the sleeve's
+own (a prismatic joint between two moving bodies, whose normal turns with the sleeve), held
+by a spring-damper: two degrees of freedom."""
+
+
 def model_of(text: str, nsample: int | None = None, name: str = "<string>") -> Model:
     """A scene text compiled to a Model of ``nsample`` instances (default: the scene's)."""
     from mcchain.scene import compile_model, load_scene_text
@@ -269,6 +363,8 @@ SCENES: dict[str, Callable[..., str]] = {
     "double_pendulum": lambda: DOUBLE_PENDULUM_TEXT,
     "fourbar": fourbar_text,
     "loaded": lambda: LOADED_TEXT,
+    "slider_crank": slider_crank_text,
+    "telescope": lambda: TELESCOPE_TEXT,
 }
 """The named scenes of the simulation tests and benchmarks."""
 
