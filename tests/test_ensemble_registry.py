@@ -42,6 +42,9 @@ EXTRAS = {
     "diverged_time": ("sample",),
     "singular_time": ("sample",),
     "contact_lost_time": ("sample",),
+    "joint_moment_eq": ("sample", "joint"),
+    "joint_moment": ("sample", "time", "joint"),
+    "omega_cycle": ("sample", "phase", "mode"),
 }
 HISTORIES = {
     "q",
@@ -52,6 +55,7 @@ HISTORIES = {
     "constraint_error",
     "energy",
     "penetration",
+    "joint_moment",
 }
 
 

@@ -158,6 +158,15 @@ VARIABLES: dict[str, VariableSpec] = {
             "modes",
         ),
         _v("damped_omega", ("sample", "mode"), "rad s-1", _DAMPED_OMEGA, "float64", "modes"),
+        _v(
+            "omega_cycle",
+            ("sample", "phase", "mode"),
+            "rad s-1",
+            "eigenpulsations of the mechanism frozen along one turn of a driver ([modes] along), "
+            "ascending; signed as omega; NaN where a configuration cannot be assembled",
+            "float64",
+            "modes",
+        ),
         _v("damping_ratio", ("sample", "mode"), "1", _DAMPING_RATIO, "float64", "modes"),
         _v(
             "mode_shape",
@@ -309,6 +318,7 @@ COORDINATES: dict[str, dict[str, str]] = {
     "param_units": {"long_name": "units of each sampled parameter"},
     "driver": {"long_name": "name of the driven body"},
     "time": {"long_name": "time", "units": "s", "standard_name": "time", "axis": "T"},
+    "phase": {"long_name": "angle of the [modes] along driver from its angle0", "units": "rad"},
 }
 """Attributes of the coordinate variables."""
 
@@ -341,10 +351,15 @@ def variable_attributes(name: str) -> dict[str, Any]:
 # -- building ----------------------------------------------------------------------------
 
 
+AXIS_OUTPUTS = {"time": "time", "cycle_phase": "phase"}
+"""Solver outputs that are coordinate values (1-D, float64), and the dim each labels."""
+
+
 def coerce_outputs(
     outputs: Mapping[str, Any], history_dtype: str = "float32"
 ) -> dict[str, np.ndarray]:
-    """Cast a solver's arrays to their storage dtypes (``time`` stays float64).
+    """Cast a solver's arrays to their storage dtypes (the axis outputs, ``time`` and
+    ``cycle_phase``, stay float64).
 
     Raises ``ValueError`` for an undeclared name or an array whose kind cannot be stored
     under its rule (a float for ``status``, a non-integer count).
@@ -354,7 +369,7 @@ def coerce_outputs(
     result: dict[str, np.ndarray] = {}
     for name, value in outputs.items():
         arr = np.asarray(value)
-        if name == "time":
+        if name in AXIS_OUTPUTS:
             result[name] = np.asarray(arr, dtype=np.float64)
             continue
         spec = VARIABLES.get(name)
@@ -422,10 +437,11 @@ def build_dataset(
     names = model_coordinates(model)
     sizes: dict[str, int] = {"sample": model.nsample}
     sizes.update({dim: len(values) for dim, values in names.items()})
-    if "time" in arrays:
-        if arrays["time"].ndim != 1:
-            raise ValueError(f"time: must be 1-D, got shape {arrays['time'].shape}")
-        sizes["time"] = arrays["time"].shape[0]
+    for output, dim in AXIS_OUTPUTS.items():
+        if output in arrays:
+            if arrays[output].ndim != 1:
+                raise ValueError(f"{output}: must be 1-D, got shape {arrays[output].shape}")
+            sizes[dim] = arrays[output].shape[0]
 
     data_vars: dict[str, Any] = {}
     used: set[str] = set()
@@ -451,13 +467,15 @@ def build_dataset(
             COORDINATES["sample"],
         )
     }
-    for dim in ("body", "dof", "joint", "xy", "mode", "param", "driver", "time"):
+    for dim in ("body", "dof", "joint", "xy", "mode", "param", "driver", "time", "phase"):
         if dim not in used:
             continue
         if dim == "mode":
             values: np.ndarray = np.arange(sizes["mode"], dtype=np.int32)
         elif dim == "time":
             values = arrays["time"]
+        elif dim == "phase":
+            values = arrays["cycle_phase"]
         else:
             values = names[dim]
         coords[dim] = (dim, values, COORDINATES[dim])

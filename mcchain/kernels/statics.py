@@ -33,6 +33,7 @@ from mcchain.kernels.forces import (
 )
 from mcchain.kernels.joints import (
     JOINT_CLEARANCE,
+    constraint_gamma,
     constraint_hessian_add,
     constraint_jacobian,
     constraint_residual,
@@ -42,6 +43,7 @@ from mcchain.kernels.joints import (
 from mcchain.kernels.linalg import (
     EPS,
     cholesky,
+    cholesky_solve,
     jacobi_eigh,
     lu_factor,
     lu_solve,
@@ -556,3 +558,42 @@ def joint_forces_batch(start, stop, km, q, lam, force_out, contact_out):
     """
     for s in range(start, stop):
         joint_forces(km, s, q[s], lam[s], force_out[s], contact_out[s])
+
+
+@njit(**JIT)
+def dynamic_multipliers_batch(start, stop, km, q, v, lam_out, status_out):
+    """λ of M q̈ + Bᵀλ = F(q, q̇), B q̈ = γ(q, q̇) for samples ``start:stop``: the joint and
+    driver forces of the mechanism moving through (q, q̇) (inverse dynamics where the
+    drivers fix the motion), by the Schur complement λ = S⁻¹(B M⁻¹ F − γ).
+
+    Args:
+        q, v: (nsample, 3 nbody) states; lam_out: (nsample, ncon) written (NaN: skipped or
+            singular). status_out: (nsample,) uint32: samples with a failure bit are
+            skipped; SINGULAR is OR-ed where B loses rank.
+    """
+    n = q.shape[1]
+    m = lam_out.shape[1]
+    B = np.empty((m, n))
+    S = np.empty((m, m))
+    F = np.empty(n)
+    minv = np.empty(n)
+    gamma = np.empty(m)
+    for s in range(start, stop):
+        lam_out[s, :] = np.nan
+        if status_out[s] & (ASSEMBLY_FAILED | EQUILIBRIUM_NOT_CONVERGED | SINGULAR):
+            continue
+        mass_diagonal(km, s, minv)
+        for i in range(n):
+            minv[i] = 1.0 / minv[i]
+        constraint_jacobian(km, s, q[s], B)
+        constraint_gamma(km, s, q[s], v[s], gamma)
+        applied_forces(km, s, q[s], v[s], F)
+        if not schur_factor(B, minv, m, n, S):
+            status_out[s] |= SINGULAR
+            continue
+        for r in range(m):
+            acc = -gamma[r]
+            for k in range(n):
+                acc += B[r, k] * minv[k] * F[k]
+            lam_out[s, r] = acc
+        cholesky_solve(S, m, lam_out[s])

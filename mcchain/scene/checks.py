@@ -147,6 +147,13 @@ def check_scene(scene: Scene) -> None:
             )
         _check_contact(scene, where, joint, clearance_joint, sampled)
 
+    along = scene.modes.along if scene.modes is not None else None
+    if along is not None and along.driver not in {d.body for d in scene.driver}:
+        driven = ", ".join(d.body for d in scene.driver) or "none"
+        raise SceneError(
+            f"modes.along.driver: no driver turns body {along.driver!r} (drivers: {driven})"
+        )
+
     if scene.simulate is not None:
         sim = scene.simulate
         for key in ("dt", "output_dt"):

@@ -501,6 +501,15 @@ class Equilibrium(_Section):
     max_iterations: Int = Field(default=50, ge=1, description="Newton iterations; default 50.")
 
 
+class ModesAlong(_Section):
+    """``[modes] along``: the modes of frozen configurations over one turn of a driver."""
+
+    driver: BodyRef = Field(description="the driver (named by its body) turned; required.")
+    points: Int = Field(
+        ge=1, le=3600, description="configurations, equally spaced over one turn; required."
+    )
+
+
 class Modes(_Section):
     """``[modes]``: eigenpulsations about the equilibrium. The equilibrium is computed for
     them even without ``[equilibrium]`` (which then only sets the Newton settings)."""
@@ -508,6 +517,11 @@ class Modes(_Section):
     shapes: bool = Field(
         default=True,
         description="store the mode shapes (mode_shape); default true, false to skip them.",
+    )
+    along: ModesAlong | None = Field(
+        default=None,
+        description="also the modes of frozen configurations along one turn of a driver "
+        "(omega_cycle): ``{ driver = <body>, points = <count> }``; default none.",
     )
 
 

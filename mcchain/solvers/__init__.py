@@ -11,7 +11,7 @@ import numpy as np
 
 from mcchain.model import Model
 from mcchain.scene.models import Scene
-from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes
+from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes, solve_modes_along
 
 
 def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
@@ -51,6 +51,12 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
             out["damping_ratio"] = modes.damping_ratio
             if modes.shapes is not None:
                 out["mode_shape"] = modes.shapes.reshape(nsample, model.nmode, model.nbody, 3)
+            along = scene.modes.along
+            if along is not None:
+                driver = model.driver_names.index(along.driver)
+                cycle = solve_modes_along(model, driver, along.points, assembled.q, assembled.v)
+                out["omega_cycle"] = cycle.omega
+                out["cycle_phase"] = cycle.phase
     if scene.simulate is not None:
         from mcchain.solvers.simulate import simulate
 

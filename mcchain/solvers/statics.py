@@ -87,12 +87,20 @@ class ModesResult:
     damping_ratio: np.ndarray | None = None
 
 
-def assemble(model: Model, status: np.ndarray | None = None) -> Assembled:
-    """Project every sample's initial positions and velocities onto the constraints."""
+def assemble(
+    model: Model,
+    status: np.ndarray | None = None,
+    q_start: np.ndarray | None = None,
+    v_start: np.ndarray | None = None,
+) -> Assembled:
+    """Project every sample's initial positions and velocities onto the constraints (from
+    ``q_start``/``v_start`` (nsample or 1, 3 nbody) instead of the model's when given)."""
     nsample = model.nsample
+    q0 = model.q0 if q_start is None else q_start
+    v0 = model.v0 if v_start is None else v_start
     # C order: a copy of a broadcast view is F-ordered, and numba compiles per layout
-    q = np.array(np.broadcast_to(model.q0, (nsample, model.ndof)), dtype=np.float64, order="C")
-    v = np.array(np.broadcast_to(model.v0, (nsample, model.ndof)), dtype=np.float64, order="C")
+    q = np.array(np.broadcast_to(q0, (nsample, model.ndof)), dtype=np.float64, order="C")
+    v = np.array(np.broadcast_to(v0, (nsample, model.ndof)), dtype=np.float64, order="C")
     status = _status_or_new(status, nsample)
     over_samples(assembly.assemble_batch, nsample, model.kernel_model(), q, v, status)
     return Assembled(q=q, v=v, status=status)
@@ -165,6 +173,70 @@ def solve_modes(
 
 
 _FAILED = Status.ASSEMBLY_FAILED | Status.EQUILIBRIUM_NOT_CONVERGED | Status.SINGULAR
+
+
+@dataclass(frozen=True)
+class CycleModes:
+    """Modes of frozen configurations along one turn of a driver.
+
+    Attributes:
+        phase: (points,) the driver's angle from its ``angle0``, rad: 2π j / points.
+        omega: (nsample, points, nmode) signed pulsations, rad/s, ascending; NaN where the
+            configuration could not be assembled or its B lost rank.
+        q, v: (nsample, points, 3 nbody) the configurations and their velocities; lam:
+            (nsample, points, ncon) their multipliers (inverse dynamics at the driver's speed).
+    """
+
+    phase: np.ndarray
+    omega: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    lam: np.ndarray
+
+
+def solve_modes_along(
+    model: Model, driver: int, points: int, q_start: np.ndarray, v_start: np.ndarray
+) -> CycleModes:
+    """The modes of the mechanism frozen at ``points`` equally spaced angles of one turn of
+    driver ``driver`` (a designer's check of natural frequencies against the drive speed).
+
+    Each configuration is assembled kinematically with the driver at angle0 + 2π j/points
+    (from the previous configuration, so the branch is kept), clearance journals pressed on
+    their bearings as the ideal-joint force says, velocities from the drivers with journals
+    at rest; λ comes from the KKT system at those velocities (inverse dynamics: inertia
+    loads included), and the modes from the stiffness at (q, λ) with the drivers held, as
+    ``[modes]`` does at the equilibrium. Nothing here changes a sample's status.
+    """
+    nsample, nmode = model.nsample, model.nmode
+    phase = 2.0 * np.pi * np.arange(points) / points
+    omega = np.full((nsample, points, nmode), np.nan)
+    qs = np.full((nsample, points, model.ndof), np.nan)
+    vs = np.full((nsample, points, model.ndof), np.nan)
+    lams = np.full((nsample, points, model.ncon), np.nan)
+    angle0 = np.broadcast_to(model.driver_angle0, (nsample, model.ndriver)).copy()
+    free = np.full_like(np.broadcast_to(model.joint_eccentricity, (1, model.njoint)), np.nan)
+    q, v = q_start, v_start
+    shapes = np.zeros((1, nmode, model.ndof))
+    for j, turn in enumerate(phase):
+        angles = angle0.copy()
+        angles[:, driver] += turn
+        frozen = replace(model, driver_angle0=angles, joint_eccentricity=free)
+        status = np.zeros(nsample, dtype=STATUS_DTYPE)
+        assembled = assemble(frozen, status, q, v)
+        km = frozen.kernel_model()
+        lam = np.full((nsample, model.ncon), np.nan)
+        over_samples(
+            kernels.dynamic_multipliers_batch, nsample, km, assembled.q, assembled.v, lam, status
+        )
+        pulsations = np.full((nsample, nmode), np.nan)  # C-contiguous: one compiled layout
+        over_samples(
+            kernels.modes_batch, nsample, km, assembled.q, lam, False, pulsations, shapes, status
+        )
+        omega[:, j], qs[:, j], vs[:, j], lams[:, j] = pulsations, assembled.q, assembled.v, lam
+        # the next configuration starts from this one where it was found
+        q = np.where(np.isfinite(assembled.q), assembled.q, q)
+        v = np.where(np.isfinite(assembled.v), assembled.v, v)
+    return CycleModes(phase, omega, qs, vs, lams)
 
 
 def check_scene(model: Model) -> Assembled:
