@@ -292,7 +292,7 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     Sample 0 of ``model`` (compile the scene without ``[sample]`` for the state as written)
     is compared with its assembled state. A body's move is the largest displacement of its
     centre and its joint points; it is reported when the scene wrote (or sampled) the body's
-    position or angle and the move exceeds 1e-6 of the mechanism's size plus twice the sum
+    position (an angle written alone is a hint that picks the branch) and the move exceeds 1e-6 of the mechanism's size plus twice the sum
     of the clearances (a journal legitimately moves within its clearance). Velocities the
     scene wrote are reported when the largest change of those points' velocities exceeds
     1e-6 of the velocity scale (written speeds, driver speeds × size). Bodies whose state
@@ -319,7 +319,7 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     lines = []
     for b, name in enumerate(model.body_names):
         points = _point_offsets(model, b)
-        if written["position"][b] or written["angle"][b]:
+        if written["position"][b]:  # an angle alone is a rough hint: it picks the branch
             before = q0[3 * b : 3 * b + 2] + _rotated(q0[3 * b + 2], points)
             after = q[3 * b : 3 * b + 2] + _rotated(q[3 * b + 2], points)
             move = float(np.hypot(*(after - before).T).max())
