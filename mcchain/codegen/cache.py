@@ -15,6 +15,8 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
+from mcchain.caches import temporary_cache, warn_fallback, writable
+
 _GENERATOR_FILES = (
     "topology.py",
     "emitter.py",
@@ -35,7 +37,8 @@ def generator_hash() -> str:
 
 
 def cache_dir() -> Path:
-    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``."""
+    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``
+    (``<tmp>/mcchain-generated-<uid>`` with a warning when that cannot be written)."""
     root = os.environ.get("MCCHAIN_CACHE_DIR")
     if root:
         path = Path(root)
@@ -43,14 +46,11 @@ def cache_dir() -> Path:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
         path = Path(base) / "mcchain"
     path = path / "generated"
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        if not os.access(path, os.W_OK):
-            raise PermissionError(path)
-    except OSError:
-        path = Path(tempfile.gettempdir()) / f"mcchain-generated-{os.getuid()}"
-        path.mkdir(parents=True, exist_ok=True)
-    return path
+    if writable(path):
+        return path
+    fallback = temporary_cache("generated")
+    warn_fallback("MCCHAIN_CACHE_DIR", path.parent, fallback)
+    return fallback
 
 
 def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:

@@ -12,6 +12,11 @@ No kernel is ``parallel=True``: numba's parallel loops compiled every kernel's c
 more (the threads of :mod:`mcchain.solvers.threads` run as fast).
 """
 
+from mcchain.caches import ensure_numba_cache
+
+NUMBA_CACHE = ensure_numba_cache()  # before any kernel is decorated with cache=True
+"""Where numba caches the kernels (a writable folder; see :mod:`mcchain.caches`)."""
+
 JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 """Options of hand-written kernels (``@njit(**JIT)``)."""
 

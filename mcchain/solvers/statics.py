@@ -292,8 +292,9 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     Sample 0 of ``model`` (compile the scene without ``[sample]`` for the state as written)
     is compared with its assembled state. A body's move is the largest displacement of its
     centre and its joint points; it is reported when the scene wrote (or sampled) the body's
-    position (an angle written alone is a hint that picks the branch) and the move exceeds 1e-6 of the mechanism's size plus twice the sum
-    of the clearances (a journal legitimately moves within its clearance). Velocities the
+    position (an angle written alone is a hint that picks the branch) and the move exceeds
+    1e-6 of the mechanism's size plus twice the sum of the clearances (a journal
+    legitimately moves within its clearance). Velocities the
     scene wrote are reported when the largest change of those points' velocities exceeds
     1e-6 of the velocity scale (written speeds, driver speeds × size). Bodies whose state
     the scene leaves out are placed and analysed silently: that is what they ask for.

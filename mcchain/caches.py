@@ -1,0 +1,82 @@
+"""Where compiled code is kept, and what happens when that place cannot be written.
+
+Two caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
+``__pycache__``, else numba's user-wide folder) and mcchain's generated lane modules
+(``MCCHAIN_CACHE_DIR``, :func:`mcchain.codegen.cache.cache_dir`). A cache that cannot be
+written (a read-only home or installation) never stops a run: the cache moves to the
+temporary folder, with one warning line on stderr, and kernels then compile once per
+machine boot instead of once per installation.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+_warned: set[str] = set()
+
+
+def writable(folder: Path) -> bool:
+    """Whether ``folder`` exists or can be made, and a file can be written in it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError:
+        return False
+    return True
+
+
+def temporary_cache(name: str) -> Path:
+    """``<tmp>/mcchain-<name>-<uid>``, made if needed."""
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    folder = Path(tempfile.gettempdir()) / f"mcchain-{name}-{uid}"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def warn_fallback(what: str, folder: Path | str, fallback: Path) -> None:
+    """One line on stderr (once per process and cache) that ``folder`` is not writable."""
+    if what in _warned:
+        return
+    _warned.add(what)
+    print(
+        f"mcchain: warning: {what} {folder} cannot be written: compiled kernels are cached in "
+        f"{fallback} instead (set {what} to a writable folder to keep them across reboots)",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def ensure_numba_cache() -> str:
+    """Make sure numba has a writable cache location before any kernel is decorated.
+
+    Numba tries ``NUMBA_CACHE_DIR``, then ``__pycache__`` beside each source, then its
+    user-wide folder, and raises at decoration when none can be written. This picks the
+    temporary folder (and warns) where the one it would use is not writable.
+
+    Returns:
+        The folder numba caches mcchain's kernels in, for messages.
+    """
+    from numba import config
+    from numba.misc.appdirs import AppDirs
+
+    configured = getattr(config, "CACHE_DIR", "")
+    if configured:
+        if writable(Path(configured)):
+            return str(configured)
+        fallback = temporary_cache("numba")
+        warn_fallback("NUMBA_CACHE_DIR", configured, fallback)
+        config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
+        return str(fallback)
+    in_tree = Path(__file__).parent / "kernels" / "__pycache__"
+    if writable(in_tree):
+        return "beside mcchain's sources (__pycache__)"
+    user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+    if writable(user_wide):
+        return str(user_wide)
+    fallback = temporary_cache("numba")
+    warn_fallback("NUMBA_CACHE_DIR", in_tree.parent, fallback)
+    config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
+    return str(fallback)

@@ -1,0 +1,81 @@
+"""A cache folder that cannot be written never stops mcchain: one warning line, and the
+kernels are cached in the temporary folder instead."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from numba import config
+
+from mcchain import caches
+from mcchain.codegen.cache import cache_dir
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def blocked(tmp_path: Path) -> Path:
+    """A folder path that cannot be made, for any user: its parent is a regular file."""
+    (tmp_path / "a-file").write_text("")
+    return tmp_path / "a-file" / "cache"
+
+
+@pytest.fixture(autouse=True)
+def fresh_warnings(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(caches, "_warned", set())
+
+
+def test_writable__a_folder_under_a_file_is_not(blocked: Path, tmp_path: Path) -> None:
+    assert not caches.writable(blocked)
+    assert caches.writable(tmp_path / "new" / "folder")
+
+
+def test_numba_cache__unwritable_dir_moves_to_temp_with_one_warning(
+    blocked: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(config, "CACHE_DIR", str(blocked))
+    where = caches.ensure_numba_cache()
+    caches.ensure_numba_cache()  # warned once only
+    err = capsys.readouterr().err.splitlines()
+    assert where == config.CACHE_DIR == str(caches.temporary_cache("numba"))
+    assert len(err) == 1
+    assert err[0].startswith(f"mcchain: warning: NUMBA_CACHE_DIR {blocked} cannot be written")
+
+
+def test_numba_cache__writable_dir_is_kept_silently(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "numba"))
+    assert caches.ensure_numba_cache() == str(tmp_path / "numba")
+    assert capsys.readouterr().err == ""
+
+
+def test_generated_cache__unwritable_dir_moves_to_temp_with_one_warning(
+    blocked: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(blocked))
+    assert cache_dir() == caches.temporary_cache("generated")
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "MCCHAIN_CACHE_DIR" in err[0]
+
+
+def test_import__kernels_load_with_unwritable_caches(blocked: Path) -> None:
+    """A fresh process whose caches cannot be written imports and decorates every kernel."""
+    env = {
+        **os.environ,
+        "NUMBA_CACHE_DIR": str(blocked / "numba"),
+        "MCCHAIN_CACHE_DIR": str(blocked / "mcchain"),
+        "PYTHONPATH": str(REPO),
+    }
+    code = "import mcchain.kernels.statics, mcchain.kernels.implicit; print('ok')"
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "ok\n"
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and "NUMBA_CACHE_DIR" in lines[0], proc.stderr
