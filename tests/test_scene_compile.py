@@ -301,6 +301,8 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
         "joint_point_b": (nj, 2),
         "joint_clearance": (nj,),
         "joint_eccentricity": (nj,),
+        "joint_axis": (nj, 2),
+        "joint_relative_angle": (nj,),
         "joint_contact_stiffness": (nj,),
         "joint_contact_exponent": (nj,),
         "joint_contact_restitution": (nj,),
@@ -325,7 +327,13 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
         assert arr.dtype == np.float64 and arr.flags.c_contiguous, name
         assert arr.shape[1:] == shape, name
         assert arr.shape[0] in (1, n), name
-        if name not in ("joint_eccentricity", "joint_contact_stiffness"):  # NaN: unset
+        unset = (
+            "joint_eccentricity",
+            "joint_contact_stiffness",
+            "joint_axis",
+            "joint_relative_angle",
+        )
+        if name not in unset:  # NaN: unset
             assert np.all(np.isfinite(arr)), name
     joint_row, driver_row = constraint_rows(model.joint_kind, nd)
     np.testing.assert_array_equal(model.joint_row, joint_row)

@@ -14,7 +14,10 @@ more (the threads of :mod:`mcchain.solvers.threads` run as fast).
 
 from mcchain.caches import ensure_numba_cache
 
-NUMBA_CACHE = ensure_numba_cache()  # before any kernel is decorated with cache=True
+try:
+    NUMBA_CACHE = ensure_numba_cache()  # before any kernel is decorated with cache=True
+except ImportError:  # generating kernel source needs these options, not numba itself
+    NUMBA_CACHE = "none (numba is not importable)"
 """Where numba caches the kernels (a writable folder; see :mod:`mcchain.caches`)."""
 
 JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
