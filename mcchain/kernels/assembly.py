@@ -29,6 +29,7 @@ from mcchain.kernels.joints import (
     constraint_jacobian,
     constraint_residual,
     constraint_velocity_rhs,
+    joint_rate_terms,
     joint_separation_rate,
     joint_vectors,
     prismatic_gamma,
@@ -99,14 +100,7 @@ def max_abs(x, n):
 @njit(**JIT)
 def schur_factor(B, minv, m, n, S_out):
     """S = B M⁻¹ Bᵀ into ``S_out`` (m, m), Cholesky-factored in place; False if singular."""
-    for i in range(m):
-        for j in range(i + 1):
-            acc = 0.0
-            for k in range(n):
-                acc += B[i, k] * minv[k] * B[j, k]
-            S_out[i, j] = acc
-            S_out[j, i] = acc
-    return cholesky(S_out, m, SCHUR_PIVOT_RTOL)
+    return schur_factor_damped(B, minv, m, n, S_out, 0.0)
 
 
 @njit(**JIT)
@@ -316,11 +310,7 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     for k in range(nj):  # γ of an ideal joint: p_b θ̇_b² − p_a θ̇_a²; drivers: 0
         a = km.joint_body_a[k]
         b = km.joint_body_b[k]
-        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, qi, k)
-        wa = vi[3 * a + 2] if a >= 0 else 0.0
-        wb = vi[3 * b + 2] if b >= 0 else 0.0
-        gx = pbx * wb * wb - pax * wa * wa
-        gy = pby * wb * wb - pay * wa * wa
+        pax, pay, pbx, pby, dx, dy, wa, gx, gy = joint_rate_terms(km, s, qi, vi, k)
         if km.joint_kind[k] == JOINT_PRISMATIC:
             nx, ny = prismatic_normal(km, s, qi, k)
             ddx, ddy = joint_separation_rate(vi, a, b, pax, pay, pbx, pby)

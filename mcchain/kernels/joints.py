@@ -173,6 +173,24 @@ def constraint_jacobian(km, s, q, B_out):
 
 
 @njit(**JIT)
+def joint_rate_terms(km, s, q, v, k):
+    """:func:`joint_vectors` of joint ``k``, θ̇_a, and g = p_b θ̇_b² − p_a θ̇_a² (the part of
+    d̈ that B q̈ leaves out, with a minus sign: d̈ = ∂d/∂q q̈ − g).
+
+    Returns:
+        (pax, pay, pbx, pby, dx, dy, wa, gx, gy).
+    """
+    a = km.joint_body_a[k]
+    b = km.joint_body_b[k]
+    pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+    wa = v[3 * a + 2] if a >= 0 else 0.0
+    wb = v[3 * b + 2] if b >= 0 else 0.0
+    gx = pbx * wb * wb - pax * wa * wa
+    gy = pby * wb * wb - pay * wa * wa
+    return pax, pay, pbx, pby, dx, dy, wa, gx, gy
+
+
+@njit(**JIT)
 def prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa):
     """γ of a prismatic joint's offset row n·d: n·(p_b θ̇_b² − p_a θ̇_a²) (``gx``, ``gy``)
     + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ, from n̈ = θ̈_a Ω n − θ̇_a² n and ṅ = θ̇_a Ω n."""
@@ -190,11 +208,7 @@ def constraint_gamma(km, s, q, v, gamma_out):
     for k in range(km.joint_body_a.shape[0]):
         a = km.joint_body_a[k]
         b = km.joint_body_b[k]
-        pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
-        wa = v[3 * a + 2] if a >= 0 else 0.0
-        wb = v[3 * b + 2] if b >= 0 else 0.0
-        gx = pbx * wb * wb - pax * wa * wa
-        gy = pby * wb * wb - pay * wa * wa
+        pax, pay, pbx, pby, dx, dy, wa, gx, gy = joint_rate_terms(km, s, q, v, k)
         row = km.joint_row[k]
         if km.joint_kind[k] == JOINT_IDEAL:
             gamma_out[row] = gx
