@@ -116,6 +116,12 @@ def _status_counts(path: Path) -> dict[str, int]:
     return total
 
 
+def _kernels(job: Job) -> str | None:
+    """The path that integrates the run's time histories (``[simulate] kernels``), or None."""
+    sim = getattr(job.scene, "simulate", None)
+    return None if sim is None else str(getattr(sim, "kernels", "lanes"))
+
+
 def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -> dict[str, Any]:
     from mcchain.parallel import plan_chunks
 
@@ -150,6 +156,7 @@ def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -
         "sessions": [],
         "error": None,
         "warnings": list(job.warnings),
+        "kernels": _kernels(job),
     }
 
 

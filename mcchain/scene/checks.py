@@ -14,6 +14,7 @@ from mcchain.scene.models import (
     CONTACT_METHODS,
     FIXED_STEP_METHODS,
     GROUND_NAME,
+    LOOP_METHODS,
     Joint,
     Scene,
     saltelli_count_error,
@@ -153,6 +154,20 @@ def check_scene(scene: Scene) -> None:
         raise SceneError(
             f"modes.along.driver: no driver turns body {along.driver!r} (drivers: {driven})"
         )
+
+    if scene.simulate is not None and scene.simulate.kernels == "loop":
+        sim = scene.simulate
+        if sim.method not in LOOP_METHODS:
+            raise SceneError(
+                f'simulate.kernels: "loop" integrates with {", ".join(LOOP_METHODS)}, not '
+                f'{sim.method!r} (use kernels = "lanes")'
+            )
+        for joint in scene.joint:
+            if joint.contact is not None and joint.resolved_model != "link":
+                raise SceneError(
+                    f'simulate.kernels: "loop" has no contact law, which joint {joint.name!r} '
+                    'uses (use kernels = "lanes")'
+                )
 
     if scene.simulate is not None:
         sim = scene.simulate

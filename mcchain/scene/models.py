@@ -527,6 +527,8 @@ class Modes(_Section):
 
 SIMULATE_METHODS = ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau")
 FIXED_STEP_METHODS = ("rk4", "rk4-projection", "generalized-alpha")
+LOOP_METHODS = ("rk4",)
+"""The methods of the loop kernels (``[simulate] kernels = "loop"``)."""
 CONTACT_METHODS = ("rk45", "rk4", "rk4-projection")
 """The methods that integrate the contact law of a clearance joint (model contact or auto)."""
 
@@ -576,6 +578,12 @@ class Simulate(_Section):
     )
     max_newton: Int = Field(
         default=20, ge=1, description="Newton iterations of implicit steps; default 20."
+    )
+    kernels: Literal["lanes", "loop"] = Field(
+        default="lanes",
+        description='"lanes": kernels generated for the scene\'s topology (fastest per step, '
+        'compiled once per topology); "loop": generic kernels compiled once per installation '
+        '(method rk4, no contact law); default "lanes".',
     )
 
     @field_validator("perturb", mode="before")

@@ -316,7 +316,32 @@ def _run_erk(run: _Run, project: bool) -> None:
 
 
 def _run_rk4(run: _Run) -> None:
-    _run_erk(run, project=False)
+    if run.settings.kernels == "loop":
+        _run_rk4_loop(run)
+    else:
+        _run_erk(run, project=False)
+
+
+def _run_rk4_loop(run: _Run) -> None:
+    """RK4 on the generic kernels (:mod:`mcchain.kernels.explicit`): compiled once for every
+    topology, the lanes' steps and checks, one sample at a time."""
+    from mcchain.kernels.explicit import rk4_run
+    from mcchain.kernels.tableaux import RK4
+
+    s = run.settings
+    alpha, beta = s.gains
+    nstep = (len(run.time) - 1) * run.every
+    integrated = (run.status & FAILURE_BITS) == 0
+    run.steps[integrated] = nstep
+    run.evaluations[integrated] = RK4.nstage * nstep + 1
+    over_samples(
+        rk4_run, run.model.nsample,
+        run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
+        0.0, s.dt, nstep, run.every, run.model.ncon, RK4.A, RK4.b, RK4.c,
+        2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+    )  # fmt: skip
 
 
 def _run_rk4_projection(run: _Run) -> None:
