@@ -82,7 +82,7 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     from mcchain.solvers.statics import check_scene, initial_state_warnings
 
     scene = load_scene(path)
-    model = compile_model(scene, nsample=samples, seed=seed)
+    model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
     model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model

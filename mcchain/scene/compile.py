@@ -17,6 +17,7 @@ from mcchain.contact import LAW_CODES, LINK, MODEL_CODES, internal_cylinder_stif
 from mcchain.errors import SceneError
 from mcchain.model import GROUND, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
+from mcchain.resources import check_memory
 from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
@@ -38,7 +39,9 @@ def _check_count(name: str, value: int, low: int, high: int | None = None) -> in
     return int(value)
 
 
-def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = None) -> Model:
+def compile_model(
+    scene: Scene, nsample: int | None = None, seed: int | None = None, count_name: str = "nsample"
+) -> Model:
     """Lay a scene out as a :class:`Model` of ``nsample`` instances.
 
     Args:
@@ -46,6 +49,7 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         nsample: number of instances; default ``[sample] count``, or 1 without ``[sample]``
             (then every instance is the same and there are no parameters).
         seed: sampling seed; default ``[sample] seed`` (0 without ``[sample]``).
+        count_name: how a message names ``nsample`` (``--samples`` from the command line).
 
     Returns:
         The model; ``parameters`` (nsample, nparam) holds the sampled values in the order of
@@ -58,7 +62,6 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
             parameter's domain (e.g. a normal mass draw <= 0), naming the path and the sample.
     """
     sample = scene.sample
-    count_name = "nsample"
     if nsample is None:
         nsample = sample.count if sample is not None else 1
         count_name = "sample.count"
@@ -70,6 +73,7 @@ def compile_model(scene: Scene, nsample: int | None = None, seed: int | None = N
         reason = saltelli_count_error(len(sample.vary), nsample)
         if reason is not None:
             raise SceneError(f"{count_name}: {reason}")
+    check_memory(scene, nsample, count_name)
 
     arrays = _base_arrays(scene)
     varied: set[Slot] = set()

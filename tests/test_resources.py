@@ -1,0 +1,45 @@
+"""A run that cannot fit in memory is refused before anything is allocated or written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from test_cli_commands import assert_usage_error, in_process
+
+from mcchain import resources
+from mcchain.scene import load_scene
+from mcchain.testing.factory import write_scene
+
+REPO = Path(__file__).resolve().parents[1]
+SWEEP = (REPO / "configs" / "clearance-sweep.toml").read_text()
+
+
+def test_estimate__counts_the_sampled_arrays_per_sample() -> None:
+    """Two sampled numbers (a clearance, a mass): the table, draws and values (3 × 2) and
+    the two model arrays made per-sample (one clearance, one mass each): 8 × 8 bytes."""
+    scene = load_scene(REPO / "configs" / "clearance-sweep.toml")
+    assert resources._per_sample_model_bytes(scene) == 64
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_huge_count__one_line_exit_2_nothing_written(tmp_path, monkeypatch, capsys, command):
+    path = write_scene(tmp_path, SWEEP.replace("count = 10000", "count = 10000000000"))
+    args = [command, path] + (["--out", tmp_path / "runs"] if command == "run" else [])
+    ran = in_process(monkeypatch, capsys)(*args, cwd=tmp_path)
+    assert_usage_error(ran, "sample.count: 10000000000 samples need about 596 GiB", "available")
+    assert not (tmp_path / "runs").exists()
+
+
+def test_huge_samples_flag__names_the_flag(tmp_path, monkeypatch, capsys):
+    path = write_scene(tmp_path, SWEEP)
+    ran = in_process(monkeypatch, capsys)(
+        "run", path, "--samples", "10000000000", "--out", tmp_path / "runs", cwd=tmp_path
+    )
+    assert_usage_error(ran, "--samples: 10000000000 samples need about")
+    assert not (tmp_path / "runs").exists()
+
+
+def test_available_memory__is_known_here() -> None:
+    available = resources.available_memory()
+    assert available is not None and available > 2**20
