@@ -132,6 +132,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--resume", metavar="RUN", help="complete an interrupted run folder")
     run.add_argument(
+        "--remerge",
+        action="store_true",
+        help="with --resume: rebuild the run's ensemble.nc (a damaged one is kept as "
+        "ensemble.damaged.nc; chunks whose part files are gone are computed again, and runs "
+        "are deterministic, so the file is the same)",
+    )
+    run.add_argument(
         "--rerun",
         metavar="SAMPLES",
         help="stream these samples (comma-separated global indices, e.g. 0,1) to rerun while "
@@ -268,6 +275,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return _fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
         result = execution.resume_run(
             args.resume,
+            remerge=args.remerge,
             dask=args.dask,
             threads=args.threads,
             argv=argv,
@@ -275,6 +283,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             rerun=live,
         )
     else:
+        if args.remerge:
+            return _fail("--remerge: only with --resume RUN")
         if args.scene is None:
             return _fail("run: a SCENE.toml (or --resume RUN) is required")
         if args.out is not None and args.run_dir is not None:

@@ -471,6 +471,7 @@ def resume_run(
     progress: bool | None = None,
     keep_parts: bool = False,
     rerun: LiveOptions | None = None,
+    remerge: bool = False,
 ) -> RunResult:
     """Complete an interrupted or failed run: compute only its missing chunks.
 
@@ -478,14 +479,26 @@ def resume_run(
     seed and chunk size, so the final ``ensemble.nc`` equals an uninterrupted run's.
     ``rerun`` streams the selected samples of the chunks computed now (those computed
     before are named in the summary: replay them with ``mcchain show``).
+
+    ``remerge`` rebuilds ``ensemble.nc`` of any run (a damaged one is kept aside as
+    ``ensemble.damaged.nc``): the chunks whose part files are gone (a completed run keeps
+    none) are computed again, and runs are deterministic, so the file is the one the run
+    wrote first.
     """
+    from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
+
     t0 = time.perf_counter()
     folder = resolve_run(run)
     record = read_record(folder)
-    if record.get("status") == COMPLETED and (folder / ENSEMBLE).exists():
-        raise RunError(f"{run}: already completed")
     if is_locked(folder):
         raise RunError(f"{run}: the run is being executed by another process")
+    ensemble = folder / ENSEMBLE
+    if record.get("status") == COMPLETED and ensemble.exists() and not remerge:
+        try:
+            open_ensemble(ensemble).close()
+        except DamagedEnsemble as exc:
+            raise RunError(f"{run}: already completed, but {exc}") from None
+        raise RunError(f"{run}: already completed")
     _check_threads(threads, dask)
     job = prepare_job(
         folder / SCENE_COPY,
@@ -499,6 +512,8 @@ def resume_run(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
     check_live(rerun, job.nsample)
+    if remerge and ensemble.exists():
+        os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
     argv = list(sys.argv if argv is None else argv)
     return execute(
         job,
@@ -513,6 +528,10 @@ def resume_run(
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
     )
+
+
+DAMAGED_ENSEMBLE = "ensemble.damaged.nc"
+"""Where ``--remerge`` keeps the ``ensemble.nc`` it replaces."""
 
 
 def _check_threads(threads: int | None, dask: str | None) -> None:

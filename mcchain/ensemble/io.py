@@ -524,13 +524,35 @@ def _has_dask() -> bool:
     return True
 
 
+class DamagedEnsemble(RunError):
+    """An ``ensemble.nc`` that cannot be read (cut short, overwritten): how to rebuild it."""
+
+    def __init__(self, path: Path, reason: BaseException) -> None:
+        why = str(reason).strip().splitlines()[0] if str(reason).strip() else type(reason).__name__
+        super().__init__(
+            f"{path}: cannot be read ({why}): the file is damaged; rebuild it with: "
+            f"mcchain run --resume {path.parent} --remerge"
+        )
+
+
 def open_ensemble(path: Path) -> xr.Dataset:
-    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks)."""
+    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks).
+
+    Raises:
+        DamagedEnsemble: the file cannot be opened, or its per-sample ``status`` (read here,
+            small) cannot be read: a file cut short or overwritten.
+    """
     import xarray as xr
 
-    if _has_dask():
-        return xr.open_dataset(path, engine="netcdf4", chunks={})
-    return xr.open_dataset(path, engine="netcdf4")
+    try:
+        if _has_dask():
+            ds = xr.open_dataset(path, engine="netcdf4", chunks={})
+        else:
+            ds = xr.open_dataset(path, engine="netcdf4")
+        ds["status"].values  # noqa: B018 (a damaged file fails here, not in a plot)
+    except (OSError, ValueError, RuntimeError, KeyError) as exc:
+        raise DamagedEnsemble(path, exc) from None
+    return ds
 
 
 def open_parts(parts: Iterable[Part]) -> xr.Dataset:
