@@ -175,6 +175,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     report.add_argument("run", help="run folder (or its id under runs/)")
     report.add_argument("--out", metavar="DIR", help="folder of the PNG files (default RUN/report)")
+    export = sub.add_parser(
+        "export",
+        help="write a run's per-sample results as a table",
+        description="write one row per sample: sampled parameters, status, pulsations (rad/s "
+        "and Hz), equilibria, contact summaries and the peaks of the force histories",
+        named_errors=True,
+    )
+    export.add_argument("run", help="run folder (or its id under runs/)")
+    export.add_argument("--csv", action="store_true", help="as CSV (the format)")
+    export.add_argument("--out", metavar="FILE", help="the file (default RUN/export/samples.csv)")
 
     return parser
 
@@ -499,6 +509,15 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from mcchain.ensemble.export import export_run
+
+    if not args.csv:
+        return _fail("export: give the format: --csv")
+    print(export_run(args.run, args.out))
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -518,6 +537,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "runs": _cmd_runs,
             "show": _cmd_show,
             "report": _cmd_report,
+            "export": _cmd_export,
         }[command]
         return handler(args)
     except McchainError as exc:

@@ -280,3 +280,16 @@ def format_runs(runs: Sequence[RunInfo]) -> str:
         "  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()
         for row in rows
     )
+
+
+def writable_folder(path: Path, flag: str) -> None:
+    """Create ``path`` (and its parents) unless it exists, and check that files can be made
+    in it; else raise ``RunError`` naming ``flag``, the folder and the reason."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise RunError(f"{flag}: {path} is a file, not a folder") from None
+    except OSError as exc:
+        raise RunError(f"{flag}: cannot create the folder {path} ({exc.strerror})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise RunError(f"{flag}: cannot write into {path} (permission denied)")

@@ -535,7 +535,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
     from mcchain.ensemble.describe import stored_model
     from mcchain.errors import McchainError
-    from mcchain.runs import open_run, resolve_run
+    from mcchain.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     ds = open_run(folder)
@@ -547,20 +547,3 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
         log.info("report: the run's model cannot be rebuilt (%s)", err)
         model = None
     return make_report(ds, target, design=run_design(folder, ds), model=model)
-
-
-def writable_folder(path: Path, flag: str) -> None:
-    """Create ``path`` (and its parents) unless it exists, and check that files can be made
-    in it; else raise ``RunError`` naming ``flag``, the folder and the reason."""
-    import os
-
-    from mcchain.errors import RunError
-
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise RunError(f"{flag}: {path} is a file, not a folder") from None
-    except OSError as exc:
-        raise RunError(f"{flag}: cannot create the folder {path} ({exc.strerror})") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise RunError(f"{flag}: cannot write into {path} (permission denied)")
