@@ -14,6 +14,15 @@ from mcchain.scene.models import Scene
 from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes, solve_modes_along
 
 
+def wrap_angles(q: np.ndarray) -> np.ndarray:
+    """A copy of configurations (..., 3 nbody) with every angle θ wrapped to (−π, π]: a
+    configuration's angle, as stored, has one value (time histories keep theirs continuous)."""
+    q = np.array(q, dtype=np.float64, copy=True)
+    theta = q[..., 2::3]
+    q[..., 2::3] = np.pi - np.mod(np.pi - theta, 2.0 * np.pi)
+    return q
+
+
 def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
     """Run the scene's analyses on every sample of ``model``.
 
@@ -38,7 +47,7 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
         want_shapes = scene.modes is not None and scene.modes.shapes
         modes = solve_modes(model, equilibrium, shapes=want_shapes, damped=scene.modes is not None)
         status |= modes.status
-        out["q_eq"] = equilibrium.q.reshape(nsample, model.nbody, 3)
+        out["q_eq"] = wrap_angles(equilibrium.q).reshape(nsample, model.nbody, 3)
         out["joint_force_eq"] = equilibrium.joint_force
         if model.has_prismatic:
             out["joint_moment_eq"] = equilibrium.joint_moment
