@@ -10,6 +10,7 @@ import pytest
 from test_cli_commands import Ran, assert_usage_error, in_process
 
 from mcchain.testing.factory import chain_scene_text, clearance_bar_text, paper_bar_text
+from mcchain.testing.scenes import fourbar_text
 
 BAR = clearance_bar_text()
 
@@ -57,6 +58,12 @@ CASES = {
     "body held by nothing": (
         BAR + '[[body]]\nname = "loose"\nmass = 1.0\ninertia = 0.1\n',
         "body[1]: 'loose' is not connected to the ground",
+    ),
+    "loop driven twice": (
+        fourbar_text() + '[[driver]]\nbody = "rocker"\nomega = 5.0\n[equilibrium]\n',
+        "driver.rocker: the mechanism has 1 degree(s) of freedom (9 coordinates, 4 joints of "
+        "2 rows each, clearances closed), already driven by driver.crank; one more driver "
+        "over-constrains it",
     ),
 }
 

@@ -247,6 +247,17 @@ def check_scene(model: Model) -> Assembled:
     rank at the assembled configuration.
     """
     nominal = model.select(0, 1)
+    # freedoms the joints leave, clearances closed (a clearance adds play, not a freedom)
+    free = nominal.ndof - 2 * nominal.njoint
+    if nominal.ndriver > max(free, 0) and free >= 0:
+        extra = nominal.driver_names[free]
+        already = ", ".join(f"driver.{d}" for d in nominal.driver_names[:free])
+        raise SceneError(
+            f"driver.{extra}: the mechanism has {free} degree(s) of freedom ({nominal.ndof} "
+            f"coordinates, {nominal.njoint} joints of 2 rows each, clearances closed)"
+            + (f", already driven by {already}" if already else "")
+            + "; one more driver over-constrains it (drive one body per freedom)"
+        )
     dof = nominal.ndof - nominal.ncon
     if dof < 0:
         raise SceneError(
