@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 import xarray as xr
 from test_viz_playback import read_rrd
-from test_viz_report import assert_real_picture
+from test_viz_report import assert_real_picture, assert_texts_inside
 from test_viz_synthetic import _rot, make_dataset, make_model
 
 from mcchain.contact import AUTO
 from mcchain.ensemble import queries
 from mcchain.model import Model
 from mcchain.status import CONTACT_STEP_TOO_LARGE
-from mcchain.viz import contact, history, playback, report, report_contact
+from mcchain.viz import contact, history, playback, report, report_contact, scatter
 
 HALF = 0.5  # m, half length of the synthetic bars (test_viz_synthetic.HALF)
 PRESS = 0.02  # ρ − 1 in contact: a penetration of 2 % of the clearance
@@ -131,15 +131,15 @@ def _titles(fig: Any) -> list[str]:
 # -- queries and labels ---------------------------------------------------------------------------
 def test_param_axis__key_item_and_display_units() -> None:
     small, large = np.array([5e-5, 2e-4]), np.array([0.2, 0.3])
-    assert report_contact.param_axis("joint.B.clearance", small) == ("clearance B [mm]", 1e3)
-    assert report_contact.param_axis("joint.B.clearance", large) == ("clearance B [m]", 1.0)
-    assert report_contact.param_axis("joint.B.contact.restitution", small) == (
+    assert scatter.param_axis("joint.B.clearance", small) == ("clearance B [mm]", 1e3)
+    assert scatter.param_axis("joint.B.clearance", large) == ("clearance B [m]", 1.0)
+    assert scatter.param_axis("joint.B.contact.restitution", small) == (
         "restitution B [-]",
         1.0,
     )
-    assert report_contact.param_axis("body.bar.mass", large) == ("mass bar [kg]", 1.0)
-    assert report_contact.param_axis("scene.gravity[1]", large) == ("gravity[1] [m s-2]", 1.0)
-    assert report_contact.param_axis("joint.B.points[1][0]", large)[0] == "points[1][0] B [m]"
+    assert scatter.param_axis("body.bar.mass", large) == ("mass bar [kg]", 1.0)
+    assert scatter.param_axis("scene.gravity[1]", large) == ("gravity[1] [m s-2]", 1.0)
+    assert scatter.param_axis("joint.B.points[1][0]", large)[0] == "points[1][0] B [m]"
 
 
 def test_largest__finite_values_largest_first() -> None:
@@ -208,11 +208,12 @@ def test_peak_force_figure__unit_axes_and_no_straight_line(contact_run: Any) -> 
     # the points are the samples, x in mm; the line is the binned median (one point per bin)
     np.testing.assert_allclose(axes[0].collections[0].get_offsets()[:, 0], 1e3 * params[:, 0])
     trend = axes[0].lines[0]
-    nbin = NSAMPLE // report_contact.MIN_PER_BIN
+    nbin = NSAMPLE // scatter.MIN_PER_BIN
     assert len(trend.get_xdata()) == nbin
     # peak = 300 sqrt(c / 0.1 mm) rises with c: every bin median above the one before
     assert np.all(np.diff(trend.get_ydata()) > 0)
     assert "Spearman ρ = +1.00" in [t.get_text() for t in axes[0].texts]
+    assert_texts_inside(fig)
 
 
 def test_impact_figure__counts_of_law_joints_only(contact_run: Any) -> None:
@@ -231,6 +232,7 @@ def test_orbit_figure__worst_samples_at_their_closed_form_offsets(contact_run: A
     ds, model, params = contact_run
     fig = report_contact.orbit_figure(ds, model, ["auto", None], count=2)
     assert not isinstance(fig, str)
+    assert_texts_inside(fig)
     worst = np.argsort(-params[:, 0])[:2]  # peak = 300 sqrt(c / 0.1 mm): largest c first
     orbit = orbit_closed_form()
     axes = [ax for ax in fig.axes if ax.get_visible()]
@@ -284,6 +286,7 @@ def test_reaction_envelopes__titles_name_the_model_and_states_are_shown(contact_
     ds, model, _ = contact_run
     fig = history.reaction_envelopes_figure(ds, contact.joint_models(ds, model))
     assert not isinstance(fig, str)
+    assert_texts_inside(fig)
     titles = _titles(fig)
     assert "|f O| — contact law (auto)" in titles
     assert "|f A|" in titles
@@ -324,20 +327,28 @@ def test_reaction_envelopes__link_samples_left_out_after_contact_lost() -> None:
     assert "1 samples lost contact under the link model" in fig.get_suptitle()
 
 
-def test_contact_loss__first_separations_under_the_law(contact_run: Any) -> None:
-    ds, _, _ = contact_run
+def test_contact_loss__first_separations_against_the_sampled_parameters(
+    contact_run: Any,
+) -> None:
+    ds, _, params = contact_run
     fig = history.contact_loss_figure(ds)
     assert not isinstance(fig, str)
-    scatter_ax, share_ax = fig.axes
-    assert scatter_ax.get_title() == (
-        f"0 of {NSAMPLE} samples: contact_lost (link model)\n"
-        f"{NSAMPLE} of {NSAMPLE} samples: first separation (contact law)"
-    )
-    separated = share_ax.lines[1]
+    share_ax, clearance_ax, restitution_ax = (ax for ax in fig.axes if ax.get_visible())
+    title = " ".join(fig.get_suptitle().split())
+    assert title.startswith(f"contact loss: {NSAMPLE} of {NSAMPLE} samples: first separation")
+    assert "contact_lost (link model)" not in title  # no sample lost contact under the link
+    (separated,) = share_ax.lines
     assert separated.get_label() == "first separation (contact law)"
     time, expected = ds["time"].values, separation_times(NSAMPLE)
     share = (time[:, None] >= expected[None, :]).mean(axis=1)
     np.testing.assert_allclose(separated.get_ydata(), 100.0 * share)
+    assert clearance_ax.get_xlabel() == "clearance O [mm]"
+    assert restitution_ax.get_xlabel() == "restitution O [-]"
+    assert clearance_ax.get_ylabel() == "time of loss [s]"
+    points = clearance_ax.collections[0].get_offsets()
+    np.testing.assert_allclose(points[:, 0], 1e3 * params[:, 0])
+    np.testing.assert_allclose(points[:, 1], expected)
+    assert_texts_inside(fig)
 
 
 # -- show -----------------------------------------------------------------------------------------

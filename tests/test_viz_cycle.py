@@ -8,6 +8,8 @@ import re
 import numpy as np
 import xarray as xr
 
+from test_viz_report import assert_texts_inside
+
 from mcchain.viz.report_cycle import campbell_figure
 
 DRIVE = 2 * np.pi * 10.0  # rad/s: a 10 Hz drive
@@ -37,7 +39,8 @@ def test_campbell__harmonics_in_range_are_drawn_and_crossings_marked():
     assert len(crossings) == 1 and len(crossings[0].get_xdata()) == 4  # 20 Hz twice, 30 twice
     assert ax.get_xlabel() == "angle of driver crank from its angle0 [°]"
     assert ax.get_ylabel() == "natural frequency f [Hz]"
-    assert "harmonics dashed" in ax.get_title()
+    assert "harmonics dashed" in " ".join(ax.get_title().split())
+    assert_texts_inside(fig)
 
 
 def test_campbell__modes_far_above_the_drive_say_the_ratio_instead():

@@ -4,21 +4,24 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 import xarray as xr
 from PIL import Image
 from SALib.sample import sobol as salib_sobol
-from scipy.stats import qmc
+from scipy.stats import qmc, spearmanr
 from test_viz_synthetic import SCENE_TEXT, make_dataset, pulsations, random_params
 
 from mcchain import cli
 from mcchain.ensemble import queries
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.testing.factory import clearance_bar_text
-from mcchain.viz import report
+from mcchain.viz import report, scatter
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 SALTELLI_ATOL = 0.01  # Saltelli/Jansen estimators on 2^11 scrambled-Sobol base points: observed
 #                       error <= 0.004 against the quadrature for this smooth 2-input model
@@ -57,6 +60,27 @@ def assert_real_picture(path: Path, min_size: tuple[int, int] = (300, 200)) -> N
     assert pixels.var() > 0.0, f"{path.name} is blank"
     background = (pixels == pixels[0, 0]).all(axis=-1).mean()
     assert background < 0.995, f"{path.name} is {background:.1%} background"
+
+
+def assert_texts_inside(fig: Figure) -> None:
+    """Every title, axis label and text of ``fig`` lies inside the figure once drawn (nothing
+    cut off at an edge)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    width, height = fig.bbox.width, fig.bbox.height
+    texts = [fig._suptitle] if fig._suptitle is not None else []
+    for ax in fig.axes:
+        if ax.get_visible():
+            texts += [ax.title, ax.xaxis.label, ax.yaxis.label, *ax.texts]
+    for text in texts:
+        if not text.get_text():
+            continue
+        box = text.get_window_extent(renderer)
+        inside = box.x0 >= -1 and box.x1 <= width + 1 and box.y0 >= -1 and box.y1 <= height + 1
+        assert inside, f"{text.get_text()!r} is cut off: {box} in {width} x {height}"
 
 
 def make_run(folder: Path, params: np.ndarray, design: str, **kwargs: object) -> Path:
@@ -104,6 +128,7 @@ def test_report__skips_what_the_run_lacks_and_says_why(tmp_path: Path) -> None:
     }
     assert set(result.skipped) == {
         "omega_histogram.png",
+        "modes_along_cycle.png",
         "scatter_impact_count.png",
         "journal_orbit.png",
         "reaction_envelopes.png",
@@ -300,9 +325,77 @@ def test_omega_histogram__labels_hz_and_overlays_damped_pulsations() -> None:
         {"omega": (("sample", "mode"), omega), "damped_omega": (("sample", "mode"), 0.9 * omega)},
         coords={"sample": [0, 1], "mode": [0, 1]},
     )
-    first = report.omega_histogram_figure(ds).axes[0]
+    fig = report.omega_histogram_figure(ds)
+    assert_texts_inside(fig)
+    first = fig.axes[0]
     assert first.get_title() == "ω0: mean 6.283 rad/s (1 Hz), sd 0 (0 Hz)"
     assert [c.get_xlabel() for c in first.child_axes] == ["Hz"]
     assert [t.get_text() for t in first.get_legend().get_texts()] == ["undamped ω", "damped |Im s|"]
     undamped = ds.assign(damped_omega=ds["omega"])
     assert report.omega_histogram_figure(undamped).axes[0].get_legend() is None
+
+
+# -- scatter against the parameters ----------------------------------------------------------------
+def _clearance_mass_dataset(n: int) -> tuple[xr.Dataset, np.ndarray]:
+    rng = np.random.default_rng(11)
+    params = np.column_stack([rng.uniform(1e-4, 1e-3, n), rng.uniform(1.5, 2.5, n)])
+    ds = xr.Dataset(
+        {"parameters": (("sample", "param"), params)},
+        coords={"sample": np.arange(n), "param": PROBLEM["names"]},
+    )
+    return ds, params
+
+
+def test_scatter__a_nonlinear_relation_gets_binned_medians_not_a_straight_line() -> None:
+    n = 400
+    ds, params = _clearance_mass_dataset(n)
+    bowl = 10.0 + 1e7 * (params[:, 0] - 5.5e-4) ** 2  # not monotone: Pearson r would say ~0
+    values = np.column_stack([bowl, np.full(n, 7.0)])
+    fig = report.scatter_figure(ds, report.Result("omega", ("ω0", "ω1"), values, "rad/s"))
+    assert not isinstance(fig, str)
+    clearance_ax, mass_ax = fig.axes
+    assert [clearance_ax.get_xlabel(), mass_ax.get_xlabel()] == [
+        "clearance O [mm]",
+        "mass bar [kg]",
+    ]
+    assert clearance_ax.get_ylabel() == "ω0 [rad/s]"
+    assert [c.get_ylabel() for c in mass_ax.child_axes] == ["Hz"]
+    # the red line: the median of each of 10 bins of 40 samples, sorted by clearance
+    (trend,) = clearance_ax.lines
+    bins = np.array_split(np.argsort(params[:, 0], kind="stable"), scatter.MAX_BINS)
+    np.testing.assert_allclose(trend.get_xdata(), [1e3 * np.median(params[b, 0]) for b in bins])
+    np.testing.assert_allclose(trend.get_ydata(), [np.median(bowl[b]) for b in bins])
+    ends, lowest = trend.get_ydata()[[0, -1]].min() - 10.0, trend.get_ydata().min() - 10.0
+    assert ends > 50.0 * lowest  # the bowl shows
+    rho = spearmanr(params[:, 0], bowl).statistic
+    assert f"Spearman ρ = {rho:+.2f}" in [t.get_text() for t in clearance_ax.texts]
+    title = " ".join(fig.get_suptitle().split())
+    assert title == (
+        f"omega against the sampled parameters, {n} samples: binned median (red) and 5–95 % "
+        f"band constant (not drawn): ω1 = 7 in all {n} samples"
+    )
+    assert_texts_inside(fig)
+
+
+def test_scatter__a_constant_result_is_named_not_drawn() -> None:
+    ds, _ = _clearance_mass_dataset(8)
+    flat = report.Result("q_eq", ("x bar", "θ bar"), np.full((8, 2), 0.25), "m or rad")
+    assert report.scatter_figure(ds, flat) == (
+        "q_eq is constant: x bar = 0.25 in all 8 samples; θ bar = 0.25 in all 8 samples"
+    )
+
+
+def test_sobol__a_constant_output_is_named_with_its_value_not_given_zero_bars() -> None:
+    params = salib_sobol.sample(PROBLEM, 64, calc_second_order=True, seed=3)
+    n = len(params)
+    flat = np.full(n, 7.0) * (1.0 + 1e-13 * np.sin(np.arange(n)))  # round-off only
+    outputs = {"ω0": pulsations(*params.T)[:, 0], "ω1": flat}
+    skipped: dict[str, str] = {}
+    found = report.sobol_indices(params, outputs, PROBLEM["names"], skipped, "sobol")
+    assert not isinstance(found, str)
+    assert [s.output for s in found] == ["ω0"]
+    assert skipped == {"sobol ω1": f"constant: ω1 = 7 in all {n} samples"}
+    reason = report.sobol_indices(params, {"ω1": flat}, PROBLEM["names"], design="sobol")
+    assert reason == (
+        f"no output with finite, varying values to analyse: ω1: constant: ω1 = 7 in all {n} samples"
+    )

@@ -6,6 +6,7 @@ backend switch); matplotlib is imported only when a figure is made.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,11 +14,15 @@ import numpy as np
 
 if TYPE_CHECKING:
     import xarray as xr
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 BLOCK_BYTES = 64 * 2**20
 """Memory budget of one block read from the ensemble."""
 DPI = 100
+CHAR_WIDTH = 0.55
+"""Mean glyph width of the default sans-serif font, in units of the font size (a bound that
+keeps wrapped titles inside the figure with a margin)."""
 
 
 def block(ds: xr.Dataset, name: str, axis: str) -> int:
@@ -53,3 +58,27 @@ def save(fig: Figure, path: Path) -> Path:
 def save_or_reason(found: Figure | str, path: Path) -> Path | str:
     """Save a figure (returns ``path``), or pass on the reason why there is none."""
     return found if isinstance(found, str) else save(found, path)
+
+
+def wrap(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` with each of its lines wrapped to fit ``width_in`` inches at ``fontsize``
+    points."""
+    chars = max(20, int(width_in * 72.0 / (CHAR_WIDTH * fontsize)))
+    return "\n".join(textwrap.fill(line, chars) for line in text.split("\n"))
+
+
+def suptitle(fig: Figure, text: str, fontsize: float = 10.0) -> None:
+    """The figure's title, wrapped to the figure's width (never cut off at the edges)."""
+    fig.suptitle(wrap(text, float(fig.get_figwidth()), fontsize), fontsize=fontsize)
+
+
+def panel_title(ax: Axes, text: str, fontsize: float = 9.0) -> None:
+    """A panel's title, wrapped to the width of the panel's grid cell."""
+    fig = ax.get_figure(root=True)
+    spec = ax.get_subplotspec()
+    share = 1.0
+    if spec is not None:
+        columns = spec.colspan
+        share = (columns.stop - columns.start) / spec.get_gridspec().ncols
+    width = float(fig.get_figwidth()) * share if fig is not None else 4.0
+    ax.set_title(wrap(text, width, fontsize), fontsize=fontsize)

@@ -6,7 +6,7 @@ that produced it (link, or contact law and its model); samples flagged ``contact
 left out after their ``contact_lost_time`` and those times shaded; the state of each joint
 with a contact law (link, contact, free, ...) as shares of the samples over time.
 ``contact_loss.png``: which samples lost contact under the link model, and when (and when
-joints with a contact law first separated).
+joints with a contact law first separated), against each sampled parameter.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import numpy as np
 
 from mcchain.ensemble.queries import dim_names
 from mcchain.viz.contact import FAILED, LINK, LINK_LOST, STATE_COLORS, STATES, joint_models
-from mcchain.viz.figures import block, figure, grid, save_or_reason
+from mcchain.viz.figures import block, figure, grid, panel_title, save_or_reason, suptitle
+from mcchain.viz.scatter import param_axis
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -143,7 +144,7 @@ def reaction_envelopes_figure(
                 time, 0, 1, where=masked > 0, transform=ax.get_xaxis_transform(),
                 color="C3", alpha=0.12, lw=0, label="samples left out (contact_lost)",
             )  # fmt: skip
-        ax.set_title(title, fontsize=9)
+        panel_title(ax, title)
         ax.set_xlabel("time (s)")
         ax.set_ylabel(units)
         ax.legend(fontsize=7, frameon=False)
@@ -165,7 +166,7 @@ def reaction_envelopes_figure(
             f"\n{nlost} samples lost contact under the link model (λ ≤ 0 needed): left out "
             "from their contact_lost_time on (shaded)"
         )
-    fig.suptitle(title, fontsize=10)
+    suptitle(fig, title)
     return fig
 
 
@@ -177,7 +178,14 @@ def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:
 def contact_loss_figure(ds: xr.Dataset) -> Figure | str:
     """Which samples lost contact at a clearance joint, and when: ``contact_lost_time`` under
     the link model and, for joints with a contact law, the first separation (the earliest
-    ``first_separation_time`` over a sample's joints)."""
+    ``first_separation_time`` over a sample's joints).
+
+    The first panel is the share of the samples that lost contact by time t; one panel per
+    sampled parameter then shows the time of loss against the parameter's value (samples that
+    kept contact drawn hollow along the top edge, at the end of the history), so that what
+    drives the loss can be read off. Without sampled parameters the time is drawn against the
+    sample id.
+    """
     if "contact_lost_time" not in ds.data_vars:
         return "the run has no contact_lost_time (no clearance joint or no [simulate])"
     events = [("contact_lost (link model)", np.asarray(ds["contact_lost_time"].values, float))]
@@ -189,31 +197,62 @@ def contact_loss_figure(ds: xr.Dataset) -> Figure | str:
         events.append(
             ("first separation (contact law)", np.where(separated < np.inf, separated, np.nan))
         )
+    events = [(label, t) for label, t in events if np.isfinite(t).any()] or events[:1]
     n = len(events[0][1])
-    ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(n)
     if "time" in ds.coords and ds.sizes.get("time", 0):
         time = np.asarray(ds["time"].values, float)
     else:
         time = np.unique(np.concatenate([t[np.isfinite(t)] for _, t in events] + [np.zeros(1)]))
-    fig, axes = figure(1, 2, w=4.5, h=3.2)
+    t_end = time[-1] if time[-1] > time[0] else time[0] + 1.0
+    xs = _loss_axes(ds, n)
+    nrow, ncol = grid(1 + len(xs), 3)
+    fig, axes = figure(nrow, ncol, w=3.6, h=2.9)
+    flat = list(axes.flat)
     counts = []
     for (label, t), color in zip(events, ("C3", "C2"), strict=False):
         at = np.isfinite(t)
         counts.append(f"{int(at.sum())} of {n} samples: {label}")
-        axes[0, 0].scatter(t[at], ids[at], s=8, color=color, label=label)
         frac = np.searchsorted(np.sort(t[at]), time, side="right") / max(n, 1)
-        axes[0, 1].step(time, 100.0 * frac, where="post", color=color, label=label)
-    ax = axes[0, 0]
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("sample")
-    if len(ids):
-        ax.set_ylim(float(ids.min()) - 0.5, float(ids.max()) + 0.5)
-    ax.set_xlim(time[0], time[-1] if time[-1] > time[0] else time[0] + 1.0)
-    ax.set_title("\n".join(counts), fontsize=9)
-    ax = axes[0, 1]
-    ax.set_xlabel("time (s)")
+        flat[0].step(time, 100.0 * frac, where="post", color=color, label=label)
+        for ax, (_, x) in zip(flat[1:], xs, strict=False):
+            ax.scatter(x[at], t[at], s=7, color=color, linewidths=0, alpha=0.7)
+            ax.scatter(
+                x[~at], np.full(int((~at).sum()), t_end), s=9, facecolors="none",
+                edgecolors=color, linewidths=0.6, alpha=0.7,
+            )  # fmt: skip
+    ax = flat[0]
+    ax.set_xlabel("time [s]")
     ax.set_ylabel("% of samples")
     ax.set_ylim(-2, 102)
-    ax.set_title("samples that lost contact by time t", fontsize=9)
-    ax.legend(fontsize=7, frameon=False, loc="upper left")
+    ax.set_xlim(time[0], t_end)
+    panel_title(ax, "samples that lost contact by time t")
+    ax.legend(fontsize=7, frameon=False, loc="best")
+    for ax, (label, _) in zip(flat[1:], xs, strict=False):
+        ax.set_xlabel(label, fontsize=8)
+        ax.set_ylabel("time of loss [s]", fontsize=8)
+        ax.set_ylim(time[0], t_end * 1.04)
+        ax.tick_params(labelsize=7)
+    for ax in flat[1 + len(xs) :]:
+        ax.set_visible(False)
+    text = "; ".join(counts)
+    if any(np.isfinite(t).sum() < n for _, t in events):
+        text += " (hollow at the top: kept contact to the end)"
+    suptitle(fig, "contact loss: " + text)
     return fig
+
+
+def _loss_axes(ds: xr.Dataset, n: int) -> list[tuple[str, np.ndarray]]:
+    """(axis label, values scaled to that label) of each varying sampled parameter, or the
+    sample id when the run samples none."""
+    found = []
+    if "parameters" in ds.data_vars and ds.sizes.get("param", 0):
+        params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
+        for j, path in enumerate(dim_names(ds, "param")):
+            x = params[:, j]
+            if np.isfinite(x).any() and np.nanmax(x) > np.nanmin(x):
+                label, scale = param_axis(path, x)
+                found.append((label, scale * x))
+    if not found:
+        ids = np.asarray(ds["sample"].values) if "sample" in ds.coords else np.arange(n)
+        found.append(("sample (no parameter sampled)", np.asarray(ids, float)))
+    return found

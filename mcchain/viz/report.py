@@ -7,12 +7,16 @@ reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, def
 ==============================  ==========================================================
 ``omega_histogram.png``         histogram of each eigenpulsation (``[modes]``), in rad/s
                                 and Hz, with ``damped_omega`` overlaid if it differs
+``modes_along_cycle.png``       natural frequencies along one turn of the driver of
+                                ``[modes] along``, with the drive's harmonics
+                                (:mod:`mcchain.viz.report_cycle`)
 ``scatter_<result>.png``        each result against each sampled parameter (axes named
-                                ``key item [units]``), with a least-squares trend line and
-                                Pearson's r (components constant over the samples are named,
-                                not drawn); results are ``omega`` (modes; a Hz axis beside
-                                rad/s), ``q_eq`` (body, dof), ``joint_force_eq`` (magnitude
-                                per joint)
+                                ``key item [units]``), with the binned median, its 5–95 %
+                                band and Spearman's ρ (:mod:`mcchain.viz.scatter`;
+                                components constant over the samples are named with their
+                                value, not drawn); results are ``omega`` (modes; a Hz axis
+                                beside rad/s), ``q_eq`` (body, dof), ``joint_force_eq``
+                                (magnitude per joint)
 contact figures                 ``scatter_peak_contact_force.png``: peak normal force per
                                 clearance joint against each sampled parameter;
                                 ``scatter_impact_count.png``: impacts per joint with a
@@ -25,10 +29,12 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
                                 samples left out after their ``contact_lost_time``
                                 (:mod:`mcchain.viz.history`)
 ``contact_loss.png``            which samples lost contact, and when
-                                (``contact_lost_time``), with the fraction lost by time t
+                                (``contact_lost_time``): the fraction lost by time t, and
+                                the time of loss against each sampled parameter
 ``status_counts.png``           how many samples carry each status flag
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
-                                contact force, for a ``design = "saltelli"`` or
+                                contact force (an output constant over the samples is named
+                                with its value instead of zero bars), for a ``design = "saltelli"`` or
                                 ``"sobol"`` run only: first- and total-order
                                 (``SALib.analyze.sobol``) when the samples have Saltelli's
                                 layout (rows A, AB_1..AB_D[, BA_1..BA_D], B per base point, as
@@ -55,15 +61,16 @@ import numpy as np
 from mcchain.ensemble.queries import dim_names, run_design
 from mcchain.status import Status, counts
 from mcchain.viz.contact import joint_models
-from mcchain.viz.figures import figure, grid, save, save_or_reason
+from mcchain.viz.figures import figure, grid, save, save_or_reason, suptitle
 from mcchain.viz.history import contact_loss, reaction_envelopes
 from mcchain.viz.report_contact import (
     impact_figure,
     orbit_figure,
-    param_axis,
     peak_contact_forces,
     peak_force_figure,
 )
+from mcchain.viz.report_cycle import campbell_figure
+from mcchain.viz.scatter import parameter_scatter
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -73,10 +80,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-MAX_SCATTER_POINTS = 4000
-"""Points drawn per scatter panel (a fixed random subset; trends use every sample)."""
 CONSTANT_RTOL = 1e-9
-"""A result component whose spread is below this (relative, floor 1) is constant: not drawn."""
+"""A result whose spread is below this, relative to its largest magnitude, is constant (round-off
+only): not drawn, and no sensitivity index is computed for it."""
 SOBOL_RESAMPLES = 200
 """Bootstrap resamples of SALib's confidence intervals."""
 MIN_RBD_SAMPLES = 64
@@ -184,7 +190,7 @@ def omega_histogram_figure(ds: xr.Dataset) -> Figure:
         ax.set_xlabel("rad/s")
         ax.set_ylabel("samples")
         ax.secondary_xaxis("top", functions=(_to_hz, _to_rad_s)).set_xlabel("Hz", fontsize=8)
-    fig.suptitle(f"eigenpulsations, {omega.shape[0]} samples")
+    suptitle(fig, f"eigenpulsations, {omega.shape[0]} samples")
     return fig
 
 
@@ -204,67 +210,42 @@ def _in_hz(w: np.ndarray) -> str:
     return f"mean {mean:.4g} rad/s ({_to_hz(mean):.4g} Hz), sd {sd:.3g} ({_to_hz(sd):.3g} Hz)"
 
 
-def _trend(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float] | None:
-    """Least-squares line y = a + b x and Pearson's r over the finite pairs."""
-    ok = np.isfinite(x) & np.isfinite(y)
-    if ok.sum() < 3 or np.ptp(x[ok]) == 0.0:
-        return None
-    b, a = np.polyfit(x[ok], y[ok], 1)
-    r = float(np.corrcoef(x[ok], y[ok])[0, 1]) if np.ptp(y[ok]) > 0 else 0.0
-    return float(a), float(b), r
+def is_constant(y: np.ndarray) -> bool:
+    """Whether the finite values ``y`` (non-empty) differ by round-off only
+    (:data:`CONSTANT_RTOL`)."""
+    return bool(np.ptp(y) <= CONSTANT_RTOL * float(np.abs(y).max()))
+
+
+def constant_note(label: str, y: np.ndarray) -> str:
+    """``"ω1 = 12.5 in all 64 samples"``: what a plot says of a constant output."""
+    return f"{label} = {float(y[0]):.6g} in all {len(y)} samples"
 
 
 def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
-    """Each component of ``result`` against each sampled parameter, with a trend line."""
-    nparam = ds.sizes.get("param", 0)
-    if "parameters" not in ds.data_vars or not nparam:
-        return "the run samples no parameter ([sample] absent)"
-    params = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
-    paths = dim_names(ds, "param")
+    """``scatter_<result>.png``: :func:`scatter_figure`, saved."""
+    return save_or_reason(scatter_figure(ds, result), path)
+
+
+def scatter_figure(ds: xr.Dataset, result: Result) -> Figure | str:
+    """Each varying component of ``result`` against each sampled
+    parameter (:func:`mcchain.viz.scatter.parameter_scatter`); constant components are named
+    in the title, not drawn."""
     rows, constant = [], []
-    for k in range(result.values.shape[1]):
-        y = result.values[:, k][np.isfinite(result.values[:, k])]
-        if len(y) and np.ptp(y) > CONSTANT_RTOL * max(1.0, float(np.abs(y).max())):
-            rows.append(k)
-        elif len(y):
-            constant.append(result.labels[k])
-    if not rows:
-        return f"{result.name} has no finite, varying component"
-    n = params.shape[0]
-    shown = np.arange(n)
-    if n > MAX_SCATTER_POINTS:
-        shown = np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER_POINTS, replace=False))
-    axes_of = [param_axis(path, params[:, j]) for j, path in enumerate(paths)]
-    xlabels = [label for label, _ in axes_of]
-    params = params * np.array([scale for _, scale in axes_of])
-    fig, axes = figure(len(rows), nparam, w=2.8, h=2.2)
-    alpha = float(np.clip(200.0 / max(len(shown), 1), 0.08, 0.8))
-    for i, k in enumerate(rows):
+    for k, label in enumerate(result.labels):
         y = result.values[:, k]
-        for j in range(nparam):
-            ax = axes[i, j]
-            x = params[:, j]
-            ax.scatter(x[shown], y[shown], s=6, alpha=alpha, color="C0", linewidths=0)
-            fit = _trend(x, y)
-            if fit is not None:
-                a, b, r = fit
-                xs = np.array([np.nanmin(x), np.nanmax(x)])
-                ax.plot(xs, a + b * xs, color="C3", lw=1.5, label=f"r = {r:+.2f}")
-                ax.legend(loc="best", fontsize=7, frameon=False)
-            if i == len(rows) - 1:
-                ax.set_xlabel(xlabels[j], fontsize=8)
-            if j == 0:
-                ax.set_ylabel(result.labels[k], fontsize=8)
-            if j == nparam - 1 and result.units == "rad/s":
-                hz = ax.secondary_yaxis("right", functions=(_to_hz, _to_rad_s))
-                hz.set_ylabel("Hz", fontsize=8)
-                hz.tick_params(labelsize=7)
-            ax.tick_params(labelsize=7)
-    title = f"{result.name} ({result.units}) against the sampled parameters, {n} samples"
-    if constant:
-        title += "\nconstant (not drawn): " + ", ".join(constant)
-    fig.suptitle(title, fontsize=10)
-    return save(fig, path)
+        finite = y[np.isfinite(y)]
+        if len(finite) and not is_constant(finite):
+            rows.append((f"{label} [{result.units}]", y))
+        elif len(finite):
+            constant.append(constant_note(label, finite))
+    if not rows:
+        if constant:
+            return f"{result.name} is constant: " + "; ".join(constant)
+        return f"{result.name} has no finite value"
+    notes = ["constant (not drawn): " + "; ".join(constant)] if constant else []
+    hz = ("Hz", _to_hz, _to_rad_s) if result.units == "rad/s" else None
+    title = f"{result.name} against the sampled parameters"
+    return parameter_scatter(ds, rows, title, notes, hz)
 
 
 def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
@@ -347,6 +328,7 @@ def sobol_indices(
     """
     from SALib.analyze import rbd_fast, sobol
 
+    skipped = {} if skipped is None else skipped
     params = np.asarray(params, dtype=np.float64)
     d = len(names)
     if design == "saltelli":
@@ -378,12 +360,11 @@ def sobol_indices(
             reason = f"{int((~finite).sum())} samples have no finite value (Saltelli rows)"
         elif layout is None and finite.sum() < MIN_RBD_SAMPLES:
             reason = f"only {int(finite.sum())} samples have a finite value"
-        elif np.ptp(y[finite]) == 0.0:
-            reason = "constant over the samples"
+        elif is_constant(y[finite]):
+            reason = "constant: " + constant_note(label, y[finite])
         if reason is not None:
             log.info("sobol: %s left out: %s", label, reason)
-            if skipped is not None:
-                skipped[f"sobol {label}"] = reason
+            skipped[f"sobol {label}"] = reason
             continue
         if layout is not None:
             si = sobol.analyze(
@@ -416,7 +397,9 @@ def sobol_indices(
             )
         )
     if not found:
-        return "no output with finite, varying values to analyse"
+        return "no output with finite, varying values to analyse: " + "; ".join(
+            f"{label.removeprefix('sobol ')}: {why}" for label, why in skipped.items()
+        )
     return found
 
 
@@ -443,7 +426,10 @@ def sobol_figure(
             outputs[label] = result.values[:, k]
     if not outputs:
         return "the run has no scalar result to analyse"
-    found = sobol_indices(params, outputs, names, skipped, design)
+    left_out: dict[str, str] = {}
+    found = sobol_indices(params, outputs, names, left_out, design)
+    if skipped is not None:
+        skipped.update(left_out)
     if isinstance(found, str):
         return found
     with open(csv_path, "w", newline="") as fh:
@@ -472,7 +458,10 @@ def sobol_figure(
         how = 'SALib sobol (S1, ST) on the "saltelli" design'
     else:
         how = "SALib sobol on Saltelli's layout"
-    fig.suptitle(f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}", fontsize=10)
+    constant = [why.removeprefix("constant: ") for why in left_out.values() if "constant" in why]
+    if constant:  # said, not drawn as zero bars
+        how += "\nconstant, no indices: " + "; ".join(constant)
+    suptitle(fig, f"Sobol indices, {params.shape[0]} samples, 95 % CI\n{how}")
     return save(fig, path)
 
 
@@ -502,6 +491,8 @@ def make_report(
             report.skipped[name] = produced
 
     record("omega_histogram.png", omega_histogram(ds, out / "omega_histogram.png"))
+    cycle = out / "modes_along_cycle.png"
+    record("modes_along_cycle.png", save_or_reason(campbell_figure(ds), cycle))
     models = joint_models(ds, model)
     found = results(ds, models)
     if not found:

@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names, largest, peak_abs_over_time, sample_ids
-from mcchain.parameters import param_units
 from mcchain.viz import contact
-from mcchain.viz.figures import block, figure
+from mcchain.viz.figures import block, figure, suptitle
+from mcchain.viz.scatter import param_axis, parameter_scatter
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -39,35 +39,11 @@ if TYPE_CHECKING:
 
 ORBIT_SAMPLES = 4
 """Samples drawn per clearance joint in ``journal_orbit.png`` (largest peak force first)."""
-MIN_PER_BIN = 4
-"""Fewest samples in a bin of the binned median (fewer: no median line)."""
-MAX_BINS = 10
-"""Most bins of the binned median."""
-SMALL_LENGTH = 0.1
-"""Lengths (m) whose sampled values all stay below this are shown in mm."""
 LAW_MODELS = ("contact", "auto", "contact law")
 """Names of :func:`mcchain.viz.contact.joint_models` that use a contact law."""
 
 
 # -- axes and values ---------------------------------------------------------------------------
-def param_axis(path: str, values: np.ndarray) -> tuple[str, float]:
-    """Axis label and scale of a sampled parameter: ``joint.B.clearance`` with values of
-    0.1 mm -> ``("clearance B [mm]", 1e3)`` (plot ``scale * values``);
-    ``joint.B.contact.restitution`` -> ``("restitution B [-]", 1.0)``."""
-    base, bracket, index = path.partition("[")
-    parts = [part.strip('"') for part in base.split(".")]
-    if parts[0] == "scene" or len(parts) < 3:
-        label = parts[-1] + bracket + index
-    else:
-        label = f"{parts[-1]}{bracket}{index} {parts[1]}"
-    units, scale = param_units(path), 1.0
-    finite = np.abs(np.asarray(values, dtype=np.float64))
-    finite = finite[np.isfinite(finite)]
-    if units == "m" and len(finite) and finite.max() < SMALL_LENGTH:
-        units, scale = "mm", 1e3
-    return f"{label} [{'-' if units == '1' else units}]", scale
-
-
 def peak_contact_forces(
     ds: xr.Dataset, models: list[str | None]
 ) -> tuple[list[str], np.ndarray, list[int]]:
@@ -100,71 +76,7 @@ def peak_contact_forces(
     return labels, peaks, joints
 
 
-def binned_median(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Median of ``y`` in bins of equal counts along ``x`` (a trend that assumes no shape):
-    (x medians, y medians), or ``None`` with fewer than 2 bins of :data:`MIN_PER_BIN`."""
-    ok = np.isfinite(x) & np.isfinite(y)
-    nbin = min(MAX_BINS, int(ok.sum()) // MIN_PER_BIN)
-    if nbin < 2 or np.ptp(x[ok]) == 0.0:
-        return None
-    order = np.argsort(x[ok], kind="stable")
-    bins = np.array_split(order, nbin)
-    xs, ys = x[ok], y[ok]
-    return (
-        np.array([np.median(xs[b]) for b in bins]),
-        np.array([np.median(ys[b]) for b in bins]),
-    )
-
-
-def spearman(x: np.ndarray, y: np.ndarray) -> float:
-    """Spearman's rank correlation over the finite pairs (NaN with fewer than 3 or no
-    spread)."""
-    from scipy.stats import spearmanr
-
-    ok = np.isfinite(x) & np.isfinite(y)
-    if ok.sum() < 3 or np.ptp(x[ok]) == 0.0 or np.ptp(y[ok]) == 0.0:
-        return float("nan")
-    return float(spearmanr(x[ok], y[ok]).statistic)
-
-
 # -- scatter figures ---------------------------------------------------------------------------
-def parameter_scatter(
-    ds: xr.Dataset, rows: list[tuple[str, np.ndarray]], units: str, title: str
-) -> Figure | str:
-    """Each row's values (nsample,) against each sampled parameter: points, the binned
-    median (:func:`binned_median`) and Spearman's ρ; y axes ``label [units]``."""
-    nparam = ds.sizes.get("param", 0)
-    if "parameters" not in ds.data_vars or not nparam:
-        return "the run samples no parameter ([sample] absent)"
-    if not rows:
-        return "no clearance joint has a value to draw"
-    params = np.asarray(ds["parameters"].transpose("sample", "param").values, np.float64)
-    paths = dim_names(ds, "param")
-    fig, axes = figure(len(rows), nparam, w=3.0, h=2.4)
-    alpha = float(np.clip(200.0 / max(params.shape[0], 1), 0.15, 0.8))
-    for i, (label, y) in enumerate(rows):
-        for j in range(nparam):
-            ax = axes[i, j]
-            xlabel, scale = param_axis(paths[j], params[:, j])
-            x = scale * params[:, j]
-            ax.scatter(x, y, s=9, alpha=alpha, color="C0", linewidths=0, label="samples")
-            trend = binned_median(x, y)
-            if trend is not None:
-                ax.plot(*trend, color="C3", lw=1.5, marker="o", ms=3, label="binned median")
-            rho = spearman(x, y)
-            ax.text(
-                0.02, 0.97, f"Spearman ρ = {rho:+.2f}", transform=ax.transAxes,
-                va="top", fontsize=7,
-            )  # fmt: skip
-            ax.set_xlabel(xlabel, fontsize=8)
-            ax.set_ylabel(f"{label} [{units}]", fontsize=8)
-            ax.tick_params(labelsize=7)
-            if i == 0 and j == nparam - 1:
-                ax.legend(fontsize=7, frameon=False, loc="best")
-    fig.suptitle(f"{title}, {params.shape[0]} samples", fontsize=10)
-    return fig
-
-
 def peak_force_figure(ds: xr.Dataset, models: list[str | None]) -> Figure | str:
     """``scatter_peak_contact_force.png`` (see the module docstring)."""
     labels, peaks, joints = peak_contact_forces(ds, models)
@@ -175,7 +87,8 @@ def peak_force_figure(ds: xr.Dataset, models: list[str | None]) -> Figure | str:
     ]
     if not rows:
         return "the run has no contact force history of a clearance joint"
-    return parameter_scatter(ds, rows, "N", "peak contact force against the sampled parameters")
+    title = "peak contact force against the sampled parameters"
+    return parameter_scatter(ds, [(f"{label} [N]", y) for label, y in rows], title)
 
 
 def impact_figure(ds: xr.Dataset) -> Figure | str:
@@ -192,7 +105,7 @@ def impact_figure(ds: xr.Dataset) -> Figure | str:
     if not rows:
         return "no joint has a contact law"
     title = "impacts (located contact onsets) against the sampled parameters"
-    return parameter_scatter(ds, rows, "-", title)
+    return parameter_scatter(ds, [(f"{label} [-]", y) for label, y in rows], title)
 
 
 # -- journal orbit -----------------------------------------------------------------------------
@@ -278,9 +191,9 @@ def orbit_figure(
     handles.append(Line2D([], [], ls="", marker="x", color="black"))
     names = [contact.STATES[c] for c in sorted(drawn)] + ["t = 0"]
     fig.legend(handles, names, loc="outside lower center", ncol=len(names), fontsize=8)
-    fig.suptitle(
+    suptitle(
+        fig,
         "journal orbit d / c in the clearance circle (d = journal − bearing centre), "
         f"the {ncol} samples with the largest peak force",
-        fontsize=10,
     )
     return fig

@@ -13,12 +13,11 @@
 from __future__ import annotations
 
 import json
-import textwrap
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mcchain.viz.figures import figure
+from mcchain.viz.figures import figure, panel_title
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -26,8 +25,6 @@ if TYPE_CHECKING:
 
 MAX_HARMONICS = 12
 """Most harmonic lines drawn (more below the modes' top: none, the ratio is said instead)."""
-TITLE_WIDTH = 90
-"""Characters per title line (the title wraps rather than being cut)."""
 
 
 def along_driver(ds: xr.Dataset) -> tuple[str, float] | None:
@@ -101,7 +98,7 @@ def campbell_figure(ds: xr.Dataset) -> Figure | str:
     ax.set_ylabel("natural frequency f [Hz]")
     ax.set_xlim(angle[0], angle[0] + 360.0)
     title = f"modes along one turn of {body}, {nsample} samples: median, 5–95 %; {note}"
-    ax.set_title(textwrap.fill(title, TITLE_WIDTH), fontsize=9)
+    panel_title(ax, title)
     ax.legend(fontsize=7, frameon=False, loc="best")
     ax.secondary_yaxis(
         "right", functions=(lambda f: 2.0 * np.pi * f, lambda w: w / (2.0 * np.pi))
