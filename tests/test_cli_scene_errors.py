@@ -59,6 +59,13 @@ CASES = {
         BAR + '[[body]]\nname = "loose"\nmass = 1.0\ninertia = 0.1\n',
         "body[1]: 'loose' is not connected to the ground",
     ),
+    "inertia scaled and sampled": (
+        BAR.replace("mass = 2.0", "mass = 2.0\nscale_inertia = true")
+        + SAMPLE.format(path="body.bar.inertia", dist="uniform = [0.1, 0.2]"),
+        'body.bar.scale_inertia: the inertia is sampled as well (sample.vary."body.bar.inertia"); '
+        "scale it "
+        "with the mass or sample it, not both",
+    ),
     "loop driven twice": (
         fourbar_text() + '[[driver]]\nbody = "rocker"\nomega = 5.0\n[equilibrium]\n',
         "driver.rocker: the mechanism has 1 degree(s) of freedom (9 coordinates, 4 joints of "

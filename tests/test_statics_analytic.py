@@ -175,3 +175,24 @@ def test_modes__inverted_bar_is_unstable():
     expected = -bar_pulsation(mass, INERTIA, HALF_LENGTH, GRAVITY)
     assert out["omega"][:, 0] == pytest.approx(expected, rel=0.05)
     assert np.all(out["omega"][:, 0] < 0)
+
+
+def test_statics__scale_inertia_carries_the_inertia_with_the_sampled_mass():
+    """With ``scale_inertia`` J = J_written m / m_written, and each clearance-bar sample
+    matches the quartic with its own (m, J); without it J stays as written."""
+    text = bar_scene(clearance=1e-3, count=200)
+    scaled = text.replace(f"inertia = {INERTIA!r}", f"inertia = {INERTIA!r}\nscale_inertia = true")
+    model, out = run(scaled)
+    mass = sampled(model, "body.bar.mass")
+    clearance = sampled(model, "joint.O.clearance")
+    np.testing.assert_allclose(model.body_inertia[:, 0], INERTIA * mass / 2.0, rtol=1e-15)
+    expected = np.array(
+        [
+            clearance_bar_pulsations(m, INERTIA * m / 2.0, HALF_LENGTH, GRAVITY, c)
+            for m, c in zip(mass, clearance, strict=True)
+        ]
+    )
+    np.testing.assert_allclose(out["omega"], expected, rtol=CLOSED_FORM_RTOL, atol=0)
+    assert np.ptp(model.body_inertia) > 0.01 * INERTIA  # the masses scatter by ~1 %
+    written = compile_model(load_scene_text(text))
+    assert np.all(written.body_inertia == INERTIA)

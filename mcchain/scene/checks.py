@@ -137,6 +137,13 @@ def check_scene(scene: Scene) -> None:
                 raise SceneError(f"sample.count: {reason}")
 
     sampled = set(targets) if scene.sample is not None else set()
+    for i, body in enumerate(scene.body):
+        if body.scale_inertia and f"body.{body.name}.inertia" in sampled:
+            raise SceneError(
+                f"{_item(scene, 'body', i)}.scale_inertia: the inertia is sampled as well "
+                f"(sample.vary.{quote_key(targets[f'body.{body.name}.inertia'])}); scale it "
+                "with the mass or sample it, not both"
+            )
     for i, joint in enumerate(scene.joint):
         where = _item(scene, "joint", i)
         _check_joint_type(where, joint, sampled)

@@ -232,11 +232,16 @@ def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
 def _derived_defaults(
     scene: Scene, arrays: dict[str, np.ndarray], varied: set[Slot], nsample: int
 ) -> None:
-    """Fill defaults that follow other values: body angles and positions not written, driver
-    angle0 (the body's angle), a prismatic joint's relative angle (as written or placed),
-    spring rest length (the distance at the initial positions)."""
+    """Fill defaults that follow other values: the inertia of a body whose sampled mass
+    carries it (``scale_inertia``), body angles and positions not written, driver angle0 (the
+    body's angle), a prismatic joint's relative angle (as written or placed), spring rest
+    length (the distance at the initial positions)."""
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
+    for b, body in enumerate(scene.body):
+        if body.scale_inertia and ("body_mass", (b,)) in varied:
+            inertia = _rows_like(arrays, "body_inertia", nsample)
+            inertia[:, b] = body.inertia * arrays["body_mass"][:, b] / body.mass
     _unwritten_angles(scene, arrays, index)
     _place_on_joints(scene, arrays, index)
     q0 = arrays["q0"]

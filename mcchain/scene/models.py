@@ -103,6 +103,12 @@ class Body(_Section):
     name: Name = Field(description="unique body name (not ``ground``); required.")
     mass: Num = Field(gt=0, description="mass m, kg; required, > 0.")
     inertia: Num = Field(gt=0, description="centroidal moment of inertia J, kg m²; required.")
+    scale_inertia: bool = Field(
+        default=False,
+        description="true: a sampled mass carries the inertia with it, J = J_written · m / "
+        "m_written in every instance (the same shape and size, only denser or lighter); "
+        "default false: J stays as written. Not with ``inertia`` sampled as well.",
+    )
     position: Vec2 | None = Field(
         default=None,
         description="centre of mass (X, Y) at t = 0, m; default: placed on its joints "
