@@ -7,7 +7,6 @@ import re
 
 import numpy as np
 import xarray as xr
-
 from test_viz_report import assert_texts_inside
 
 from mcchain.viz.report_cycle import campbell_figure

@@ -34,8 +34,8 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
 ``status_counts.png``           how many samples carry each status flag
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
                                 contact force (an output constant over the samples is named
-                                with its value instead of zero bars), for a ``design = "saltelli"`` or
-                                ``"sobol"`` run only: first- and total-order
+                                with its value instead of zero bars), for a ``design =
+                                "saltelli"`` or ``"sobol"`` run only: first- and total-order
                                 (``SALib.analyze.sobol``) when the samples have Saltelli's
                                 layout (rows A, AB_1..AB_D[, BA_1..BA_D], B per base point, as
                                 ``SALib.sample.sobol.sample`` makes them, and as
