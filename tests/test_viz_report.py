@@ -328,7 +328,7 @@ def test_omega_histogram__labels_hz_and_overlays_damped_pulsations() -> None:
     fig = report.omega_histogram_figure(ds)
     assert_texts_inside(fig)
     first = fig.axes[0]
-    assert first.get_title() == "ω0: mean 6.283 rad/s (1 Hz), sd 0 (0 Hz)"
+    assert " ".join(first.get_title().split()) == "ω0: mean 6.283 rad/s (1 Hz), sd 0 (0 Hz)"
     assert [c.get_xlabel() for c in first.child_axes] == ["Hz"]
     assert [t.get_text() for t in first.get_legend().get_texts()] == ["undamped ω", "damped |Im s|"]
     undamped = ds.assign(damped_omega=ds["omega"])

@@ -60,6 +60,10 @@ def save_or_reason(found: Figure | str, path: Path) -> Path | str:
     return found if isinstance(found, str) else save(found, path)
 
 
+AXES_SHARE = 0.8
+"""Least share of a grid cell's width that its axes spans (the rest: y label, tick labels)."""
+
+
 def wrap(text: str, width_in: float, fontsize: float) -> str:
     """``text`` with each of its lines wrapped to fit ``width_in`` inches at ``fontsize``
     points."""
@@ -73,12 +77,13 @@ def suptitle(fig: Figure, text: str, fontsize: float = 10.0) -> None:
 
 
 def panel_title(ax: Axes, text: str, fontsize: float = 9.0) -> None:
-    """A panel's title, wrapped to the width of the panel's grid cell."""
+    """A panel's title, wrapped to the width of the panel's axes (:data:`AXES_SHARE` of its
+    grid cell: the title is centred on the axes, not on the cell with its tick labels)."""
     fig = ax.get_figure(root=True)
     spec = ax.get_subplotspec()
     share = 1.0
     if spec is not None:
         columns = spec.colspan
         share = (columns.stop - columns.start) / spec.get_gridspec().ncols
-    width = float(fig.get_figwidth()) * share if fig is not None else 4.0
+    width = AXES_SHARE * float(fig.get_figwidth()) * share if fig is not None else 3.0
     ax.set_title(wrap(text, width, fontsize), fontsize=fontsize)

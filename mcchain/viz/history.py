@@ -145,7 +145,7 @@ def reaction_envelopes_figure(
                 color="C3", alpha=0.12, lw=0, label="samples left out (contact_lost)",
             )  # fmt: skip
         panel_title(ax, title)
-        ax.set_xlabel("time (s)")
+        ax.set_xlabel("time [s]")
         ax.set_ylabel(units)
         ax.legend(fontsize=7, frameon=False)
     for ax, (k, share) in zip(list(axes.flat)[len(panels) :], shares, strict=False):
@@ -153,8 +153,8 @@ def reaction_envelopes_figure(
         colors = [STATE_COLORS[code] / 255.0 for code in seen]
         labels = [STATES[code] for code in seen]
         ax.stackplot(time, 100.0 * share[seen], colors=colors, labels=labels, alpha=0.85)
-        ax.set_title(f"state of {joints[k]}{model_tag(models[k])}", fontsize=9)
-        ax.set_xlabel("time (s)")
+        panel_title(ax, f"state of {joints[k]}{model_tag(models[k])}")
+        ax.set_xlabel("time [s]")
         ax.set_ylabel("% of samples")
         ax.set_ylim(0, 100)
         ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))

@@ -61,7 +61,7 @@ import numpy as np
 from mcchain.ensemble.queries import dim_names, run_design
 from mcchain.status import Status, counts
 from mcchain.viz.contact import joint_models
-from mcchain.viz.figures import figure, grid, save, save_or_reason, suptitle
+from mcchain.viz.figures import figure, grid, panel_title, save, save_or_reason, suptitle
 from mcchain.viz.history import contact_loss, reaction_envelopes
 from mcchain.viz.report_contact import (
     impact_figure,
@@ -70,7 +70,7 @@ from mcchain.viz.report_contact import (
     peak_force_figure,
 )
 from mcchain.viz.report_cycle import campbell_figure
-from mcchain.viz.scatter import parameter_scatter
+from mcchain.viz.scatter import param_axis, parameter_scatter
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -107,6 +107,12 @@ class Result:
     labels: tuple[str, ...]
     values: np.ndarray
     units: str
+    component_units: tuple[str, ...] | None = None
+    """Units of each component when they differ (``q_eq``: m for x, y and rad for θ)."""
+
+    def units_of(self, k: int) -> str:
+        """Units of component ``k``."""
+        return self.units if self.component_units is None else self.component_units[k]
 
 
 @dataclass(frozen=True)
@@ -132,8 +138,10 @@ def results(ds: xr.Dataset, models: list[str | None] | None = None) -> list[Resu
         out.append(Result("omega", tuple(f"ω{k}" for k in range(omega.shape[1])), omega, "rad/s"))
     if "q_eq" in ds.data_vars:
         q = np.asarray(ds["q_eq"].transpose("sample", "body", "dof").values, float)
-        labels = tuple(f"{b}.{d}" for b in dim_names(ds, "body") for d in dim_names(ds, "dof"))
-        out.append(Result("q_eq", labels, q.reshape(q.shape[0], -1), "m, rad"))
+        pairs = [(b, d) for b in dim_names(ds, "body") for d in dim_names(ds, "dof")]
+        labels = tuple(f"{b}.{d}" for b, d in pairs)
+        units = tuple("rad" if d == "theta" else "m" for _, d in pairs)
+        out.append(Result("q_eq", labels, q.reshape(q.shape[0], -1), "m, rad", units))
     if "joint_force_eq" in ds.data_vars and ds.sizes.get("joint", 0):
         f = np.asarray(ds["joint_force_eq"].transpose("sample", "joint", "xy").values, float)
         out.append(
@@ -183,10 +191,10 @@ def omega_histogram_figure(ds: xr.Dataset) -> Figure:
                 wd = damped[:, k][np.isfinite(damped[:, k])]
                 ax.hist(wd, bins=bins, color="C1", alpha=0.6, label="damped |Im s|")
                 ax.legend(fontsize=7, frameon=False)
-            ax.set_title(f"ω{k}: {_in_hz(w)}", fontsize=9)
+            panel_title(ax, f"ω{k}: {_in_hz(w)}")
         else:
             ax.text(0.5, 0.5, "no finite value", ha="center", transform=ax.transAxes)
-            ax.set_title(f"ω{k}", fontsize=9)
+            panel_title(ax, f"ω{k}")
         ax.set_xlabel("rad/s")
         ax.set_ylabel("samples")
         ax.secondary_xaxis("top", functions=(_to_hz, _to_rad_s)).set_xlabel("Hz", fontsize=8)
@@ -235,7 +243,7 @@ def scatter_figure(ds: xr.Dataset, result: Result) -> Figure | str:
         y = result.values[:, k]
         finite = y[np.isfinite(y)]
         if len(finite) and not is_constant(finite):
-            rows.append((f"{label} [{result.units}]", y))
+            rows.append((f"{label} [{result.units_of(k)}]", y))
         elif len(finite):
             constant.append(constant_note(label, finite))
     if not rows:
@@ -262,7 +270,7 @@ def status_counts(ds: xr.Dataset, path: Path) -> Path | str:
     ax.bar_label(bars, fontsize=8)
     ax.set_xticks(range(len(names)), [n.replace("_", "\n") for n in names], fontsize=8)
     ax.set_ylabel("samples")
-    ax.set_title(f"status of {len(np.asarray(ds['status'].values))} samples (flags may overlap)")
+    panel_title(ax, f"status of {ds.sizes['sample']} samples (flags may overlap)", 10.0)
     return save(fig, path)
 
 
@@ -442,13 +450,14 @@ def sobol_figure(
     nrow, ncol = grid(len(found), 3)
     fig, axes = figure(nrow, ncol, w=max(3.2, 0.9 * len(names) + 1.5), h=2.8)
     x = np.arange(len(names))
+    ticks = [param_axis(path, params[:, j])[0] for j, path in enumerate(names)]
     for ax, s in zip(axes.flat, found, strict=False):
         ax.bar(x - 0.2, s.S1, 0.4, yerr=s.S1_conf, capsize=2, label="first order S1")
         if np.isfinite(s.ST).any():
             ax.bar(x + 0.2, s.ST, 0.4, yerr=s.ST_conf, capsize=2, label="total order ST")
-        ax.set_xticks(x, names, rotation=30, ha="right", fontsize=7)
+        ax.set_xticks(x, ticks, rotation=30, ha="right", fontsize=7)
         ax.set_ylim(min(0.0, float(np.nanmin(s.S1 - s.S1_conf))) - 0.02, 1.05)
-        ax.set_title(s.output, fontsize=9)
+        panel_title(ax, s.output)
         ax.legend(fontsize=7, frameon=False)
     for ax in list(axes.flat)[len(found) :]:
         ax.set_visible(False)

@@ -27,7 +27,7 @@ import numpy as np
 
 from mcchain.ensemble.queries import dim_names, largest, peak_abs_over_time, sample_ids
 from mcchain.viz import contact
-from mcchain.viz.figures import block, figure, suptitle
+from mcchain.viz.figures import block, figure, panel_title, suptitle
 from mcchain.viz.scatter import param_axis, parameter_scatter
 
 if TYPE_CHECKING:
@@ -177,8 +177,8 @@ def orbit_figure(
             if params is not None:
                 named = [param_axis(p, params[:, c]) for c, p in enumerate(paths)]
                 values = [scale * params[pos, c] for c, (_, scale) in enumerate(named)]
-                lines.append(", ".join(map(_value_text, [n for n, _ in named], values)))
-            ax.set_title("\n".join(lines), fontsize=7)
+                lines += map(_value_text, [n for n, _ in named], values)  # one per line
+            panel_title(ax, "\n".join(lines), 7.0)
             ax.set_xlabel(f"d_x / c  ({orbit.names[at]}, {models[k]})", fontsize=8)
             ax.set_ylabel("d_y / c", fontsize=8)
             ax.tick_params(labelsize=7)

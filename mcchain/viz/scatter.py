@@ -131,6 +131,7 @@ def parameter_scatter(
             ax.set_xlabel(xlabel, fontsize=8)
             ax.set_ylabel(ylabel, fontsize=8)
             ax.tick_params(labelsize=7)
+            ax.ticklabel_format(axis="y", useOffset=False)  # values, not "1e-5+1.758e-1"
             if right_axis is not None and j == nparam - 1:
                 label, forward, inverse = right_axis
                 twin = ax.secondary_yaxis("right", functions=(forward, inverse))
