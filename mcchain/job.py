@@ -84,8 +84,28 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
-    model.meta["warnings"] = initial_state_warnings(*written_state(scene))
+    model.meta["warnings"] = initial_state_warnings(*written_state(scene)) + grid_warnings(scene)
     return scene, model
+
+
+def grid_warnings(scene: Any) -> list[str]:
+    """One line when the step of a fixed-step method is shortened because ``[simulate]``
+    t_end is not a whole number of output intervals (the grid is fitted to end at t_end,
+    :class:`mcchain.solvers.simulate.OutputGrid`); adaptive methods change no step: no line."""
+    sim = _section(scene, "simulate")
+    if sim is None:
+        return []
+    from mcchain.solvers.simulate import output_times
+
+    grid = output_times(sim)
+    if not grid.fitted or grid.dt == sim.dt:
+        return []
+    step = float(grid.time[1] - grid.time[0])
+    return [
+        f"simulate.t_end: {sim.t_end:g} s is not a whole number of output_dt = "
+        f"{sim.output_step:g} s; the {len(grid.time) - 1} output intervals are {step:.6g} s "
+        f"(dt {grid.dt:.6g} s) so that the last output is t_end"
+    ]
 
 
 def written_state(scene: Any) -> tuple[Model, Any]:

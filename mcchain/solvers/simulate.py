@@ -6,9 +6,10 @@ Contract of :func:`simulate`:
    absolute coordinates. Index-1 methods solve B q̈ = γ − 2αΦ̇ − β²Φ (Baumgarte, α and β
    from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
    method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.
-2. Methods are the rows of :data:`METHODS`; all share the start state, the output times and
-   the outputs below. Fixed-step methods need ``output_dt`` to be a whole multiple of
-   ``dt``; adaptive ones land exactly on every output time.
+2. Methods are the rows of :data:`METHODS`; all share the start state, the output times
+   (:func:`output_times`: uniform, the last one t_end) and the outputs below. Fixed-step
+   methods need ``output_dt`` to be a whole multiple of ``dt``; adaptive ones land exactly
+   on every output time.
 3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
    ``q_start``/``v_start`` (e.g. the equilibrium with zero velocity); ``perturb`` adds to
    named coordinates, and the other coordinates are then projected back onto the position
@@ -78,20 +79,57 @@ class Method:
 # Output times and the start state
 
 
-def output_times(settings: Simulate) -> tuple[np.ndarray, int]:
-    """Output times (0, output_dt, …, ≤ t_end) and, for fixed steps, steps per output."""
+@dataclass(frozen=True)
+class OutputGrid:
+    """The output times of a run and the step that reaches them.
+
+    Attributes:
+        time: (ntime,) 0, h, 2h, …, t_end: the last output is t_end itself.
+        every: steps of ``dt`` per output (fixed-step methods; adaptive ones land on every
+            output time and use it as a cap on their first step only).
+        dt: the step, s.
+        fitted: True when t_end is not a whole multiple of ``output_dt``: the output
+            interval h = t_end / n (n = ⌈t_end / output_dt⌉) and dt = h / every are then
+            shortened from the written values by less than one part in n, so that the grid
+            ends exactly at t_end ("one crank turn" covers the whole turn).
+    """
+
+    time: np.ndarray
+    every: int
+    dt: float
+    fitted: bool
+
+
+GRID_RTOL = 1e-9
+"""t_end within this (relative) of a whole number of output intervals keeps the written grid."""
+
+
+def output_times(settings: Simulate) -> OutputGrid:
+    """The output grid of ``settings`` (see :class:`OutputGrid`)."""
     ratio = settings.output_step / settings.dt
     every = round(ratio)
-    if METHODS[settings.method].fixed_step and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
+    fixed = METHODS[settings.method].fixed_step
+    if fixed and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
         raise SceneError(
             f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
             f"{settings.method!r}, got {settings.output_step:g}"
         )
-    ntime = math.floor(settings.t_end / settings.output_step * (1 + 1e-12)) + 1
-    if METHODS[settings.method].fixed_step:
-        # (i · every) · dt: the very float the kernels compute as the time of step i · every.
-        return (np.arange(ntime) * every) * settings.dt, every
-    return np.arange(ntime) * settings.output_step, max(every, 1)
+    every = every if fixed else max(every, 1)
+    intervals = settings.t_end / settings.output_step
+    whole = round(intervals)
+    if whole >= 1 and abs(intervals - whole) <= GRID_RTOL * intervals:
+        # fixed steps: (i · every) · dt, the very float the kernels compute as that step's time
+        steps = np.arange(whole + 1) * every
+        time = steps * settings.dt if fixed else np.arange(whole + 1) * settings.output_step
+        return OutputGrid(time, every, settings.dt, False)
+    count = math.ceil(intervals)
+    step = settings.t_end / count
+    if fixed:
+        dt = step / every
+        return OutputGrid((np.arange(count + 1) * every) * dt, every, dt, True)
+    time = np.arange(count + 1) * step
+    time[-1] = settings.t_end  # the adaptive methods land on it exactly
+    return OutputGrid(time, every, min(settings.dt, step), True)
 
 
 _PERTURB = re.compile(
@@ -252,6 +290,7 @@ class _Run:
     v: np.ndarray
     time: np.ndarray
     every: int
+    dt: float  # the step of fixed-step methods (OutputGrid.dt)
     out: dict[str, np.ndarray]
     status: np.ndarray
     t_div: np.ndarray
@@ -307,7 +346,7 @@ def _run_erk(run: _Run, project: bool) -> None:
     run.evaluations[integrated] = RK4.nstage * nstep + 1
     over_samples(
         module.erk_project_run if project else module.erk_run, run.groups,
-        P, Q0, V0, 0.0, s.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
+        P, Q0, V0, 0.0, run.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
@@ -337,7 +376,7 @@ def _run_rk4_loop(run: _Run) -> None:
     over_samples(
         rk4_run, run.model.nsample,
         run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
-        0.0, s.dt, nstep, run.every, run.model.ncon, RK4.A, RK4.b, RK4.c,
+        0.0, run.dt, nstep, run.every, run.model.ncon, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)),
         run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
@@ -482,7 +521,7 @@ def _run_generalized_alpha(run: _Run) -> None:
     nstep = (len(run.time) - 1) * run.every
     over_samples(
         generalized_alpha_run, run.model.nsample,
-        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, s.dt, nstep,
+        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, run.dt, nstep,
         run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
         s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)),
@@ -613,7 +652,8 @@ def simulate(
             f"simulate.method: {settings.method!r} cannot integrate the contact law of joint "
             f"{names[0]!r}; use one of {', '.join(CONTACT_METHODS)}"
         )
-    time, every = output_times(settings)
+    grid = output_times(settings)
+    time, every = grid.time, grid.every
     q, v, status = start_state(model, settings, q_start, v_start, status)
     out = _allocate(model, len(time), history_dtype)
     n = model.nsample
@@ -625,6 +665,7 @@ def simulate(
         v=v,
         time=time,
         every=every,
+        dt=grid.dt,
         out=out,
         status=status,
         t_div=np.full(n, np.nan),
