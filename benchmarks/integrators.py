@@ -447,7 +447,7 @@ def _scipy_chain(model: Model, dt: float, nstep: int = 20) -> float:
         q, v = y[:n], y[n:]
         applied_forces(km, 0, q, v, F)
         constraint_jacobian(km, 0, q, B)
-        constraint_gamma(km, 0, q, v, g)
+        constraint_gamma(km, 0, q, v, t, g)
         K[:n, :n] = np.diag(M)
         K[:n, n:] = B.T
         K[n:, :n] = B

@@ -57,6 +57,13 @@ JOINT_CLEARANCE = int(JointKind.CLEARANCE)
 JOINT_PRISMATIC = int(JointKind.PRISMATIC)
 """``JointKind.PRISMATIC`` as a plain int, for numba kernels."""
 
+DRIVER_CONSTANT = 0
+"""``Model.driver_law`` of θ0 + ω t."""
+DRIVER_HARMONIC = 1
+"""``Model.driver_law`` of θ0 + ω t + A (sin(2π f t + φ) − sin φ)."""
+DRIVER_LAWS = {"constant": DRIVER_CONSTANT, "harmonic": DRIVER_HARMONIC}
+"""``[[driver]] law`` -> ``Model.driver_law`` code."""
+
 
 def joint_rows(joint_kind: np.ndarray) -> np.ndarray:
     """(njoint,) int64 number of constraint rows of each joint (:attr:`JointKind.rows`)."""
@@ -79,6 +86,7 @@ class KernelModel(NamedTuple):
     joint_contact_law: np.ndarray
     driver_body: np.ndarray
     driver_row: np.ndarray
+    driver_law: np.ndarray
     force_body: np.ndarray
     spring_body_a: np.ndarray
     spring_body_b: np.ndarray
@@ -98,6 +106,9 @@ class KernelModel(NamedTuple):
     joint_contact_radius: np.ndarray
     driver_angle0: np.ndarray
     driver_omega: np.ndarray
+    driver_amplitude: np.ndarray
+    driver_frequency: np.ndarray
+    driver_phase: np.ndarray
     force_point: np.ndarray
     force_value: np.ndarray
     force_torque: np.ndarray
@@ -158,8 +169,11 @@ class Model:
         joint_contact_restitution: (*, njoint) coefficient of restitution e.
         joint_contact_friction: (*, njoint) Coulomb coefficient μ.
         joint_contact_radius: (*, njoint) journal radius R (friction's slip and moment arm), m.
+        driver_law: (ndriver,) int64 :data:`DRIVER_LAWS` code of each driver.
         driver_angle0: (*, ndriver) θ_0, rad.
         driver_omega: (*, ndriver) ω, rad/s.
+        driver_amplitude, driver_frequency, driver_phase: (*, ndriver) A (rad), f (Hz) and
+            φ (rad) of harmonic drivers (0 for constant ones).
         force_point: (*, nforce, 2) local application point, m.
         force_value: (*, nforce, 2) constant force, global frame, N.
         force_torque: (*, nforce) constant couple, N m (counter-clockwise positive).
@@ -219,10 +233,20 @@ class Model:
     # Prismatic joints (optional: None gives no axis, as for revolute joints).
     joint_axis: np.ndarray = None  # type: ignore[assignment]
     joint_relative_angle: np.ndarray = None  # type: ignore[assignment]
+    # Driver laws (optional: None gives constant-speed drivers).
+    driver_law: np.ndarray = None  # type: ignore[assignment]
+    driver_amplitude: np.ndarray = None  # type: ignore[assignment]
+    driver_frequency: np.ndarray = None  # type: ignore[assignment]
+    driver_phase: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         njoint = len(self.joint_names)
+        ndriver = len(self.driver_names)
         defaults = {
+            "driver_law": np.zeros(ndriver, dtype=np.int64),
+            "driver_amplitude": np.zeros((1, ndriver)),
+            "driver_frequency": np.zeros((1, ndriver)),
+            "driver_phase": np.zeros((1, ndriver)),
             "joint_axis": np.full((1, njoint, 2), np.nan),
             "joint_relative_angle": np.full((1, njoint), np.nan),
             "joint_model": np.zeros(njoint, dtype=np.int64),
@@ -331,6 +355,7 @@ _TOPOLOGY_FIELDS = frozenset(
         "joint_contact_law",
         "driver_body",
         "driver_row",
+        "driver_law",
         "force_body",
         "spring_body_a",
         "spring_body_b",

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mcchain.model import JointKind
+from mcchain.model import DRIVER_HARMONIC, JointKind
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,8 @@ UNIT_INTERVAL = Domain(0.0, True, 1.0)
 CONTACT_JOINTS = "contact"
 """``packed_for`` of the contact-law rows: packed only for clearance joints whose model is
 ``contact`` or ``auto`` (:data:`mcchain.contact.MODEL_CODES`)."""
+HARMONIC_DRIVERS = "harmonic"
+"""``packed_for`` of the harmonic-law rows of drivers: packed only for drivers of that law."""
 
 
 @dataclass(frozen=True)
@@ -195,7 +197,14 @@ TABLE: tuple[Parameter, ...] = (
     _P("driver", "angle0",          (),     "driver_angle0",         "rad",     None,
       slots=("th0_{i}",), unset=_NAN),
     _P("driver", "omega",           (),     "driver_omega",          "rad s-1", None,
-      slots=("om{i}",)),
+      slots=("om{i}",), unset=0.0),
+    # law = "harmonic": θ0 + ω t + A (sin(2π f t + φ) − sin φ)
+    _P("driver", "amplitude",       (),     "driver_amplitude",      "rad",     None,
+      slots=("amp{i}",), packed_for=HARMONIC_DRIVERS, unset=0.0),
+    _P("driver", "frequency",       (),     "driver_frequency",      "Hz",      POSITIVE,
+      slots=("frq{i}",), packed_for=HARMONIC_DRIVERS, unset=0.0),
+    _P("driver", "phase",           (),     "driver_phase",          "rad",     None,
+      slots=("pha{i}",), packed_for=HARMONIC_DRIVERS, unset=0.0),
     _P("force", "point",            (2,),   "force_point",           "m",       None,
       slots=("fpx{i}", "fpy{i}")),
     _P("force", "value",            (2,),   "force_value",           "N",       None,
@@ -252,15 +261,20 @@ def packed_slots(
     nforce: int,
     nspring: int,
     joint_model: Sequence[int] | None = None,
+    driver_law: Sequence[int] | None = None,
 ) -> list[Slot]:
     """The rows of ``P`` for a topology, in order: kinds in table order, then items in order;
     per item, every row's plain slots in table order, then the inverse slots.
 
     A joint row with ``packed_for`` is packed only for joints of that kind (or, for
-    :data:`CONTACT_JOINTS`, whose ``joint_model`` is not the link; default: every joint is).
+    :data:`CONTACT_JOINTS`, whose ``joint_model`` is not the link; default: every joint is);
+    a driver row with :data:`HARMONIC_DRIVERS` only for drivers whose ``driver_law`` is
+    harmonic (default: none is).
     """
     contact = [m != 0 for m in joint_model] if joint_model is not None else []
     contact += [False] * (len(joint_kind) - len(contact))
+    harmonic = [law == DRIVER_HARMONIC for law in driver_law] if driver_law is not None else []
+    harmonic += [False] * (ndriver - len(harmonic))
     counts = {"scene": 1, "body": nbody, "joint": len(joint_kind), "driver": ndriver}
     counts |= {"force": nforce, "spring": nspring}
     out: list[Slot] = []
@@ -272,6 +286,9 @@ def packed_slots(
             for row in rows:
                 if row.packed_for == CONTACT_JOINTS:
                     if not contact[i]:
+                        continue
+                elif row.packed_for == HARMONIC_DRIVERS:
+                    if not harmonic[i]:
                         continue
                 elif row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
                     continue
@@ -302,7 +319,8 @@ def packed_slot_names(
     nforce: int,
     nspring: int,
     joint_model: Sequence[int] | None = None,
+    driver_law: Sequence[int] | None = None,
 ) -> list[str]:
     """The names of the rows of ``P`` (see :func:`packed_slots`), in order."""
-    slots = packed_slots(joint_kind, nbody, ndriver, nforce, nspring, joint_model)
+    slots = packed_slots(joint_kind, nbody, ndriver, nforce, nspring, joint_model, driver_law)
     return [s.name for s in slots]

@@ -112,7 +112,7 @@ def test_constraint_gamma__is_minus_bdot_qdot(chain):
     model, q, v, _ = chain
     km = model.kernel_model()
     gamma = np.empty(model.ncon)
-    constraint_gamma(km, 0, q, v, gamma)
+    constraint_gamma(km, 0, q, v, 0.0, gamma)
     h = 1e-30
     bdot = np.imag(reference.constraint_jacobian_formula(model, 0, q + 1j * h * v)) / h
     # γ sums terms that may cancel: its round-off scales with the terms, not with the sum

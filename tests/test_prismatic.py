@@ -131,7 +131,7 @@ def test_slider_crank__kinematics_match_the_closed_form_along_a_cycle(cycle):
     B, gamma = np.zeros((model.ncon, model.ndof)), np.zeros(model.ncon)
     for i in range(0, t.size, 20):
         constraint_jacobian(km, 0, q[0, i], B)
-        constraint_gamma(km, 0, q[0, i], v[0, i], gamma)
+        constraint_gamma(km, 0, q[0, i], v[0, i], t[i], gamma)
         qdd = np.linalg.solve(B, gamma)
         scale = OMEGA**2 * SLIDER_CRANK["crank"]
         assert abs(qdd[6] - k["x_dd"][i]) <= 1e-9 * scale

@@ -202,7 +202,7 @@ BAD = [
         "driver-missing-omega",
         BASE + '[[driver]]\nbody = "bar"\n',
         "driver.bar.omega",
-        "missing required key",
+        'required for law "constant"',
     ),
     (
         "driver-duplicate",

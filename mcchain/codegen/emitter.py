@@ -12,6 +12,7 @@ d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -33,6 +34,7 @@ from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 # for |x| < 3.5e15 rad; the reduction itself stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such
 # as np.floor cost numba's type inference more than anything else in generated code.
 
+TWO_PI = 2.0 * math.pi
 _ROUND = "6755399441055744.0"  # 1.5 · 2⁵²: adding and subtracting it rounds to an integer
 
 _SINCOS_TEMPLATE = "\n".join(
@@ -340,6 +342,17 @@ class Emitter:
         for d in range(topo.ndriver):
             r = topo.driver_row[d]
             i = 3 * topo.driver_body[d] + 2
+            if d in topo.harmonic_drivers:
+                # θ0 + ω t + A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too
+                self.emit(f"hw{d} = {TWO_PI!r} * p_frq{d}")
+                self.emit(*sincos_code(f"(hw{d} * {t} + p_pha{d})", f"hs{d}", f"hc{d}", f"h{d}"))
+                self.emit(*sincos_code(f"p_pha{d}", f"hp{d}", f"_hpc{d}", f"hp{d}"))
+                self.emit(
+                    f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t} - p_amp{d} * (hs{d} - hp{d})"
+                )
+                if v is not None:
+                    self.emit(f"phid{r} = {v}{i} - (p_om{d} + p_amp{d} * hw{d} * hc{d})")
+                continue
             self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}")
             if v is not None:
                 self.emit(f"phid{r} = {v}{i} - p_om{d}")
@@ -389,7 +402,10 @@ class Emitter:
                     f" - phid{r} * phid{r}) * irho{k}"
                 )
         for d in range(topo.ndriver):
-            self.emit(f"gam{topo.driver_row[d]} = 0.0")
+            if d in topo.harmonic_drivers:  # −Φ_tt = f̈ = −A Ω² sin(Ω t + φ)
+                self.emit(f"gam{topo.driver_row[d]} = -(p_amp{d} * hw{d} * hw{d} * hs{d})")
+            else:
+                self.emit(f"gam{topo.driver_row[d]} = 0.0")
         if baumgarte:
             for r in range(topo.ncon):
                 self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from mcchain.model import JointKind, Model, constraint_rows
+from mcchain.model import DRIVER_HARMONIC, JointKind, Model, constraint_rows
 from mcchain.parameters import Slot, packed_slots
 
 
@@ -33,13 +33,17 @@ class Topology:
     spring_a: tuple[int, ...]
     spring_b: tuple[int, ...]
     joint_model: tuple[int, ...] = ()
+    driver_law: tuple[int, ...] = ()
 
     def __repr__(self) -> str:
-        # The contact fields only when a joint uses the law: the text of every generated
-        # module without contact (it starts with this repr) is unchanged by their addition.
+        # The contact fields only when a joint uses the law, the driver laws only when one is
+        # not constant: the text of every generated module without them (it starts with this
+        # repr) is unchanged by their addition.
         names = [f.name for f in fields(self)]
         if not self.contact_joints:
             names = [n for n in names if n != "joint_model"]
+        if not self.harmonic_drivers:
+            names = [n for n in names if n != "driver_law"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -60,6 +64,7 @@ class Topology:
             # 1 where the joint may use the contact law: whether from the start or after the
             # link lets go (model contact or auto) is a parameter of the lanes, as the law.
             joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
+            driver_law=t(model.driver_law),
         )
 
     @property
@@ -101,6 +106,11 @@ class Topology:
         """The joints that may use the contact law (model contact or auto)."""
         return tuple(k for k, m in enumerate(self.joint_model) if m != 0)
 
+    @property
+    def harmonic_drivers(self) -> tuple[int, ...]:
+        """The drivers of law harmonic."""
+        return tuple(d for d, law in enumerate(self.driver_law) if law == DRIVER_HARMONIC)
+
     def packed(self) -> list[Slot]:
         """The rows of ``P``, in order (:func:`mcchain.parameters.packed_slots`)."""
         return packed_slots(
@@ -110,6 +120,7 @@ class Topology:
             len(self.force_body),
             len(self.spring_a),
             self.joint_model,
+            self.driver_law,
         )
 
     def slots(self) -> dict[str, int]:

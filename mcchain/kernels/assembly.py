@@ -29,6 +29,7 @@ from mcchain.kernels.joints import (
     constraint_jacobian,
     constraint_residual,
     constraint_velocity_rhs,
+    driver_rate,
     joint_rate_terms,
     joint_separation_rate,
     joint_vectors,
@@ -268,7 +269,7 @@ def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
             acc += J[i, k] * v[k]
         residual[i] = acc
     for j in range(km.driver_body.shape[0]):
-        residual[2 * nj + j] -= km.driver_omega[s % km.driver_omega.shape[0], j]
+        residual[2 * nj + j] -= driver_rate(km, s, j, 0.0)
     project_onto_rows(J, minv, ma, n, S, residual, v)
     return True
 
@@ -411,7 +412,7 @@ def assemble_one(km, s, q, v):
     B = np.empty((m, n))
     constraint_jacobian(km, s, q, B)
     nu = np.empty(m)
-    constraint_velocity_rhs(km, s, nu)
+    constraint_velocity_rhs(km, s, 0.0, nu)
     vscale = 0.0
     for i in range(m):
         acc = -nu[i]

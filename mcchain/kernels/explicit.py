@@ -92,8 +92,8 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, work_B, work
     err = max_abs(work_phi, m)
     if m > 0:
         constraint_jacobian(km, s, q, work_B)
-        constraint_gamma(km, s, q, v, work_g)
-        constraint_velocity_rhs(km, s, lam_out)  # ν, then Φ̇ = B q̇ − ν (drivers: −Φ_t)
+        constraint_gamma(km, s, q, v, t, work_g)
+        constraint_velocity_rhs(km, s, t, lam_out)  # ν, then Φ̇ = B q̇ − ν (drivers: −Φ_t)
         for r in range(m):
             rate = -lam_out[r]
             for k in range(n):

@@ -242,7 +242,7 @@ def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon):
     """Solve [[M, Bᵀ], [B, 0]] [q̈; λ] = [F; γ] (dense, for a start state) into ``rhs``."""
     applied_forces(km, s, q, v, F)
     constraint_jacobian(km, s, q, B)
-    constraint_gamma(km, s, q, v, gamma)
+    constraint_gamma(km, s, q, v, t, gamma)
     nsys = ndof + ncon
     for i in range(nsys):
         rhs[i] = 0.0

@@ -12,7 +12,8 @@ point, d = r_b + p_b − r_a − p_a (journal centre minus bearing centre):
 * clearance:  Φ = |d| − c,    row e·∂d/∂q with e = d/|d|;
 * prismatic:  Φ = (n·d, θ_b − θ_a − θ_0), n = A_a Ω u the normal of the unit axis u fixed
   in a: row n·∂d/∂q plus (Ω n)·d on θ_a (the normal turns with a), and the angle row;
-* driver:     Φ = θ_j − θ_0 − ω t.
+* driver:     Φ = θ_j − f(t), f = θ_0 + ω t (law constant) or θ_0 + ω t + A (sin(2π f t + φ)
+  − sin φ) (law harmonic): Φ_t = −ḟ, Φ_tt = −f̈ exactly (:func:`driver_motion`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,34 @@ from numba import njit
 from mcchain.kernels.config import JIT
 
 # numba reads module globals as compile-time constants
-from mcchain.model import JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC  # noqa: F401 (re-exported)
+from mcchain.model import (  # noqa: F401 (re-exported)
+    DRIVER_HARMONIC,
+    JOINT_CLEARANCE,
+    JOINT_IDEAL,
+    JOINT_PRISMATIC,
+)
+
+TWO_PI = 2.0 * math.pi
+
+
+@njit(**JIT)
+def driver_swing(km, s, j, t):
+    """The harmonic part of driver ``j``'s angle at ``t``: (A (sin(Ωt + φ) − sin φ),
+    A Ω cos(Ωt + φ), −A Ω² sin(Ωt + φ)) with Ω = 2π f; zeros for a constant-speed driver."""
+    if km.driver_law[j] != DRIVER_HARMONIC:
+        return 0.0, 0.0, 0.0
+    amp = km.driver_amplitude[s % km.driver_amplitude.shape[0], j]
+    w = TWO_PI * km.driver_frequency[s % km.driver_frequency.shape[0], j]
+    phase = km.driver_phase[s % km.driver_phase.shape[0], j]
+    arg = w * t + phase
+    sn = math.sin(arg)
+    return amp * (sn - math.sin(phase)), amp * w * math.cos(arg), -amp * w * w * sn
+
+
+@njit(**JIT)
+def driver_rate(km, s, j, t):
+    """ḟ of driver ``j`` at ``t``, rad/s: ω plus the swing's rate."""
+    return km.driver_omega[s % km.driver_omega.shape[0], j] + driver_swing(km, s, j, t)[1]
 
 
 @njit(**JIT)
@@ -113,7 +141,10 @@ def constraint_residual(km, s, q, t, phi_out):
         i = s % km.driver_omega.shape[0]
         i0 = s % km.driver_angle0.shape[0]
         theta = q[3 * km.driver_body[j] + 2]
-        phi_out[km.driver_row[j]] = theta - km.driver_angle0[i0, j] - km.driver_omega[i, j] * t
+        phi = theta - km.driver_angle0[i0, j] - km.driver_omega[i, j] * t
+        if km.driver_law[j] == DRIVER_HARMONIC:  # (a constant law keeps its exact rounding)
+            phi -= driver_swing(km, s, j, t)[0]
+        phi_out[km.driver_row[j]] = phi
 
 
 @njit(**JIT)
@@ -198,12 +229,13 @@ def prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa):
 
 
 @njit(**JIT)
-def constraint_gamma(km, s, q, v, gamma_out):
-    """γ = −(Ḃ q̇ + Φ_tt) into ``gamma_out`` (ncon,), so that B q̈ = γ. m/s² or rad/s².
+def constraint_gamma(km, s, q, v, t, gamma_out):
+    """γ = −(Ḃ q̇ + Φ_tt) at ``t`` into ``gamma_out`` (ncon,), so that B q̈ = γ. m/s² or
+    rad/s².
 
     Ideal: γ = p_b θ̇_b² − p_a θ̇_a². Clearance: γ = e·(p_b θ̇_b² − p_a θ̇_a²)
     − (|ḋ|² − (e·ḋ)²)/|d|. Prismatic: :func:`prismatic_gamma`, 0 for the angle row.
-    Drivers (θ_0 + ω t): γ = 0.
+    Drivers: γ = f̈ (0 at constant speed).
     """
     for k in range(km.joint_body_a.shape[0]):
         a = km.joint_body_a[k]
@@ -226,15 +258,16 @@ def constraint_gamma(km, s, q, v, gamma_out):
             along = ex * ddx + ey * ddy
             gamma_out[row] = ex * gx + ey * gy - (ddx * ddx + ddy * ddy - along * along) / dist
     for j in range(km.driver_body.shape[0]):
-        gamma_out[km.driver_row[j]] = 0.0
+        gamma_out[km.driver_row[j]] = driver_swing(km, s, j, t)[2]  # −Φ_tt = f̈
 
 
 @njit(**JIT)
-def constraint_velocity_rhs(km, s, nu_out):
-    """ν = −Φ_t into ``nu_out`` (ncon,), so that B q̇ = ν: ω for drivers, 0 for joints."""
+def constraint_velocity_rhs(km, s, t, nu_out):
+    """ν = −Φ_t at ``t`` into ``nu_out`` (ncon,), so that B q̇ = ν: ḟ for drivers, 0 for
+    joints."""
     nu_out[:] = 0.0
     for j in range(km.driver_body.shape[0]):
-        nu_out[km.driver_row[j]] = km.driver_omega[s % km.driver_omega.shape[0], j]
+        nu_out[km.driver_row[j]] = driver_rate(km, s, j, t)
 
 
 @njit(**JIT)

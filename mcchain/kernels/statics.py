@@ -586,7 +586,7 @@ def dynamic_multipliers_batch(start, stop, km, q, v, lam_out, status_out):
         for i in range(n):
             minv[i] = 1.0 / minv[i]
         constraint_jacobian(km, s, q[s], B)
-        constraint_gamma(km, s, q[s], v[s], gamma)
+        constraint_gamma(km, s, q[s], v[s], 0.0, gamma)
         applied_forces(km, s, q[s], v[s], F)
         if not schur_factor(B, minv, m, n, S):
             status_out[s] |= SINGULAR

@@ -15,6 +15,7 @@ from mcchain.scene.models import (
     FIXED_STEP_METHODS,
     GROUND_NAME,
     LOOP_METHODS,
+    Driver,
     Joint,
     Scene,
     saltelli_count_error,
@@ -102,6 +103,10 @@ def check_scene(scene: Scene) -> None:
             )
         drivers[driver.body] = i
 
+    sampled_paths = set(_canonical_paths(scene))
+    for i, driver in enumerate(scene.driver):
+        _check_driver_law(_item(scene, "driver", i), driver, sampled_paths)
+
     for i, force in enumerate(scene.force):
         where = _item(scene, "force", i)
         if force.body == GROUND_NAME:
@@ -161,6 +166,12 @@ def check_scene(scene: Scene) -> None:
         raise SceneError(
             f"modes.along.driver: no driver turns body {along.driver!r} (drivers: {driven})"
         )
+    if along is not None and any(d.law != "constant" for d in scene.driver):
+        raise SceneError(
+            'modes.along: follows drivers of law "constant" only (one turn at speed ω); '
+            + ", ".join(f"driver.{d.body}" for d in scene.driver if d.law != "constant")
+            + ' is "harmonic"'
+        )
 
     if scene.simulate is not None and scene.simulate.kernels == "loop":
         sim = scene.simulate
@@ -197,6 +208,47 @@ def check_scene(scene: Scene) -> None:
                 raise SceneError(
                     f"simulate.output_dt: must be a whole multiple of dt ({sim.dt!r}) for "
                     f"method {sim.method!r}, got {sim.output_dt!r}"
+                )
+
+
+HARMONIC_KEYS = ("amplitude", "frequency", "phase")
+"""The keys only a harmonic driver has."""
+
+
+def _canonical_paths(scene: Scene) -> list[str]:
+    """The canonical form of every sampled path that parses (the others are named later)."""
+    if scene.sample is None:
+        return []
+    found = []
+    for path in scene.sample.vary:
+        try:
+            found.append(parse_path(scene, path, PARAM_SHAPES).canonical())
+        except ValueError:
+            continue
+    return found
+
+
+def _check_driver_law(where: str, driver: Driver, sampled: set[str]) -> None:
+    """The keys a driver's ``law`` needs are given (or sampled), and no other law's keys."""
+
+    def given(key: str) -> bool:
+        return getattr(driver, key) is not None or f"driver.{driver.body}.{key}" in sampled
+
+    if driver.law == "constant":
+        if not given("omega"):
+            raise SceneError(f'{where}.omega: required for law "constant" (θ0 + ω t)')
+        for key in HARMONIC_KEYS:
+            if given(key):
+                raise SceneError(
+                    f'{where}.{key}: only a driver of law "harmonic" has one (this one is '
+                    '"constant"; set law = "harmonic")'
+                )
+    else:
+        for key in ("amplitude", "frequency"):
+            if not given(key):
+                raise SceneError(
+                    f'{where}.{key}: required for law "harmonic" (θ0 + ω t + A (sin(2π f t + φ) '
+                    "− sin φ))"
                 )
 
 

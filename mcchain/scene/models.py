@@ -253,12 +253,38 @@ class Joint(_Section):
 
 # -- [[driver]] ----------------------------------------------------------------------------
 class Driver(_Section):
-    """``[[driver]]``: prescribed rotation θ = angle0 + ω t of one body (named by the body)."""
+    """``[[driver]]``: prescribed rotation θ(t) of one body (named by the body).
+
+    ``law = "constant"``: θ = θ0 + ω t. ``law = "harmonic"``: θ = θ0 + ω t + A (sin(2π f t + φ)
+    − sin φ), a steady turn (ω, default 0) with a harmonic swing or speed fluctuation on top;
+    θ(0) = θ0 either way.
+    """
 
     body: BodyRef = Field(description="the driven body (not ground); required.")
-    omega: Num = Field(description="angular speed ω, rad/s; required.")
+    law: Literal["constant", "harmonic"] = Field(
+        default="constant",
+        description='"constant" (θ0 + ω t, default) or "harmonic" (θ0 + ω t + A (sin(2π f t '
+        "+ φ) − sin φ)).",
+    )
+    omega: Num | None = Field(
+        default=None,
+        description='angular speed ω, rad/s; required for law "constant", default 0 for '
+        '"harmonic".',
+    )
     angle0: Num | None = Field(
         default=None, description="θ_0, rad; default: the body's initial ``angle``."
+    )
+    amplitude: Num | None = Field(
+        default=None, description='A of law "harmonic", rad; required there, not allowed else.'
+    )
+    frequency: Num | None = Field(
+        default=None,
+        gt=0,
+        description='f of law "harmonic", Hz (cycles per second); required there, not allowed '
+        "else.",
+    )
+    phase: Num | None = Field(
+        default=None, description='φ of law "harmonic", rad; default 0 there, not allowed else.'
     )
 
     @property

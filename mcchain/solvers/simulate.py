@@ -237,7 +237,7 @@ def _project_start(
             v[s] = np.nan
             continue
         constraint_jacobian(km, s, q[s], B)
-        constraint_velocity_rhs(km, s, nu)
+        constraint_velocity_rhs(km, s, 0.0, nu)
         W = B[:, free_v] / m[free_v]
         res = B @ v[s] - nu
         v[s, free_v] -= W.T @ np.linalg.lstsq(W * m[free_v] @ W.T, res, rcond=1e-12)[0]

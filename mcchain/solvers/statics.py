@@ -374,7 +374,7 @@ def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 
     n, m = model.ndof, model.ncon
     B, gamma, F, mass = np.zeros((m, n)), np.zeros(m), np.zeros(n), np.zeros(n)
     constraint_jacobian(km, sample, q, B)
-    constraint_gamma(km, sample, q, v, gamma)
+    constraint_gamma(km, sample, q, v, 0.0, gamma)
     applied_forces(km, sample, q, v, F)
     mass_diagonal(km, sample, mass)
     kkt = np.block([[np.diag(mass), B.T], [B, np.zeros((m, m))]])

@@ -23,7 +23,7 @@ import scipy.integrate
 import scipy.linalg
 import scipy.optimize
 
-from mcchain.model import GROUND, JOINT_IDEAL, JOINT_PRISMATIC, Model
+from mcchain.model import DRIVER_HARMONIC, GROUND, JOINT_IDEAL, JOINT_PRISMATIC, Model
 from mcchain.testing.factory import rotation
 
 OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -85,11 +85,25 @@ def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarr
             phi[row + 1] = angle_b - angle_a - _param(model, "joint_relative_angle", s)[k]
         else:
             phi[row] = np.sqrt(d[0] * d[0] + d[1] * d[1]) - clearance[k]
-    theta0 = _param(model, "driver_angle0", s)
-    omega = _param(model, "driver_omega", s)
     for j in range(model.ndriver):
-        phi[model.driver_row[j]] = q[3 * model.driver_body[j] + 2] - theta0[j] - omega[j] * t
+        phi[model.driver_row[j]] = q[3 * model.driver_body[j] + 2] - driver_law(model, s, j, t)[0]
     return phi
+
+
+def driver_law(model: Model, s: int, j: int, t: float) -> tuple[float, float, float]:
+    """(f, ḟ, f̈) of driver j of sample s at t: θ0 + ω t (+ A (sin(2π f t + φ) − sin φ) for
+    a harmonic one), written out independently of the kernels."""
+    theta0 = float(_param(model, "driver_angle0", s)[j])
+    omega = float(_param(model, "driver_omega", s)[j])
+    f, rate, acc = theta0 + omega * t, omega, 0.0
+    if int(model.driver_law[j]) == DRIVER_HARMONIC:
+        amp = float(_param(model, "driver_amplitude", s)[j])
+        w = 2.0 * np.pi * float(_param(model, "driver_frequency", s)[j])
+        phase = float(_param(model, "driver_phase", s)[j])
+        f += amp * (np.sin(w * t + phase) - np.sin(phase))
+        rate += amp * w * np.cos(w * t + phase)
+        acc -= amp * w * w * np.sin(w * t + phase)
+    return f, rate, acc
 
 
 def applied_forces(model: Model, s: int, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
@@ -312,14 +326,14 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
             gam.append(-(e @ w) - (dd @ dd - (e @ dd) ** 2) / rho)
             phi.append(rho - clearance[k])
             phid.append(e @ dd)
-    theta0, omega = _param(model, "driver_angle0", s), _param(model, "driver_omega", s)
     for j in range(model.ndriver):
         row = np.zeros(n)
         row[3 * int(model.driver_body[j]) + 2] = 1.0
         rows_B.append(row)
-        gam.append(0.0)
-        phi.append(q[3 * int(model.driver_body[j]) + 2] - theta0[j] - omega[j] * t)
-        phid.append(v[3 * int(model.driver_body[j]) + 2] - omega[j])
+        f, rate, acc = driver_law(model, s, j, t)
+        gam.append(acc)
+        phi.append(q[3 * int(model.driver_body[j]) + 2] - f)
+        phid.append(v[3 * int(model.driver_body[j]) + 2] - rate)
     B = np.array(rows_B).reshape(-1, n)
     F = applied_forces(model, s, q, v)
     return M, B, np.array(gam), np.array(phi), np.array(phid), F
