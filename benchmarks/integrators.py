@@ -445,7 +445,7 @@ def _scipy_chain(model: Model, dt: float, nstep: int = 20) -> float:
 
     def rhs(t, y):
         q, v = y[:n], y[n:]
-        applied_forces(km, 0, q, v, F)
+        applied_forces(km, 0, q, v, t, F)
         constraint_jacobian(km, 0, q, B)
         constraint_gamma(km, 0, q, v, t, g)
         K[:n, :n] = np.diag(M)

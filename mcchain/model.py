@@ -63,6 +63,12 @@ DRIVER_HARMONIC = 1
 """``Model.driver_law`` of θ0 + ω t + A (sin(2π f t + φ) − sin φ)."""
 DRIVER_LAWS = {"constant": DRIVER_CONSTANT, "harmonic": DRIVER_HARMONIC}
 """``[[driver]] law`` -> ``Model.driver_law`` code."""
+LOAD_CONSTANT = 0
+"""``Model.force_law`` of a constant load."""
+LOAD_HARMONIC = 1
+"""``Model.force_law`` of a load times sin(2π f t + φ)."""
+LOAD_LAWS = {"constant": LOAD_CONSTANT, "harmonic": LOAD_HARMONIC}
+"""``[[force]] law`` -> ``Model.force_law`` code."""
 
 
 def joint_rows(joint_kind: np.ndarray) -> np.ndarray:
@@ -88,6 +94,7 @@ class KernelModel(NamedTuple):
     driver_row: np.ndarray
     driver_law: np.ndarray
     force_body: np.ndarray
+    force_law: np.ndarray
     spring_body_a: np.ndarray
     spring_body_b: np.ndarray
     gravity: np.ndarray
@@ -112,6 +119,8 @@ class KernelModel(NamedTuple):
     force_point: np.ndarray
     force_value: np.ndarray
     force_torque: np.ndarray
+    force_frequency: np.ndarray
+    force_phase: np.ndarray
     spring_point_a: np.ndarray
     spring_point_b: np.ndarray
     spring_stiffness: np.ndarray
@@ -177,6 +186,9 @@ class Model:
         force_point: (*, nforce, 2) local application point, m.
         force_value: (*, nforce, 2) constant force, global frame, N.
         force_torque: (*, nforce) constant couple, N m (counter-clockwise positive).
+        force_law: (nforce,) int64 :data:`LOAD_LAWS` code of each force.
+        force_frequency, force_phase: (*, nforce) f (Hz) and φ (rad) of harmonic loads
+            (value and torque times sin(2π f t + φ); 0 for constant ones).
         spring_point_a, spring_point_b: (*, nspring, 2) local attachment points, m.
         spring_stiffness: (*, nspring) N/m.
         spring_rest_length: (*, nspring) m.
@@ -238,11 +250,19 @@ class Model:
     driver_amplitude: np.ndarray = None  # type: ignore[assignment]
     driver_frequency: np.ndarray = None  # type: ignore[assignment]
     driver_phase: np.ndarray = None  # type: ignore[assignment]
+    # Load laws (optional: None gives constant loads).
+    force_law: np.ndarray = None  # type: ignore[assignment]
+    force_frequency: np.ndarray = None  # type: ignore[assignment]
+    force_phase: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         njoint = len(self.joint_names)
         ndriver = len(self.driver_names)
+        nforce = len(self.force_names)
         defaults = {
+            "force_law": np.zeros(nforce, dtype=np.int64),
+            "force_frequency": np.zeros((1, nforce)),
+            "force_phase": np.zeros((1, nforce)),
             "driver_law": np.zeros(ndriver, dtype=np.int64),
             "driver_amplitude": np.zeros((1, ndriver)),
             "driver_frequency": np.zeros((1, ndriver)),
@@ -357,6 +377,7 @@ _TOPOLOGY_FIELDS = frozenset(
         "driver_row",
         "driver_law",
         "force_body",
+        "force_law",
         "spring_body_a",
         "spring_body_b",
     }

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mcchain.model import DRIVER_HARMONIC, JointKind
+from mcchain.model import DRIVER_HARMONIC, LOAD_HARMONIC, JointKind
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,8 @@ CONTACT_JOINTS = "contact"
 ``contact`` or ``auto`` (:data:`mcchain.contact.MODEL_CODES`)."""
 HARMONIC_DRIVERS = "harmonic"
 """``packed_for`` of the harmonic-law rows of drivers: packed only for drivers of that law."""
+HARMONIC_LOADS = "harmonic load"
+"""``packed_for`` of the harmonic-law rows of forces: packed only for forces of that law."""
 
 
 @dataclass(frozen=True)
@@ -211,6 +213,11 @@ TABLE: tuple[Parameter, ...] = (
       slots=("fx{i}", "fy{i}"), unset=0.0),
     _P("force", "torque",           (),     "force_torque",          "N m",     None,
       slots=("tq{i}",), unset=0.0),
+    # law = "harmonic": value and torque times sin(2π f t + φ)
+    _P("force", "frequency",        (),     "force_frequency",       "Hz",      POSITIVE,
+      slots=("ffr{i}",), packed_for=HARMONIC_LOADS, unset=0.0),
+    _P("force", "phase",            (),     "force_phase",           "rad",     None,
+      slots=("fph{i}",), packed_for=HARMONIC_LOADS, unset=0.0),
     _P("spring", "points",          (2, 2), _SAB,                    "m",       None,
       slots=("spax{i}", "spay{i}", "spbx{i}", "spby{i}")),
     _P("spring", "stiffness",       (),     "spring_stiffness",      "N m-1",   NON_NEGATIVE,
@@ -262,6 +269,7 @@ def packed_slots(
     nspring: int,
     joint_model: Sequence[int] | None = None,
     driver_law: Sequence[int] | None = None,
+    force_law: Sequence[int] | None = None,
 ) -> list[Slot]:
     """The rows of ``P`` for a topology, in order: kinds in table order, then items in order;
     per item, every row's plain slots in table order, then the inverse slots.
@@ -269,12 +277,15 @@ def packed_slots(
     A joint row with ``packed_for`` is packed only for joints of that kind (or, for
     :data:`CONTACT_JOINTS`, whose ``joint_model`` is not the link; default: every joint is);
     a driver row with :data:`HARMONIC_DRIVERS` only for drivers whose ``driver_law`` is
-    harmonic (default: none is).
+    harmonic, a force row with :data:`HARMONIC_LOADS` only for forces whose ``force_law`` is
+    (default: none is).
     """
     contact = [m != 0 for m in joint_model] if joint_model is not None else []
     contact += [False] * (len(joint_kind) - len(contact))
     harmonic = [law == DRIVER_HARMONIC for law in driver_law] if driver_law is not None else []
     harmonic += [False] * (ndriver - len(harmonic))
+    waving = [law == LOAD_HARMONIC for law in force_law] if force_law is not None else []
+    waving += [False] * (nforce - len(waving))
     counts = {"scene": 1, "body": nbody, "joint": len(joint_kind), "driver": ndriver}
     counts |= {"force": nforce, "spring": nspring}
     out: list[Slot] = []
@@ -289,6 +300,9 @@ def packed_slots(
                         continue
                 elif row.packed_for == HARMONIC_DRIVERS:
                     if not harmonic[i]:
+                        continue
+                elif row.packed_for == HARMONIC_LOADS:
+                    if not waving[i]:
                         continue
                 elif row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
                     continue
@@ -320,7 +334,10 @@ def packed_slot_names(
     nspring: int,
     joint_model: Sequence[int] | None = None,
     driver_law: Sequence[int] | None = None,
+    force_law: Sequence[int] | None = None,
 ) -> list[str]:
     """The names of the rows of ``P`` (see :func:`packed_slots`), in order."""
-    slots = packed_slots(joint_kind, nbody, ndriver, nforce, nspring, joint_model, driver_law)
+    slots = packed_slots(
+        joint_kind, nbody, ndriver, nforce, nspring, joint_model, driver_law, force_law
+    )
     return [s.name for s in slots]

@@ -44,10 +44,10 @@ GOLDEN = {
         "rk45": "f396ee7fef4746568576d3734fd68f3d38696ac4dc311a77bda776ceb184477b",
     },
     "chain4-mixed-spring": {
-        "accel": "60bb1204e42d054c75e3d065cdd5c38bce39cd698fcb21fb515bd8b59ea79255",
-        "rk4": "6ef1c0b4b608682987c64d5d8beab2f6d744c974aadcd5c783a54c169b1abc34",
-        "rk4-projection": "e014e671f9389656be3dc5b9b1401fcc37a10e1033f34c64992d09bf652ce9c8",
-        "rk45": "17dd9e525dbf1ddbabe4fd939d469fbe09cd740cb059ae564c26ba2ec1602b7c",
+        "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
+        "rk4": "e2eb800723a2a8f84e713fcb69c828846f8662677c03ee6a605090b166f37816",
+        "rk4-projection": "1b5b27053ddac48aa39ad04a3537d0a2a1f2799fcc50774ebcf77342efdc0cba",
+        "rk45": "e883e19df2141cbccee694b5be3718cf935a8d61626cd39ad12580e8a9d289a9",
     },
 }
 

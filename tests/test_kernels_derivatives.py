@@ -127,12 +127,12 @@ def test_stiffness__matches_differences(chain):
     km = model.kernel_model()
     K = np.zeros((model.ndof, model.ndof))
     constraint_hessian_add(km, 0, q, lam, K)
-    applied_stiffness_add(km, 0, q, K)
+    applied_stiffness_add(km, 0, q, 0.0, K)
     rest = np.zeros(model.ndof)
 
     def generalised_reaction(x):
         F = np.empty(model.ndof)
-        applied_forces(km, 0, x, rest, F)
+        applied_forces(km, 0, x, rest, 0.0, F)
         return _jacobian(km, x, model.ncon, model.ndof).T @ lam - F
 
     _assert_close(K, _central(generalised_reaction, q), FD_RTOL)
@@ -167,7 +167,7 @@ def test_damper_stiffness__matches_differences_at_any_velocity(chain):
 
     def minus_damping_forces(x):
         F = np.empty(model.ndof)
-        applied_forces(damping_only, 0, x, v, F)
+        applied_forces(damping_only, 0, x, v, 0.0, F)
         return -F
 
     _assert_close(K, _central(minus_damping_forces, q), FD_RTOL)
@@ -179,11 +179,11 @@ def test_applied_forces__match_reference_and_potential(chain):
     model, q, v, _ = chain
     km = model.kernel_model()
     F = np.empty(model.ndof)
-    applied_forces(km, 0, q, v, F)
+    applied_forces(km, 0, q, v, 0.0, F)
     _assert_close(F, reference.applied_forces(model, 0, q, v), 1e-13)
     # at rest every load is conservative: F = −∂V/∂q
     F_rest = np.empty(model.ndof)
-    applied_forces(km, 0, q, np.zeros(model.ndof), F_rest)
+    applied_forces(km, 0, q, np.zeros(model.ndof), 0.0, F_rest)
     grad = _central(lambda x: np.array([potential_energy(km, 0, x)]), q)[0]
     _assert_close(F_rest, -grad, FD_RTOL)
     mass = reference.mass_diagonal(model, 0)

@@ -316,6 +316,8 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
         "force_point": (nf, 2),
         "force_value": (nf, 2),
         "force_torque": (nf,),
+        "force_frequency": (nf,),
+        "force_phase": (nf,),
         "spring_point_a": (ns, 2),
         "spring_point_b": (ns, 2),
         "spring_stiffness": (ns,),

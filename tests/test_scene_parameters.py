@@ -91,7 +91,7 @@ def test_table__rows_unique_and_every_slot_per_element() -> None:
     for row in TABLE:
         assert not row.slots or len(row.slots) == row.size, row
         assert len(row.inverse_slots) in (0, row.size), row
-        assert row.packed_for is None or row.kind in ("joint", "driver"), row
+        assert row.packed_for is None or row.kind in ("joint", "driver", "force"), row
 
 
 def test_table__keys_are_scene_keys_and_fields_are_model_arrays() -> None:
@@ -122,7 +122,7 @@ def test_table__drives_path_shapes() -> None:
 @pytest.mark.parametrize("row", TABLE, ids=lambda r: f"{r.kind}.{r.key}")
 def test_table__model_index_matches_compiled_value(row) -> None:
     d = chain_scene_dict(2, (1,), seed=5, springs=1, forces=1, driver=True)
-    d["force"][0]["torque"] = 0.25
+    d["force"][0] |= {"torque": 0.25, "law": "harmonic", "frequency": 4.0, "phase": 0.75}
     d["joint"][1]["eccentricity"] = 0.5
     d["driver"][0] |= {"angle0": 0.125, "law": "harmonic", "amplitude": 0.25, "frequency": 2.0}
     d["driver"][0]["phase"] = 0.5

@@ -258,7 +258,7 @@ def test_damping_matrix__is_minus_velocity_derivative_of_the_forces():
 
     def forces(velocity):
         F = np.empty(model.ndof)
-        applied_forces(km, 0, q, velocity, F)
+        applied_forces(km, 0, q, velocity, 0.0, F)
         return F
 
     h = 1e-3

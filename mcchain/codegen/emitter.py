@@ -416,9 +416,10 @@ class Emitter:
         bodies = set(topo.force_body) | set(topo.spring_a) | set(topo.spring_b)
         return bodies - {GROUND}
 
-    def forces(self, q: str = "q", v: str = "v", tag: str = "") -> None:
-        """Generalised applied forces ``F{i}`` (gravity, constant loads, springs) of the
-        bodies in :meth:`loaded_bodies` (the free acceleration of the others is g)."""
+    def forces(self, q: str = "q", v: str = "v", tag: str = "", t: str = "t") -> None:
+        """Generalised applied forces ``F{i}`` (gravity, loads, springs) of the bodies in
+        :meth:`loaded_bodies` (the free acceleration of the others is g); a harmonic load is
+        multiplied by ``lf{f}`` = sin(2π f t + φ)."""
         topo = self.topo
         for b in sorted(self.loaded_bodies()):
             self.emit(
@@ -428,6 +429,15 @@ class Emitter:
             if b == GROUND:
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", q, tag)
+            if f in topo.harmonic_loads:
+                arg = f"({TWO_PI!r} * p_ffr{f} * {t} + p_fph{f})"
+                self.emit(*sincos_code(arg, f"lf{f}", f"_lfc{f}", f"lf{f}{tag}"))
+                self.emit(
+                    f"F{3 * b} += lf{f} * p_fx{f}",
+                    f"F{3 * b + 1} += lf{f} * p_fy{f}",
+                    f"F{3 * b + 2} += lf{f} * (fp{f}x * p_fy{f} - fp{f}y * p_fx{f} + p_tq{f})",
+                )
+                continue
             self.emit(
                 f"F{3 * b} += p_fx{f}",
                 f"F{3 * b + 1} += p_fy{f}",
@@ -448,12 +458,12 @@ class Emitter:
                 # iso: rest length 0, an isotropic spring −k u − c u̇ (as forces.py).
                 f"iso{s} = (p_l0{s} == 0.0) * 1.0",
                 f"ilen{s} = (1.0 - iso{s}) / (len{s} + iso{s})",
-                f"nx{s} = ux{s} * ilen{s}",
-                f"ny{s} = uy{s} * ilen{s}",
+                f"snx{s} = ux{s} * ilen{s}",
+                f"sny{s} = uy{s} * ilen{s}",
                 f"ten{s} = p_k{s} * (len{s} - p_l0{s})"
-                f" + p_cd{s} * (nx{s} * dux{s} + ny{s} * duy{s})",
-                f"sfx{s} = iso{s} * (-p_k{s} * ux{s} - p_cd{s} * dux{s}) - ten{s} * nx{s}",
-                f"sfy{s} = iso{s} * (-p_k{s} * uy{s} - p_cd{s} * duy{s}) - ten{s} * ny{s}",
+                f" + p_cd{s} * (snx{s} * dux{s} + sny{s} * duy{s})",
+                f"sfx{s} = iso{s} * (-p_k{s} * ux{s} - p_cd{s} * dux{s}) - ten{s} * snx{s}",
+                f"sfy{s} = iso{s} * (-p_k{s} * uy{s} - p_cd{s} * duy{s}) - ten{s} * sny{s}",
             )
             for body, sign, pt in ((b, "+", f"sb{s}"), (a, "-", f"sa{s}")):
                 if body == GROUND:
@@ -590,7 +600,7 @@ class Emitter:
         self.joints()
         self.constraint_values(t=t)
         self.gamma(baumgarte=baumgarte)
-        self.forces()
+        self.forces(t=t)
         # Free accelerations M⁻¹F; a body under gravity alone has exactly (gx, gy, 0), and the
         # structural zeros drop out of the products below.
         loaded = self.loaded_bodies()
@@ -758,7 +768,7 @@ class Emitter:
                 f"energy -= p_m{b} * (p_gx * q{x} + p_gy * q{y})",
             )
         for f, b in enumerate(topo.force_body):
-            if b == GROUND:
+            if b == GROUND or f in topo.harmonic_loads:  # a harmonic load has no potential
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}")
             self.emit(f"energy -= p_fx{f} * fp{f}X + p_fy{f} * fp{f}Y + p_tq{f} * q{3 * b + 2}")

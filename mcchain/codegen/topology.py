@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from mcchain.model import DRIVER_HARMONIC, JointKind, Model, constraint_rows
+from mcchain.model import DRIVER_HARMONIC, LOAD_HARMONIC, JointKind, Model, constraint_rows
 from mcchain.parameters import Slot, packed_slots
 
 
@@ -34,6 +34,7 @@ class Topology:
     spring_b: tuple[int, ...]
     joint_model: tuple[int, ...] = ()
     driver_law: tuple[int, ...] = ()
+    force_law: tuple[int, ...] = ()
 
     def __repr__(self) -> str:
         # The contact fields only when a joint uses the law, the driver laws only when one is
@@ -44,6 +45,8 @@ class Topology:
             names = [n for n in names if n != "joint_model"]
         if not self.harmonic_drivers:
             names = [n for n in names if n != "driver_law"]
+        if not self.harmonic_loads:
+            names = [n for n in names if n != "force_law"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -65,6 +68,7 @@ class Topology:
             # link lets go (model contact or auto) is a parameter of the lanes, as the law.
             joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
             driver_law=t(model.driver_law),
+            force_law=t(model.force_law),
         )
 
     @property
@@ -111,6 +115,11 @@ class Topology:
         """The drivers of law harmonic."""
         return tuple(d for d, law in enumerate(self.driver_law) if law == DRIVER_HARMONIC)
 
+    @property
+    def harmonic_loads(self) -> tuple[int, ...]:
+        """The forces of law harmonic."""
+        return tuple(f for f, law in enumerate(self.force_law) if law == LOAD_HARMONIC)
+
     def packed(self) -> list[Slot]:
         """The rows of ``P``, in order (:func:`mcchain.parameters.packed_slots`)."""
         return packed_slots(
@@ -121,6 +130,7 @@ class Topology:
             len(self.spring_a),
             self.joint_model,
             self.driver_law,
+            self.force_law,
         )
 
     def slots(self) -> dict[str, int]:

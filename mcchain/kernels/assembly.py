@@ -301,7 +301,7 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     if not _velocities_at_rest_in_bearings(km, s, J, minv, S, vi):
         return False
     F = np.empty(n)
-    applied_forces(km, s, qi, vi, F)
+    applied_forces(km, s, qi, vi, 0.0, F)
     lam = np.zeros(ma)
     for i in range(ma):
         acc = 0.0

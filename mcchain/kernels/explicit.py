@@ -87,7 +87,7 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, work_B, work
     """
     n = q.shape[0]
     m = lam_out.shape[0]
-    applied_forces(km, s, q, v, work_F)
+    applied_forces(km, s, q, v, t, work_F)
     constraint_residual(km, s, q, t, work_phi)
     err = max_abs(work_phi, m)
     if m > 0:

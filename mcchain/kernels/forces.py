@@ -1,4 +1,4 @@
-"""Applied forces of one sample: gravity, constant loads, linear spring-dampers.
+"""Applied forces of one sample: gravity, loads (constant or harmonic), linear spring-dampers.
 
 ``F`` is the generalised force vector (3 nbody,) [N, N, N m]*; ``K_out += −∂F/∂q`` adds the
 load stiffness used by equilibrium Newton and the eigen step (at q̇ = 0, where dampers add
@@ -14,6 +14,7 @@ from numba import njit
 
 from mcchain.kernels.config import JIT
 from mcchain.kernels.joints import (
+    TWO_PI,
     add_pair_column,
     add_pair_outer,
     add_pair_product,
@@ -21,6 +22,18 @@ from mcchain.kernels.joints import (
     body_velocity,
     rotate,
 )
+
+# numba reads module globals as compile-time constants
+from mcchain.model import LOAD_HARMONIC
+
+
+@njit(**JIT)
+def load_factor(km, s, k, t):
+    """The time factor of load ``k`` at ``t``: 1 (constant) or sin(2π f t + φ) (harmonic)."""
+    if km.force_law[k] != LOAD_HARMONIC:
+        return 1.0
+    w = TWO_PI * km.force_frequency[s % km.force_frequency.shape[0], k]
+    return math.sin(w * t + km.force_phase[s % km.force_phase.shape[0], k])
 
 
 @njit(**JIT)
@@ -63,8 +76,9 @@ def _add_generalised(F_out, body, sign, fx, fy, px, py):
 
 
 @njit(**JIT)
-def applied_forces(km, s, q, v, F_out):
-    """F(q, q̇) into ``F_out`` (3 nbody,): gravity, constant forces/torques, springs.
+def applied_forces(km, s, q, v, t, F_out):
+    """F(q, q̇, t) into ``F_out`` (3 nbody,): gravity, loads (times :func:`load_factor`),
+    springs.
 
     A spring's force on body b is −(k (L − L₀) + c L̇) e along u/L from a to b; with
     L₀ = 0 the spring is isotropic, −k u − c u̇, defined also at L = 0.
@@ -82,8 +96,9 @@ def applied_forces(km, s, q, v, F_out):
         if b < 0:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
-        _add_generalised(F_out, b, 1.0, fx, fy, px, py)
-        F_out[3 * b + 2] += km.force_torque[s % km.force_torque.shape[0], k]
+        factor = load_factor(km, s, k, t)
+        _add_generalised(F_out, b, factor, fx, fy, px, py)
+        F_out[3 * b + 2] += factor * km.force_torque[s % km.force_torque.shape[0], k]
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
@@ -188,10 +203,11 @@ def damping_matrix_add(km, s, q, scale, C_out):
 
 
 @njit(**JIT)
-def applied_stiffness_add(km, s, q, K_out):
-    """K += −∂F/∂q at q̇ = 0 (exact; symmetric since every load here is conservative).
+def applied_stiffness_add(km, s, q, t, K_out):
+    """K += −∂F/∂q at q̇ = 0 and time ``t`` (exact; symmetric: at a given t every load here
+    derives from a potential).
 
-    Constant force f at p: −∂F_θ/∂θ = p·f. Spring with V = ½ k (L − L₀)²:
+    Force f at p (times :func:`load_factor`): −∂F_θ/∂θ = p·f. Spring with V = ½ k (L − L₀)²:
     ∂²V/∂q² = k gₑᵀgₑ + k (L − L₀)/L gₙᵀgₙ + k (L − L₀) e·∂²u/∂q², gₑ/gₙ = e/n·∂u/∂q.
     """
     for k in range(km.force_body.shape[0]):
@@ -199,7 +215,7 @@ def applied_stiffness_add(km, s, q, K_out):
         if b < 0:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
-        K_out[3 * b + 2, 3 * b + 2] += px * fx + py * fy
+        K_out[3 * b + 2, 3 * b + 2] += load_factor(km, s, k, t) * (px * fx + py * fy)
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
@@ -230,7 +246,8 @@ def applied_stiffness_add(km, s, q, K_out):
 
 @njit(**JIT)
 def potential_energy(km, s, q):
-    """Potential energy, J: −m g·r, −f·(r + p), −τ θ, and ½ k (L − L₀)²."""
+    """Potential energy, J: −m g·r, −f·(r + p) and −τ θ of constant loads, and
+    ½ k (L − L₀)². A harmonic load has no potential (it does work, as a driver does)."""
     energy = 0.0
     ig = s % km.gravity.shape[0]
     im = s % km.body_mass.shape[0]
@@ -240,7 +257,7 @@ def potential_energy(km, s, q):
         )
     for k in range(km.force_body.shape[0]):
         b = km.force_body[k]
-        if b < 0:
+        if b < 0 or km.force_law[k] == LOAD_HARMONIC:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
         energy -= fx * (q[3 * b] + px) + fy * (q[3 * b + 1] + py)

@@ -136,7 +136,7 @@ def generalized_alpha_run(
             pivot = np.inf
             for _ in range(max_newton):
                 nev += 1
-                applied_forces(km, s, q, v, F)
+                applied_forces(km, s, q, v, tn, F)
                 constraint_residual(km, s, q, tn, phi)
                 constraint_jacobian(km, s, q, B)
                 for i in range(nsys):
@@ -155,7 +155,7 @@ def generalized_alpha_run(
                         Kmat[ndof + r, i] = bp * B[r, i]
                         Kmat[i, ndof + r] = bp * B[r, i]
                 # K = ∂(Bᵀλ)/∂q − ∂F/∂q, C = −∂F/∂q̇ (dampers), into the top-left block.
-                _tangent_add(km, s, q, v, lam, gp, Kmat)
+                _tangent_add(km, s, q, v, tn, lam, gp, Kmat)
                 scale = 0.0
                 for i in range(nsys):
                     for j in range(nsys):
@@ -215,12 +215,12 @@ def _nan_history(s, first, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_
 
 
 @njit(**JIT)
-def _tangent_add(km, s, q, v, lam, gp, K_out):
+def _tangent_add(km, s, q, v, t, lam, gp, K_out):
     """K_out[:ndof, :ndof] += ∂(Bᵀλ)/∂q − ∂F/∂q + γ′ C, all exact: the joints' second
     derivatives, the loads' and springs' stiffness, the dampers' position dependence at fixed
     q̇, and C = −∂F/∂q̇ (along the spring; isotropic for rest length 0)."""
     constraint_hessian_add(km, s, q, lam, K_out)
-    applied_stiffness_add(km, s, q, K_out)
+    applied_stiffness_add(km, s, q, t, K_out)
     damper_stiffness_add(km, s, q, v, K_out)
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
@@ -240,7 +240,7 @@ def _tangent_add(km, s, q, v, lam, gp, K_out):
 @njit(**JIT)
 def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon):
     """Solve [[M, Bᵀ], [B, 0]] [q̈; λ] = [F; γ] (dense, for a start state) into ``rhs``."""
-    applied_forces(km, s, q, v, F)
+    applied_forces(km, s, q, v, t, F)
     constraint_jacobian(km, s, q, B)
     constraint_gamma(km, s, q, v, t, gamma)
     nsys = ndof + ncon

@@ -81,7 +81,7 @@ def _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R_o
         descends it).
     """
     constraint_jacobian(km, s, q, B)
-    applied_forces(km, s, q, v_rest, F)
+    applied_forces(km, s, q, v_rest, 0.0, F)
     for k in range(n):
         acc = -F[k]
         for i in range(m):
@@ -188,7 +188,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     F = np.empty(n)
     v_rest = np.zeros(n)
     constraint_jacobian(km, s, q, B)
-    applied_forces(km, s, q, v_rest, F)
+    applied_forces(km, s, q, v_rest, 0.0, F)
     fscale = 0.0
     for k in range(n):
         fscale = max(fscale, abs(F[k]) / (lscale if k % 3 == 2 else 1.0))
@@ -248,7 +248,7 @@ def equilibrium_one(km, s, q, lam, tol, max_iter, history):
             break
         K[:, :] = 0.0
         constraint_hessian_add(km, s, q, lam, K)
-        applied_stiffness_add(km, s, q, K)
+        applied_stiffness_add(km, s, q, 0.0, K)
         if mu_unit == 0.0:
             # the shift's natural unit: the largest stiffness over mass ratio, ≈ p_max²
             for k in range(n):
@@ -405,7 +405,7 @@ def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
         return SINGULAR
     K = np.zeros((n, n))
     constraint_hessian_add(km, s, q, lam, K)
-    applied_stiffness_add(km, s, q, K)
+    applied_stiffness_add(km, s, q, 0.0, K)
     mdiag = np.empty(n)
     mass_diagonal(km, s, mdiag)
     # reduced matrices; N = Q[:, m:]
@@ -587,7 +587,7 @@ def dynamic_multipliers_batch(start, stop, km, q, v, lam_out, status_out):
             minv[i] = 1.0 / minv[i]
         constraint_jacobian(km, s, q[s], B)
         constraint_gamma(km, s, q[s], v[s], 0.0, gamma)
-        applied_forces(km, s, q[s], v[s], F)
+        applied_forces(km, s, q[s], v[s], 0.0, F)
         if not schur_factor(B, minv, m, n, S):
             status_out[s] |= SINGULAR
             continue

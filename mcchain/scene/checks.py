@@ -16,6 +16,7 @@ from mcchain.scene.models import (
     GROUND_NAME,
     LOOP_METHODS,
     Driver,
+    Force,
     Joint,
     Scene,
     saltelli_count_error,
@@ -109,6 +110,7 @@ def check_scene(scene: Scene) -> None:
 
     for i, force in enumerate(scene.force):
         where = _item(scene, "force", i)
+        _check_load_law(where, force, sampled_paths)
         if force.body == GROUND_NAME:
             raise SceneError(f"{where}.body: a load on the fixed body 'ground' does nothing")
         if force.body not in known:
@@ -250,6 +252,27 @@ def _check_driver_law(where: str, driver: Driver, sampled: set[str]) -> None:
                     f'{where}.{key}: required for law "harmonic" (θ0 + ω t + A (sin(2π f t + φ) '
                     "− sin φ))"
                 )
+
+
+def _check_load_law(where: str, force: Force, sampled: set[str]) -> None:
+    """A harmonic load has its frequency; a constant one no frequency or phase."""
+
+    def given(key: str) -> bool:
+        return getattr(force, key) is not None or f"force.{force.name}.{key}" in sampled
+
+    if force.law == "harmonic":
+        if not given("frequency"):
+            raise SceneError(
+                f'{where}.frequency: required for law "harmonic" (value and torque times '
+                "sin(2π f t + φ))"
+            )
+        return
+    for key in ("frequency", "phase"):
+        if given(key):
+            raise SceneError(
+                f'{where}.{key}: only a load of law "harmonic" has one (this one is "constant"; '
+                'set law = "harmonic")'
+            )
 
 
 def _check_connected(scene: Scene) -> None:

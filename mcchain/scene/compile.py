@@ -15,7 +15,7 @@ import numpy as np
 
 from mcchain.contact import LAW_CODES, LINK, MODEL_CODES, internal_cylinder_stiffness
 from mcchain.errors import SceneError
-from mcchain.model import DRIVER_LAWS, GROUND, JointKind, Model, constraint_rows
+from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
 from mcchain.resources import check_memory
 from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
@@ -147,6 +147,7 @@ def compile_model(
         driver_row=driver_row,
         driver_law=np.array([DRIVER_LAWS[d.law] for d in scene.driver], dtype=np.int64),
         force_body=topo([f.body for f in scene.force]),
+        force_law=np.array([LOAD_LAWS[f.law] for f in scene.force], dtype=np.int64),
         spring_body_a=topo([s.bodies[0] for s in scene.spring]),
         spring_body_b=topo([s.bodies[1] for s in scene.spring]),
         meta={

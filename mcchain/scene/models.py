@@ -295,7 +295,8 @@ class Driver(_Section):
 
 # -- [[force]] -----------------------------------------------------------------------------
 class Force(_Section):
-    """``[[force]]``: a constant load on a body: a force (global frame), a couple, or both."""
+    """``[[force]]``: a load on a body: a force (global frame), a couple, or both; constant, or
+    ``law = "harmonic"``: value and torque times sin(2π f t + φ)."""
 
     name: Name | None = Field(
         default=None, description="unique force name; default: the body's name."
@@ -310,6 +311,19 @@ class Force(_Section):
     )
     torque: Num | None = Field(
         default=None, description="couple, N m, counter-clockwise positive; default 0."
+    )
+    law: Literal["constant", "harmonic"] = Field(
+        default="constant",
+        description='"constant" (default) or "harmonic": ``value`` and ``torque`` times '
+        "sin(2π f t + φ).",
+    )
+    frequency: Num | None = Field(
+        default=None,
+        gt=0,
+        description='f of law "harmonic", Hz; required there, not allowed else.',
+    )
+    phase: Num | None = Field(
+        default=None, description='φ of law "harmonic", rad; default 0 there, not allowed else.'
     )
 
     _auto_name: bool = PrivateAttr(default=False)

@@ -375,7 +375,7 @@ def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 
     B, gamma, F, mass = np.zeros((m, n)), np.zeros(m), np.zeros(n), np.zeros(n)
     constraint_jacobian(km, sample, q, B)
     constraint_gamma(km, sample, q, v, 0.0, gamma)
-    applied_forces(km, sample, q, v, F)
+    applied_forces(km, sample, q, v, 0.0, F)
     mass_diagonal(km, sample, mass)
     kkt = np.block([[np.diag(mass), B.T], [B, np.zeros((m, m))]])
     return np.linalg.solve(kkt, np.concatenate([F, gamma]))[n:]

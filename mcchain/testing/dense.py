@@ -23,7 +23,14 @@ import scipy.integrate
 import scipy.linalg
 import scipy.optimize
 
-from mcchain.model import DRIVER_HARMONIC, GROUND, JOINT_IDEAL, JOINT_PRISMATIC, Model
+from mcchain.model import (
+    DRIVER_HARMONIC,
+    GROUND,
+    JOINT_IDEAL,
+    JOINT_PRISMATIC,
+    LOAD_HARMONIC,
+    Model,
+)
 from mcchain.testing.factory import rotation
 
 OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -106,8 +113,10 @@ def driver_law(model: Model, s: int, j: int, t: float) -> tuple[float, float, fl
     return f, rate, acc
 
 
-def applied_forces(model: Model, s: int, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
-    """F(q, q̇) of sample s, (3 nbody,), by virtual work of each load; complex-safe in q."""
+def applied_forces(
+    model: Model, s: int, q: np.ndarray, v: np.ndarray | None = None, t: float = 0.0
+) -> np.ndarray:
+    """F(q, q̇, t) of sample s, (3 nbody,), by virtual work of each load; complex-safe in q."""
     dtype = np.result_type(q, float)
     v = np.zeros(model.ndof) if v is None else v
     F = np.zeros(model.ndof, dtype=dtype)
@@ -126,11 +135,12 @@ def applied_forces(model: Model, s: int, q: np.ndarray, v: np.ndarray | None = N
 
     for k in range(model.nforce):
         body = model.force_body[k]
+        factor = load_factor(model, s, k, t)
         add_point_force(
-            body, _param(model, "force_point", s)[k], _param(model, "force_value", s)[k]
+            body, _param(model, "force_point", s)[k], factor * _param(model, "force_value", s)[k]
         )
         if body != GROUND:
-            F[3 * body + 2] += _param(model, "force_torque", s)[k]
+            F[3 * body + 2] += factor * _param(model, "force_torque", s)[k]
     for k in range(model.nspring):
         a, b = model.spring_body_a[k], model.spring_body_b[k]
         sa, sb = _param(model, "spring_point_a", s)[k], _param(model, "spring_point_b", s)[k]
@@ -335,7 +345,7 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
         phi.append(q[3 * int(model.driver_body[j]) + 2] - f)
         phid.append(v[3 * int(model.driver_body[j]) + 2] - rate)
     B = np.array(rows_B).reshape(-1, n)
-    F = applied_forces(model, s, q, v)
+    F = applied_forces(model, s, q, v, t)
     return M, B, np.array(gam), np.array(phi), np.array(phid), F
 
 
@@ -354,8 +364,17 @@ def kkt_acceleration(
     return x[:n], x[n:]
 
 
+def load_factor(model: Model, s: int, k: int, t: float) -> float:
+    """1 for a constant load, sin(2π f t + φ) for a harmonic one (written out anew)."""
+    if int(model.force_law[k]) != LOAD_HARMONIC:
+        return 1.0
+    f = float(_param(model, "force_frequency", s)[k])
+    return float(np.sin(2.0 * np.pi * f * t + float(_param(model, "force_phase", s)[k])))
+
+
 def energy(model: Model, s: int, q: np.ndarray, v: np.ndarray) -> float:
-    """Kinetic + potential energy (gravity, constant forces and couples, springs)."""
+    """Kinetic + potential energy (gravity, constant forces and couples, springs; harmonic
+    loads have no potential)."""
     mass, inertia, g = (_param(model, x, s) for x in ("body_mass", "body_inertia", "gravity"))
     e = 0.0
     for b in range(model.nbody):
@@ -367,7 +386,7 @@ def energy(model: Model, s: int, q: np.ndarray, v: np.ndarray) -> float:
     )
     for k in range(model.nforce):
         b = int(model.force_body[k])
-        if b != GROUND:
+        if b != GROUND and int(model.force_law[k]) != LOAD_HARMONIC:
             e -= value[k] @ (q[3 * b : 3 * b + 2] + rotation(q[3 * b + 2]) @ point[k])
             e -= torque[k] * q[3 * b + 2]
     spa, spb = _param(model, "spring_point_a", s), _param(model, "spring_point_b", s)

@@ -1,0 +1,163 @@
+"""Load laws: a harmonic force or couple, value × sin(2π f t + φ), in every path.
+
+References: the forced undamped oscillator (a slider on a spring, started at rest) and a
+rotor turned by a harmonic couple, both in closed form; the kernels' F(q, q̇, t) against the
+dense reference; one line per bad load table.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_cli_commands import Ran, assert_usage_error, in_process
+
+from mcchain.kernels.forces import applied_forces
+from mcchain.solvers.simulate import simulate
+from mcchain.solvers.statics import assemble
+from mcchain.testing import dense
+from mcchain.testing.scenes import model_of
+
+MASS, STIFFNESS, FORCE, FREQUENCY = 2.0, 800.0, 3.0, 3.0  # kg, N/m, N, Hz
+INERTIA, TORQUE, PHASE = 0.05, 0.4, 0.6  # kg m², N m, rad
+METHODS = [
+    ("rk4", "lanes"), ("rk4", "loop"), ("rk45", "lanes"), ("radau", "lanes"),
+    ("generalized-alpha", "lanes"),
+]  # fmt: skip
+ATOL = {"rk4": 1e-12, "rk45": 1e-10, "radau": 1e-10, "generalized-alpha": 2e-6}
+"""Of positions in m or rad over 1 s (h = 1e-4; generalized-α is second order)."""
+
+OSCILLATOR = f"""
+[scene]
+name = "forced-oscillator"
+gravity = [0.0, 0.0]
+[[body]]
+name = "slider"
+mass = {MASS}
+inertia = 1.0
+[[joint]]
+name = "P"
+type = "prismatic"
+bodies = ["ground", "slider"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+axis = [1.0, 0.0]
+[[spring]]
+bodies = ["ground", "slider"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+stiffness = {STIFFNESS}
+rest_length = 0.0
+[[force]]
+name = "shaker"
+body = "slider"
+value = [{FORCE}, 0.0]
+law = "harmonic"
+frequency = {FREQUENCY}
+"""
+
+ROTOR = f"""
+[scene]
+name = "rotor"
+gravity = [0.0, -9.81]
+[[body]]
+name = "rotor"
+mass = 1.0
+inertia = {INERTIA}
+[[joint]]
+name = "O"
+bodies = ["ground", "rotor"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+[[force]]
+name = "couple"
+body = "rotor"
+torque = {TORQUE}
+law = "harmonic"
+frequency = {FREQUENCY}
+phase = {PHASE}
+"""
+
+
+def oscillator_closed_form(t: np.ndarray) -> np.ndarray:
+    """x(t) of m ẍ + k x = F sin Ω t from rest at 0."""
+    w0, w = math.sqrt(STIFFNESS / MASS), 2.0 * math.pi * FREQUENCY
+    return FORCE / (MASS * (w0 * w0 - w * w)) * (np.sin(w * t) - (w / w0) * np.sin(w0 * t))
+
+
+def rotor_closed_form(t: np.ndarray) -> np.ndarray:
+    """θ(t) of J θ̈ = τ sin(Ω t + φ) from rest at 0."""
+    w = 2.0 * math.pi * FREQUENCY
+    a = TORQUE / INERTIA
+    return a * math.cos(PHASE) / w * t - a / (w * w) * (np.sin(w * t + PHASE) - math.sin(PHASE))
+
+
+def _run(text: str, method: str, kernels: str) -> dict[str, np.ndarray]:
+    model = model_of(text)
+    start = assemble(model)
+    settings = dict(
+        t_end=1.0, dt=1e-4, output_dt=1e-2, method=method, kernels=kernels, rtol=1e-11,
+        atol=1e-13,
+    )  # fmt: skip
+    out = simulate(model, settings, start.q, start.v, np.float64)
+    assert out["status"][0] == 0
+    return out
+
+
+@pytest.mark.parametrize(("method", "kernels"), METHODS)
+def test_harmonic_force__forced_oscillator_matches_the_closed_form(method, kernels):
+    out = _run(OSCILLATOR, method, kernels)
+    x = out["q"][0, :, 0, 0]
+    np.testing.assert_allclose(x, oscillator_closed_form(out["time"]), rtol=0, atol=ATOL[method])
+
+
+@pytest.mark.parametrize(("method", "kernels"), METHODS)
+def test_harmonic_couple__rotor_matches_the_closed_form(method, kernels):
+    out = _run(ROTOR, method, kernels)
+    theta = out["q"][0, :, 0, 2]
+    np.testing.assert_allclose(theta, rotor_closed_form(out["time"]), rtol=0, atol=ATOL[method])
+
+
+@pytest.mark.parametrize("t", [0.0, 0.0417, 0.73])
+def test_harmonic_load__kernel_forces_match_the_dense_reference(t):
+    model = model_of(OSCILLATOR.replace('name = "shaker"', 'name = "shaker"\npoint = [0.1, 0.2]'))
+    km = model.kernel_model()
+    rng = np.random.default_rng(4)
+    q, v = rng.normal(size=model.ndof), rng.normal(size=model.ndof)
+    F = np.empty(model.ndof)
+    applied_forces(km, 0, q, v, t, F)
+    np.testing.assert_allclose(F, dense.applied_forces(model, 0, q, v, t), rtol=1e-14, atol=1e-13)
+    factor = math.sin(2.0 * math.pi * FREQUENCY * t)
+    assert F[0] == pytest.approx(FORCE * factor - STIFFNESS * q[0] - 0.0, abs=1e-12)
+
+
+# -- bad load tables --------------------------------------------------------------------------
+LOAD_CASES = {
+    "harmonic without frequency": (
+        ROTOR.replace(f"frequency = {FREQUENCY}\n", ""),
+        'force.couple.frequency: required for law "harmonic"',
+    ),
+    "phase on a constant load": (
+        ROTOR.replace('law = "harmonic"\n', "").replace(f"frequency = {FREQUENCY}\n", ""),
+        'force.couple.phase: only a load of law "harmonic" has one',
+    ),
+    "unknown load law": (ROTOR.replace('law = "harmonic"', 'law = "table"'), "force.couple.law"),
+}
+
+
+@pytest.fixture
+def mcchain(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    return in_process(monkeypatch, capsys)
+
+
+@pytest.mark.parametrize("case", sorted(LOAD_CASES))
+def test_cli_run__bad_load_law_is_one_line_exit_2_no_folder(
+    mcchain: Callable[..., Ran], tmp_path: Path, case: str
+) -> None:
+    text, fragment = LOAD_CASES[case]
+    assert text != ROTOR
+    (tmp_path / "scene.toml").write_text(text)
+    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
