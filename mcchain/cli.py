@@ -344,7 +344,7 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     import numpy as np
 
     from mcchain.contact import LAW_NAMES, LINK, MODEL_NAMES
-    from mcchain.model import GROUND, JointKind
+    from mcchain.model import DRIVER_HARMONIC, GROUND, JointKind
     from mcchain.parameters import PARAMETERS
 
     def body(index: int) -> str:
@@ -393,9 +393,13 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     if model.ndriver:
         lines.append("drivers:")
         for k, name in enumerate(model.driver_names):
-            lines.append(
-                f"  {name}: {show('driver', k, 'omega', 'angle0')}, row {int(model.driver_row[k])}"
-            )
+            slider = int(model.driver_joint[k]) >= 0
+            keys: tuple[str, ...] = ("speed", "displacement0") if slider else ("omega", "angle0")
+            if int(model.driver_law[k]) == DRIVER_HARMONIC:
+                keys += ("amplitude", "frequency", "phase")
+            what = f"joint {name} along its axis, " if slider else ""
+            row = int(model.driver_row[k])
+            lines.append(f"  {name}: {what}{show('driver', k, *keys)}, row {row}")
     if model.param_paths:
         lines.append("sampled (range over the samples):")
         params = np.asarray(model.parameters, dtype=float)

@@ -93,6 +93,7 @@ class KernelModel(NamedTuple):
     driver_body: np.ndarray
     driver_row: np.ndarray
     driver_law: np.ndarray
+    driver_joint: np.ndarray
     force_body: np.ndarray
     force_law: np.ndarray
     spring_body_a: np.ndarray
@@ -116,6 +117,8 @@ class KernelModel(NamedTuple):
     driver_amplitude: np.ndarray
     driver_frequency: np.ndarray
     driver_phase: np.ndarray
+    driver_displacement0: np.ndarray
+    driver_speed: np.ndarray
     force_point: np.ndarray
     force_value: np.ndarray
     force_torque: np.ndarray
@@ -179,6 +182,10 @@ class Model:
         joint_contact_friction: (*, njoint) Coulomb coefficient μ.
         joint_contact_radius: (*, njoint) journal radius R (friction's slip and moment arm), m.
         driver_law: (ndriver,) int64 :data:`DRIVER_LAWS` code of each driver.
+        driver_joint: (ndriver,) int64 the prismatic joint a slider driver moves, −1 for a
+            driver of a body's angle (whose ``driver_body`` is then ``GROUND`` for a slider).
+        driver_displacement0, driver_speed: (*, ndriver) s0 (m) and v (m/s) of slider drivers
+            (NaN and 0 for the others).
         driver_angle0: (*, ndriver) θ_0, rad.
         driver_omega: (*, ndriver) ω, rad/s.
         driver_amplitude, driver_frequency, driver_phase: (*, ndriver) A (rad), f (Hz) and
@@ -250,6 +257,9 @@ class Model:
     driver_amplitude: np.ndarray = None  # type: ignore[assignment]
     driver_frequency: np.ndarray = None  # type: ignore[assignment]
     driver_phase: np.ndarray = None  # type: ignore[assignment]
+    driver_joint: np.ndarray = None  # type: ignore[assignment]
+    driver_displacement0: np.ndarray = None  # type: ignore[assignment]
+    driver_speed: np.ndarray = None  # type: ignore[assignment]
     # Load laws (optional: None gives constant loads).
     force_law: np.ndarray = None  # type: ignore[assignment]
     force_frequency: np.ndarray = None  # type: ignore[assignment]
@@ -267,6 +277,9 @@ class Model:
             "driver_amplitude": np.zeros((1, ndriver)),
             "driver_frequency": np.zeros((1, ndriver)),
             "driver_phase": np.zeros((1, ndriver)),
+            "driver_joint": np.full(ndriver, -1, dtype=np.int64),
+            "driver_displacement0": np.full((1, ndriver), np.nan),
+            "driver_speed": np.zeros((1, ndriver)),
             "joint_axis": np.full((1, njoint, 2), np.nan),
             "joint_relative_angle": np.full((1, njoint), np.nan),
             "joint_model": np.zeros(njoint, dtype=np.int64),
@@ -320,6 +333,11 @@ class Model:
     @property
     def has_clearance(self) -> bool:
         return bool(np.any(self.joint_kind == JointKind.CLEARANCE))
+
+    @property
+    def has_slider_drivers(self) -> bool:
+        """Whether a driver moves a prismatic joint (its output is a force, not a torque)."""
+        return bool(np.any(np.asarray(self.driver_joint) >= 0))
 
     @property
     def has_prismatic(self) -> bool:
@@ -376,6 +394,7 @@ _TOPOLOGY_FIELDS = frozenset(
         "driver_body",
         "driver_row",
         "driver_law",
+        "driver_joint",
         "force_body",
         "force_law",
         "spring_body_a",

@@ -63,6 +63,8 @@ CONTACT_JOINTS = "contact"
 ``contact`` or ``auto`` (:data:`mcchain.contact.MODEL_CODES`)."""
 HARMONIC_DRIVERS = "harmonic"
 """``packed_for`` of the harmonic-law rows of drivers: packed only for drivers of that law."""
+SLIDER_DRIVERS = "slider"
+"""``packed_for`` of the rows of slider drivers: packed only for drivers of a prismatic joint."""
 HARMONIC_LOADS = "harmonic load"
 """``packed_for`` of the harmonic-law rows of forces: packed only for forces of that law."""
 
@@ -200,6 +202,11 @@ TABLE: tuple[Parameter, ...] = (
       slots=("th0_{i}",), unset=_NAN),
     _P("driver", "omega",           (),     "driver_omega",          "rad s-1", None,
       slots=("om{i}",), unset=0.0),
+    # A slider driver (``joint``): s0 + v t; s0 unset: as written or placed
+    _P("driver", "displacement0",   (),     "driver_displacement0",  "m",       None,
+      slots=("s0_{i}",), packed_for=SLIDER_DRIVERS, unset=_NAN),
+    _P("driver", "speed",           (),     "driver_speed",          "m s-1",   None,
+      slots=("spd{i}",), packed_for=SLIDER_DRIVERS, unset=0.0),
     # law = "harmonic": θ0 + ω t + A (sin(2π f t + φ) − sin φ)
     _P("driver", "amplitude",       (),     "driver_amplitude",      "rad",     None,
       slots=("amp{i}",), packed_for=HARMONIC_DRIVERS, unset=0.0),
@@ -270,6 +277,7 @@ def packed_slots(
     joint_model: Sequence[int] | None = None,
     driver_law: Sequence[int] | None = None,
     force_law: Sequence[int] | None = None,
+    driver_joint: Sequence[int] | None = None,
 ) -> list[Slot]:
     """The rows of ``P`` for a topology, in order: kinds in table order, then items in order;
     per item, every row's plain slots in table order, then the inverse slots.
@@ -277,8 +285,9 @@ def packed_slots(
     A joint row with ``packed_for`` is packed only for joints of that kind (or, for
     :data:`CONTACT_JOINTS`, whose ``joint_model`` is not the link; default: every joint is);
     a driver row with :data:`HARMONIC_DRIVERS` only for drivers whose ``driver_law`` is
-    harmonic, a force row with :data:`HARMONIC_LOADS` only for forces whose ``force_law`` is
-    (default: none is).
+    harmonic, a force row with :data:`HARMONIC_LOADS` only for forces whose ``force_law`` is,
+    a driver row with :data:`SLIDER_DRIVERS` only for drivers of a prismatic joint
+    (``driver_joint`` ≥ 0) (default: none is).
     """
     contact = [m != 0 for m in joint_model] if joint_model is not None else []
     contact += [False] * (len(joint_kind) - len(contact))
@@ -286,6 +295,8 @@ def packed_slots(
     harmonic += [False] * (ndriver - len(harmonic))
     waving = [law == LOAD_HARMONIC for law in force_law] if force_law is not None else []
     waving += [False] * (nforce - len(waving))
+    slider = [k >= 0 for k in driver_joint] if driver_joint is not None else []
+    slider += [False] * (ndriver - len(slider))
     counts = {"scene": 1, "body": nbody, "joint": len(joint_kind), "driver": ndriver}
     counts |= {"force": nforce, "spring": nspring}
     out: list[Slot] = []
@@ -303,6 +314,9 @@ def packed_slots(
                         continue
                 elif row.packed_for == HARMONIC_LOADS:
                     if not waving[i]:
+                        continue
+                elif row.packed_for == SLIDER_DRIVERS:
+                    if not slider[i]:
                         continue
                 elif row.packed_for is not None and int(joint_kind[i]) != row.packed_for:
                     continue
@@ -335,9 +349,18 @@ def packed_slot_names(
     joint_model: Sequence[int] | None = None,
     driver_law: Sequence[int] | None = None,
     force_law: Sequence[int] | None = None,
+    driver_joint: Sequence[int] | None = None,
 ) -> list[str]:
     """The names of the rows of ``P`` (see :func:`packed_slots`), in order."""
     slots = packed_slots(
-        joint_kind, nbody, ndriver, nforce, nspring, joint_model, driver_law, force_law
+        joint_kind,
+        nbody,
+        ndriver,
+        nforce,
+        nspring,
+        joint_model,
+        driver_law,
+        force_law,
+        driver_joint,
     )
     return [s.name for s in slots]

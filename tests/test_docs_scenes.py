@@ -214,12 +214,13 @@ def test_docs__designs_and_methods_have_a_row_each(header: str, name: str, colum
     assert {f'`"{v}"`' for v in values} == set(table), f"{header} {column} table"
 
 
+_DRIVER_NAME = {"displacement0": "joint", "speed": "joint", "omega": "body", "angle0": "body"}
+"""How the docs name a driver in a sampled path: by its joint (slider drivers' keys), its body
+(angle drivers' keys), or either (``<name>``, the keys of both)."""
+
+
 def _path_cell(row: Parameter) -> str:
-    head = (
-        "scene"
-        if row.kind == "scene"
-        else f"{row.kind}.<{'body' if row.kind == 'driver' else 'name'}>"
-    )
+    head = "scene" if row.kind == "scene" else f"{row.kind}.<{_DRIVER_NAME.get(row.key, 'name')}>"
     return (
         f"`{head}.{row.key}"
         + "".join("[i]" if k == 0 else "[j]" for k in range(len(row.shape)))

@@ -22,6 +22,7 @@ DESIGN_VARIABLES = {
     "joint_force": ("sample", "time", "joint", "xy"),
     "contact_force": ("sample", "time", "joint"),
     "driver_torque": ("sample", "time", "driver"),
+    "driver_force": ("sample", "time", "driver"),
     "constraint_error": ("sample", "time"),
     "energy": ("sample", "time"),
     # The contact law (issue 11's contract).
@@ -52,6 +53,7 @@ HISTORIES = {
     "joint_force",
     "contact_force",
     "driver_torque",
+    "driver_force",
     "constraint_error",
     "energy",
     "penetration",

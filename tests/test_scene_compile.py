@@ -313,6 +313,8 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
         "driver_amplitude": (nd,),
         "driver_frequency": (nd,),
         "driver_phase": (nd,),
+        "driver_displacement0": (nd,),
+        "driver_speed": (nd,),
         "force_point": (nf, 2),
         "force_value": (nf, 2),
         "force_torque": (nf,),
@@ -337,6 +339,7 @@ def test_compile_model__random_chains_shapes_and_broadcasting(case) -> None:
             "joint_contact_stiffness",
             "joint_axis",
             "joint_relative_angle",
+            "driver_displacement0",
         )
         if name not in unset:  # NaN: unset
             assert np.all(np.isfinite(arr)), name

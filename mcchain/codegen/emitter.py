@@ -259,6 +259,16 @@ class Emitter:
                         f"ny{k} = -{sn} * p_uy{k} + {c} * p_ux{k}",
                         f"pta{k} = nx{k} * (pa{k}y + dy{k}) - ny{k} * (pa{k}x + dx{k})",
                     )
+                if k in topo.slider_drivers.values():
+                    # u = A_a u_0 the axis itself (Ω u = n), and B's θ_a entry of u·d
+                    if a == GROUND:
+                        self.emit(f"ax{k} = p_ux{k}", f"ay{k} = p_uy{k}")
+                    else:
+                        self.emit(
+                            f"ax{k} = ny{k}",
+                            f"ay{k} = -nx{k}",
+                            f"ptu{k} = ax{k} * (pa{k}y + dy{k}) - ay{k} * (pa{k}x + dx{k})",
+                        )
 
     def rows(self) -> list[dict[int, Coef]]:
         """Non-zeros of each row of B as {column: coefficient} (after :meth:`joints`)."""
@@ -302,7 +312,16 @@ class Emitter:
                 row.update(point_row(a, -1.0, ex, ey, *pa))
                 rows.append(row)
         for d in range(topo.ndriver):
-            rows.append({3 * topo.driver_body[d] + 2: 1.0})
+            g = topo.slider_drivers.get(d)
+            if g is None:
+                rows.append({3 * topo.driver_body[d] + 2: 1.0})
+                continue
+            a, b = topo.joint_a[g], topo.joint_b[g]
+            row = point_row(b, 1.0, f"ax{g}", f"ay{g}", f"pb{g}x", f"pb{g}y")
+            row.update(point_row(a, -1.0, f"ax{g}", f"ay{g}", f"pa{g}x", f"pa{g}y"))
+            if a != GROUND:
+                row[3 * a + 2] = f"ptu{g}"
+            rows.append(row)
         self._rows_cache = rows
         return rows
 
@@ -340,22 +359,33 @@ class Emitter:
                 if v is not None:
                     self.emit(f"phid{r} = ex{k} * ddx{k} + ey{k} * ddy{k}")
         for d in range(topo.ndriver):
+            # f = f0 + rate · t (+ A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too)
             r = topo.driver_row[d]
-            i = 3 * topo.driver_body[d] + 2
+            swing, swing_rate = "", ""
             if d in topo.harmonic_drivers:
-                # θ0 + ω t + A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too
                 self.emit(f"hw{d} = {TWO_PI!r} * p_frq{d}")
                 self.emit(*sincos_code(f"(hw{d} * {t} + p_pha{d})", f"hs{d}", f"hc{d}", f"h{d}"))
                 self.emit(*sincos_code(f"p_pha{d}", f"hp{d}", f"_hpc{d}", f"hp{d}"))
-                self.emit(
-                    f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t} - p_amp{d} * (hs{d} - hp{d})"
-                )
+                swing = f" - p_amp{d} * (hs{d} - hp{d})"
+                swing_rate = f" + p_amp{d} * hw{d} * hc{d}"
+            g = topo.slider_drivers.get(d)
+            if g is None:  # θ − θ0 − ω t
+                i = 3 * topo.driver_body[d] + 2
+                rate = f"(p_om{d}{swing_rate})" if swing_rate else f"p_om{d}"
+                self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}{swing}")
                 if v is not None:
-                    self.emit(f"phid{r} = {v}{i} - (p_om{d} + p_amp{d} * hw{d} * hc{d})")
+                    self.emit(f"phid{r} = {v}{i} - {rate}")
                 continue
-            self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}")
+            # a slider driver: u·d − s0 − v t
+            a = topo.joint_a[g]
+            rate = f"(p_spd{d}{swing_rate})" if swing_rate else f"p_spd{d}"
+            along = f"ax{g} * dx{g} + ay{g} * dy{g}"
+            self.emit(f"phi{r} = {along} - p_s0_{d} - p_spd{d} * {t}{swing}")
             if v is not None:
-                self.emit(f"phid{r} = {v}{i} - p_om{d}")
+                turn = (
+                    f" + {v}{3 * a + 2} * (-ay{g} * dx{g} + ax{g} * dy{g})" if a != GROUND else ""
+                )
+                self.emit(f"phid{r} = ax{g} * ddx{g} + ay{g} * ddy{g}{turn} - {rate}")
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
         terms = []
@@ -402,10 +432,21 @@ class Emitter:
                     f" - phid{r} * phid{r}) * irho{k}"
                 )
         for d in range(topo.ndriver):
+            r = topo.driver_row[d]
+            terms = []
+            g = topo.slider_drivers.get(d)
+            if g is not None:  # −(Ḃ q̇) of u·d, as a prismatic offset row with u for n
+                a = topo.joint_a[g]
+                terms.append(f"ax{g} * cqx{g} + ay{g} * cqy{g}")
+                if a != GROUND:
+                    wa, wa2 = f"{v}{3 * a + 2}", f"{v}{3 * a + 2} * {v}{3 * a + 2}"
+                    terms.append(
+                        f"{wa2} * (ax{g} * dx{g} + ay{g} * dy{g})"
+                        f" - 2.0 * {wa} * (-ay{g} * ddx{g} + ax{g} * ddy{g})"
+                    )
             if d in topo.harmonic_drivers:  # −Φ_tt = f̈ = −A Ω² sin(Ω t + φ)
-                self.emit(f"gam{topo.driver_row[d]} = -(p_amp{d} * hw{d} * hw{d} * hs{d})")
-            else:
-                self.emit(f"gam{topo.driver_row[d]} = 0.0")
+                terms.append(f"-(p_amp{d} * hw{d} * hw{d} * hs{d})")
+            self.emit(f"gam{r} = " + (" + ".join(terms) if terms else "0.0"))
         if baumgarte:
             for r in range(topo.ncon):
                 self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")

@@ -35,6 +35,7 @@ class Topology:
     joint_model: tuple[int, ...] = ()
     driver_law: tuple[int, ...] = ()
     force_law: tuple[int, ...] = ()
+    driver_joint: tuple[int, ...] = ()
 
     def __repr__(self) -> str:
         # The contact fields only when a joint uses the law, the driver laws only when one is
@@ -47,6 +48,8 @@ class Topology:
             names = [n for n in names if n != "driver_law"]
         if not self.harmonic_loads:
             names = [n for n in names if n != "force_law"]
+        if not self.slider_drivers:
+            names = [n for n in names if n != "driver_joint"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -69,6 +72,7 @@ class Topology:
             joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
             driver_law=t(model.driver_law),
             force_law=t(model.force_law),
+            driver_joint=t(model.driver_joint),
         )
 
     @property
@@ -116,6 +120,11 @@ class Topology:
         return tuple(d for d, law in enumerate(self.driver_law) if law == DRIVER_HARMONIC)
 
     @property
+    def slider_drivers(self) -> dict[int, int]:
+        """Driver -> the prismatic joint it moves, for the slider drivers."""
+        return {d: k for d, k in enumerate(self.driver_joint) if k >= 0}
+
+    @property
     def harmonic_loads(self) -> tuple[int, ...]:
         """The forces of law harmonic."""
         return tuple(f for f, law in enumerate(self.force_law) if law == LOAD_HARMONIC)
@@ -131,6 +140,7 @@ class Topology:
             self.joint_model,
             self.driver_law,
             self.force_law,
+            self.driver_joint,
         )
 
     def slots(self) -> dict[str, int]:

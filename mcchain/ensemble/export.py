@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
 
-PEAK_HISTORIES = ("joint_force", "contact_force", "driver_torque", "joint_moment")
+PEAK_HISTORIES = ("joint_force", "contact_force", "driver_torque", "driver_force", "joint_moment")
 """Time histories exported as their peak |value| over time (vectors: the magnitude)."""
 BLOCK = 4096
 """Samples read at a time from a time history."""

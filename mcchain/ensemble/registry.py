@@ -226,7 +226,16 @@ VARIABLES: dict[str, VariableSpec] = {
             "driver_torque",
             ("sample", "time", "driver"),
             "N m",
-            "torque the driver applies",
+            "torque the driver applies (NaN for slider drivers)",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "driver_force",
+            ("sample", "time", "driver"),
+            "N",
+            "force a slider driver applies along its prismatic joint's axis (NaN for drivers "
+            "of an angle)",
             "history",
             "simulate",
         ),

@@ -26,16 +26,19 @@ from mcchain.kernels.joints import (
     JOINT_CLEARANCE,
     JOINT_PRISMATIC,
     _add_point_rows,
+    axis_row,
     constraint_jacobian,
     constraint_residual,
     constraint_velocity_rhs,
     driver_rate,
+    driver_start,
     joint_rate_terms,
     joint_separation_rate,
     joint_vectors,
     prismatic_gamma,
     prismatic_normal,
     prismatic_rows,
+    slider_displacement,
 )
 from mcchain.kernels.linalg import (
     cholesky,
@@ -210,8 +213,16 @@ def _assembly_residual(km, s, q, target, psi_out, J_out):
         _add_point_rows(J_out, 2 * k + 1, b, 1.0, 0.0, 1.0, pbx, pby)
         _add_point_rows(J_out, 2 * k + 1, a, -1.0, 0.0, 1.0, pax, pay)
     for j in range(km.driver_body.shape[0]):
+        start = driver_start(km, s, j)[0]
+        if km.driver_joint[j] >= 0:  # a slider driver: u·d = s_0
+            along, k, ux, uy, pax, pay, pbx, pby, dx, dy = slider_displacement(km, s, q, j)
+            psi_out[2 * nj + j] = along - start
+            a = km.joint_body_a[k]
+            b = km.joint_body_b[k]
+            axis_row(J_out, 2 * nj + j, a, b, ux, uy, pax, pay, pbx, pby, dx, dy)
+            continue
         body = km.driver_body[j]
-        psi_out[2 * nj + j] = q[3 * body + 2] - km.driver_angle0[s % km.driver_angle0.shape[0], j]
+        psi_out[2 * nj + j] = q[3 * body + 2] - start
         J_out[2 * nj + j, 3 * body + 2] = 1.0
 
 

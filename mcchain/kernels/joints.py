@@ -13,7 +13,9 @@ point, d = r_b + p_b − r_a − p_a (journal centre minus bearing centre):
 * prismatic:  Φ = (n·d, θ_b − θ_a − θ_0), n = A_a Ω u the normal of the unit axis u fixed
   in a: row n·∂d/∂q plus (Ω n)·d on θ_a (the normal turns with a), and the angle row;
 * driver:     Φ = θ_j − f(t), f = θ_0 + ω t (law constant) or θ_0 + ω t + A (sin(2π f t + φ)
-  − sin φ) (law harmonic): Φ_t = −ḟ, Φ_tt = −f̈ exactly (:func:`driver_motion`).
+  − sin φ) (law harmonic): Φ_t = −ḟ, Φ_tt = −f̈ exactly (:func:`driver_swing`);
+* slider driver of prismatic joint k: Φ = u·d − f(t), u = A_a u_0 the joint's unit axis (it
+  turns with a), f = s_0 + v t (+ the same swing): the row u·∂d/∂q with (Ω u)·d on θ_a.
 """
 
 from __future__ import annotations
@@ -50,9 +52,43 @@ def driver_swing(km, s, j, t):
 
 
 @njit(**JIT)
+def driver_start(km, s, j):
+    """(f(0), steady rate) of driver ``j``: (θ_0, ω) in rad, rad/s, or (s_0, v) in m, m/s for
+    a slider driver."""
+    if km.driver_joint[j] >= 0:
+        return (
+            km.driver_displacement0[s % km.driver_displacement0.shape[0], j],
+            km.driver_speed[s % km.driver_speed.shape[0], j],
+        )
+    return (
+        km.driver_angle0[s % km.driver_angle0.shape[0], j],
+        km.driver_omega[s % km.driver_omega.shape[0], j],
+    )
+
+
+@njit(**JIT)
 def driver_rate(km, s, j, t):
-    """ḟ of driver ``j`` at ``t``, rad/s: ω plus the swing's rate."""
-    return km.driver_omega[s % km.driver_omega.shape[0], j] + driver_swing(km, s, j, t)[1]
+    """ḟ of driver ``j`` at ``t`` (rad/s, or m/s for a slider driver): the steady rate plus
+    the swing's."""
+    return driver_start(km, s, j)[1] + driver_swing(km, s, j, t)[1]
+
+
+@njit(**JIT)
+def slider_axis(km, s, q, k):
+    """World unit axis u = A_a u_0 of prismatic joint ``k`` (u_0 fixed in body a)."""
+    i = s % km.joint_axis.shape[0]
+    _, _, ca, sa = body_pose(q, km.joint_body_a[k])
+    return rotate(ca, sa, km.joint_axis[i, k, 0], km.joint_axis[i, k, 1])
+
+
+@njit(**JIT)
+def slider_displacement(km, s, q, j):
+    """u·d of slider driver ``j``'s prismatic joint, m, and the joint's vectors: (u·d, k, ux,
+    uy, pax, pay, pbx, pby, dx, dy)."""
+    k = km.driver_joint[j]
+    pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
+    ux, uy = slider_axis(km, s, q, k)
+    return ux * dx + uy * dy, k, ux, uy, pax, pay, pbx, pby, dx, dy
 
 
 @njit(**JIT)
@@ -138,6 +174,11 @@ def constraint_residual(km, s, q, t, phi_out):
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             phi_out[row] = math.hypot(dx, dy) - c
     for j in range(km.driver_body.shape[0]):
+        if km.driver_joint[j] >= 0:
+            start, rate = driver_start(km, s, j)
+            along = slider_displacement(km, s, q, j)[0]
+            phi_out[km.driver_row[j]] = along - start - rate * t - driver_swing(km, s, j, t)[0]
+            continue
         i = s % km.driver_omega.shape[0]
         i0 = s % km.driver_angle0.shape[0]
         theta = q[3 * km.driver_body[j] + 2]
@@ -158,13 +199,21 @@ def _add_point_rows(B_out, row, body, sign, wx, wy, px, py):
 
 
 @njit(**JIT)
+def axis_row(B_out, row, a, b, wx, wy, pax, pay, pbx, pby, dx, dy):
+    """Add w·∂d/∂q to row ``row`` of B for a vector w fixed in body a (∂w/∂θ_a = Ω w: the
+    term (Ω w)·d on θ_a): a prismatic joint's offset row (w = n) or a slider driver's (w = u)."""
+    _add_point_rows(B_out, row, b, 1.0, wx, wy, pbx, pby)
+    _add_point_rows(B_out, row, a, -1.0, wx, wy, pax, pay)
+    if a >= 0:
+        B_out[row, 3 * a + 2] += -wy * dx + wx * dy
+
+
+@njit(**JIT)
 def prismatic_rows(B_out, row, a, b, nx, ny, pax, pay, pbx, pby, dx, dy):
     """Add the two rows of a prismatic joint to B: n·∂d/∂q with (Ω n)·d on θ_a (∂n/∂θ_a =
     Ω n), then θ_b − θ_a."""
-    _add_point_rows(B_out, row, b, 1.0, nx, ny, pbx, pby)
-    _add_point_rows(B_out, row, a, -1.0, nx, ny, pax, pay)
+    axis_row(B_out, row, a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
     if a >= 0:
-        B_out[row, 3 * a + 2] += -ny * dx + nx * dy
         B_out[row + 1, 3 * a + 2] -= 1.0
     if b >= 0:
         B_out[row + 1, 3 * b + 2] += 1.0
@@ -200,6 +249,12 @@ def constraint_jacobian(km, s, q, B_out):
                 _add_point_rows(B_out, row, b, 1.0, ex, ey, pbx, pby)
                 _add_point_rows(B_out, row, a, -1.0, ex, ey, pax, pay)
     for j in range(km.driver_body.shape[0]):
+        if km.driver_joint[j] >= 0:
+            _, k, ux, uy, pax, pay, pbx, pby, dx, dy = slider_displacement(km, s, q, j)
+            a = km.joint_body_a[k]
+            b = km.joint_body_b[k]
+            axis_row(B_out, km.driver_row[j], a, b, ux, uy, pax, pay, pbx, pby, dx, dy)
+            continue
         B_out[km.driver_row[j], 3 * km.driver_body[j] + 2] = 1.0
 
 
@@ -258,7 +313,16 @@ def constraint_gamma(km, s, q, v, t, gamma_out):
             along = ex * ddx + ey * ddy
             gamma_out[row] = ex * gx + ey * gy - (ddx * ddx + ddy * ddy - along * along) / dist
     for j in range(km.driver_body.shape[0]):
-        gamma_out[km.driver_row[j]] = driver_swing(km, s, j, t)[2]  # −Φ_tt = f̈
+        acc = driver_swing(km, s, j, t)[2]  # −Φ_tt = f̈
+        if km.driver_joint[j] >= 0:  # −(Ḃ q̇) of u·d: as a prismatic offset row, u for n
+            k = km.driver_joint[j]
+            a = km.joint_body_a[k]
+            b = km.joint_body_b[k]
+            pax, pay, pbx, pby, dx, dy, wa, gx, gy = joint_rate_terms(km, s, q, v, k)
+            ux, uy = slider_axis(km, s, q, k)
+            ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
+            acc += prismatic_gamma(ux, uy, gx, gy, dx, dy, ddx, ddy, wa)
+        gamma_out[km.driver_row[j]] = acc
 
 
 @njit(**JIT)
@@ -335,7 +399,8 @@ def constraint_hessian_add(km, s, q, lam, K_out):
 
     ∂²d/∂θ_b² = −p_b and ∂²d/∂θ_a² = +p_a; a clearance row adds (λ/|d|) gᵀg with
     g = n·∂d/∂q, n ⟂ e (the curvature of |d|); prismatic: :func:`_prismatic_hessian_add`.
-    Drivers are linear in q.
+    Drivers of an angle are linear in q; a slider driver's row u·d is curved as a prismatic
+    offset row (:func:`_prismatic_hessian_add` with u for n).
     """
     for k in range(km.joint_body_a.shape[0]):
         a = km.joint_body_a[k]
@@ -360,6 +425,13 @@ def constraint_hessian_add(km, s, q, lam, K_out):
             K_out[3 * b + 2, 3 * b + 2] -= lx * pbx + ly * pby
         if a >= 0:
             K_out[3 * a + 2, 3 * a + 2] += lx * pax + ly * pay
+    for j in range(km.driver_body.shape[0]):
+        if km.driver_joint[j] >= 0:
+            _, k, ux, uy, pax, pay, pbx, pby, dx, dy = slider_displacement(km, s, q, j)
+            a = km.joint_body_a[k]
+            b = km.joint_body_b[k]
+            lam_j = lam[km.driver_row[j]]
+            _prismatic_hessian_add(K_out, lam_j, a, b, ux, uy, pax, pay, pbx, pby, dx, dy)
 
 
 @njit(**JIT)

@@ -33,7 +33,7 @@ from mcchain.scene.paths import (
 def _item(scene: Scene, kind: str, index: int) -> str:
     entry = getattr(scene, kind)[index]
     if kind == "driver":
-        return item_path(kind, index, entry.body)
+        return item_path(kind, index, entry.name)
     if getattr(entry, "_auto_name", False):
         return f"{kind}[{index}]"
     return item_path(kind, index, entry.name)
@@ -92,7 +92,26 @@ def check_scene(scene: Scene) -> None:
 
     drivers: dict[str, int] = {}
     for i, driver in enumerate(scene.driver):
+        if (driver.body is None) == (driver.joint is None):
+            raise SceneError(
+                f"driver[{i}]: give `body` (a body's angle) or `joint` (a prismatic joint's "
+                "displacement), " + ("not both" if driver.body is not None else "one of them")
+            )
         where = _item(scene, "driver", i)
+        if driver.slides:
+            _check_slider_driver(scene, where, driver)
+            if driver.name in drivers:
+                raise SceneError(
+                    f"driver[{i}].joint: joint {driver.joint!r} already driven by "
+                    f"driver[{drivers[driver.name]}]"
+                )
+            drivers[driver.name] = i
+            continue
+        for key in ("displacement0", "speed"):
+            if getattr(driver, key) is not None:
+                raise SceneError(
+                    f"{where}.{key}: only a driver of a prismatic joint (`joint = ...`) has one"
+                )
         if driver.body == GROUND_NAME:
             raise SceneError(f"{where}.body: cannot drive the fixed body 'ground'")
         if driver.body not in known:
@@ -163,15 +182,21 @@ def check_scene(scene: Scene) -> None:
         _check_contact(scene, where, joint, clearance_joint, sampled)
 
     along = scene.modes.along if scene.modes is not None else None
-    if along is not None and along.driver not in {d.body for d in scene.driver}:
-        driven = ", ".join(d.body for d in scene.driver) or "none"
+    if along is not None and along.driver not in {d.body for d in scene.driver if not d.slides}:
+        driven = ", ".join(d.name for d in scene.driver if not d.slides) or "none"
         raise SceneError(
             f"modes.along.driver: no driver turns body {along.driver!r} (drivers: {driven})"
+        )
+    if along is not None and any(d.slides for d in scene.driver):
+        raise SceneError(
+            "modes.along: follows one crank turn with every other driver held; a slider driver ("
+            + ", ".join(f"driver.{d.name}" for d in scene.driver if d.slides)
+            + ") has no turn to hold (leave [modes] along out, or drive the slider's crank)"
         )
     if along is not None and any(d.law != "constant" for d in scene.driver):
         raise SceneError(
             'modes.along: follows drivers of law "constant" only (one turn at speed ω); '
-            + ", ".join(f"driver.{d.body}" for d in scene.driver if d.law != "constant")
+            + ", ".join(f"driver.{d.name}" for d in scene.driver if d.law != "constant")
             + ' is "harmonic"'
         )
 
@@ -230,15 +255,34 @@ def _canonical_paths(scene: Scene) -> list[str]:
     return found
 
 
+def _check_slider_driver(scene: Scene, where: str, driver: Driver) -> None:
+    """A slider driver names a prismatic joint and uses ``displacement0``/``speed``."""
+    if driver.joint not in scene.joint_names:
+        known = ", ".join(scene.joint_names) or "none"
+        raise SceneError(f"{where}.joint: unknown joint {driver.joint!r} (known: {known})")
+    joint = scene.joint[scene.joint_names.index(str(driver.joint))]
+    if joint.type != "prismatic":
+        raise SceneError(
+            f"{where}.joint: joint {driver.joint!r} is {joint.type}; a driver moves a prismatic "
+            "joint along its axis (drive a body's angle with `body = ...`)"
+        )
+    for key in ("omega", "angle0"):
+        if getattr(driver, key) is not None:
+            other = {"omega": "speed", "angle0": "displacement0"}[key]
+            raise SceneError(f"{where}.{key}: a slider driver takes `{other}` (m), not `{key}`")
+
+
 def _check_driver_law(where: str, driver: Driver, sampled: set[str]) -> None:
     """The keys a driver's ``law`` needs are given (or sampled), and no other law's keys."""
 
     def given(key: str) -> bool:
-        return getattr(driver, key) is not None or f"driver.{driver.body}.{key}" in sampled
+        return getattr(driver, key) is not None or f"driver.{driver.name}.{key}" in sampled
 
     if driver.law == "constant":
-        if not given("omega"):
-            raise SceneError(f'{where}.omega: required for law "constant" (θ0 + ω t)')
+        rate = "speed" if driver.slides else "omega"
+        if not given(rate):
+            law = "s0 + v t" if driver.slides else "θ0 + ω t"
+            raise SceneError(f'{where}.{rate}: required for law "constant" ({law})')
         for key in HARMONIC_KEYS:
             if given(key):
                 raise SceneError(

@@ -143,7 +143,11 @@ def compile_model(
         joint_row=joint_row,
         joint_model=joint_model,
         joint_contact_law=joint_law,
-        driver_body=topo([d.body for d in scene.driver]),
+        driver_body=topo([GROUND_NAME if d.slides else str(d.body) for d in scene.driver]),
+        driver_joint=np.array(
+            [scene.joint_names.index(str(d.joint)) if d.slides else -1 for d in scene.driver],
+            dtype=np.int64,
+        ),
         driver_row=driver_row,
         driver_law=np.array([DRIVER_LAWS[d.law] for d in scene.driver], dtype=np.int64),
         force_body=topo([f.body for f in scene.force]),
@@ -252,7 +256,13 @@ def _derived_defaults(
         return b != GROUND and any(("q0", (3 * b + k,)) in varied for k in range(3))
 
     for d, driver in enumerate(scene.driver):
-        b = index[driver.body]
+        if driver.slides:
+            if driver.displacement0 is None and ("driver_displacement0", (d,)) not in varied:
+                found = _axial_displacement(scene, arrays, index, driver.joint)
+                target = _rows_like(arrays, "driver_displacement0", len(found))
+                target[:, d] = found
+            continue
+        b = index[str(driver.body)]
         if driver.angle0 is not None:
             continue
         if ("q0", (3 * b + 2,)) in varied:
@@ -294,6 +304,28 @@ def _derived_defaults(
         rest[:, s] = length if per_sample else length[0]
 
 
+def _axial_displacement(
+    scene: Scene, arrays: dict[str, np.ndarray], index: dict[str, int], joint: str | None
+) -> np.ndarray:
+    """u·d of a prismatic joint at the initial positions, per row of ``q0``: the displacement
+    along its axis u (unit, in its first body's frame) of the second body's point from the
+    first's, m."""
+    k = scene.joint_names.index(str(joint))
+    a, b = (index[name] for name in scene.joint[k].bodies)
+    shapes = [arrays[n].shape[0] for n in ("q0", "joint_point_a", "joint_point_b", "joint_axis")]
+    rows = max(shapes)
+    q0 = np.broadcast_to(arrays["q0"], (rows, arrays["q0"].shape[1]))
+    point_a = np.broadcast_to(arrays["joint_point_a"][:, k], (rows, 2))
+    point_b = np.broadcast_to(arrays["joint_point_b"][:, k], (rows, 2))
+    d = _world_point(q0, b, point_b) - _world_point(q0, a, point_a)
+    u = np.broadcast_to(arrays["joint_axis"][:, k], (rows, 2))
+    u = u / np.hypot(u[:, 0], u[:, 1])[:, None]
+    theta = q0[:, 3 * a + 2] if a != GROUND else np.zeros(rows)
+    c, s = np.cos(theta), np.sin(theta)
+    ux, uy = c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]
+    return np.asarray(ux * d[:, 0] + uy * d[:, 1])
+
+
 def _rows_like(arrays: dict[str, np.ndarray], name: str, rows: int) -> np.ndarray:
     """``arrays[name]`` with ``rows`` samples (repeated from 1 when needed)."""
     arr = arrays[name]
@@ -305,7 +337,9 @@ def _rows_like(arrays: dict[str, np.ndarray], name: str, rows: int) -> np.ndarra
 def _unwritten_angles(scene: Scene, arrays: dict[str, np.ndarray], index: dict[str, int]) -> None:
     """A body angle the scene leaves out (NaN): its driver's ``angle0`` when given, else 0."""
     for driver_index, driver in enumerate(scene.driver):
-        b = index[driver.body]
+        if driver.slides:
+            continue
+        b = index[str(driver.body)]
         angle0 = arrays["driver_angle0"][:, driver_index]
         if np.isnan(arrays["q0"][:, 3 * b + 2]).any() and not np.isnan(angle0).any():
             q0 = _rows_like(arrays, "q0", max(arrays["q0"].shape[0], angle0.shape[0]))

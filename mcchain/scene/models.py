@@ -253,14 +253,22 @@ class Joint(_Section):
 
 # -- [[driver]] ----------------------------------------------------------------------------
 class Driver(_Section):
-    """``[[driver]]``: prescribed rotation θ(t) of one body (named by the body).
+    """``[[driver]]``: prescribed rotation θ(t) of one body (``body``, the driver's name), or
+    prescribed displacement s(t) of a prismatic joint (``joint``, the driver's name).
 
-    ``law = "constant"``: θ = θ0 + ω t. ``law = "harmonic"``: θ = θ0 + ω t + A (sin(2π f t + φ)
-    − sin φ), a steady turn (ω, default 0) with a harmonic swing or speed fluctuation on top;
-    θ(0) = θ0 either way.
+    ``law = "constant"``: θ = θ0 + ω t (s = s0 + v t). ``law = "harmonic"``: θ = θ0 + ω t +
+    A (sin(2π f t + φ) − sin φ), a steady turn (ω, default 0) with a harmonic swing or speed
+    fluctuation on top; θ(0) = θ0 either way (the same for s with s0, v).
     """
 
-    body: BodyRef = Field(description="the driven body (not ground); required.")
+    body: BodyRef | None = Field(
+        default=None, description="the driven body (not ground); this or ``joint`` is required."
+    )
+    joint: BodyRef | None = Field(
+        default=None,
+        description="the driven prismatic joint (its displacement along the axis); this or "
+        "``body`` is required.",
+    )
     law: Literal["constant", "harmonic"] = Field(
         default="constant",
         description='"constant" (θ0 + ω t, default) or "harmonic" (θ0 + ω t + A (sin(2π f t '
@@ -275,7 +283,9 @@ class Driver(_Section):
         default=None, description="θ_0, rad; default: the body's initial ``angle``."
     )
     amplitude: Num | None = Field(
-        default=None, description='A of law "harmonic", rad; required there, not allowed else.'
+        default=None,
+        description='A of law "harmonic", rad (m for a slider driver); required there, not '
+        "allowed else.",
     )
     frequency: Num | None = Field(
         default=None,
@@ -286,11 +296,27 @@ class Driver(_Section):
     phase: Num | None = Field(
         default=None, description='φ of law "harmonic", rad; default 0 there, not allowed else.'
     )
+    displacement0: Num | None = Field(
+        default=None,
+        description="s0 of a slider driver, m: the displacement u·d along the joint's axis at "
+        "t = 0; default: as written or placed.",
+    )
+    speed: Num | None = Field(
+        default=None,
+        description='v of a slider driver, m/s; required for law "constant", default 0 for '
+        '"harmonic".',
+    )
 
     @property
     def name(self) -> str:
-        """A driver is named by its body (``driver.crank.omega``)."""
-        return self.body
+        """A driver is named by its body or its prismatic joint (``driver.crank.omega``,
+        ``driver.P.speed``)."""
+        return str(self.body if self.body is not None else self.joint)
+
+    @property
+    def slides(self) -> bool:
+        """Whether the driver prescribes a prismatic joint's displacement."""
+        return self.joint is not None
 
 
 # -- [[force]] -----------------------------------------------------------------------------
@@ -750,7 +776,7 @@ class Scene(_Section):
 
     @property
     def driver_names(self) -> list[str]:
-        return [d.body for d in self.driver]
+        return [d.name for d in self.driver]
 
     @property
     def force_names(self) -> list[str]:

@@ -18,7 +18,8 @@ Contract of :func:`simulate`:
 4. Outputs at ``time`` (ntime,): ``q``, ``v`` (sample, time, body, dof); ``joint_force``
    (sample, time, joint, xy) = force on body b by body a (−λ ideal, −λ e clearance);
    ``contact_force`` (sample, time, joint) = λ of clearance joints (NaN for ideal ones);
-   ``driver_torque`` (sample, time, driver) = −λ of the driver row; ``constraint_error``
+   ``driver_torque`` (sample, time, driver) = −λ of the driver row (``driver_force`` for a
+   slider driver: the force along its joint's axis, N); ``constraint_error``
    (sample, time) = max |Φ|; ``energy`` (sample, time) = kinetic + potential (gravity, springs,
    constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them).
 5. Status (per sample, :mod:`mcchain.status`): DIVERGED when the state is non-finite or
@@ -539,6 +540,17 @@ def _prismatic_moments(model: Model, contact_force: np.ndarray) -> dict[str, np.
     return {"joint_moment": moment}
 
 
+def _slider_forces(model: Model, driver_torque: np.ndarray) -> dict[str, np.ndarray]:
+    """``driver_force`` (..., ndriver): −λ of slider drivers, the force along the joint's axis
+    that the kernels leave in ``driver_torque``'s slot (NaN there afterwards); NaN for drivers
+    of an angle."""
+    slider = np.asarray(model.driver_joint) >= 0
+    force = np.full_like(driver_torque, np.nan)
+    force[..., slider] = driver_torque[..., slider]
+    driver_torque[..., slider] = np.nan
+    return {"driver_force": force}
+
+
 def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
     """The contact-law outputs by ensemble variable, every joint (the others: NaN, or -1
     for the integer ones), from the lane kernels' contact arrays."""
@@ -684,6 +696,8 @@ def simulate(
     result = {"time": time, **out}
     if model.has_prismatic:
         result.update(_prismatic_moments(model, result["contact_force"]))
+    if model.has_slider_drivers:
+        result.update(_slider_forces(model, result["driver_torque"]))
     if ncj:
         result.update(_contact_outputs(run, history_dtype))
     result["status"] = run.status

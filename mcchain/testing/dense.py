@@ -73,6 +73,13 @@ def _prismatic_normal(model: Model, s: int, q: np.ndarray, k: int) -> np.ndarray
     return normal if a == GROUND else _pose(q, a)[1] @ normal
 
 
+def _slider_axis(model: Model, s: int, q: np.ndarray, k: int) -> np.ndarray:
+    """u = A_a u_0: the unit axis of prismatic joint k in the world (u_0 fixed in body a)."""
+    u = _param(model, "joint_axis", s)[k]
+    a = model.joint_body_a[k]
+    return u if a == GROUND else _pose(q, a)[1] @ u
+
+
 def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarray:
     """Φ(q, t) of sample s, (ncon,)."""
     phi = np.zeros(model.ncon, dtype=q.dtype)
@@ -93,6 +100,14 @@ def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarr
         else:
             phi[row] = np.sqrt(d[0] * d[0] + d[1] * d[1]) - clearance[k]
     for j in range(model.ndriver):
+        k = int(model.driver_joint[j])
+        if k >= 0:
+            a, b = model.joint_body_a[k], model.joint_body_b[k]
+            d = _point(q, b, pb_all[k]) - _point(q, a, pa_all[k])
+            phi[model.driver_row[j]] = (
+                _slider_axis(model, s, q, k) @ d - driver_law(model, s, j, t)[0]
+            )
+            continue
         phi[model.driver_row[j]] = q[3 * model.driver_body[j] + 2] - driver_law(model, s, j, t)[0]
     return phi
 
@@ -100,8 +115,9 @@ def constraints(model: Model, s: int, q: np.ndarray, t: float = 0.0) -> np.ndarr
 def driver_law(model: Model, s: int, j: int, t: float) -> tuple[float, float, float]:
     """(f, ḟ, f̈) of driver j of sample s at t: θ0 + ω t (+ A (sin(2π f t + φ) − sin φ) for
     a harmonic one), written out independently of the kernels."""
-    theta0 = float(_param(model, "driver_angle0", s)[j])
-    omega = float(_param(model, "driver_omega", s)[j])
+    slider = int(model.driver_joint[j]) >= 0
+    theta0 = float(_param(model, "driver_displacement0" if slider else "driver_angle0", s)[j])
+    omega = float(_param(model, "driver_speed" if slider else "driver_omega", s)[j])
     f, rate, acc = theta0 + omega * t, omega, 0.0
     if int(model.driver_law[j]) == DRIVER_HARMONIC:
         amp = float(_param(model, "driver_amplitude", s)[j])
@@ -257,8 +273,14 @@ def constraint_jacobian_formula(model: Model, s: int, q: np.ndarray) -> np.ndarr
                 B[row + 1, 3 * a + 2] = -1.0
         else:
             B[row] = d @ rows / np.sqrt(d[0] * d[0] + d[1] * d[1])
+        for slid in np.flatnonzero(np.asarray(model.driver_joint) == k):  # u·d − s(t)
+            axis = _slider_axis(model, s, q, k)
+            B[model.driver_row[slid]] = axis @ rows
+            if a != GROUND:
+                B[model.driver_row[slid], 3 * a + 2] += (omega @ axis) @ d
     for j in range(model.ndriver):
-        B[model.driver_row[j], 3 * model.driver_body[j] + 2] = 1.0
+        if int(model.driver_joint[j]) < 0:
+            B[model.driver_row[j], 3 * model.driver_body[j] + 2] = 1.0
     return B
 
 
@@ -290,6 +312,7 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
     rows_B, gam, phi, phid = [], [], [], []
     pa_all, pb_all = _param(model, "joint_point_a", s), _param(model, "joint_point_b", s)
     clearance = _param(model, "joint_clearance", s)
+    kinematics = {}  # joint -> (d, ḋ, ∂d/∂q, w, θ̇_a), for slider drivers
     for k in range(model.njoint):
         a, b = int(model.joint_body_a[k]), int(model.joint_body_b[k])
         ra, Aa, va, wa = _body(q, v, a)
@@ -305,6 +328,7 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
             D[:, 3 * a : 3 * a + 2] = -np.eye(2)
             D[:, 3 * a + 2] = -(OMEGA @ ua)
         w = -(wb**2) * ub + wa**2 * ua  # d̈ = D q̈ + w
+        kinematics[k] = (d, dd, D, w, wa)
         if model.joint_kind[k] == JOINT_IDEAL:
             rows_B += [D[0], D[1]]
             gam += list(-w)
@@ -337,10 +361,23 @@ def equations(model: Model, s: int, q: np.ndarray, v: np.ndarray, t: float):
             phi.append(rho - clearance[k])
             phid.append(e @ dd)
     for j in range(model.ndriver):
+        f, rate, acc = driver_law(model, s, j, t)
+        k = int(model.driver_joint[j])
+        if k >= 0:  # u·d − s(t), u turning with body a as a prismatic joint's normal does
+            d, dd, D, w, wa = kinematics[k]
+            a = int(model.joint_body_a[k])
+            axis = _slider_axis(model, s, q, k)
+            turn = np.zeros(n)
+            if a != GROUND:
+                turn[3 * a + 2] = (OMEGA @ axis) @ d
+            rows_B.append(axis @ D + turn)
+            gam.append(acc - axis @ w - 2 * wa * ((OMEGA @ axis) @ dd) + wa**2 * (axis @ d))
+            phi.append(axis @ d - f)
+            phid.append(wa * ((OMEGA @ axis) @ d) + axis @ dd - rate)
+            continue
         row = np.zeros(n)
         row[3 * int(model.driver_body[j]) + 2] = 1.0
         rows_B.append(row)
-        f, rate, acc = driver_law(model, s, j, t)
         gam.append(acc)
         phi.append(q[3 * int(model.driver_body[j]) + 2] - f)
         phid.append(v[3 * int(model.driver_body[j]) + 2] - rate)

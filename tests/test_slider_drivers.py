@@ -1,0 +1,284 @@
+"""Slider drivers: ``[[driver]] joint = "P"`` prescribes a prismatic joint's displacement
+s(t) = s0 + v t (+ A (sin(2π f t + φ) − sin φ)) along its axis, in every path.
+
+References: a block pushed up an incline (the driving force m s̈ + m g sin α in closed form),
+a slider pushed along an arm that turns at constant speed (the axis turns: position and force
+in closed form), the inverted slider-crank (crank angle from the triangle), the dense KKT
+reference at the computed states, and one line per bad slider driver.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_cli_commands import Ran, assert_usage_error, in_process
+
+from mcchain.kernels.joints import constraint_gamma, constraint_residual, constraint_velocity_rhs
+from mcchain.solvers.simulate import simulate
+from mcchain.solvers.statics import assemble
+from mcchain.testing import dense
+from mcchain.testing.scenes import model_of
+
+TILT, MASS, GRAVITY = 0.4, 1.5, 9.81  # rad, kg, m/s²
+S0, SPEED, AMPLITUDE, FREQUENCY, PHASE = 0.2, 0.3, 0.05, 2.0, 0.5
+METHODS = [
+    ("rk4", "lanes"), ("rk4", "loop"), ("rk45", "lanes"), ("radau", "lanes"),
+    ("generalized-alpha", "lanes"),
+]  # fmt: skip
+FORCE_RTOL = {"rk4": 1e-11, "rk45": 1e-9, "radau": 1e-9, "generalized-alpha": 1e-5}
+"""Of the driving force against its closed form (generalized-α: O(h²) accelerations)."""
+
+INCLINE = f"""
+[scene]
+name = "incline"
+gravity = [0.0, -{GRAVITY}]
+[[body]]
+name = "block"
+mass = {MASS}
+inertia = 0.01
+[[joint]]
+name = "P"
+type = "prismatic"
+bodies = ["ground", "block"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+axis = [{math.cos(TILT)!r}, {math.sin(TILT)!r}]
+[[driver]]
+joint = "P"
+law = "harmonic"
+speed = {SPEED}
+displacement0 = {S0}
+amplitude = {AMPLITUDE}
+frequency = {FREQUENCY}
+phase = {PHASE}
+"""
+
+OMEGA_ARM, ARM_MASS, ARM_INERTIA = 3.0, 2.0, 0.2
+ARM = f"""
+[scene]
+name = "arm"
+gravity = [0.0, 0.0]
+[[body]]
+name = "arm"
+mass = {ARM_MASS}
+inertia = {ARM_INERTIA}
+[[body]]
+name = "slider"
+mass = {MASS}
+inertia = 0.01
+position = [{S0}, 0.0]
+[[joint]]
+name = "O"
+bodies = ["ground", "arm"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+[[joint]]
+name = "P"
+type = "prismatic"
+bodies = ["arm", "slider"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+axis = [1.0, 0.0]
+[[driver]]
+body = "arm"
+omega = {OMEGA_ARM}
+angle0 = 0.0
+[[driver]]
+joint = "P"
+law = "harmonic"
+speed = {SPEED}
+amplitude = {AMPLITUDE}
+frequency = {FREQUENCY}
+phase = {PHASE}
+"""
+
+
+def stroke(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """s, ṡ, s̈ of the harmonic slider driver."""
+    w = 2.0 * math.pi * FREQUENCY
+    s = S0 + SPEED * t + AMPLITUDE * (np.sin(w * t + PHASE) - math.sin(PHASE))
+    return (
+        s,
+        SPEED + AMPLITUDE * w * np.cos(w * t + PHASE),
+        -AMPLITUDE * w * w * np.sin(w * t + PHASE),
+    )
+
+
+def _run(text: str, method: str, kernels: str, t_end: float = 1.0) -> dict[str, np.ndarray]:
+    model = model_of(text)
+    start = assemble(model)
+    settings = dict(
+        t_end=t_end, dt=1e-4, output_dt=1e-2, method=method, kernels=kernels, rtol=1e-11,
+        atol=1e-13,
+    )  # fmt: skip
+    out = simulate(model, settings, start.q, start.v, np.float64)
+    assert out["status"][0] == 0
+    return out
+
+
+@pytest.mark.parametrize(("method", "kernels"), METHODS)
+def test_slider_driver__block_up_an_incline_with_the_closed_form_force(method, kernels):
+    out = _run(INCLINE, method, kernels)
+    s, _, acc = stroke(out["time"])
+    q = out["q"][0, :, 0]
+    np.testing.assert_allclose(q[:, 0], s * math.cos(TILT), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(q[:, 1], s * math.sin(TILT), rtol=0, atol=1e-12)
+    force = MASS * acc + MASS * GRAVITY * math.sin(TILT)  # along u: F − m g sin α = m s̈
+    got = out["driver_force"][0, :, 0]
+    assert np.abs(got - force).max() <= FORCE_RTOL[method] * np.abs(force).max()
+    assert np.isnan(out["driver_torque"]).all()  # a slider driver's output is a force
+
+
+@pytest.mark.parametrize(("method", "kernels"), METHODS)
+def test_slider_driver__along_a_turning_arm(method, kernels):
+    """The axis turns with the arm (θ = ω t): r = s (cos ω t, sin ω t), and along the arm
+    F = m (s̈ − s ω²); across it the guide pushes m (2 ṡ ω)."""
+    out = _run(ARM, method, kernels, t_end=0.5)
+    t = out["time"]
+    s, _, acc = stroke(t)
+    r = out["q"][0, :, 1, :2]
+    np.testing.assert_allclose(r[:, 0], s * np.cos(OMEGA_ARM * t), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(r[:, 1], s * np.sin(OMEGA_ARM * t), rtol=0, atol=1e-11)
+    force = MASS * (acc - s * OMEGA_ARM**2)
+    got = out["driver_force"][0, :, 1]
+    assert np.abs(got - force).max() <= FORCE_RTOL[method] * np.abs(force).max()
+    assert np.isnan(out["driver_force"][0, :, 0]).all()  # the arm's driver turns it: a torque
+
+
+@pytest.mark.parametrize("t", [0.0, 0.21, 0.77])
+def test_slider_driver__rows_match_the_dense_reference_and_differences(t):
+    """Φ, B, γ and ν of the arm's slider row (the axis turns with the arm) against the dense
+    reference (complex-step B of the written-out formulation) at a moving state."""
+    model = model_of(ARM)
+    km = model.kernel_model()
+    rng = np.random.default_rng(7)
+    q, v = rng.normal(size=model.ndof), rng.normal(size=model.ndof)
+    m = model.ncon
+    phi, gamma, nu = np.empty(m), np.empty(m), np.empty(m)
+    constraint_residual(km, 0, q, t, phi)
+    constraint_gamma(km, 0, q, v, t, gamma)
+    constraint_velocity_rhs(km, 0, t, nu)
+    _, B, gam, phi_ref, phid, _ = dense.equations(model, 0, q, v, t)
+    np.testing.assert_allclose(phi, phi_ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(gamma, gam, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(B @ v - nu, phid, rtol=1e-12, atol=1e-13)
+    B_cs = dense.complex_step_jacobian(lambda x: dense.constraints(model, 0, x, t), q)
+    np.testing.assert_allclose(B, B_cs, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        dense.constraint_jacobian_formula(model, 0, q), B_cs, rtol=0, atol=1e-14
+    )
+
+
+def test_slider_driver__inverted_slider_crank_kinematics_and_reactions():
+    """The slider, pushed along the ground, turns a crank through a rod: the crank angle from
+    the triangle r² + x² − 2 r x cos φ = l², and every multiplier equals the dense KKT
+    solution at the computed states (generic kernels: the lanes' reactions come from them)."""
+    crank, rod = 0.1, 0.25
+    text = f"""
+[scene]
+name = "pushed-crank"
+[[body]]
+name = "crank"
+mass = 0.2
+inertia = 0.001
+angle = 1.0
+[[body]]
+name = "rod"
+mass = 0.3
+inertia = 0.002
+angle = -0.3
+[[body]]
+name = "slider"
+mass = 0.5
+inertia = 0.001
+[[joint]]
+name = "O"
+bodies = ["ground", "crank"]
+points = [[0.0, 0.0], [{-crank / 2}, 0.0]]
+[[joint]]
+name = "A"
+bodies = ["crank", "rod"]
+points = [[{crank / 2}, 0.0], [{-rod / 2}, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["rod", "slider"]
+points = [[{rod / 2}, 0.0], [0.0, 0.0]]
+[[joint]]
+name = "P"
+type = "prismatic"
+bodies = ["ground", "slider"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+axis = [1.0, 0.0]
+[[driver]]
+joint = "P"
+law = "harmonic"
+amplitude = 0.04
+frequency = 1.0
+"""
+    model = model_of(text)
+    start = assemble(model)
+    out = simulate(model, dict(t_end=1.0, dt=1e-4, output_dt=1e-2), start.q, start.v, np.float64)
+    assert out["status"][0] == 0
+    x = out["q"][0, :, 2, 0]
+    x0 = x[0]
+    t = out["time"]
+    np.testing.assert_allclose(x, x0 + 0.04 * np.sin(2 * math.pi * t), rtol=0, atol=1e-12)
+    cos_phi = (crank**2 + x**2 - rod**2) / (2 * crank * x)
+    crank_angle = out["q"][0, :, 0, 2]
+    np.testing.assert_allclose(np.cos(crank_angle), cos_phi, rtol=0, atol=1e-11)
+    for i in range(0, len(t), 25):
+        q, v = out["q"][0, i].reshape(-1), out["v"][0, i].reshape(-1)
+        _, lam = dense.kkt_acceleration(model, 0, q, v, t[i])
+        driver = lam[model.driver_row[0]]
+        assert out["driver_force"][0, i, 0] == pytest.approx(-driver, rel=1e-8, abs=1e-9)
+
+
+# -- bad slider drivers -----------------------------------------------------------------------
+SLIDER_CASES = {
+    "body and joint": (
+        INCLINE.replace('joint = "P"\nlaw', 'joint = "P"\nbody = "block"\nlaw'),
+        "driver[0]: give `body` (a body's angle) or `joint` (a prismatic joint's displacement), "
+        "not both",
+    ),
+    "unknown joint": (INCLINE.replace('joint = "P"\nlaw', 'joint = "Q"\nlaw'), "unknown joint 'Q'"),
+    "revolute joint": (
+        INCLINE.replace('type = "prismatic"\n', "").replace(
+            f"axis = [{math.cos(TILT)!r}, {math.sin(TILT)!r}]\n", ""
+        ),
+        "driver.P.joint: joint 'P' is revolute; a driver moves a prismatic joint",
+    ),
+    "omega on a slider": (
+        INCLINE.replace("speed = 0.3", "omega = 0.3"),
+        "driver.P.omega: a slider driver takes `speed` (m), not `omega`",
+    ),
+    "speed on a body driver": (
+        ARM.replace("omega = 3.0", "omega = 3.0\nspeed = 1.0"),
+        "driver.arm.speed: only a driver of a prismatic joint (`joint = ...`) has one",
+    ),
+    "constant without speed": (
+        INCLINE.replace('law = "harmonic"\nspeed = 0.3\n', "")
+        .replace("amplitude = 0.05\n", "")
+        .replace("frequency = 2.0\n", "")
+        .replace("phase = 0.5\n", ""),
+        'driver.P.speed: required for law "constant" (s0 + v t)',
+    ),
+}
+
+
+@pytest.fixture
+def mcchain(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> Callable[..., Ran]:
+    return in_process(monkeypatch, capsys)
+
+
+@pytest.mark.parametrize("case", sorted(SLIDER_CASES))
+def test_cli_run__bad_slider_driver_is_one_line_exit_2_no_folder(
+    mcchain: Callable[..., Ran], tmp_path: Path, case: str
+) -> None:
+    text, fragment = SLIDER_CASES[case]
+    assert text not in (INCLINE, ARM)
+    (tmp_path / "scene.toml").write_text(text)
+    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
