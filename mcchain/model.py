@@ -61,13 +61,17 @@ DRIVER_CONSTANT = 0
 """``Model.driver_law`` of θ0 + ω t."""
 DRIVER_HARMONIC = 1
 """``Model.driver_law`` of θ0 + ω t + A (sin(2π f t + φ) − sin φ)."""
-DRIVER_LAWS = {"constant": DRIVER_CONSTANT, "harmonic": DRIVER_HARMONIC}
+DRIVER_TABLE = 2
+"""``Model.driver_law`` of a cubic spline through a table (θ0 = f(0), ω = 0)."""
+DRIVER_LAWS = {"constant": DRIVER_CONSTANT, "harmonic": DRIVER_HARMONIC, "table": DRIVER_TABLE}
 """``[[driver]] law`` -> ``Model.driver_law`` code."""
 LOAD_CONSTANT = 0
 """``Model.force_law`` of a constant load."""
 LOAD_HARMONIC = 1
 """``Model.force_law`` of a load times sin(2π f t + φ)."""
-LOAD_LAWS = {"constant": LOAD_CONSTANT, "harmonic": LOAD_HARMONIC}
+LOAD_TABLE = 2
+"""``Model.force_law`` of a load times a cubic spline through a table of factors."""
+LOAD_LAWS = {"constant": LOAD_CONSTANT, "harmonic": LOAD_HARMONIC, "table": LOAD_TABLE}
 """``[[force]] law`` -> ``Model.force_law`` code."""
 
 
@@ -94,8 +98,14 @@ class KernelModel(NamedTuple):
     driver_row: np.ndarray
     driver_law: np.ndarray
     driver_joint: np.ndarray
+    driver_table_size: np.ndarray
+    driver_table_knots: np.ndarray
+    driver_table_coef: np.ndarray
     force_body: np.ndarray
     force_law: np.ndarray
+    force_table_size: np.ndarray
+    force_table_knots: np.ndarray
+    force_table_coef: np.ndarray
     spring_body_a: np.ndarray
     spring_body_b: np.ndarray
     gravity: np.ndarray
@@ -186,6 +196,10 @@ class Model:
             driver of a body's angle (whose ``driver_body`` is then ``GROUND`` for a slider).
         driver_displacement0, driver_speed: (*, ndriver) s0 (m) and v (m/s) of slider drivers
             (NaN and 0 for the others).
+        driver_table_size, driver_table_knots, driver_table_coef: (ndriver,) int64 knots,
+            (ndriver, nknot) s and (ndriver, 4 (nknot − 1)) ascending cubic coefficients of
+            each table driver's spline (:mod:`mcchain.kernels.tables`; size 0 for the others);
+            ``force_table_*`` the same for the loads' factors.
         driver_angle0: (*, ndriver) θ_0, rad.
         driver_omega: (*, ndriver) ω, rad/s.
         driver_amplitude, driver_frequency, driver_phase: (*, ndriver) A (rad), f (Hz) and
@@ -260,6 +274,12 @@ class Model:
     driver_joint: np.ndarray = None  # type: ignore[assignment]
     driver_displacement0: np.ndarray = None  # type: ignore[assignment]
     driver_speed: np.ndarray = None  # type: ignore[assignment]
+    driver_table_size: np.ndarray = None  # type: ignore[assignment]
+    driver_table_knots: np.ndarray = None  # type: ignore[assignment]
+    driver_table_coef: np.ndarray = None  # type: ignore[assignment]
+    force_table_size: np.ndarray = None  # type: ignore[assignment]
+    force_table_knots: np.ndarray = None  # type: ignore[assignment]
+    force_table_coef: np.ndarray = None  # type: ignore[assignment]
     # Load laws (optional: None gives constant loads).
     force_law: np.ndarray = None  # type: ignore[assignment]
     force_frequency: np.ndarray = None  # type: ignore[assignment]
@@ -280,6 +300,12 @@ class Model:
             "driver_joint": np.full(ndriver, -1, dtype=np.int64),
             "driver_displacement0": np.full((1, ndriver), np.nan),
             "driver_speed": np.zeros((1, ndriver)),
+            "driver_table_size": np.zeros(ndriver, dtype=np.int64),
+            "driver_table_knots": np.zeros((ndriver, 0)),
+            "driver_table_coef": np.zeros((ndriver, 0)),
+            "force_table_size": np.zeros(nforce, dtype=np.int64),
+            "force_table_knots": np.zeros((nforce, 0)),
+            "force_table_coef": np.zeros((nforce, 0)),
             "joint_axis": np.full((1, njoint, 2), np.nan),
             "joint_relative_angle": np.full((1, njoint), np.nan),
             "joint_model": np.zeros(njoint, dtype=np.int64),
@@ -395,8 +421,14 @@ _TOPOLOGY_FIELDS = frozenset(
         "driver_row",
         "driver_law",
         "driver_joint",
+        "driver_table_size",
+        "driver_table_knots",
+        "driver_table_coef",
         "force_body",
         "force_law",
+        "force_table_size",
+        "force_table_knots",
+        "force_table_coef",
         "spring_body_a",
         "spring_body_b",
     }

@@ -193,7 +193,41 @@ DRIVER_CASES = {
         'driver.bar.frequency: required for law "harmonic"',
     ),
     "frequency not positive": (BAR.replace("frequency = 1.5", "frequency = 0.0"), "frequency"),
-    "unknown law": (BAR.replace('law = "harmonic"', 'law = "table"'), "driver.bar.law"),
+    "unknown law": (BAR.replace('law = "harmonic"', 'law = "cam"'), "driver.bar.law"),
+    "table without angles": (
+        BAR.replace('law = "harmonic"', 'law = "table"\ntimes = [0.0, 1.0]')
+        .replace("omega = 0.7\n", "")
+        .replace("amplitude = 0.4\n", "")
+        .replace("frequency = 1.5\n", "")
+        .replace("phase = 0.3\n", ""),
+        'driver.bar.angles: required for law "table"',
+    ),
+    "table times not increasing": (
+        BAR.replace(
+            'law = "harmonic"', 'law = "table"\ntimes = [0.0, 0.5, 0.5]\nangles = [0, 1, 2]'
+        )
+        .replace("omega = 0.7\n", "")
+        .replace("amplitude = 0.4\n", "")
+        .replace("frequency = 1.5\n", "")
+        .replace("phase = 0.3\n", ""),
+        "driver.bar.times: must increase, but times[2] = 0.5 follows 0.5",
+    ),
+    "omega with a table": (
+        BAR.replace('law = "harmonic"', 'law = "table"\ntimes = [0.0, 1.0]\nangles = [0, 1]')
+        .replace("amplitude = 0.4\n", "")
+        .replace("frequency = 1.5\n", "")
+        .replace("phase = 0.3\n", ""),
+        'driver.bar.omega: a driver of law "table" takes `times` and `angles` only',
+    ),
+    "table shorter than the run": (
+        BAR.replace('law = "harmonic"', 'law = "table"\ntimes = [0.0, 0.5]\nangles = [0, 1]')
+        .replace("omega = 0.7\n", "")
+        .replace("amplitude = 0.4\n", "")
+        .replace("frequency = 1.5\n", "")
+        .replace("phase = 0.3\n", "")
+        + "[simulate]\nt_end = 1.0\ndt = 1e-3\n",
+        "driver.bar.times: the table ends at 0.5 s, before simulate.t_end = 1.0 s",
+    ),
     "modes along a harmonic driver": (
         BAR + '[modes]\nalong = { driver = "bar", points = 8 }\n',
         'modes.along: follows drivers of law "constant" only',
@@ -217,3 +251,82 @@ def test_cli_run__bad_driver_law_is_one_line_exit_2_no_folder(
     (tmp_path / "scene.toml").write_text(text)
     assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+# -- table law ---------------------------------------------------------------------------------
+CUBIC = (THETA0, 0.7, -0.9, 1.3)  # θ(t) = c0 + c1 t + c2 t² + c3 t³
+
+
+def cubic_swing_text() -> str:
+    """The pinned bar turned by a table of θ(t) = a cubic at 11 knots on [0, 1] s: the
+    not-a-knot spline through them is that cubic, exactly."""
+    times = np.linspace(0.0, 1.0, 11)
+    angles = np.polyval(CUBIC[::-1], times)
+    driver = (
+        f'law = "table"\ntimes = {[float(t) for t in times]}\n'
+        f"angles = {[float(a) for a in angles]}\n"
+    )
+    text = swing_text()
+    start = text.index('law = "harmonic"')
+    end = text.index("phase = 0.3\n") + len("phase = 0.3\n")
+    return text[:start] + driver + text[end:]
+
+
+@pytest.mark.parametrize(
+    ("method", "kernels"),
+    [("rk4", "lanes"), ("rk4", "loop"), ("rk45", "lanes"), ("radau", "lanes"),
+     ("generalized-alpha", "lanes")],
+)  # fmt: skip
+def test_table_driver__a_cubic_table_is_followed_with_the_closed_form_torque(method, kernels):
+    model = model_of(cubic_swing_text())
+    start = assemble(model)
+    assert start.v[0, 2] == pytest.approx(CUBIC[1], rel=1e-12)  # ḟ(0) = c1
+    settings = dict(
+        t_end=1.0, dt=1e-4, output_dt=1e-2, method=method, kernels=kernels, rtol=1e-11,
+        atol=1e-12,
+    )  # fmt: skip
+    out = simulate(model, settings, start.q, start.v, np.float64)
+    assert out["status"][0] == 0
+    t = out["time"]
+    theta = np.polyval(CUBIC[::-1], t)
+    acc = 2 * CUBIC[2] + 6 * CUBIC[3] * t
+    torque = (INERTIA + MASS * HALF * HALF) * acc + MASS * GRAVITY * HALF * np.cos(theta)
+    np.testing.assert_allclose(out["q"][0, :, 0, 2], theta, rtol=0, atol=ANGLE_ATOL[method] + 1e-13)
+    got = out["driver_torque"][0, :, 0]
+    assert np.abs(got - torque).max() <= TORQUE_RTOL[method] * np.abs(torque).max()
+
+
+def test_table_driver__spline_through_the_points_and_its_derivatives():
+    """A table of a smooth motion: the spline passes through every point, and between them
+    ḟ and f̈ (the velocity and acceleration rows) agree with central differences of f."""
+    times = np.linspace(-0.1, 1.2, 27)
+    angles = THETA0 + 2.0 * times + 0.3 * np.sin(7.0 * times)
+    text = cubic_swing_text()
+    text = text[: text.index("times = ")] + (
+        f"times = {[float(t) for t in times]}\nangles = {[float(a) for a in angles]}\n"
+    )
+    model = model_of(text)
+    km = model.kernel_model()
+    q = np.zeros(model.ndof)
+    phi = np.empty(model.ncon)
+    row = model.driver_row[0]
+
+    def f(t: float) -> float:
+        constraint_residual(km, 0, q, t, phi)
+        return -phi[row]  # Φ = θ − f with θ = 0
+
+    for t, a in zip(times, angles, strict=True):
+        assert f(t) == pytest.approx(a, abs=1e-13)
+    nu, gamma = np.empty(model.ncon), np.empty(model.ncon)
+    h = 1e-5
+    for t in (0.0, 0.123, 0.77):
+        constraint_velocity_rhs(km, 0, t, nu)
+        constraint_gamma(km, 0, q, np.zeros(model.ndof), t, gamma)
+        assert nu[row] == pytest.approx((f(t + h) - f(t - h)) / (2 * h), rel=1e-8)
+        nu_next, nu_prev = np.empty(model.ncon), np.empty(model.ncon)
+        constraint_velocity_rhs(km, 0, t + h, nu_next)
+        constraint_velocity_rhs(km, 0, t - h, nu_prev)
+        # f̈ = dḟ/dt; across a knot f‴ jumps: the difference is off by up to h |Δf‴| / 2
+        assert gamma[row] == pytest.approx((nu_next[row] - nu_prev[row]) / (2 * h), abs=1e-4)
+        _, rate, acc = dense.driver_law(model, 0, 0, t)
+        assert (nu[row], gamma[row]) == pytest.approx((rate, acc), rel=1e-13)

@@ -141,7 +141,19 @@ LOAD_CASES = {
         ROTOR.replace('law = "harmonic"\n', "").replace(f"frequency = {FREQUENCY}\n", ""),
         'force.couple.phase: only a load of law "harmonic" has one',
     ),
-    "unknown load law": (ROTOR.replace('law = "harmonic"', 'law = "table"'), "force.couple.law"),
+    "unknown load law": (ROTOR.replace('law = "harmonic"', 'law = "ramp"'), "force.couple.law"),
+    "table without factors": (
+        ROTOR.replace('law = "harmonic"', 'law = "table"\ntimes = [0.0, 1.0]')
+        .replace(f"frequency = {FREQUENCY}\n", "")
+        .replace(f"phase = {PHASE}\n", ""),
+        'force.couple.factors: required for law "table"',
+    ),
+    "table factors of another length": (
+        ROTOR.replace('law = "harmonic"', 'law = "table"\ntimes = [0.0, 1.0]\nfactors = [1.0]')
+        .replace(f"frequency = {FREQUENCY}\n", "")
+        .replace(f"phase = {PHASE}\n", ""),
+        "force.couple.factors: 1 values for 2 times (one value per time)",
+    ),
 }
 
 
@@ -161,3 +173,39 @@ def test_cli_run__bad_load_law_is_one_line_exit_2_no_folder(
     (tmp_path / "scene.toml").write_text(text)
     assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+# -- table law ---------------------------------------------------------------------------------
+FACTOR = (1.0, 0.5, -0.3, 0.2)  # g(t) = 1 + 0.5 t − 0.3 t² + 0.2 t³
+
+
+def rotor_table_text() -> str:
+    """The rotor under its couple times a table of g(t), a cubic at 9 knots on [0, 1.2] s:
+    the not-a-knot spline through them is g itself."""
+    times = np.linspace(0.0, 1.2, 9)
+    factors = np.polyval(FACTOR[::-1], times)
+    law = f'law = "table"\ntimes = {[float(t) for t in times]}\n'
+    law += f"factors = {[float(g) for g in factors]}\n"
+    text = ROTOR.replace('law = "harmonic"\n', law)
+    return text.replace(f"frequency = {FREQUENCY}\n", "").replace(f"phase = {PHASE}\n", "")
+
+
+@pytest.mark.parametrize(("method", "kernels"), METHODS)
+def test_table_load__rotor_under_a_tabled_couple_matches_the_closed_form(method, kernels):
+    """J θ̈ = τ g(t) from rest: θ = (τ/J) (t²/2 + g1 t³/6 + g2 t⁴/12 + g3 t⁵/20)."""
+    out = _run(rotor_table_text(), method, kernels)
+    t = out["time"]
+    g0, g1, g2, g3 = FACTOR
+    theta = TORQUE / INERTIA * (g0 * t**2 / 2 + g1 * t**3 / 6 + g2 * t**4 / 12 + g3 * t**5 / 20)
+    np.testing.assert_allclose(out["q"][0, :, 0, 2], theta, rtol=0, atol=ATOL[method])
+
+
+def test_table_load__kernel_factor_is_the_spline_through_the_table():
+    model = model_of(rotor_table_text())
+    km = model.kernel_model()
+    q = np.zeros(model.ndof)
+    F = np.empty(model.ndof)
+    for t in (0.0, 0.15, 0.6, 1.2):
+        applied_forces(km, 0, q, q, t, F)
+        assert F[2] == pytest.approx(TORQUE * np.polyval(FACTOR[::-1], t), rel=1e-13)
+        np.testing.assert_allclose(F, dense.applied_forces(model, 0, q, q, t), rtol=1e-14)

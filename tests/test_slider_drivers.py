@@ -282,3 +282,22 @@ def test_cli_run__bad_slider_driver_is_one_line_exit_2_no_folder(
     (tmp_path / "scene.toml").write_text(text)
     assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+
+
+def test_slider_driver__a_table_of_displacements_on_the_incline():
+    """A cubic stroke s(t) tabled at 6 knots: followed exactly (the spline is the cubic), with
+    the driving force m s̈ + m g sin α."""
+    stroke_poly = (0.1, 0.2, 0.4, -0.3)
+    times = np.linspace(0.0, 0.6, 6)
+    table = (
+        f'law = "table"\ntimes = {[float(t) for t in times]}\n'
+        f"displacements = {[float(x) for x in np.polyval(stroke_poly[::-1], times)]}\n"
+    )
+    text = INCLINE[: INCLINE.index('law = "harmonic"')] + table
+    out = _run(text, "rk4", "lanes", t_end=0.6)
+    t = out["time"]
+    s = np.polyval(stroke_poly[::-1], t)
+    acc = 2 * stroke_poly[2] + 6 * stroke_poly[3] * t
+    np.testing.assert_allclose(out["q"][0, :, 0, 0], s * math.cos(TILT), rtol=0, atol=1e-12)
+    force = MASS * acc + MASS * GRAVITY * math.sin(TILT)
+    np.testing.assert_allclose(out["driver_force"][0, :, 0], force, rtol=1e-11, atol=1e-11)

@@ -26,6 +26,7 @@ from mcchain.contact import (
     LANKARANI_NIKRAVESH,
 )
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
+from mcchain.scene.compile import spline_value
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -362,6 +363,16 @@ class Emitter:
             # f = f0 + rate · t (+ A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too)
             r = topo.driver_row[d]
             swing, swing_rate = "", ""
+            if topo.driver_tables and topo.driver_tables[d]:  # g(t) − g(0), ġ, g̈ (g̈ serves γ)
+                knots, coef = topo.driver_tables[d]
+                self.emit(
+                    f"tvs{d} = spline_at(TK{d}, TC{d}, {len(knots)}, {t})",
+                    f"tv{d} = tvs{d}[0]",
+                    f"tv1{d} = tvs{d}[1]",
+                    f"tv2{d} = tvs{d}[2]",
+                )
+                start = spline_value(np.asarray(knots), np.asarray(coef), 0.0)
+                swing, swing_rate = f" - (tv{d} - {start!r})", f" + tv1{d}"
             if d in topo.harmonic_drivers:
                 self.emit(f"hw{d} = {TWO_PI!r} * p_frq{d}")
                 self.emit(*sincos_code(f"(hw{d} * {t} + p_pha{d})", f"hs{d}", f"hc{d}", f"h{d}"))
@@ -446,6 +457,8 @@ class Emitter:
                     )
             if d in topo.harmonic_drivers:  # −Φ_tt = f̈ = −A Ω² sin(Ω t + φ)
                 terms.append(f"-(p_amp{d} * hw{d} * hw{d} * hs{d})")
+            if topo.driver_tables and topo.driver_tables[d]:  # f̈ of the table's spline
+                terms.append(f"tv2{d}")
             self.emit(f"gam{r} = " + (" + ".join(terms) if terms else "0.0"))
         if baumgarte:
             for r in range(topo.ncon):
@@ -470,9 +483,13 @@ class Emitter:
             if b == GROUND:
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", q, tag)
-            if f in topo.harmonic_loads:
-                arg = f"({TWO_PI!r} * p_ffr{f} * {t} + p_fph{f})"
-                self.emit(*sincos_code(arg, f"lf{f}", f"_lfc{f}", f"lf{f}{tag}"))
+            if f in topo.varying_loads:
+                if f in topo.harmonic_loads:
+                    arg = f"({TWO_PI!r} * p_ffr{f} * {t} + p_fph{f})"
+                    self.emit(*sincos_code(arg, f"lf{f}", f"_lfc{f}", f"lf{f}{tag}"))
+                else:  # a table's spline
+                    n = len(topo.load_tables[f][0])
+                    self.emit(f"lfs{f} = spline_at(FK{f}, FC{f}, {n}, {t})", f"lf{f} = lfs{f}[0]")
                 self.emit(
                     f"F{3 * b} += lf{f} * p_fx{f}",
                     f"F{3 * b + 1} += lf{f} * p_fy{f}",
@@ -809,7 +826,7 @@ class Emitter:
                 f"energy -= p_m{b} * (p_gx * q{x} + p_gy * q{y})",
             )
         for f, b in enumerate(topo.force_body):
-            if b == GROUND or f in topo.harmonic_loads:  # a harmonic load has no potential
+            if b == GROUND or f in topo.varying_loads:  # a load varying in time: no potential
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}")
             self.emit(f"energy -= p_fx{f} * fp{f}X + p_fy{f} * fp{f}Y + p_tq{f} * q{3 * b + 2}")

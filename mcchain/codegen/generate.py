@@ -486,6 +486,8 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions())
+    if any(topo.driver_tables) or any(topo.load_tables):
+        parts.append(_table_constants(topo))
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
@@ -519,6 +521,26 @@ def _contact_functions() -> str:
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)
+
+
+def _table_constants(topo: Topology) -> str:
+    """The table laws' splines as module constants (``TK{d}``/``TC{d}`` of drivers,
+    ``FK{f}``/``FC{f}`` of loads: knots and ascending coefficients), and a copy of
+    :func:`mcchain.kernels.tables.spline_at` (copied for the reason of
+    :func:`_contact_functions`)."""
+    import inspect
+
+    from mcchain.kernels import tables
+
+    lines = ["# table laws: knots and ascending cubic coefficients per segment"]
+    for prefix, items in (("T", topo.driver_tables), ("F", topo.load_tables)):
+        for i, table in enumerate(items):
+            if table:
+                lines.append(f"{prefix}K{i} = {table[0]!r}")
+                lines.append(f"{prefix}C{i} = {table[1]!r}")
+    source = inspect.getsource(tables.spline_at.py_func)
+    lines.append("\n@njit(**JIT)\n" + source[source.index("def ") :])
+    return "\n".join(lines)
 
 
 _MODULES: dict[tuple[Topology, str], ModuleType] = {}

@@ -12,7 +12,14 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from mcchain.model import DRIVER_HARMONIC, LOAD_HARMONIC, JointKind, Model, constraint_rows
+from mcchain.model import (
+    DRIVER_HARMONIC,
+    LOAD_CONSTANT,
+    LOAD_HARMONIC,
+    JointKind,
+    Model,
+    constraint_rows,
+)
 from mcchain.parameters import Slot, packed_slots
 
 
@@ -36,6 +43,9 @@ class Topology:
     driver_law: tuple[int, ...] = ()
     force_law: tuple[int, ...] = ()
     driver_joint: tuple[int, ...] = ()
+    # Table laws: per driver / load, (knots, ascending coefficients) of its spline, or ()
+    driver_tables: tuple[tuple[tuple[float, ...], ...], ...] = ()
+    load_tables: tuple[tuple[tuple[float, ...], ...], ...] = ()
 
     def __repr__(self) -> str:
         # The contact fields only when a joint uses the law, the driver laws only when one is
@@ -50,6 +60,10 @@ class Topology:
             names = [n for n in names if n != "force_law"]
         if not self.slider_drivers:
             names = [n for n in names if n != "driver_joint"]
+        if not any(self.driver_tables):
+            names = [n for n in names if n != "driver_tables"]
+        if not any(self.load_tables):
+            names = [n for n in names if n != "load_tables"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -73,7 +87,11 @@ class Topology:
             driver_law=t(model.driver_law),
             force_law=t(model.force_law),
             driver_joint=t(model.driver_joint),
-        )
+            driver_tables=_tables(model.driver_table_size, model.driver_table_knots,
+                                  model.driver_table_coef),
+            load_tables=_tables(model.force_table_size, model.force_table_knots,
+                                model.force_table_coef),
+        )  # fmt: skip
 
     @property
     def ndof(self) -> int:
@@ -129,6 +147,11 @@ class Topology:
         """The forces of law harmonic."""
         return tuple(f for f, law in enumerate(self.force_law) if law == LOAD_HARMONIC)
 
+    @property
+    def varying_loads(self) -> tuple[int, ...]:
+        """The forces that vary in time (law harmonic or table): no potential."""
+        return tuple(f for f, law in enumerate(self.force_law) if law != LOAD_CONSTANT)
+
     def packed(self) -> list[Slot]:
         """The rows of ``P``, in order (:func:`mcchain.parameters.packed_slots`)."""
         return packed_slots(
@@ -146,6 +169,22 @@ class Topology:
     def slots(self) -> dict[str, int]:
         """Row of ``P`` holding each named per-sample quantity."""
         return {slot.name: i for i, slot in enumerate(self.packed())}
+
+
+def _tables(
+    size: np.ndarray, knots: np.ndarray, coef: np.ndarray
+) -> tuple[tuple[tuple[float, ...], ...], ...]:
+    """Per item, (knots, coefficients) of its table's spline as tuples of floats, or ()."""
+    out: list[tuple[tuple[float, ...], ...]] = []
+    for i, n in enumerate(np.asarray(size).reshape(-1)):
+        n = int(n)
+        if n == 0:
+            out.append(())
+            continue
+        out.append(
+            (tuple(float(x) for x in knots[i, :n]), tuple(float(x) for x in coef[i, : 4 * (n - 1)]))
+        )
+    return tuple(out)
 
 
 def pack_parameters(model: Model, topology: Topology | None = None) -> np.ndarray:

@@ -24,12 +24,17 @@ from mcchain.kernels.joints import (
 )
 
 # numba reads module globals as compile-time constants
-from mcchain.model import LOAD_HARMONIC
+from mcchain.kernels.tables import spline_at
+from mcchain.model import LOAD_CONSTANT, LOAD_HARMONIC, LOAD_TABLE
 
 
 @njit(**JIT)
 def load_factor(km, s, k, t):
-    """The time factor of load ``k`` at ``t``: 1 (constant) or sin(2π f t + φ) (harmonic)."""
+    """The time factor of load ``k`` at ``t``: 1 (constant), sin(2π f t + φ) (harmonic) or
+    its table's spline (table)."""
+    if km.force_law[k] == LOAD_TABLE:
+        n = km.force_table_size[k]
+        return spline_at(km.force_table_knots[k], km.force_table_coef[k], n, t)[0]
     if km.force_law[k] != LOAD_HARMONIC:
         return 1.0
     w = TWO_PI * km.force_frequency[s % km.force_frequency.shape[0], k]
@@ -247,7 +252,8 @@ def applied_stiffness_add(km, s, q, t, K_out):
 @njit(**JIT)
 def potential_energy(km, s, q):
     """Potential energy, J: −m g·r, −f·(r + p) and −τ θ of constant loads, and
-    ½ k (L − L₀)². A harmonic load has no potential (it does work, as a driver does)."""
+    ½ k (L − L₀)². A load that varies in time has no potential (it does work, as a driver
+    does)."""
     energy = 0.0
     ig = s % km.gravity.shape[0]
     im = s % km.body_mass.shape[0]
@@ -257,7 +263,7 @@ def potential_energy(km, s, q):
         )
     for k in range(km.force_body.shape[0]):
         b = km.force_body[k]
-        if b < 0 or km.force_law[k] == LOAD_HARMONIC:
+        if b < 0 or km.force_law[k] != LOAD_CONSTANT:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
         energy -= fx * (q[3 * b] + px) + fy * (q[3 * b + 1] + py)

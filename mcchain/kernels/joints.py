@@ -27,8 +27,11 @@ from numba import njit
 from mcchain.kernels.config import JIT
 
 # numba reads module globals as compile-time constants
+from mcchain.kernels.tables import spline_at
 from mcchain.model import (  # noqa: F401 (re-exported)
+    DRIVER_CONSTANT,
     DRIVER_HARMONIC,
+    DRIVER_TABLE,
     JOINT_CLEARANCE,
     JOINT_IDEAL,
     JOINT_PRISMATIC,
@@ -39,8 +42,16 @@ TWO_PI = 2.0 * math.pi
 
 @njit(**JIT)
 def driver_swing(km, s, j, t):
-    """The harmonic part of driver ``j``'s angle at ``t``: (A (sin(Ωt + φ) − sin φ),
-    A Ω cos(Ωt + φ), −A Ω² sin(Ωt + φ)) with Ω = 2π f; zeros for a constant-speed driver."""
+    """What driver ``j``'s law adds at ``t`` to the steady f(0) + rate · t, with its first and
+    second derivatives: (A (sin(Ωt + φ) − sin φ), A Ω cos(Ωt + φ), −A Ω² sin(Ωt + φ)), Ω = 2π f,
+    for a harmonic law; (g(t) − g(0), ġ, g̈) of the spline g of a table law (whose f(0) is
+    g(0) and rate 0); zeros at constant speed."""
+    if km.driver_law[j] == DRIVER_TABLE:
+        n = km.driver_table_size[j]
+        knots = km.driver_table_knots[j]
+        coef = km.driver_table_coef[j]
+        value, rate, acc = spline_at(knots, coef, n, t)
+        return value - spline_at(knots, coef, n, 0.0)[0], rate, acc
     if km.driver_law[j] != DRIVER_HARMONIC:
         return 0.0, 0.0, 0.0
     amp = km.driver_amplitude[s % km.driver_amplitude.shape[0], j]
@@ -183,7 +194,7 @@ def constraint_residual(km, s, q, t, phi_out):
         i0 = s % km.driver_angle0.shape[0]
         theta = q[3 * km.driver_body[j] + 2]
         phi = theta - km.driver_angle0[i0, j] - km.driver_omega[i, j] * t
-        if km.driver_law[j] == DRIVER_HARMONIC:  # (a constant law keeps its exact rounding)
+        if km.driver_law[j] != DRIVER_CONSTANT:  # (a constant law keeps its exact rounding)
             phi -= driver_swing(km, s, j, t)[0]
         phi_out[km.driver_row[j]] = phi
 

@@ -8,6 +8,8 @@ against ``dt``. Each failure is one :class:`~mcchain.errors.SceneError` line
 
 from __future__ import annotations
 
+import itertools
+
 from mcchain.errors import SceneError
 from mcchain.parameters import PARAMETERS
 from mcchain.scene.models import (
@@ -216,6 +218,14 @@ def check_scene(scene: Scene) -> None:
 
     if scene.simulate is not None:
         sim = scene.simulate
+        tabled = [("driver", i, d.times) for i, d in enumerate(scene.driver) if d.law == "table"]
+        tabled += [("force", i, f.times) for i, f in enumerate(scene.force) if f.law == "table"]
+        for kind, i, times in tabled:
+            if times is not None and times[-1] < sim.t_end:
+                raise SceneError(
+                    f"{_item(scene, kind, i)}.times: the table ends at {times[-1]!r} s, before "
+                    f"simulate.t_end = {sim.t_end!r} s (extend it to cover the run)"
+                )
         for key in ("dt", "output_dt"):
             value = getattr(sim, key)
             if value is not None and value > sim.t_end:
@@ -278,6 +288,21 @@ def _check_driver_law(where: str, driver: Driver, sampled: set[str]) -> None:
     def given(key: str) -> bool:
         return getattr(driver, key) is not None or f"driver.{driver.name}.{key}" in sampled
 
+    values = "displacements" if driver.slides else "angles"
+    table_keys = ("times", "angles", "displacements")
+    if driver.law == "table":
+        wrong = "angles" if driver.slides else "displacements"
+        for key in ("omega", "angle0", "speed", "displacement0", *HARMONIC_KEYS, wrong):
+            if given(key):
+                raise SceneError(
+                    f'{where}.{key}: a driver of law "table" takes `times` and `{values}` only '
+                    "(its start and rate come from the table)"
+                )
+        _check_table(where, driver.times, getattr(driver, values), values)
+        return
+    for key in table_keys:
+        if getattr(driver, key) is not None:
+            raise SceneError(f'{where}.{key}: only a driver of law "table" has one')
     if driver.law == "constant":
         rate = "speed" if driver.slides else "omega"
         if not given(rate):
@@ -298,11 +323,50 @@ def _check_driver_law(where: str, driver: Driver, sampled: set[str]) -> None:
                 )
 
 
+def _check_table(
+    where: str, times: list[float] | None, values: list[float] | None, name: str
+) -> None:
+    """``times`` and ``values`` of a table law: given, as long as each other, at least 2,
+    times increasing and covering t = 0."""
+    if times is None:
+        raise SceneError(f'{where}.times: required for law "table"')
+    if values is None:
+        raise SceneError(f'{where}.{name}: required for law "table"')
+    if len(times) < 2:
+        raise SceneError(f"{where}.times: a table needs at least 2 points, got {len(times)}")
+    if len(values) != len(times):
+        raise SceneError(
+            f"{where}.{name}: {len(values)} values for {len(times)} times (one value per time)"
+        )
+    steps = [b - a for a, b in itertools.pairwise(times)]
+    if min(steps) <= 0.0:
+        i = steps.index(min(steps))
+        raise SceneError(
+            f"{where}.times: must increase, but times[{i + 1}] = {times[i + 1]!r} follows "
+            f"{times[i]!r}"
+        )
+    if times[0] > 0.0:
+        raise SceneError(f"{where}.times: the table must cover t = 0, it starts at {times[0]!r}")
+
+
 def _check_load_law(where: str, force: Force, sampled: set[str]) -> None:
-    """A harmonic load has its frequency; a constant one no frequency or phase."""
+    """A harmonic load has its frequency; a table load its times and factors; a constant one
+    neither."""
 
     def given(key: str) -> bool:
         return getattr(force, key) is not None or f"force.{force.name}.{key}" in sampled
+
+    if force.law == "table":
+        for key in ("frequency", "phase"):
+            if given(key):
+                raise SceneError(
+                    f'{where}.{key}: a load of law "table" takes `times` and `factors` only'
+                )
+        _check_table(where, force.times, force.factors, "factors")
+        return
+    for key in ("times", "factors"):
+        if getattr(force, key) is not None:
+            raise SceneError(f'{where}.{key}: only a load of law "table" has one')
 
     if force.law == "harmonic":
         if not given("frequency"):

@@ -93,6 +93,7 @@ def compile_model(
             varied.add((name, idx))
     else:
         values = np.empty((nsample, 0), dtype=np.float64)
+    tables = _time_tables(scene, arrays)
     _derived_defaults(scene, arrays, varied, nsample)
 
     clearance = PARAMETERS["joint", "clearance"]
@@ -150,6 +151,7 @@ def compile_model(
         ),
         driver_row=driver_row,
         driver_law=np.array([DRIVER_LAWS[d.law] for d in scene.driver], dtype=np.int64),
+        **tables,
         force_body=topo([f.body for f in scene.force]),
         force_law=np.array([LOAD_LAWS[f.law] for f in scene.force], dtype=np.int64),
         spring_body_a=topo([s.bodies[0] for s in scene.spring]),
@@ -256,6 +258,8 @@ def _derived_defaults(
         return b != GROUND and any(("q0", (3 * b + k,)) in varied for k in range(3))
 
     for d, driver in enumerate(scene.driver):
+        if driver.law == "table":  # f(0) of its spline, set by _time_tables
+            continue
         if driver.slides:
             if driver.displacement0 is None and ("driver_displacement0", (d,)) not in varied:
                 found = _axial_displacement(scene, arrays, index, driver.joint)
@@ -324,6 +328,64 @@ def _axial_displacement(
     c, s = np.cos(theta), np.sin(theta)
     ux, uy = c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1]
     return np.asarray(ux * d[:, 0] + uy * d[:, 1])
+
+
+def spline_table(times: list[float], values: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """The cubic spline through (``times``, ``values``) as the kernels evaluate it
+    (:func:`mcchain.kernels.tables.spline_at`): knots (n,) and ascending coefficients
+    (4 (n − 1),) per segment. Not-a-knot ends (scipy's default: a cubic through the first and
+    last four points; with 2 or 3 points the line or parabola through them)."""
+    from scipy.interpolate import CubicSpline
+
+    knots = np.asarray(times, dtype=np.float64)
+    spline = CubicSpline(knots, np.asarray(values, dtype=np.float64))
+    return knots, np.ascontiguousarray(spline.c[::-1].T).reshape(-1)  # (c0, c1, c2, c3) rows
+
+
+def _time_tables(scene: Scene, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The splines of table drivers and loads, padded to the longest table (the Model's
+    ``driver_table_*``/``force_table_*``); a table driver starts at f(0) with no steady
+    rate (its ``angle0``/``displacement0`` and ``omega``/``speed`` columns)."""
+    out: dict[str, np.ndarray] = {}
+    tables: dict[str, list[tuple[list[float], list[float]] | None]] = {
+        "driver": [
+            (d.times or [], (d.displacements if d.slides else d.angles) or [])
+            if d.law == "table"
+            else None
+            for d in scene.driver
+        ],
+        "force": [
+            (f.times or [], f.factors or []) if f.law == "table" else None for f in scene.force
+        ],
+    }
+    for kind, written in tables.items():
+        fitted = [spline_table(*table) if table is not None else None for table in written]
+        width = max((len(f[0]) for f in fitted if f is not None), default=0)
+        knots = np.full((len(fitted), width), np.nan)
+        coef = np.zeros((len(fitted), 4 * max(width - 1, 0)))
+        size = np.zeros(len(fitted), dtype=np.int64)
+        for i, found in enumerate(fitted):
+            if found is None:
+                continue
+            size[i] = len(found[0])
+            knots[i, : size[i]] = found[0]
+            coef[i, : len(found[1])] = found[1]
+            if kind == "driver":
+                start = spline_value(found[0], found[1], 0.0)
+                slider = scene.driver[i].slides
+                arrays["driver_displacement0" if slider else "driver_angle0"][:, i] = start
+                arrays["driver_speed" if slider else "driver_omega"][:, i] = 0.0
+        out |= {f"{kind}_table_size": size, f"{kind}_table_knots": knots}
+        out[f"{kind}_table_coef"] = coef
+    return out
+
+
+def spline_value(knots: np.ndarray, coef: np.ndarray, t: float) -> float:
+    """The spline of :func:`spline_table` at ``t`` (numpy, for the compiler)."""
+    i = int(np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(knots) - 2))
+    c = coef[4 * i : 4 * i + 4]
+    tau = t - knots[i]
+    return float(c[0] + tau * (c[1] + tau * (c[2] + tau * c[3])))
 
 
 def _rows_like(arrays: dict[str, np.ndarray], name: str, rows: int) -> np.ndarray:

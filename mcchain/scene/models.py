@@ -269,10 +269,11 @@ class Driver(_Section):
         description="the driven prismatic joint (its displacement along the axis); this or "
         "``body`` is required.",
     )
-    law: Literal["constant", "harmonic"] = Field(
+    law: Literal["constant", "harmonic", "table"] = Field(
         default="constant",
-        description='"constant" (θ0 + ω t, default) or "harmonic" (θ0 + ω t + A (sin(2π f t '
-        "+ φ) − sin φ)).",
+        description='"constant" (θ0 + ω t, default), "harmonic" (θ0 + ω t + A (sin(2π f t '
+        '+ φ) − sin φ)) or "table" (a cubic spline through ``times`` and ``angles`` or '
+        "``displacements``).",
     )
     omega: Num | None = Field(
         default=None,
@@ -306,6 +307,17 @@ class Driver(_Section):
         description='v of a slider driver, m/s; required for law "constant", default 0 for '
         '"harmonic".',
     )
+    times: list[Num] | None = Field(
+        default=None,
+        description='knots of law "table", s, increasing; the table must cover t = 0 (and '
+        "``[simulate] t_end``).",
+    )
+    angles: list[Num] | None = Field(
+        default=None, description='θ at ``times`` of law "table", rad (a body driver).'
+    )
+    displacements: list[Num] | None = Field(
+        default=None, description='s at ``times`` of law "table", m (a slider driver).'
+    )
 
     @property
     def name(self) -> str:
@@ -338,10 +350,10 @@ class Force(_Section):
     torque: Num | None = Field(
         default=None, description="couple, N m, counter-clockwise positive; default 0."
     )
-    law: Literal["constant", "harmonic"] = Field(
+    law: Literal["constant", "harmonic", "table"] = Field(
         default="constant",
-        description='"constant" (default) or "harmonic": ``value`` and ``torque`` times '
-        "sin(2π f t + φ).",
+        description='"constant" (default), "harmonic" (``value`` and ``torque`` times '
+        'sin(2π f t + φ)) or "table" (times a cubic spline through `times` and `factors`).',
     )
     frequency: Num | None = Field(
         default=None,
@@ -350,6 +362,14 @@ class Force(_Section):
     )
     phase: Num | None = Field(
         default=None, description='φ of law "harmonic", rad; default 0 there, not allowed else.'
+    )
+    times: list[Num] | None = Field(
+        default=None,
+        description='knots of law "table", s, increasing; the table must cover t = 0 (and '
+        "``[simulate] t_end``).",
+    )
+    factors: list[Num] | None = Field(
+        default=None, description='the load\'s factor at ``times`` of law "table" (1: as written).'
     )
 
     _auto_name: bool = PrivateAttr(default=False)

@@ -25,10 +25,13 @@ import scipy.optimize
 
 from mcchain.model import (
     DRIVER_HARMONIC,
+    DRIVER_TABLE,
     GROUND,
     JOINT_IDEAL,
     JOINT_PRISMATIC,
+    LOAD_CONSTANT,
     LOAD_HARMONIC,
+    LOAD_TABLE,
     Model,
 )
 from mcchain.testing.factory import rotation
@@ -119,6 +122,9 @@ def driver_law(model: Model, s: int, j: int, t: float) -> tuple[float, float, fl
     theta0 = float(_param(model, "driver_displacement0" if slider else "driver_angle0", s)[j])
     omega = float(_param(model, "driver_speed" if slider else "driver_omega", s)[j])
     f, rate, acc = theta0 + omega * t, omega, 0.0
+    if int(model.driver_law[j]) == DRIVER_TABLE:
+        n = int(model.driver_table_size[j])
+        return _piecewise_cubic(model.driver_table_knots[j, :n], model.driver_table_coef[j], t)
     if int(model.driver_law[j]) == DRIVER_HARMONIC:
         amp = float(_param(model, "driver_amplitude", s)[j])
         w = 2.0 * np.pi * float(_param(model, "driver_frequency", s)[j])
@@ -401,8 +407,21 @@ def kkt_acceleration(
     return x[:n], x[n:]
 
 
+def _piecewise_cubic(knots: np.ndarray, coef: np.ndarray, t: float) -> tuple[float, float, float]:
+    """(g, ġ, g̈) at t of the compiled spline, by numpy's polynomial class on the segment that
+    holds t (an evaluation independent of the kernels')."""
+    i = int(np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(knots) - 2))
+    segment = np.polynomial.Polynomial(coef[4 * i : 4 * i + 4])
+    tau = t - knots[i]
+    return float(segment(tau)), float(segment.deriv()(tau)), float(segment.deriv(2)(tau))
+
+
 def load_factor(model: Model, s: int, k: int, t: float) -> float:
-    """1 for a constant load, sin(2π f t + φ) for a harmonic one (written out anew)."""
+    """1 for a constant load, sin(2π f t + φ) for a harmonic one, the table's spline for a
+    table one (written out anew)."""
+    if int(model.force_law[k]) == LOAD_TABLE:
+        n = int(model.force_table_size[k])
+        return _piecewise_cubic(model.force_table_knots[k, :n], model.force_table_coef[k], t)[0]
     if int(model.force_law[k]) != LOAD_HARMONIC:
         return 1.0
     f = float(_param(model, "force_frequency", s)[k])
@@ -423,7 +442,7 @@ def energy(model: Model, s: int, q: np.ndarray, v: np.ndarray) -> float:
     )
     for k in range(model.nforce):
         b = int(model.force_body[k])
-        if b != GROUND and int(model.force_law[k]) != LOAD_HARMONIC:
+        if b != GROUND and int(model.force_law[k]) == LOAD_CONSTANT:
             e -= value[k] @ (q[3 * b : 3 * b + 2] + rotation(q[3 * b + 2]) @ point[k])
             e -= torque[k] * q[3 * b + 2]
     spa, spb = _param(model, "spring_point_a", s), _param(model, "spring_point_b", s)
