@@ -209,3 +209,33 @@ def test_table_load__kernel_factor_is_the_spline_through_the_table():
         applied_forces(km, 0, q, q, t, F)
         assert F[2] == pytest.approx(TORQUE * np.polyval(FACTOR[::-1], t), rel=1e-13)
         np.testing.assert_allclose(F, dense.applied_forces(model, 0, q, q, t), rtol=1e-14)
+
+
+@pytest.mark.parametrize("text", ["harmonic", "table"])
+def test_varying_load__stiffness_matches_central_differences(text):
+    """−∂F/∂q at time t of a load off the centre of mass (its lever turns with the body),
+    harmonic or tabled, against central differences of the kernels' F(q, 0, t)."""
+    from mcchain.kernels.forces import applied_stiffness_add
+
+    scene = OSCILLATOR if text == "harmonic" else rotor_table_text()
+    scene = scene.replace('body = "slider"\nvalue', 'body = "slider"\npoint = [0.1, 0.2]\nvalue')
+    scene = scene.replace(
+        "torque = 0.4\n", "torque = 0.4\nvalue = [2.0, -1.0]\npoint = [0.3, 0.1]\n"
+    )
+    model = model_of(scene)
+    km = model.kernel_model()
+    rng = np.random.default_rng(2)
+    q, rest, t = rng.normal(size=model.ndof), np.zeros(model.ndof), 0.37
+    F = np.empty(model.ndof)
+
+    def force(x: np.ndarray) -> np.ndarray:
+        applied_forces(km, 0, x, rest, t, F)
+        return F.copy()
+
+    h = 1e-6
+    fd = -np.column_stack(
+        [(force(q + h * e) - force(q - h * e)) / (2 * h) for e in np.eye(model.ndof)]
+    )
+    K = np.zeros((model.ndof, model.ndof))
+    applied_stiffness_add(km, 0, q, t, K)
+    np.testing.assert_allclose(K, fd, rtol=0, atol=1e-7 * max(1.0, np.abs(K).max()))

@@ -301,3 +301,28 @@ def test_slider_driver__a_table_of_displacements_on_the_incline():
     np.testing.assert_allclose(out["q"][0, :, 0, 0], s * math.cos(TILT), rtol=0, atol=1e-12)
     force = MASS * acc + MASS * GRAVITY * math.sin(TILT)
     np.testing.assert_allclose(out["driver_force"][0, :, 0], force, rtol=1e-11, atol=1e-11)
+
+
+def test_slider_driver__hessian_matches_central_differences():
+    """∂(Bᵀλ)/∂q with the slider row's curvature (the axis turns with the arm), against
+    central differences of the kernels' B(q)ᵀλ."""
+    from mcchain.kernels.joints import constraint_hessian_add, constraint_jacobian
+
+    model = model_of(ARM)
+    km = model.kernel_model()
+    rng = np.random.default_rng(11)
+    q, lam = rng.normal(size=model.ndof), rng.normal(size=model.ncon)
+    B = np.empty((model.ncon, model.ndof))
+
+    def force(x: np.ndarray) -> np.ndarray:
+        constraint_jacobian(km, 0, x, B)
+        return B.T @ lam
+
+    h = 1e-6
+    fd = np.column_stack(
+        [(force(q + h * e) - force(q - h * e)) / (2 * h) for e in np.eye(model.ndof)]
+    )
+    K = np.zeros((model.ndof, model.ndof))
+    constraint_hessian_add(km, 0, q, lam, K)
+    np.testing.assert_allclose(K, fd, rtol=0, atol=1e-8 * max(1.0, np.abs(K).max()))
+    assert np.abs(K).max() > 0.1  # the slider row curves: not a trivially zero Hessian
