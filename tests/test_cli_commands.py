@@ -90,6 +90,14 @@ def assert_usage_error(proc: Ran | subprocess.CompletedProcess[str], *fragments:
     assert proc.stdout == ""
 
 
+def assert_scene_refused(run: Callable[..., Ran], folder: Path, text: str, fragment: str) -> None:
+    """``mcchain run`` of the scene ``text`` (written into ``folder``): one line with
+    ``fragment``, exit code 2, and nothing written beside the scene file."""
+    (folder / "scene.toml").write_text(text)
+    assert_usage_error(run("run", "scene.toml", "--out", "runs", cwd=folder), fragment)
+    assert sorted(p.name for p in folder.iterdir()) == ["scene.toml"]
+
+
 def test_cli__console_entry_point_smoke(tmp_path: Path) -> None:
     """One real process: ``python -m mcchain.cli`` exits 2 with the one-line message."""
     env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from test_cli_commands import Ran, assert_usage_error, in_process
+from test_cli_commands import Ran, assert_scene_refused, in_process
 
 from mcchain.testing.factory import chain_scene_text, clearance_bar_text, paper_bar_text
 from mcchain.testing.scenes import fourbar_text
@@ -88,6 +88,4 @@ def test_cli_run__bad_scene_is_one_line_exit_2_no_folder(
 ) -> None:
     text, fragment = CASES[case]
     assert text != BAR  # the mutation applied
-    (tmp_path / "scene.toml").write_text(text)
-    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+    assert_scene_refused(mcchain, tmp_path, text, fragment)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_commands import Ran, assert_usage_error, in_process
+from test_cli_commands import Ran, assert_scene_refused, in_process
 
 from mcchain.kernels.forces import applied_forces
 from mcchain.solvers.simulate import simulate
@@ -170,9 +170,7 @@ def test_cli_run__bad_load_law_is_one_line_exit_2_no_folder(
 ) -> None:
     text, fragment = LOAD_CASES[case]
     assert text != ROTOR
-    (tmp_path / "scene.toml").write_text(text)
-    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+    assert_scene_refused(mcchain, tmp_path, text, fragment)
 
 
 # -- table law ---------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_commands import Ran, assert_usage_error, in_process
+from test_cli_commands import Ran, assert_scene_refused, in_process
 
 from mcchain.kernels.joints import constraint_gamma, constraint_residual, constraint_velocity_rhs
 from mcchain.solvers.simulate import simulate
@@ -279,9 +279,7 @@ def test_cli_run__bad_slider_driver_is_one_line_exit_2_no_folder(
 ) -> None:
     text, fragment = SLIDER_CASES[case]
     assert text not in (INCLINE, ARM)
-    (tmp_path / "scene.toml").write_text(text)
-    assert_usage_error(mcchain("run", "scene.toml", "--out", "runs", cwd=tmp_path), fragment)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.toml"]
+    assert_scene_refused(mcchain, tmp_path, text, fragment)
 
 
 def test_slider_driver__a_table_of_displacements_on_the_incline():
