@@ -392,6 +392,40 @@ class Model:
 
         return as_struct(self.kernel_arrays())
 
+    def constraint_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where B and S = B M⁻¹ Bᵀ may be non-zero, from the topology alone.
+
+        Returns:
+            ``cols`` (ncon, 6) int64: the coordinates each constraint row touches, ascending,
+            −1 after the last (a joint's or slider driver's: both bodies' x, y, θ; an angle
+            driver's: its body's θ); ``first`` (ncon,) int64: the first row that shares a
+            coordinate with each row, so that row i of S (and of its LDLᵀ factor) is zero left
+            of column ``first[i]``.
+        """
+        touched: list[list[int]] = [[] for _ in range(self.ncon)]
+
+        def coordinates(*bodies: int) -> list[int]:
+            return [3 * b + i for b in sorted(bodies) if b != GROUND for i in range(3)]
+
+        for k in range(self.njoint):
+            row = int(self.joint_row[k])
+            for r in range(row, row + JointKind(int(self.joint_kind[k])).rows):
+                touched[r] = coordinates(int(self.joint_body_a[k]), int(self.joint_body_b[k]))
+        for d in range(self.ndriver):
+            k = int(self.driver_joint[d])
+            row = int(self.driver_row[d])
+            if k >= 0:
+                touched[row] = coordinates(int(self.joint_body_a[k]), int(self.joint_body_b[k]))
+            else:
+                touched[row] = [3 * int(self.driver_body[d]) + 2]
+        cols = np.full((self.ncon, 6), -1, dtype=np.int64)
+        first = np.zeros(self.ncon, dtype=np.int64)
+        for i, row_cols in enumerate(touched):
+            cols[i, : len(row_cols)] = row_cols
+            mine = set(row_cols)
+            first[i] = next(j for j in range(i + 1) if mine & set(touched[j]) or j == i)
+        return cols, first
+
     def select(self, start: int, stop: int) -> Model:
         """The sub-model of samples ``start:stop`` (per-sample arrays sliced, others kept)."""
         changes: dict[str, object] = {"nsample": stop - start}

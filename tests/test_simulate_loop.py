@@ -11,6 +11,7 @@ from mcchain.errors import SceneError
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
+from mcchain.testing import dense
 from mcchain.testing.factory import write_scene
 from mcchain.testing.scenes import scene_model, straight_chain_text
 
@@ -86,3 +87,30 @@ def scene_text_with_contact() -> str:
     config = Path(__file__).resolve().parents[1] / "configs" / "fourbar-clearance.toml"
     text = config.read_text()
     return text.replace('method = "rk45"', 'method = "rk4"\nkernels = "loop"')
+
+
+def test_constraint_pattern__rows_touch_their_bodies_and_the_envelope_is_tight():
+    """The four-bar: rows O2 (0-1), A (2-3), B (4, clearance), O4 (5-6), the crank's driver
+    (7); each row's coordinates, and the first row it shares one with."""
+    model = scene_model("fourbar")
+    cols, first = model.constraint_pattern()
+    crank, coupler, rocker = [0, 1, 2], [3, 4, 5], [6, 7, 8]
+    expected = [
+        crank,
+        crank,
+        crank + coupler,
+        crank + coupler,
+        coupler + rocker,
+        rocker,
+        rocker,
+        [2],
+    ]
+    for row, want in enumerate(expected):
+        assert [c for c in cols[row] if c >= 0] == want, row
+    np.testing.assert_array_equal(first, [0, 0, 0, 0, 2, 4, 4, 0])
+    # S = B M⁻¹ Bᵀ is zero left of the envelope at any configuration
+    q = np.random.default_rng(0).normal(size=model.ndof)
+    B = dense.constraint_jacobian_formula(model, 0, q)
+    S = B @ np.diag(1.0 / dense.mass_diagonal(model, 0)) @ B.T
+    for i, f in enumerate(first):
+        assert not S[i, :f].any()

@@ -3,7 +3,8 @@
 The generated lane kernels (:mod:`mcchain.codegen`) are straight-line code per topology:
 fastest per step, but every new topology compiles a new module. This module integrates
 any topology with the per-sample kernels of ``joints.py``, ``forces.py`` and ``linalg.py``
-(dense Schur complement S = B M⁻¹ Bᵀ, Cholesky), so it compiles once per installation. It
+(the Schur complement S = B M⁻¹ Bᵀ formed over B's non-zeros and factored in its envelope),
+so it compiles once per installation. It
 follows the lanes' fixed-step RK4 step by step (``[simulate] kernels = "loop"``): the same
 stages, the same failure checks at each step's start (max |Φ| past the tolerance: DIVERGED;
 rank loss in a stage: SINGULAR at the step's end; λ ≤ 0 at a clearance joint: CONTACT_LOST)
@@ -32,8 +33,10 @@ from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 
 @njit(**JIT)
-def ldl_factor(S, m, tau, dinv_out):
-    """LDLᵀ of ``S[:m, :m]`` in place (unit L below the diagonal) and ``dinv_out`` = 1/D.
+def ldl_factor(S, m, first, tau, dinv_out):
+    """LDLᵀ of ``S[:m, :m]`` in place (unit L below the diagonal) and ``dinv_out`` = 1/D, in
+    the envelope ``first`` (row i holds its non-zeros from column ``first[i]`` on; an LDLᵀ
+    fills nothing outside it, so entries outside are never read).
 
     A pivot D_j ≤ ``tau`` × S_jj is dropped (1/D_j = 0: row j counts as dependent on the
     previous ones), as the generated lanes do. Returns the number of dropped pivots.
@@ -42,26 +45,28 @@ def ldl_factor(S, m, tau, dinv_out):
     for j in range(m):
         diag = S[j, j]
         acc = diag
-        for k in range(j):
+        for k in range(first[j], j):
             acc -= S[j, k] * S[j, k] * S[k, k]
         ok = acc > tau * diag
         dropped += 0 if ok else 1
         dinv_out[j] = 1.0 / acc if ok else 0.0
         S[j, j] = acc  # D_j; L_jk (k < j) below the diagonal
         for i in range(j + 1, m):
+            if first[i] > j:
+                continue
             acc_i = S[i, j]
-            for k in range(j):
+            for k in range(max(first[i], first[j]), j):
                 acc_i -= S[i, k] * S[j, k] * S[k, k]
             S[i, j] = acc_i * dinv_out[j]
     return dropped
 
 
 @njit(**JIT)
-def ldl_solve(L, m, dinv, b):
+def ldl_solve(L, m, first, dinv, b):
     """Solve L D Lᵀ x = b with :func:`ldl_factor`'s factors; ``b[:m]`` becomes x."""
     for i in range(m):
         acc = b[i]
-        for k in range(i):
+        for k in range(first[i], i):
             acc -= L[i, k] * b[k]
         b[i] = acc
     for i in range(m):
@@ -69,17 +74,23 @@ def ldl_solve(L, m, dinv, b):
     for i in range(m - 1, -1, -1):
         acc = b[i]
         for k in range(i + 1, m):
-            acc -= L[k, i] * b[k]
+            if first[k] <= i:
+                acc -= L[k, i] * b[k]
         b[i] = acc
 
 
 @njit(**JIT)
-def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, work_B, work_S, work_F,
-                        work_g, work_phi, qdd_out, lam_out):  # fmt: skip
+def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, cols, first, work_B,
+                        work_S, work_F, work_g, work_phi, qdd_out, lam_out):  # fmt: skip
     """q̈ and λ of M q̈ + Bᵀλ = F, B q̈ = γ − 2α Φ̇ − β² Φ at (q, v, t) for one sample.
 
-    ``minv`` (ndof,) is M⁻¹; ``work_*`` are scratch of shapes (ncon, ndof), (ncon, ncon),
-    (ndof,), (ncon,), (ncon,). λ = S⁻¹ (B M⁻¹ F − γ′), q̈ = M⁻¹ (F − Bᵀλ).
+    ``minv`` (ndof,) is M⁻¹; ``cols`` (ncon, 6) the columns where each row of B may be
+    non-zero (−1 after the last) and ``first`` (ncon,) the envelope of S
+    (:meth:`mcchain.model.Model.constraint_pattern`): every product below runs over the
+    non-zeros only, so a step costs O(ncon · band²), not O(ncon² ndof). ``work_*`` are scratch
+    of shapes (ncon, ndof), (ncon, ncon), (ndof,), (ncon,), (ncon,).
+    λ = S⁻¹ (B M⁻¹ F − γ′), q̈ = M⁻¹ (F − Bᵀλ); the sums skip exact zeros only, so the values
+    are those of the dense products.
 
     Returns:
         max |Φ| at (q, t), or −1 − max |Φ| when S lost rank (a pivot ≤ ``tau`` × its
@@ -87,49 +98,66 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, work_B, work
     """
     n = q.shape[0]
     m = lam_out.shape[0]
+    width = cols.shape[1]
     applied_forces(km, s, q, v, t, work_F)
     constraint_residual(km, s, q, t, work_phi)
     err = max_abs(work_phi, m)
+    for k in range(n):
+        qdd_out[k] = work_F[k]
     if m > 0:
         constraint_jacobian(km, s, q, work_B)
         constraint_gamma(km, s, q, v, t, work_g)
         constraint_velocity_rhs(km, s, t, lam_out)  # ν, then Φ̇ = B q̇ − ν (drivers: −Φ_t)
         for r in range(m):
             rate = -lam_out[r]
-            for k in range(n):
+            for c in range(width):
+                k = cols[r, c]
+                if k < 0:
+                    break
                 rate += work_B[r, k] * v[k]
             work_g[r] -= balpha2 * rate + bbeta2 * work_phi[r]
         for i in range(m):
-            for j in range(i + 1):
+            for j in range(first[i], i + 1):
                 acc = 0.0
-                for k in range(n):
+                for c in range(width):
+                    k = cols[i, c]
+                    if k < 0:
+                        break
                     acc += work_B[i, k] * minv[k] * work_B[j, k]
                 work_S[i, j] = acc
                 work_S[j, i] = acc
-        dropped = ldl_factor(work_S, m, tau, work_phi)
+        dropped = ldl_factor(work_S, m, first, tau, work_phi)
         for r in range(m):
             acc = -work_g[r]
-            for k in range(n):
+            for c in range(width):
+                k = cols[r, c]
+                if k < 0:
+                    break
                 acc += work_B[r, k] * minv[k] * work_F[k]
             lam_out[r] = acc
-        ldl_solve(work_S, m, work_phi, lam_out)
+        ldl_solve(work_S, m, first, work_phi, lam_out)
         if dropped > 0:
             err = -err - 1.0  # a negative value: S lost rank (err is ≥ 0 otherwise)
-    for k in range(n):
-        acc = work_F[k]
         for r in range(m):
-            acc -= work_B[r, k] * lam_out[r]
-        qdd_out[k] = minv[k] * acc
+            for c in range(width):
+                k = cols[r, c]
+                if k < 0:
+                    break
+                qdd_out[k] -= work_B[r, k] * lam_out[r]
+    for k in range(n):
+        qdd_out[k] = minv[k] * qdd_out[k]
     return err
 
 
 @njit(**JIT)
 def rk4_run(
-    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, A, bw, cc, balpha2, bbeta2, ctol,
-    tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, status, t_div, t_sing, t_cl,
+    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, cols, first, A, bw, cc, balpha2,
+    bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, status, t_div,
+    t_sing, t_cl,
 ):  # fmt: skip
     """Fixed-step RK4 (tableau ``A``, ``bw``, ``cc``, strictly sub-diagonal) with Baumgarte
-    on the samples ``start:stop``; outputs every ``out_every`` steps, at t0 + n h."""
+    on the samples ``start:stop``; outputs every ``out_every`` steps, at t0 + n h. ``cols``,
+    ``first``: the constraint pattern (:func:`index1_acceleration`)."""
     ndof = Q0.shape[1]
     nj = km.joint_body_a.shape[0]
     nstage = bw.shape[0]
@@ -176,8 +204,9 @@ def rk4_run(
                     qs[i] = q[i] + ah * kq[i] if stage > 0 else q[i]
                     vs[i] = v[i] + ah * kv[i] if stage > 0 else v[i]
                 err = index1_acceleration(
-                    km, s, qs, vs, ts, balpha2, bbeta2, tau, minv, B, S, F, g, phi, qdd, lam
-                )
+                    km, s, qs, vs, ts, balpha2, bbeta2, tau, minv, cols, first, B, S, F, g, phi,
+                    qdd, lam,
+                )  # fmt: skip
                 if err < 0.0:
                     err = -err - 1.0
                     if stage == 0:

@@ -377,7 +377,8 @@ def _run_rk4_loop(run: _Run) -> None:
     over_samples(
         rk4_run, run.model.nsample,
         run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
-        0.0, run.dt, nstep, run.every, run.model.ncon, RK4.A, RK4.b, RK4.c,
+        0.0, run.dt, nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
+        RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)),
         run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
