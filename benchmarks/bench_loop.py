@@ -117,8 +117,15 @@ def write(rows: list[dict], samples: int) -> None:
                    label=kernels)  # fmt: skip
     left.set(xscale="log", yscale="log", xlabel="bars N", ylabel="first run of a topology [s]")
     right.set(xscale="log", yscale="log", xlabel="bars N", ylabel="instance-steps/s (warm)")
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    plain = FuncFormatter(lambda value, _: f"{value:g}")
     for ax in (left, right):
         ax.set_xticks(n, [str(x) for x in n])
+        ax.xaxis.set_minor_formatter(NullFormatter())  # no "3×10⁰" between the sizes
+        ax.yaxis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
+        ax.yaxis.set_major_formatter(plain)
+        ax.yaxis.set_minor_formatter(plain)
         ax.legend(frameon=False)
         ax.grid(alpha=0.3)
     fig.suptitle("rk4: generated lanes against the loop kernels")
