@@ -344,7 +344,7 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     import numpy as np
 
     from mcchain.contact import LAW_NAMES, LINK, MODEL_NAMES
-    from mcchain.model import DRIVER_HARMONIC, GROUND, JointKind
+    from mcchain.model import DRIVER_HARMONIC, DRIVER_TABLE, GROUND, JointKind
     from mcchain.parameters import PARAMETERS
 
     def body(index: int) -> str:
@@ -394,12 +394,21 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
         lines.append("drivers:")
         for k, name in enumerate(model.driver_names):
             slider = int(model.driver_joint[k]) >= 0
-            keys: tuple[str, ...] = ("speed", "displacement0") if slider else ("omega", "angle0")
-            if int(model.driver_law[k]) == DRIVER_HARMONIC:
-                keys += ("amplitude", "frequency", "phase")
+            driver_law = int(model.driver_law[k])
+            start, rate = ("displacement0", "speed") if slider else ("angle0", "omega")
             what = f"joint {name} along its axis, " if slider else ""
+            if driver_law == DRIVER_TABLE:
+                n = int(model.driver_table_size[k])
+                knots = model.driver_table_knots[k, :n]
+                what += f"table of {n} points over [{knots[0]:g}, {knots[-1]:g}] s, "
+                shown = show("driver", k, start) + " (from the table)"
+            else:
+                shown = show("driver", k, rate, start)
+                if driver_law == DRIVER_HARMONIC:
+                    swing = show("driver", k, "amplitude", "frequency", "phase")
+                    shown += ", " + (swing.replace(" rad,", " m,", 1) if slider else swing)
             row = int(model.driver_row[k])
-            lines.append(f"  {name}: {what}{show('driver', k, *keys)}, row {row}")
+            lines.append(f"  {name}: {what}{shown}, row {row}")
     if model.param_paths:
         lines.append("sampled (range over the samples):")
         params = np.asarray(model.parameters, dtype=float)

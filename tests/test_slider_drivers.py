@@ -324,3 +324,20 @@ def test_slider_driver__hessian_matches_central_differences():
     constraint_hessian_add(km, 0, q, lam, K)
     np.testing.assert_allclose(K, fd, rtol=0, atol=1e-8 * max(1.0, np.abs(K).max()))
     assert np.abs(K).max() > 0.1  # the slider row curves: not a trivially zero Hessian
+
+
+def test_cli_validate__prints_slider_and_table_drivers(mcchain, tmp_path: Path) -> None:
+    from test_driver_laws import cubic_swing_text
+
+    (tmp_path / "arm.toml").write_text(ARM)
+    (tmp_path / "cubic.toml").write_text(cubic_swing_text())
+    arm = mcchain("validate", "arm.toml", cwd=tmp_path)
+    assert arm.returncode == 0, arm.stderr
+    assert (
+        "  P: joint P along its axis, speed 0.3 m/s, displacement0 0.2 m, amplitude 0.05 m, "
+        "frequency 2 Hz, phase 0.5 rad, row 5"
+    ) in arm.stdout.splitlines()
+    cubic = mcchain("validate", "cubic.toml", cwd=tmp_path)
+    assert (
+        "  bar: table of 11 points over [0, 1] s, angle0 -1.2 rad (from the table), row 2"
+    ) in cubic.stdout.splitlines()
