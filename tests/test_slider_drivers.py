@@ -341,3 +341,32 @@ def test_cli_validate__prints_slider_and_table_drivers(mcchain, tmp_path: Path) 
     assert (
         "  bar: table of 11 points over [0, 1] s, angle0 -1.2 rad (from the table), row 2"
     ) in cubic.stdout.splitlines()
+
+
+def test_slider_driver__report_and_viewer_show_its_force(mcchain, tmp_path: Path) -> None:
+    """A run with a slider driver: the reaction envelopes draw "driver force P" in N (no empty
+    torque panel), and ``show`` logs it under driver_force."""
+    from test_viz_playback import read_rrd
+
+    import mcchain as package
+    from mcchain.ensemble.describe import stored_model
+    from mcchain.viz import history, playback
+
+    scene = INCLINE + "[simulate]\nt_end = 0.2\ndt = 1e-4\noutput_dt = 1e-2\n"
+    (tmp_path / "incline.toml").write_text(scene)
+    ran = mcchain("run", "incline.toml", "--out", "runs", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    ds = package.open_run(next((tmp_path / "runs").iterdir()))
+    fig = history.reaction_envelopes_figure(ds)
+    assert not isinstance(fig, str)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+    assert "driver force P" in titles and not any("torque" in t for t in titles)
+    force = next(ax for ax in fig.axes if ax.get_title() == "driver force P")
+    assert force.get_ylabel() == "N"
+    _, _, acc = stroke(np.asarray(ds["time"].values))
+    expected = MASS * acc + MASS * GRAVITY * math.sin(TILT)
+    np.testing.assert_allclose(force.lines[0].get_ydata(), expected, rtol=1e-5, atol=1e-5)
+    out = tmp_path / "incline.rrd"
+    playback.show(ds, stored_model(ds), [0], save=out)
+    rrd = read_rrd(out)
+    assert "/sample/0/driver_force/P" in rrd and "/sample/0/driver_torque/P" not in rrd

@@ -125,10 +125,13 @@ def reaction_envelopes_figure(
                 continue
             what = {"link": "λ", "contact": "F_n"}.get(str(models[k]), "λ (link) / F_n (law)")
             panels.append((f"{what} {j}{model_tag(models[k])}", q[..., k], "N"))
-    if "driver_torque" in ds.data_vars and ds.sizes.get("driver", 0):
-        q = _envelope(ds, "driver_torque", lambda a: a, idx, lost)
+    for name, what, units in (("driver_torque", "torque", "N m"), ("driver_force", "force", "N")):
+        if name not in ds.data_vars or not ds.sizes.get("driver", 0):
+            continue
+        q = _envelope(ds, name, lambda a: a, idx, lost)
         for k, d in enumerate(dim_names(ds, "driver")):
-            panels.append((f"driver torque {d}", q[..., k], "N m"))
+            if np.isfinite(q[..., k]).any():  # a slider driver has a force, not a torque
+                panels.append((f"driver {what} {d}", q[..., k], units))
     shares = []
     if "contact_mode" in ds.data_vars:
         law = [k for k, m in enumerate(models) if m not in (None, "link")]

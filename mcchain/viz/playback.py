@@ -31,6 +31,7 @@ Entities (``{i}`` is the global sample index, names are escaped entity-path part
 ``sample/{i}/joint_force/{joint}``       Scalars [x, y] (N)
 ``sample/{i}/contact_force/{joint}``     Scalars λ of clearance joints (N)
 ``sample/{i}/driver_torque/{driver}``    Scalars (N m)
+``sample/{i}/driver_force/{driver}``     Scalars of slider drivers (N)
 ``sample/{i}/energy``                    Scalars (J)
 ``sample/{i}/constraint_error``          Scalars max |Φ|
 =======================================  ==============================================
@@ -111,6 +112,7 @@ class _Track:
     joint_force: np.ndarray
     contact_force: np.ndarray | None
     driver_torque: np.ndarray | None
+    driver_force: np.ndarray | None
     energy: np.ndarray | None
     constraint_error: np.ndarray | None
 
@@ -136,6 +138,7 @@ def _track(ds: xr.Dataset, pos: int) -> _Track:
             jf,
             _values(ds, "contact_force", pos, "time", "joint"),
             _values(ds, "driver_torque", pos, "time", "driver"),
+            _values(ds, "driver_force", pos, "time", "driver"),
             _values(ds, "energy", pos, "time"),
             _values(ds, "constraint_error", pos, "time"),
         )
@@ -146,7 +149,7 @@ def _track(ds: xr.Dataset, pos: int) -> _Track:
     assert q is not None
     if jf is None:
         jf = np.full((ds.sizes.get("joint", 0), 2), np.nan)
-    return _Track(np.zeros(1), q[None], jf[None], None, None, None, None)
+    return _Track(np.zeros(1), q[None], jf[None], None, None, None, None, None)
 
 
 def _flip(xy: np.ndarray) -> np.ndarray:
@@ -411,9 +414,15 @@ def _log_one(
                 track.contact_force[:, c],
                 [f"λ {model.joint_names[c]}"],
             )
-    if track.driver_torque is not None:
+    for what, values in (
+        ("driver_torque", track.driver_torque),
+        ("driver_force", track.driver_force),
+    ):
+        if values is None:
+            continue
         for k, name in enumerate(model.driver_names):
-            scalars(f"{root}/driver_torque/{_part(name)}", track.driver_torque[:, k], [name])
+            if np.isfinite(values[:, k]).any():  # a slider driver has a force, not a torque
+                scalars(f"{root}/{what}/{_part(name)}", values[:, k], [name])
     if track.energy is not None:
         scalars(f"{root}/energy", track.energy, ["energy"])
     if track.constraint_error is not None:
@@ -535,6 +544,8 @@ def make_blueprint(
         plots.append(series("contact force λ (N)", "contact_force/**"))
     if "driver_torque" in ds.data_vars and model.ndriver:
         plots.append(series("driver torque (N m)", "driver_torque/**"))
+    if "driver_force" in ds.data_vars and model.ndriver:
+        plots.append(series("driver force (N)", "driver_force/**"))
     if "energy" in ds.data_vars:
         plots.append(series("energy (J)", "energy"))
     if "constraint_error" in ds.data_vars:
