@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from test_cli_commands import assert_usage_error, in_process
 
-from mcchain.errors import SceneError
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
+from mcchain.status import CONTACT_LOST, CONTACT_STEP_TOO_LARGE
 from mcchain.testing import dense
 from mcchain.testing.factory import write_scene
 from mcchain.testing.scenes import scene_model, straight_chain_text
@@ -75,18 +75,109 @@ def test_loop__refuses_a_method_it_does_not_have(tmp_path, monkeypatch, capsys):
     assert_usage_error(ran, "simulate.kernels: \"loop\" integrates with rk4, not 'rk45'")
 
 
-def test_loop__a_contact_law_needs_the_lanes():
-    text = scene_text_with_contact()
-    with pytest.raises(SceneError, match=r'simulate\.kernels: "loop" has no contact law'):
-        load_scene_text(text)
+CONTACT_AGREEMENT = 1e-11
+"""Largest difference between the paths under the contact law, relative to each output's
+largest value: the impact forces (1e2–1e3 × the link's) carry the rounding of the
+penetration (K δ^1.5 with δ ~ 1e-6 m)."""
+CONTACT_OUTPUTS = (
+    "penetration", "peak_contact_force", "max_penetration", "free_flight_time",
+    "first_separation_time",
+)  # fmt: skip
 
 
-def scene_text_with_contact() -> str:
-    from pathlib import Path
+def _journal_runs(**scene):
+    from test_contact_dynamics import journal_scene, run
 
-    config = Path(__file__).resolve().parents[1] / "configs" / "fourbar-clearance.toml"
-    text = config.read_text()
-    return text.replace('method = "rk45"', 'method = "rk4"\nkernels = "loop"')
+    text = journal_scene(method="rk4", output_dt=1e-3, **scene)
+    return run(text, kernels="lanes"), run(text, kernels="loop")
+
+
+@pytest.mark.parametrize(
+    "scene",
+    [
+        dict(law="hertz", model="contact", dt=2e-6, t_end=0.05),
+        dict(law="flores", restitution=0.8, friction=0.1, model="contact", dt=2e-6, t_end=0.05),
+        dict(law="lankarani-nikravesh", restitution=0.5, model="auto", dt=2e-6, t_end=0.3),
+    ],
+    ids=["hertz", "flores-friction", "auto-reseat"],
+)
+def test_loop__contact_law_agrees_with_the_lanes(scene):
+    """The journal falling across its bearing: impacts located in the step, free flight,
+    friction, the switch of model auto at λ ≤ 0 and its re-seats, on both paths."""
+    lanes, loop = _journal_runs(**scene)
+    assert lanes["status"][0] == 0 and loop["status"][0] == 0
+    np.testing.assert_array_equal(lanes["contact_mode"], loop["contact_mode"])
+    np.testing.assert_array_equal(lanes["impact_count"], loop["impact_count"])
+    assert lanes["impact_count"][0, 0] >= 3
+    if scene["model"] == "auto":
+        mode = loop["contact_mode"][0, :, 0]
+        assert np.any((mode[:-1] >= 1) & (mode[1:] == 0)), "no re-seat to compare"
+    for var in (*HISTORIES[:4], "energy", *CONTACT_OUTPUTS):
+        a, b = lanes[var], loop[var]
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=var)
+        scale = np.nanmax(np.abs(a)) if np.isfinite(a).any() else 0.0
+        assert np.nanmax(np.abs(a - b), initial=0.0) <= CONTACT_AGREEMENT * scale, var
+
+
+def test_two_coupled_contact_joints__both_paths_agree_and_conserve_energy():
+    """A hanging two-bar chain with a clearance under the Hertz law at both pins (their rows
+    share the upper bar, so their law rows couple in S): both bars rattle in their bearings,
+    the paths agree and the energy (elastic included) is conserved. The lanes once moved one
+    law row's coupling into the other's λ_r = F_n and flagged the sample; the loop kernels,
+    written apart from the code generator, caught it."""
+    text = straight_chain_text([0.3, 0.2], [0.5, 0.3], angle=-1.2, clearance={0: 2e-4, 1: 2e-4})
+    law = 'model = "contact"\n[joint.contact]\nlaw = "hertz"\nstiffness = 1e9\n'
+    text = text.replace("clearance = 0.0002\n", "clearance = 0.0002\n" + law)
+    model = compile_model(load_scene_text(text))
+    start = assemble(model)
+    sim = dict(t_end=0.05, dt=1e-6, output_dt=1e-3, method="rk4")
+    lanes, loop = (
+        simulate(
+            model, dict(sim, kernels=k), q_start=start.q, v_start=start.v,
+            history_dtype=np.float64,
+        )
+        for k in ("lanes", "loop")
+    )  # fmt: skip
+    for out in (lanes, loop):
+        assert out["status"][0] == 0
+        assert np.all(out["impact_count"][0] >= 5)
+        energy = out["energy"][0]
+        assert np.max(np.abs(energy - energy[0])) <= 1e-11 * np.max(np.abs(energy))
+    np.testing.assert_array_equal(lanes["impact_count"], loop["impact_count"])
+    np.testing.assert_array_equal(lanes["contact_mode"], loop["contact_mode"])
+    scale = np.max(np.abs(lanes["q"]))
+    assert np.max(np.abs(lanes["q"] - loop["q"])) <= 1e-12 * scale
+    # 30 impacts amplify the rounding of the penetration (K δ^1.5, δ ~ 1e-6 m)
+    peak = np.max(lanes["contact_force"])
+    assert np.max(np.abs(lanes["contact_force"] - loop["contact_force"])) <= 1e-8 * peak
+
+
+def test_loop__flags_a_step_too_large_for_the_contact_as_the_lanes():
+    lanes, loop = _journal_runs(model="auto", dt=5e-4, t_end=0.05)
+    for out in (lanes, loop):
+        assert out["status"][0] & CONTACT_STEP_TOO_LARGE
+        assert np.isnan(out["q"][0, -1]).all() and np.isnan(out["penetration"][0, -1]).all()
+        assert out["impact_count"][0, 0] == -1
+    np.testing.assert_array_equal(lanes["contact_mode"], loop["contact_mode"])
+
+
+def test_loop__auto_equals_the_link_bit_for_bit_until_the_link_lets_go():
+    """On the loop path one compiled kernel serves both models, and a joint of model auto
+    runs the link's arithmetic (the law's terms are skipped, not multiplied by 0) until its λ
+    first reaches 0: every output before that is bit-identical."""
+    from test_contact_dynamics import run, swinging
+
+    keys = {"t_end": 0.05, "output_dt": 1e-4, "method": "rk4", "dt": 2e-6}
+    link = run(swinging("link", 3.5, **keys), kernels="loop")
+    auto = run(swinging("auto", 3.5, **keys), kernels="loop")
+    assert link["status"][0] & CONTACT_LOST and not auto["status"][0] & CONTACT_LOST
+    switch = auto["first_separation_time"][0, 0]
+    assert switch == link["contact_lost_time"][0]
+    before = auto["time"] <= switch
+    assert 100 < before.sum() < len(before)
+    for name in ("q", "v", "joint_force", "contact_force", "energy", "constraint_error"):
+        np.testing.assert_array_equal(auto[name][0, before], link[name][0, before], name)
+    assert np.all(auto["contact_mode"][0, auto["time"] < switch, 0] == 0)
 
 
 def test_constraint_pattern__rows_touch_their_bodies_and_the_envelope_is_tight():

@@ -687,7 +687,11 @@ class Emitter:
             for r in range(len(rows)):
                 if r != rk and (r, rk) in self.coupling:
                     moved = f"rhs{r} - fn{k} * {self.coupling[r, rk]}"
-                    self.emit(f"rhs{r} = rhs{r} if fm{k} == 0.0 else {moved}")
+                    # a row under the law itself keeps its λ_r = F_n
+                    held = f"fm{k} == 0.0" + (
+                        f" or {self._row_law(r)} == 1.0" if self._row_law(r) else ""
+                    )
+                    self.emit(f"rhs{r} = rhs{r} if {held} else {moved}")
         self.contact_stiffness_check()
         self.schur_solve("rhs", "lam")
         self.apply_wt("lam", "qdd", a0)

@@ -209,12 +209,6 @@ def check_scene(scene: Scene) -> None:
                 f'simulate.kernels: "loop" integrates with {", ".join(LOOP_METHODS)}, not '
                 f'{sim.method!r} (use kernels = "lanes")'
             )
-        for joint in scene.joint:
-            if joint.contact is not None and joint.resolved_model != "link":
-                raise SceneError(
-                    f'simulate.kernels: "loop" has no contact law, which joint {joint.name!r} '
-                    'uses (use kernels = "lanes")'
-                )
 
     if scene.simulate is not None:
         sim = scene.simulate

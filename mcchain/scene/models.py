@@ -675,7 +675,7 @@ class Simulate(_Section):
         default="lanes",
         description='"lanes": kernels generated for the scene\'s topology (fastest per step, '
         'compiled once per topology); "loop": generic kernels compiled once per installation '
-        '(method rk4, no contact law); default "lanes".',
+        '(method rk4); default "lanes".',
     )
 
     @field_validator("perturb", mode="before")

@@ -380,9 +380,18 @@ def _run_rk4_loop(run: _Run) -> None:
         0.0, run.dt, nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
         RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
         run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
+
+
+def _loop_contact_args(run: _Run) -> tuple[np.ndarray, np.ndarray]:
+    """The contact arrays of the loop kernels: :meth:`_Run.contact_args`, or empty ones of the
+    same dimensions for a model without contact-law joints (one compiled signature)."""
+    if run.contact_history is None or run.contact_summary is None:
+        n = run.model.nsample
+        return np.zeros((n, len(run.time), 0)), np.zeros((n, 0))
+    return run.contact_history, run.contact_summary
 
 
 def _run_rk4_projection(run: _Run) -> None:
