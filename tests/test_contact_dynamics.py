@@ -314,3 +314,66 @@ def test_contact__rk4_projection_keeps_the_law_rows_out_of_its_projection():
     error = np.max(np.abs(out["q"][0, :, 0, :2] - ref.position[:, :2]))
     print(f"rk4-projection dt 2e-6: {error:.2e} m from the reference")
     assert error < 1e-7
+
+
+@pytest.mark.parametrize(("law", "e"), [("lankarani-nikravesh", 0.9), ("flores", 0.5)])
+def test_generalized_alpha__contact_law_converges_to_the_reference_at_second_order(law, e):
+    """The index-3 implicit method with the law's row λ_r = F_n(q, q̇) in its Newton system:
+    the journal's impacts follow the event-located reference, with the O(h²) error of the
+    method (halving h divides it by ≈ 4)."""
+    t_end = 0.05
+    errors = []
+    for dt in (2e-6, 1e-6):
+        text = journal_scene(law=law, restitution=e, method="generalized-alpha", dt=dt,
+                             output_dt=5e-4, t_end=t_end)  # fmt: skip
+        out = run(text)
+        ref = reference(Law(law, 1e9, 1.5, e), t_end, out["time"])
+        assert out["status"][0] == 0
+        assert int(out["impact_count"][0, 0]) == len(ref.impacts) >= 2
+        errors.append(np.max(np.abs(out["q"][0, :, 0, :2] - ref.position[:, :2])))
+        force = out["contact_force"][0, :, 0]
+        force_error = np.max(np.abs(force - ref.normal_force)) / np.max(ref.normal_force)
+    print(f"{law}: position {errors[0]:.2e} → {errors[1]:.2e} m, F_n {force_error:.1e} of the peak")
+    assert errors[1] <= 3e-9
+    assert 3.0 <= errors[0] / errors[1] <= 5.0
+    assert force_error <= 5e-5
+
+
+def test_generalized_alpha__auto_equals_the_link_bit_for_bit_and_reseats():
+    """Model auto runs the link's Newton system until λ first reaches 0 (same kernel, the law's
+    rows skipped): bit-identical outputs; a damped journal then re-seats without adding
+    energy; a step too coarse for the contact is flagged."""
+    keys = {"t_end": 0.05, "output_dt": 1e-4, "method": "generalized-alpha", "dt": 2e-6}
+    link = run(swinging("link", 3.5, **keys))
+    auto = run(swinging("auto", 3.5, **keys))
+    switch = auto["first_separation_time"][0, 0]
+    assert switch == link["contact_lost_time"][0]
+    before = auto["time"] <= switch
+    assert 50 < before.sum() < len(before)
+    for name in ("q", "v", "joint_force", "contact_force", "energy", "constraint_error"):
+        np.testing.assert_array_equal(auto[name][0, before], link[name][0, before], name)
+    text = journal_scene(
+        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3, output_dt=1e-4,
+        method="generalized-alpha", dt=2e-6,
+    )  # fmt: skip
+    out = run(text)
+    mode = out["contact_mode"][0, :, 0]
+    assert out["status"][0] == 0 and mode[-1] == 0
+    assert np.any((mode[:-1] >= 1) & (mode[1:] == 0))
+    growth = np.max(np.diff(out["energy"][0])) / (MASS * GRAVITY * 2 * CLEARANCE)
+    assert growth <= 1e-8
+    coarse = run(journal_scene(method="generalized-alpha", dt=5e-4, output_dt=1e-3))
+    assert coarse["status"][0] & CONTACT_STEP_TOO_LARGE
+    assert np.isnan(coarse["q"][0, -1]).all()
+
+
+def test_radau__refuses_the_contact_law_in_one_line():
+    from mcchain.errors import SceneError
+
+    with pytest.raises(SceneError) as info:
+        load_scene_text(journal_scene(method="radau"))
+    assert str(info.value) == (
+        "simulate.method: 'radau' cannot integrate the contact law of joint 'J' (model "
+        "'contact'); use one of "
+        'rk45, rk4, rk4-projection, generalized-alpha, or model "link"'
+    )

@@ -48,12 +48,13 @@ PDOT = 10  # δ̇, m/s
 FN = 11  # F_n, N
 KC = 12  # FM · ∂F_n/∂δ, N/m (the step-size check)
 # ... and the summaries (mcchain.contact.CONTACT_SUMMARY, in that order).
-NIM = 13  # impacts
-PKF = 14  # peak contact force, N
-PKD = 15  # peak penetration, m
-TFF = 16  # free-flight time, s
-TSE = 17  # first separation time, s
-NCST = 18
+DFR = 13  # FM · ∂F_n/∂δ̇, N s/m (Newton iterations of implicit steps)
+NIM = 14  # impacts
+PKF = 15  # peak contact force, N
+PKD = 16  # peak penetration, m
+TFF = 17  # free-flight time, s
+TSE = 18  # first separation time, s
+NCST = 19
 SUMMARY_COLUMNS = (NIM, PKF, PKD, TFF, TSE)
 
 
@@ -96,9 +97,10 @@ def contact_start(km, cst):
 
 @njit(**JIT)
 def contact_forces(km, s, q, v, cst, F_out):
-    """δ, δ̇, F_n and ∂F_n/∂δ of every contact-law joint at (q, v) into ``cst`` (PEN, PDOT, FN,
-    KC), and the regularised Coulomb friction of the joints under the law added to the
-    generalised forces ``F_out`` (3 nbody,).
+    """δ, δ̇, F_n and its partial derivatives of every contact-law joint at (q, v) into ``cst``
+    (PEN, PDOT, FN, KC, DFR; the derivatives 0 where the force is, or off the law), and the
+    regularised Coulomb friction of the joints under the law added to the generalised forces
+    ``F_out`` (3 nbody,).
 
     D comes from the approach speed of the contact in progress (VI, located when it began)
     or, in a step that started in free flight (INS = 0), from the current δ̇: the contact's
@@ -144,6 +146,7 @@ def contact_forces(km, s, q, v, cst, F_out):
         cst[j, PDOT] = pdot
         cst[j, FN] = fn
         cst[j, KC] = cst[j, FM] * stiffness * expo * slope * factor
+        cst[j, DFR] = cst[j, FM] * stiffness * pw * damping if factor > 0.0 else 0.0
         mu = km.joint_contact_friction[s % km.joint_contact_friction.shape[0], k]
         if cst[j, FM] != 1.0 or mu == 0.0:
             continue

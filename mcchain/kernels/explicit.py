@@ -40,7 +40,6 @@ from mcchain.kernels.clearance import (
 )
 from mcchain.kernels.config import JIT
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
-from mcchain.kernels.implicit import _nan_history
 from mcchain.kernels.joints import (
     constraint_gamma,
     constraint_jacobian,
@@ -57,6 +56,31 @@ from mcchain.status import (
     FAILURE_BITS,
     SINGULAR,
 )
+
+
+@njit(**JIT)
+def nan_history(s, first, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en):
+    """Outputs of sample ``s`` from history index ``first`` on are NaN (after a failure)."""
+    for it in range(first, out_q.shape[1]):
+        out_q[s, it, :] = np.nan
+        out_v[s, it, :] = np.nan
+        out_jf[s, it, :] = np.nan
+        out_cf[s, it, :] = np.nan
+        out_dtq[s, it, :] = np.nan
+        out_cerr[s, it] = np.nan
+        out_en[s, it] = np.nan
+
+
+@njit(**JIT)
+def finish_contact(s, st, written, cst, out_ct, sum_ct):
+    """A sample's contact outputs after its run: δ and the mode NaN from history index
+    ``written`` on; the summaries per joint, NaN after a failure."""
+    for it in range(written, out_ct.shape[1]):
+        out_ct[s, it, :] = np.nan
+    for j in range(cst.shape[0]):
+        for c in range(len(SUMMARY_COLUMNS)):
+            value = cst[j, SUMMARY_COLUMNS[c]]
+            sum_ct[s, len(SUMMARY_COLUMNS) * j + c] = np.nan if st & FAILURE_BITS else value
 
 
 @njit(**JIT)
@@ -333,7 +357,7 @@ def rk4_run(
     limit2 = CONTACT_STEP_LIMIT * CONTACT_STEP_LIMIT
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
-            _nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
@@ -433,7 +457,7 @@ def rk4_run(
                     wca = 0.0
                 if n % out_every == 0:
                     it = n // out_every
-                    _write_outputs(
+                    write_outputs(
                         km, s, it, q, v, lam0, cst, jf, cf, err0, out_q, out_v, out_jf, out_cf,
                         out_dtq, out_cerr, out_en, out_ct,
                     )  # fmt: skip
@@ -443,24 +467,18 @@ def rk4_run(
             for i in range(ndof):
                 q[i] += dq[i]
                 v[i] += dv[i]
-            if _marked(cst):
+            if any_marked(cst):
                 reseat(
                     km, s, q, v, t + h, minv, cols, first, cst, row_law, tau, B, S, phi, g, nu,
                     dinv,
                 )  # fmt: skip
-        _nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
-        for it in range(written, out_ct.shape[1]):
-            out_ct[s, it, :] = np.nan
-        for j in range(ncj):
-            for c in range(len(SUMMARY_COLUMNS)):
-                dead = st & FAILURE_BITS
-                value = cst[j, SUMMARY_COLUMNS[c]]
-                sum_ct[s, len(SUMMARY_COLUMNS) * j + c] = np.nan if dead else value
+        nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+        finish_contact(s, st, written, cst, out_ct, sum_ct)
         status[s] = st
 
 
 @njit(**JIT)
-def _marked(cst):
+def any_marked(cst):
     """Whether a contact-law joint was marked for re-seating (DWL < 0) in the last step."""
     for j in range(cst.shape[0]):
         if cst[j, DWL] < 0.0:
@@ -469,7 +487,7 @@ def _marked(cst):
 
 
 @njit(**JIT)
-def _write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
+def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
                    out_dtq, out_cerr, out_en, out_ct):  # fmt: skip
     """The outputs of sample ``s`` at history index ``it``: the state, the reactions from λ
     (a joint under the law: F_n ≥ 0, clipped at its switch from the link), the driver

@@ -1,10 +1,12 @@
 """Generalized-α, index 3 (Arnold & Brüls 2007): one sample at a time, over
 the samples ``start:stop`` (threads run blocks of samples).
 
-Built on the per-sample kernels of ``joints.py``, ``forces.py`` and ``linalg.py``. Rules every
-kernel keeps: no reduction across samples (sample i's history is bit-identical alone, in any
-chunk, on any thread count), never raise — failures set status bits with the time they
-happened, and the sample's outputs from then on are NaN.
+Built on the per-sample kernels of ``joints.py``, ``forces.py`` and ``linalg.py``, and on
+``clearance.py`` for joints under the contact law (their row's equation λ_r = F_n(q, q̇) joins
+the Newton system; onsets, the switch of model auto and its re-seats are kept between steps as
+the explicit kernels keep them). Rules every kernel keeps: no reduction across samples (sample
+i's history is bit-identical alone, in any chunk, on any thread count), never raise — failures
+set status bits with the time they happened, and the sample's outputs from then on are NaN.
 """
 
 from __future__ import annotations
@@ -14,14 +16,37 @@ import math
 import numpy as np
 from numba import njit
 
+from mcchain.contact import CONTACT_STEP_LIMIT
+from mcchain.kernels.clearance import (
+    DFR,
+    FM,
+    FN,
+    KC,
+    NCST,
+    PDC,
+    PRC,
+    contact_forces,
+    contact_joint_index,
+    contact_joints,
+    contact_start,
+    contact_step,
+    contact_switch,
+    law_rows,
+    record_stage0,
+)
 from mcchain.kernels.config import JIT
+from mcchain.kernels.explicit import (
+    any_marked,
+    finish_contact,
+    nan_history,
+    reseat,
+    write_outputs,
+)
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
     damper_stiffness_add,
-    kinetic_energy,
     mass_diagonal,
-    potential_energy,
     spring_vectors,
 )
 from mcchain.kernels.joints import (
@@ -30,18 +55,23 @@ from mcchain.kernels.joints import (
     constraint_hessian_add,
     constraint_jacobian,
     constraint_residual,
-    joint_forces,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
 from mcchain.model import JOINT_CLEARANCE
-from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
+from mcchain.status import (
+    CONTACT_LOST,
+    CONTACT_STEP_TOO_LARGE,
+    DIVERGED,
+    FAILURE_BITS,
+    SINGULAR,
+)
 
 
 @njit(**JIT)
 def generalized_alpha_run(
-    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, alpha_m, alpha_f, gam, beta, ctol, tau,
-    max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-    status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
+    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, cols, first, alpha_m, alpha_f, gam,
+    beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
+    out_ct, sum_ct, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``.
 
@@ -52,18 +82,30 @@ def generalized_alpha_run(
     largest entry flags SINGULAR, no convergence in ``max_newton`` iterations DIVERGED.
     Per sample: the steps completed (``nsteps_out``) and the residual evaluations, one for
     the start's index-1 solve and one per Newton iteration (``nevals_out``).
+
+    A joint under the contact law (:mod:`mcchain.kernels.clearance`) has the row
+    λ_r − F_n(q, q̇) = 0 instead of Φ_r = 0, linearised with ∂F_n/∂δ and ∂F_n/∂δ̇ along n
+    (the turning of n is left out of that row's tangent: Newton converges to the same
+    solution). At each step's start, as the explicit kernels: ω_c h past
+    CONTACT_STEP_LIMIT flags CONTACT_STEP_TOO_LARGE (the impacts would be damped by the
+    method, not by the law), then the switch of model auto, the located onsets and
+    separations, and the re-seats. ``cols``, ``first``: the constraint pattern (re-seat
+    projection); ``out_ct``, ``sum_ct``: the contact outputs (see explicit.rk4_run).
     """
     ndof = Q0.shape[1]
     nsys = ndof + ncon
+    nj = km.joint_body_a.shape[0]
+    ncj = contact_joints(km)
     bp = (1.0 - alpha_m) / (beta * h * h * (1.0 - alpha_f))
     gp = gam / (beta * h)
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
-            _nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
         m = np.zeros(ndof)
+        minv = np.zeros(ndof)
         F = np.zeros(ndof)
         qdd = np.zeros(ndof)
         acc = np.zeros(ndof)
@@ -74,13 +116,20 @@ def generalized_alpha_run(
         Kmat = np.zeros((nsys, nsys))
         rhs = np.zeros(nsys)
         piv = np.zeros(nsys, np.int64)
-        jf = np.zeros((km.joint_body_a.shape[0], 2))
-        cf = np.zeros(km.joint_body_a.shape[0])
+        jf = np.zeros((nj, 2))
+        cf = np.zeros(nj)
+        cst = np.zeros((ncj, NCST))
+        row_law = np.zeros((max(ncon, 1), 3))
+        S = np.zeros((ncon, ncon))  # re-seat scratch
+        work = np.zeros((4, ncon))
+        contact_start(km, cst)
         mass_diagonal(km, s, m)
+        for i in range(ndof):
+            minv[i] = 1.0 / m[i]
         st = status[s]
         # Consistent start: q̈_0, λ_0 from the index-1 KKT system (γ from the joints).
         gamma = np.zeros(max(ncon, 1))
-        _index1(km, s, q, v, t0, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon)
+        _index1(km, s, q, v, t0, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law)
         for i in range(ndof):
             qdd[i] = rhs[i]
             acc[i] = rhs[i]
@@ -92,34 +141,37 @@ def generalized_alpha_run(
         for n in range(nstep + 1):
             t = t0 + n * h
             constraint_residual(km, s, q, t, phi)
+            law_rows(km, cst, row_law)
             err = 0.0
             for r in range(ncon):
-                err = max(err, abs(phi[r]))
+                if row_law[r, 0] != 1.0:
+                    err = max(err, abs(phi[r]))
             for i in range(ndof):
                 err += 0.0 * (q[i] + v[i])
             if not (err <= ctol):
                 st |= DIVERGED
                 t_div[s] = t
                 break
-            for k in range(km.joint_body_a.shape[0]):
-                clearance = km.joint_kind[k] == JOINT_CLEARANCE
+            for k in range(nj):
+                clearance = km.joint_kind[k] == JOINT_CLEARANCE and km.joint_model[k] == 0
                 if clearance and lam[km.joint_row[k]] <= 0.0 and not st & CONTACT_LOST:
                     st |= CONTACT_LOST
                     t_cl[s] = t
+            if ncj > 0:
+                if not _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
+                    st |= CONTACT_STEP_TOO_LARGE
+                    break
+                if any_marked(cst):
+                    reseat(
+                        km, s, q, v, t, minv, cols, first, cst, row_law, tau, B, S, work[0],
+                        work[1], work[2], work[3],
+                    )  # fmt: skip
             if n % out_every == 0:
                 it = n // out_every
-                joint_forces(km, s, q, lam, jf, cf)
-                for i in range(ndof):
-                    out_q[s, it, i] = q[i]
-                    out_v[s, it, i] = v[i]
-                for k in range(jf.shape[0]):
-                    out_jf[s, it, 2 * k] = jf[k, 0]
-                    out_jf[s, it, 2 * k + 1] = jf[k, 1]
-                    out_cf[s, it, k] = cf[k]
-                for d in range(km.driver_row.shape[0]):
-                    out_dtq[s, it, d] = -lam[km.driver_row[d]]
-                out_cerr[s, it] = err
-                out_en[s, it] = kinetic_energy(km, s, v) + potential_energy(km, s, q)
+                write_outputs(
+                    km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
+                    out_dtq, out_cerr, out_en, out_ct,
+                )  # fmt: skip
                 written = it + 1
             if n == nstep:
                 break
@@ -137,6 +189,8 @@ def generalized_alpha_run(
             for _ in range(max_newton):
                 nev += 1
                 applied_forces(km, s, q, v, tn, F)
+                contact_forces(km, s, q, v, cst, F)
+                law_rows(km, cst, row_law)
                 constraint_residual(km, s, q, tn, phi)
                 constraint_jacobian(km, s, q, B)
                 for i in range(nsys):
@@ -154,6 +208,7 @@ def generalized_alpha_run(
                     for i in range(ndof):
                         Kmat[ndof + r, i] = bp * B[r, i]
                         Kmat[i, ndof + r] = bp * B[r, i]
+                _law_rows_newton(km, cst, row_law, lam, B, bp, gp, ndof, Kmat, rhs)
                 # K = ∂(Bᵀλ)/∂q − ∂F/∂q, C = −∂F/∂q̇ (dampers), into the top-left block.
                 _tangent_add(km, s, q, v, tn, lam, gp, Kmat)
                 scale = 0.0
@@ -195,23 +250,54 @@ def generalized_alpha_run(
                 acc[i] += (1.0 - alpha_f) / (1.0 - alpha_m) * qdd[i]
                 acc[i] -= (1.0 - alpha_f) / (1.0 - alpha_m) * qdd_old[i]
             nst += 1
-        _nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+        nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+        finish_contact(s, st, written, cst, out_ct, sum_ct)
         status[s] = st
         nsteps_out[s] = nst
         nevals_out[s] = nev
 
 
 @njit(**JIT)
-def _nan_history(s, first, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en):
-    """Outputs of sample ``s`` from history index ``first`` on are NaN (after a failure)."""
-    for it in range(first, out_q.shape[1]):
-        out_q[s, it, :] = np.nan
-        out_v[s, it, :] = np.nan
-        out_jf[s, it, :] = np.nan
-        out_cf[s, it, :] = np.nan
-        out_dtq[s, it, :] = np.nan
-        out_cerr[s, it] = np.nan
-        out_en[s, it] = np.nan
+def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
+    """At a step's start (q, v, t) with the multipliers ``lam``: δ, δ̇ and ω_c² of every
+    contact-law joint, then the switch of model auto and the bookkeeping of the step that
+    ended here (:func:`mcchain.kernels.clearance.contact_step`). Returns False when
+    ω_c h > CONTACT_STEP_LIMIT (``F``, ``B``: scratch)."""
+    contact_forces(km, s, q, v, cst, F)
+    constraint_jacobian(km, s, q, B)
+    largest = 0.0
+    for j in range(cst.shape[0]):
+        r = km.joint_row[contact_joint_index(km, j)]
+        inverse_mass = 0.0
+        for i in range(B.shape[1]):
+            inverse_mass += B[r, i] * minv[i] * B[r, i]
+        row_law[r, 2] = inverse_mass
+        largest = max(largest, cst[j, KC] * inverse_mass)
+    record_stage0(km, cst, row_law)
+    if h * h * largest > CONTACT_STEP_LIMIT * CONTACT_STEP_LIMIT:
+        return False
+    for j in range(cst.shape[0]):
+        lam_r = lam[km.joint_row[contact_joint_index(km, j)]]
+        contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
+        contact_step(km, cst, j, lam_r, t, h, cst[j, PDC], cst[j, PRC])
+    return True
+
+
+@njit(**JIT)
+def _law_rows_newton(km, cst, row_law, lam, B, bp, gp, ndof, Kmat, rhs):
+    """Rows of joints under the contact law in the Newton system: λ_r + β′x_r − F_n(q, q̇) = 0
+    with Δλ_r = β′x_r, linearised as −(∂F_n/∂δ + γ′ ∂F_n/∂δ̇) B_r Δq + β′ x_r = F_n − λ_r
+    (δ̇ = B_r q̇ and Δq̇ = γ′Δq; the columns Bᵀ of the momentum rows stay: −F_n n on the
+    journal)."""
+    for j in range(cst.shape[0]):
+        if cst[j, FM] != 1.0:
+            continue
+        r = km.joint_row[contact_joint_index(km, j)]
+        slope = cst[j, KC] + gp * cst[j, DFR]
+        for i in range(ndof):
+            Kmat[ndof + r, i] = -slope * B[r, i]
+        Kmat[ndof + r, ndof + r] = bp
+        rhs[ndof + r] = cst[j, FN] - lam[r]
 
 
 @njit(**JIT)
@@ -238,9 +324,12 @@ def _tangent_add(km, s, q, v, t, lam, gp, K_out):
 
 
 @njit(**JIT)
-def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon):
-    """Solve [[M, Bᵀ], [B, 0]] [q̈; λ] = [F; γ] (dense, for a start state) into ``rhs``."""
+def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law):
+    """Solve [[M, Bᵀ], [B, 0]] [q̈; λ] = [F; γ] (dense, for a start state) into ``rhs``; a
+    row under the contact law is λ_r = F_n."""
     applied_forces(km, s, q, v, t, F)
+    contact_forces(km, s, q, v, cst, F)
+    law_rows(km, cst, row_law)
     constraint_jacobian(km, s, q, B)
     constraint_gamma(km, s, q, v, t, gamma)
     nsys = ndof + ncon
@@ -256,6 +345,11 @@ def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon):
         for i in range(ndof):
             Kmat[ndof + r, i] = B[r, i]
             Kmat[i, ndof + r] = B[r, i]
+        if row_law[r, 0] == 1.0:
+            for i in range(ndof):
+                Kmat[ndof + r, i] = 0.0
+            Kmat[ndof + r, ndof + r] = 1.0
+            rhs[ndof + r] = row_law[r, 1]
     if lu_factor(Kmat, nsys, piv, 1e-14):
         lu_solve(Kmat, nsys, piv, rhs)
     else:

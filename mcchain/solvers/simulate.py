@@ -533,9 +533,9 @@ def _run_generalized_alpha(run: _Run) -> None:
     over_samples(
         generalized_alpha_run, run.model.nsample,
         km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, run.dt, nstep,
-        run.every, run.model.ncon, coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta,
-        s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.every, run.model.ncon, *run.model.constraint_pattern(), coef.alpha_m, coef.alpha_f,
+        coef.gamma, coef.beta, s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
+        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
         run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations, min_block=1,
     )  # fmt: skip
 
