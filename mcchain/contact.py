@@ -81,6 +81,11 @@ RESEAT_TOLERANCE = 1e-13
 RESEAT_NEWTON = 20
 """Newton iterations of that projection at most."""
 
+SWITCH_OVERSHOOT = 1.0001
+"""An adaptive step in which the link's λ of a model-auto joint falls to ≤ 0 is retried with
+this multiple of the linearly interpolated crossing's fraction of the step: it lands just past
+the crossing, where the law takes over."""
+
 CONTACT_STEP_LIMIT = 0.5
 """Largest ω_c h a fixed-step method may take in contact (ω_c = √(∂F_n/∂δ / m*), m* the
 journal's effective mass along n): RK4 loses ~1e-4 of the contact energy per step there and

@@ -31,6 +31,7 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
     RESEAT_TOLERANCE,
+    SWITCH_OVERSHOOT,
 )
 from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY, Tableau
 from mcchain.status import (
@@ -269,6 +270,7 @@ _CONTACT_BLOCKS = (
     "contact_start",
     "contact_switch",
     "contact_accept",
+    "contact_event",
     "contact_dead",
     "contact_reseat_erk",
     "contact_reseat",
@@ -399,6 +401,21 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     for j, k in enumerate(joints):
         accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
     b["contact_accept"] = "\n".join(accept)
+    # Adaptive, model auto: a step whose end has the link's λ ≤ 0 (its start λ > 0) is
+    # retried to land just past the crossing (λ interpolated linearly; an undershoot is
+    # accepted and the next step crosses again, shorter), so the law takes over where λ
+    # reaches 0, not up to a whole step later.
+    event = ["evt = 2.0"]
+    for j, k in enumerate(joints):
+        r = topo.joint_row[k]
+        lam0, lam1 = at("lam", r), at("lamc", r)
+        event += [
+            f"if {at('fm', j)} == 0.0 and {model(k)} == {AUTO!r}.0 and {lam0} > 0.0"
+            f" and {lam1} <= 0.0:",
+            f"    evt = min(evt, max({lam0} / ({lam0} - {lam1}) * {SWITCH_OVERSHOOT!r}, 1e-3))",
+        ]
+    event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
+    b["contact_event"] = "\n".join(event)
     b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
     marks = []
     for j in range(len(joints)):

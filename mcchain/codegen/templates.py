@@ -294,6 +294,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
                 if not ok:
                     fac = min(fac, 1.0)
+                @@contact_event
                 target = t_out[iout[l]]
                 landed = hh == target - @[tl]
                 cut = hh < hl[l]
