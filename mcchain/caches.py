@@ -1,8 +1,9 @@
 """Where compiled code is kept, and what happens when that place cannot be written.
 
-Two caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
-``__pycache__``, else numba's user-wide folder) and mcchain's generated lane modules
-(``MCCHAIN_CACHE_DIR``, :func:`mcchain.codegen.cache.cache_dir`). A cache that cannot be
+Three caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
+``__pycache__``, else numba's user-wide folder), and in ``MCCHAIN_CACHE_DIR``
+(:func:`mcchain_cache`) mcchain's generated lane modules and the quasi-random sample designs
+drawn before (:func:`mcchain.scene.sampling.unit_design`). A cache that cannot be
 written (a read-only home or installation) never stops a run: the cache moves to the
 temporary folder, with one warning line on stderr, and kernels then compile once per
 machine boot instead of once per installation.
@@ -47,6 +48,23 @@ def warn_fallback(what: str, folder: Path | str, fallback: Path) -> None:
         file=sys.stderr,
         flush=True,
     )
+
+
+def mcchain_cache(name: str) -> Path:
+    """The folder ``name`` of mcchain's cache: under ``$MCCHAIN_CACHE_DIR``, else
+    ``~/.cache/mcchain`` (``<tmp>/mcchain-<name>-<uid>`` with a warning when that cannot be
+    written)."""
+    root = os.environ.get("MCCHAIN_CACHE_DIR")
+    if root:
+        path = Path(root)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        path = Path(base) / "mcchain"
+    if writable(path / name):
+        return path / name
+    fallback = temporary_cache(name)
+    warn_fallback("MCCHAIN_CACHE_DIR", path, fallback)
+    return fallback
 
 
 def ensure_numba_cache() -> str:

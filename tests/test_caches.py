@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from numba import config
 
@@ -79,3 +80,42 @@ def test_import__kernels_load_with_unwritable_caches(blocked: Path) -> None:
     assert proc.stdout == "ok\n"
     lines = proc.stderr.splitlines()
     assert len(lines) == 1 and "NUMBA_CACHE_DIR" in lines[0], proc.stderr
+
+
+@pytest.mark.parametrize("design", ["sobol", "lhs", "saltelli"])
+def test_designs__a_rerun_reads_the_same_points_without_importing_scipy_stats(
+    design: str, tmp_path: Path
+) -> None:
+    """Quasi-random designs are kept in mcchain's cache: a second process draws bit-identical
+    points and never imports scipy.stats (about 1 s of a warm run); an unwritable cache only
+    costs that import."""
+    code = (
+        "import sys, numpy as np\n"
+        "from mcchain.scene.sampling import unit_design\n"
+        f"u = unit_design({design!r}, 3, 40, 7, 5, 35)\n"
+        "np.save(sys.argv[1], u)\n"
+        "print('scipy.stats' in sys.modules)\n"
+    )
+
+    def draw(cache: Path, name: str) -> tuple[str, np.ndarray]:
+        scratch = tmp_path / f"tmp-{name}"  # the fallback of an unwritable cache: fresh
+        scratch.mkdir()
+        env = {
+            **os.environ, "MCCHAIN_CACHE_DIR": str(cache), "PYTHONPATH": str(REPO),
+            "TMPDIR": str(scratch),
+        }  # fmt: skip
+        out = tmp_path / f"{name}.npy"
+        proc = subprocess.run(
+            [sys.executable, "-c", code, str(out)], env=env, capture_output=True, text=True,
+            check=True,
+        )  # fmt: skip
+        return proc.stdout.strip(), np.load(out)
+
+    first, drawn = draw(tmp_path / "cache", "first")
+    again, read = draw(tmp_path / "cache", "again")
+    assert (first, again) == ("True", "False")
+    np.testing.assert_array_equal(read, drawn)
+    (tmp_path / "a-file").write_text("")
+    blocked_first, unwritable = draw(tmp_path / "a-file" / "cache", "blocked")
+    assert blocked_first == "True"
+    np.testing.assert_array_equal(unwritable, drawn)

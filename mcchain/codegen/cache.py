@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
-from mcchain.caches import temporary_cache, warn_fallback, writable
+from mcchain.caches import mcchain_cache
 
 _GENERATOR_FILES = (
     "topology.py",
@@ -37,20 +37,9 @@ def generator_hash() -> str:
 
 
 def cache_dir() -> Path:
-    """Folder of generated kernel modules: ``$MCCHAIN_CACHE_DIR`` or ``~/.cache/mcchain``
-    (``<tmp>/mcchain-generated-<uid>`` with a warning when that cannot be written)."""
-    root = os.environ.get("MCCHAIN_CACHE_DIR")
-    if root:
-        path = Path(root)
-    else:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        path = Path(base) / "mcchain"
-    path = path / "generated"
-    if writable(path):
-        return path
-    fallback = temporary_cache("generated")
-    warn_fallback("MCCHAIN_CACHE_DIR", path.parent, fallback)
-    return fallback
+    """Folder of generated kernel modules: ``generated`` in mcchain's cache
+    (:func:`mcchain.caches.mcchain_cache`)."""
+    return mcchain_cache("generated")
 
 
 def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:

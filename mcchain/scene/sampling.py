@@ -152,8 +152,52 @@ def unit_design(
         return saltelli_rows(base)[start - first * step : stop - first * step]
     if ncol == 0 or n == 0:
         return np.empty((n, ncol), dtype=np.float64)
+    return _cached_design(design, ncol, count, seed, start, stop)
+
+
+def _cached_design(
+    design: str, ncol: int, count: int, seed: int, start: int, stop: int
+) -> np.ndarray:
+    """:func:`_scipy_design`, kept in mcchain's cache (``designs``) under its arguments and
+    scipy's version: importing scipy.stats costs about 1 s, far more than the design itself,
+    and a rerun of the same study draws the same points. A cache that cannot be read or
+    written is skipped; the values are the same either way (float64 saved exactly)."""
+    import hashlib
+    import os
+    import tempfile
+
+    import scipy
+
+    from mcchain.caches import mcchain_cache
+
+    rows = count if design == "lhs" else 0  # LHS strata depend on the count
+    key = f"{design} {ncol} {rows} {seed} {start} {stop} scipy {scipy.__version__}"
+    folder = mcchain_cache("designs")
+    path = folder / (hashlib.sha256(key.encode()).hexdigest()[:24] + ".npy")
+    try:
+        cached = np.load(path, allow_pickle=False)
+        if cached.shape == (stop - start, ncol) and cached.dtype == np.float64:
+            return cached
+    except (OSError, ValueError):
+        pass
+    values = _scipy_design(design, ncol, count, seed, start, stop)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            np.save(fh, values, allow_pickle=False)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return values
+
+
+def _scipy_design(
+    design: str, ncol: int, count: int, seed: int, start: int, stop: int
+) -> np.ndarray:
+    """Rows ``start:stop`` of scipy's scrambled Sobol' or Latin hypercube design."""
     from scipy.stats import qmc
 
+    n = stop - start
     rng = np.random.default_rng(seed)
     if design == "sobol":
         if stop > 2**_SOBOL_BITS:
@@ -177,7 +221,7 @@ def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
     [mu, sigma]: exp(mu + sigma Φ⁻¹(u)); truncnormal [mean, std, lo, hi]: scipy.stats.truncnorm
     (clipped to [lo, hi] against rounding); choice [v...]: v[floor(u n)].
     """
-    from scipy import special, stats
+    from scipy import special
 
     u = np.asarray(u, dtype=np.float64)
     a = dist.args
@@ -189,6 +233,8 @@ def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
     if kind == "lognormal":
         return np.exp(a[0] + a[1] * special.ndtri(u))
     if kind == "truncnormal":
+        from scipy import stats
+
         mean, std, lo, hi = a
         x = stats.truncnorm.ppf(u, (lo - mean) / std, (hi - mean) / std, loc=mean, scale=std)
         return np.clip(x, lo, hi)
