@@ -384,13 +384,44 @@ def test_generalized_alpha__auto_equals_the_link_bit_for_bit_and_reseats():
     assert np.isnan(coarse["q"][0, -1]).all()
 
 
-def test_radau__refuses_the_contact_law_in_one_line():
-    from mcchain.errors import SceneError
+@pytest.mark.parametrize(("law", "e"), [("hertz", None), ("lankarani-nikravesh", 0.9)])
+def test_radau__contact_law_matches_the_reference(law, e):
+    """Radau in segments between located events (onsets with the exact δ̇⁻, separations):
+    the journal's impacts as the event-located DOP853 reference, to its tolerances."""
+    t_end = 0.05
+    text = journal_scene(
+        law=law, restitution=e, method="radau", output_dt=5e-4, t_end=t_end, rtol=1e-10,
+        atol=1e-13,
+    )  # fmt: skip
+    out = run(text)
+    ref = reference(Law(law, 1e9, 1.5, 1.0 if e is None else e), t_end, out["time"])
+    assert out["status"][0] == 0
+    assert int(out["impact_count"][0, 0]) == len(ref.impacts) >= 5
+    position = np.max(np.abs(out["q"][0, :, 0, :2] - ref.position[:, :2]))
+    force = out["contact_force"][0, :, 0]
+    force_error = np.max(np.abs(force - ref.normal_force)) / np.max(ref.normal_force)
+    print(f"radau {law}: position {position:.1e} m, F_n {force_error:.1e} of the peak")
+    assert position <= 1e-10
+    assert force_error <= 1e-7
 
-    with pytest.raises(SceneError) as info:
-        load_scene_text(journal_scene(method="radau"))
-    assert str(info.value) == (
-        "simulate.method: 'radau' cannot integrate the contact law of joint 'J' (model "
-        "'contact'); use one of "
-        'rk45, rk4, rk4-projection, generalized-alpha, or model "link"'
-    )
+
+def test_radau__auto_switches_where_the_link_lets_go_and_reseats_without_adding_energy():
+    keys = {"t_end": 0.05, "output_dt": 1e-4, "rtol": 1e-10, "atol": 1e-13, "method": "radau"}
+    link = run(swinging("link", 3.5, **keys))
+    auto = run(swinging("auto", 3.5, **keys))
+    switch = auto["first_separation_time"][0, 0]
+    assert abs(switch - lets_go_time(3.5)) <= 1e-10  # the event λ = 0, located
+    before = auto["time"] < switch
+    for name in ("q", "v", "joint_force", "energy"):  # the link's Radau runs the lanes' accel
+        a, b = auto[name][0, before], link[name][0, before]
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 * np.max(np.abs(b)), err_msg=name)
+    text = journal_scene(
+        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3, output_dt=1e-4,
+        method="radau", rtol=1e-10, atol=1e-13,
+    )  # fmt: skip
+    out = run(text)
+    mode = out["contact_mode"][0, :, 0]
+    assert out["status"][0] == 0 and mode[-1] == 0
+    assert np.any((mode[:-1] >= 1) & (mode[1:] == 0))
+    growth = np.max(np.diff(out["energy"][0])) / (MASS * GRAVITY * 2 * CLEARANCE)
+    assert growth <= 1e-9

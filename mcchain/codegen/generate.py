@@ -305,16 +305,30 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        {at('tse', j)} = {t}",
         ]
 
-    def reseat(j: int, k: int, lamrow: str, h: str, d1: str, r1: str) -> list[str]:
+    def kinetic(vrow: str) -> str:
+        """The lane's kinetic energy from the velocities in W rows ``vrow``."""
+        terms = []
+        for b in range(topo.nbody):
+            vx, vy, w = (at(vrow, 3 * b + i) for i in range(3))
+            m, inertia = at("P", slots[f"m{b}"]), at("P", slots[f"J{b}"])
+            terms.append(f"0.5 * ({m} * ({vx} * {vx} + {vy} * {vy}) + {inertia} * {w} * {w})")
+        return " + ".join(terms)
+
+    def reseat(j: int, k: int, lamrow: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
         """Model auto: back to the link once pressed quasi-statically for a dwell
-        (mcchain.contact.RESEAT_RATE, RESEAT_PERIODS); the lane is then projected."""
+        (mcchain.contact.RESEAT_RATE, RESEAT_PERIODS) and, without drivers, with the kinetic
+        energy to pay for the position step (mcchain.kernels.clearance.reseat_ready); the lane
+        is then projected."""
         r = topo.joint_row[k]
         wj, dwl = at("wjc", j), at("dwl", j)
         slow = f"abs({r1}) <= {RESEAT_RATE!r} * wn * {d1}"
         pressed = f"{d1} > 0.0 and {at(lamrow, r)} > 0.0 and {model(k)} == {AUTO!r}.0"
+        mx = at("P", slots[f"mx{k}"])
+        # without drivers, the kinetic energy must pay for the position step
+        paid = f" and ({kinetic(vrow)}) > {mx} / ({mx} + 1.0) * {at(lamrow, r)} * {d1}"
         return [
             f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
-            f"if {pressed} and {slow}:",
+            f"if {pressed} and {slow}{'' if topo.ndriver else paid}:",
             f"    {dwl} += {h}",
             f"    if {dwl} * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
             f"        {dwl} = -1.0",  # marked: group_reseat puts it on the link
@@ -323,7 +337,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    {dwl} = 0.0",
         ]
 
-    def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str) -> list[str]:
+    def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
         """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
         (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peaks."""
         r = topo.joint_row[k]
@@ -344,7 +358,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        {at('tff', j)} += {h}",
             f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
             f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
-            *indent(reseat(j, k, lamrow, h, d1, r1)),
+            *indent(reseat(j, k, lamrow, h, d1, r1, vrow)),
             f"{at('pkf', j)} = max({at('pkf', j)}, {at(lamrow, r)})",
             f"{d0} = {d1}",
             f"{r0} = {r1}",
@@ -368,7 +382,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     body = []
     for j, k in enumerate(joints):
         d1, r1 = at("pdc", j), at("prc", j)
-        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "h", d1, r1)
+        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "h", d1, r1, "v")
     b["contact_step_c"] = "\n".join(
         [
             "if (st[l] & FAILBITS) == 0:",
@@ -399,7 +413,8 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     b["contact_switch"] = "\n".join(["if alive:", *indent(top or ["pass"])])
     accept = []
     for j, k in enumerate(joints):
-        accept += step(j, k, "lamc", f"({at('tl')} + hh)", "hh", at("pdc", j), at("prc", j))
+        end = f"({at('tl')} + hh)"
+        accept += step(j, k, "lamc", end, "hh", at("pdc", j), at("prc", j), "vn")
     b["contact_accept"] = "\n".join(accept)
     # Adaptive, model auto: a step whose end has the link's λ ≤ 0 (its start λ > 0) is
     # retried to land just past the crossing (λ interpolated linearly; an undershoot is

@@ -219,12 +219,29 @@ def contact_switch(km, cst, j, lam_r, t, d1):
 
 
 @njit(**JIT)
-def contact_step(km, cst, j, lam_r, t, h, d1, r1):
-    """Bookkeeping of the step of length ``h`` that ended at time ``t`` with δ1, δ̇1: onset
-    (δ crosses 0 upwards: located on the cubic Hermite interpolant, its rate is δ̇⁻),
-    separation, free flight, peaks, and the re-seat criterion of model auto (pressed
-    quasi-statically, |δ̇| ≤ RESEAT_RATE ω_c δ with F_n > 0, for RESEAT_PERIODS periods of
-    the contact's oscillation). Returns True when the joint is marked for re-seating."""
+def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
+    """Whether joint ``k`` (model auto, under the law) may count this instant towards its
+    re-seat dwell: pressed (δ > 0, F_n > 0) quasi-statically (|δ̇| ≤ RESEAT_RATE ω_c δ) and,
+    without drivers, with the kinetic energy to pay for the re-seat's position step (it lifts
+    the journal by δ against the load pressing it: m/(m+1) F_n δ beyond the elastic energy
+    it drops, taken from the kinetic energy so that no energy is added)."""
+    if not (d1 > 0.0 and lam_r > 0.0 and km.joint_model[k] == AUTO):
+        return False
+    if not abs(r1) <= RESEAT_RATE * wn * d1:
+        return False
+    if km.driver_row.shape[0] > 0:
+        return True
+    expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
+    return kinetic > expo / (expo + 1.0) * lam_r * d1
+
+
+@njit(**JIT)
+def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
+    """Bookkeeping of the step of length ``h`` that ended at time ``t`` with δ1, δ̇1 and
+    the kinetic energy ``kinetic`` (J): onset (δ crosses 0 upwards: located on the cubic
+    Hermite interpolant, its rate is δ̇⁻), separation, free flight, peaks, and the re-seat
+    criterion of model auto (:func:`reseat_ready`). Returns True when the joint is marked
+    for re-seating."""
     k = contact_joint_index(km, j)
     marked = False
     if cst[j, FM] == 1.0:
@@ -246,8 +263,7 @@ def contact_step(km, cst, j, lam_r, t, h, d1, r1):
         cst[j, PKD] = max(cst[j, PKD], d1)
         wj = cst[j, WJC]
         wn = math.sqrt(wj) if wj > 0.0 else 0.0
-        pressed = d1 > 0.0 and lam_r > 0.0 and km.joint_model[k] == AUTO
-        if pressed and abs(r1) <= RESEAT_RATE * wn * d1:
+        if reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
             cst[j, DWL] += h
             if cst[j, DWL] * wn >= 2.0 * math.pi * RESEAT_PERIODS:
                 cst[j, DWL] = -1.0

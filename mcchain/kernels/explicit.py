@@ -450,10 +450,12 @@ def rk4_run(
                     if h * h * wca > limit2:
                         st |= CONTACT_STEP_TOO_LARGE
                         break
+                    kinetic = kinetic_energy(km, s, v)
                     for j in range(ncj):
                         lam_r = lam0[km.joint_row[contact_joint_index(km, j)]]
                         contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
-                        contact_step(km, cst, j, lam_r, t, h, cst[j, PDC], cst[j, PRC])
+                        d1, r1 = cst[j, PDC], cst[j, PRC]
+                        contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic)
                     wca = 0.0
                 if n % out_every == 0:
                     it = n // out_every

@@ -46,6 +46,7 @@ from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
     damper_stiffness_add,
+    kinetic_energy,
     mass_diagonal,
     spring_vectors,
 )
@@ -265,6 +266,7 @@ def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     ω_c h > CONTACT_STEP_LIMIT (``F``, ``B``: scratch)."""
     contact_forces(km, s, q, v, cst, F)
     constraint_jacobian(km, s, q, B)
+    kinetic = kinetic_energy(km, s, v)
     largest = 0.0
     for j in range(cst.shape[0]):
         r = km.joint_row[contact_joint_index(km, j)]
@@ -279,7 +281,7 @@ def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     for j in range(cst.shape[0]):
         lam_r = lam[km.joint_row[contact_joint_index(km, j)]]
         contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
-        contact_step(km, cst, j, lam_r, t, h, cst[j, PDC], cst[j, PRC])
+        contact_step(km, s, cst, j, lam_r, t, h, cst[j, PDC], cst[j, PRC], kinetic)
     return True
 
 

@@ -13,7 +13,6 @@ import itertools
 from mcchain.errors import SceneError
 from mcchain.parameters import PARAMETERS
 from mcchain.scene.models import (
-    CONTACT_METHODS,
     FIXED_STEP_METHODS,
     GROUND_NAME,
     LOOP_METHODS,
@@ -424,8 +423,8 @@ def _check_joint_type(where: str, joint: Joint, sampled: set[str]) -> None:
 def _check_contact(
     scene: Scene, where: str, joint: Joint, clearance_joint: bool, sampled: set[str]
 ) -> None:
-    """``model`` and ``[joint.contact]`` of one joint against its clearance, the sampled
-    contact keys and the simulation method."""
+    """``model`` and ``[joint.contact]`` of one joint against its clearance and the sampled
+    contact keys."""
     contact = joint.contact
     if contact is not None and not clearance_joint:
         raise SceneError(
@@ -456,10 +455,3 @@ def _check_contact(
                 f"sample.vary.{quote_key(path)}: the stiffness of joint {joint.name!r} comes "
                 "from its radius and materials; give `stiffness` in [joint.contact] to sample it"
             )
-    sim = scene.simulate
-    if sim is not None and joint.resolved_model != "link" and sim.method not in CONTACT_METHODS:
-        raise SceneError(
-            f"simulate.method: {sim.method!r} cannot integrate the contact law of joint "
-            f"{joint.name!r} (model {joint.resolved_model!r}); use one of "
-            f'{", ".join(CONTACT_METHODS)}, or model "link"'
-        )

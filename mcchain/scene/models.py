@@ -621,8 +621,6 @@ SIMULATE_METHODS = ("rk4", "rk4-projection", "generalized-alpha", "rk45", "radau
 FIXED_STEP_METHODS = ("rk4", "rk4-projection", "generalized-alpha")
 LOOP_METHODS = ("rk4",)
 """The methods of the loop kernels (``[simulate] kernels = "loop"``)."""
-CONTACT_METHODS = ("rk45", "rk4", "rk4-projection", "generalized-alpha")
-"""The methods that integrate the contact law of a clearance joint (model contact or auto)."""
 
 
 class Simulate(_Section):

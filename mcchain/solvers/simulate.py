@@ -49,7 +49,7 @@ from mcchain.contact import CONTACT_SUMMARY
 from mcchain.errors import SceneError
 from mcchain.model import JOINT_CLEARANCE, JointKind, Model
 from mcchain.scene.loading import load_section
-from mcchain.scene.models import CONTACT_METHODS, Simulate
+from mcchain.scene.models import Simulate
 from mcchain.solvers.threads import over_samples
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
@@ -420,7 +420,13 @@ class _Singular(Exception):
 
 
 def _run_radau(run: _Run) -> None:
-    """scipy's Radau on the index-1 equations, one sample at a time (the slow reference)."""
+    """scipy's Radau on the index-1 equations, one sample at a time (the slow reference);
+    with contact-law joints, in segments between located events (:mod:`.radau_contact`)."""
+    if run.model.has_contact:
+        from mcchain.solvers.radau_contact import run_radau_contact
+
+        run_radau_contact(run, SINGULAR_PIVOT)
+        return
     from scipy.integrate import solve_ivp
 
     module, P_all, _, _ = _lane_setup(run, "accel")
@@ -668,12 +674,6 @@ def simulate(
     lanes = LMAX if lanes is None else lanes
     if not 1 <= int(lanes) <= LMAX:
         raise ValueError(f"lanes: must be in 1..{LMAX} (the lane kernels' work rows), got {lanes}")
-    if model.has_contact and settings.method not in CONTACT_METHODS:
-        names = [model.joint_names[k] for k in np.flatnonzero(model.joint_model)]
-        raise SceneError(
-            f"simulate.method: {settings.method!r} cannot integrate the contact law of joint "
-            f"{names[0]!r}; use one of {', '.join(CONTACT_METHODS)}"
-        )
     grid = output_times(settings)
     time, every = grid.time, grid.every
     q, v, status = start_state(model, settings, q_start, v_start, status)
