@@ -41,7 +41,7 @@ GOLDEN = {
         "accel": "86e32d2d5657cb7fd633ef2b973c48781a8539dfe3db0e50d2dfee88ac957acb",
         "rk4": "c5c73b7b4a6c64462518cc0db9267f4e9169dd23eacfa64bc7018df84424d391",
         "rk4-projection": "51c3f97f7c023600dbc4874bd8862ebfb12a96a4bf2cd102c20cd4ba408a48d8",
-        "rk45": "aaa80eb1cac1f7b1a08f1ba0e51e92f7893cf7eaa84d234a1d8f9db7a436e5d5",
+        "rk45": "83a1c0d1224191d323c277df4ba694fbf2d325f392a20efe16eebe72d97dfa77",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

@@ -419,7 +419,8 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     # Adaptive, model auto: a step whose end has the link's λ ≤ 0 (its start λ > 0) is
     # retried to land just past the crossing (λ interpolated linearly; an undershoot is
     # accepted and the next step crosses again, shorter), so the law takes over where λ
-    # reaches 0, not up to a whole step later.
+    # reaches 0, not up to a whole step later. A crossing in the step's first thousandth is
+    # taken at the step's end (retrying would shrink the step towards hmin).
     event = ["evt = 2.0"]
     for j, k in enumerate(joints):
         r = topo.joint_row[k]
@@ -427,7 +428,9 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         event += [
             f"if {at('fm', j)} == 0.0 and {model(k)} == {AUTO!r}.0 and {lam0} > 0.0"
             f" and {lam1} <= 0.0:",
-            f"    evt = min(evt, max({lam0} / ({lam0} - {lam1}) * {SWITCH_OVERSHOOT!r}, 1e-3))",
+            f"    frac = {lam0} / ({lam0} - {lam1})",
+            "    if frac >= 1e-3:",
+            f"        evt = min(evt, frac * {SWITCH_OVERSHOOT!r})",
         ]
     event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
     b["contact_event"] = "\n".join(event)

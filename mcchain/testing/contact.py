@@ -165,7 +165,8 @@ def _run(
         crossing.terminal = True  # type: ignore[attr-defined]
         crossing.direction = -1.0 if in_contact else 1.0  # type: ignore[attr-defined]
         sample = times[(times >= t0) & (times <= t_end)]
-        if ts and sample.size and sample[0] == ts[-1][-1]:
+        last = next((t[-1] for t in reversed(ts) if len(t)), None)
+        if last is not None and sample.size and sample[0] == last:
             sample = sample[1:]  # the previous phase ended exactly on a sample time
         sol = solve_ivp(
             scene.rhs,
@@ -182,7 +183,8 @@ def _run(
         if sol.status < 0:
             raise RuntimeError(f"reference integration failed at t = {t0:g}: {sol.message}")
         ts.append(sol.t)
-        ys.append(sol.y.T)
+        # (a phase with no sample time in it gives scipy's empty list, not an array)
+        ys.append(np.asarray(sol.y, dtype=float).reshape(y.size, -1).T)
         if sol.status == 0:
             break
         t0 = float(sol.t_events[0][0])
