@@ -40,29 +40,15 @@ def run_radau_contact(run: Any, singular_pivot: float) -> None:
     """Integrate every sample of ``run`` (a :class:`mcchain.solvers.simulate._Run` whose
     model has contact-law joints) with Radau; outputs as the lane kernels'."""
     from mcchain.kernels.explicit import nan_history
+    from mcchain.solvers.simulate import _flat_outputs
 
-    flat = _histories(run)
+    flat = _flat_outputs(run.out, run.model.nsample, len(run.time))
     run.rejected_steps[:] = -1  # scipy's Radau does not count them
     for i in range(run.model.nsample):
         if run.status[i] & FAILURE_BITS:
             nan_history(i, 0, *flat)
             continue
         _Sample(run, i, singular_pivot, flat).integrate()
-
-
-def _histories(run: Any) -> tuple[np.ndarray, ...]:
-    """The history arrays as the kernels write them: (sample, time, k)."""
-    n, ntime = run.model.nsample, len(run.time)
-    out = run.out
-    return (
-        out["q"].reshape(n, ntime, -1),
-        out["v"].reshape(n, ntime, -1),
-        out["joint_force"].reshape(n, ntime, -1),
-        out["contact_force"],
-        out["driver_torque"],
-        out["constraint_error"],
-        out["energy"],
-    )
 
 
 class _Sample:
