@@ -10,17 +10,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_cli_commands import CLEARANCE_BAR, Ran, assert_usage_error, in_process
+from test_cli_commands import CLEARANCE_BAR, Ran, assert_usage_error
 from test_runs_support import fake_loader, fake_solve, write_fake_scene
 
 from mcchain import execution
-
-
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:

@@ -73,13 +73,6 @@ def in_process(
     return run
 
 
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
-
-
 def assert_usage_error(proc: Ran | subprocess.CompletedProcess[str], *fragments: str) -> None:
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.splitlines()

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from test_cli_commands import Ran, assert_scene_refused, in_process
+from test_cli_commands import Ran, assert_scene_refused
 
 from mcchain.testing.factory import chain_scene_text, clearance_bar_text, paper_bar_text
 from mcchain.testing.scenes import fourbar_text
@@ -73,13 +73,6 @@ CASES = {
         "over-constrains it",
     ),
 }
-
-
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_commands import Ran, assert_scene_refused, in_process
+from test_cli_commands import Ran, assert_scene_refused
 
 from mcchain.kernels.joints import constraint_gamma, constraint_residual, constraint_velocity_rhs
 from mcchain.solvers.simulate import simulate
@@ -222,13 +222,6 @@ DRIVER_CASES = {
         'modes.along: follows drivers of law "constant" only',
     ),
 }
-
-
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("case", sorted(DRIVER_CASES))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_commands import Ran, assert_scene_refused, in_process
+from test_cli_commands import Ran, assert_scene_refused
 
 from mcchain.kernels.forces import applied_forces
 from mcchain.solvers.simulate import simulate
@@ -155,13 +155,6 @@ LOAD_CASES = {
         "force.couple.factors: 1 values for 2 times (one value per time)",
     ),
 }
-
-
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("case", sorted(LOAD_CASES))

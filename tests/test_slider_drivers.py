@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_cli_commands import Ran, assert_scene_refused, in_process
+from test_cli_commands import Ran, assert_scene_refused
 
 from mcchain.kernels.joints import constraint_gamma, constraint_residual, constraint_velocity_rhs
 from mcchain.solvers.simulate import simulate
@@ -264,13 +264,6 @@ SLIDER_CASES = {
         'driver.P.speed: required for law "constant" (s0 + v t)',
     ),
 }
-
-
-@pytest.fixture
-def mcchain(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> Callable[..., Ran]:
-    return in_process(monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("case", sorted(SLIDER_CASES))
