@@ -44,26 +44,29 @@ def run_radau_contact(run: Any, singular_pivot: float) -> None:
 
     flat = _flat_outputs(run.out, run.model.nsample, len(run.time))
     run.rejected_steps[:] = -1  # scipy's Radau does not count them
+    shared = (run.model.kernel_model(), *run.model.constraint_pattern())
     for i in range(run.model.nsample):
         if run.status[i] & FAILURE_BITS:
             nan_history(i, 0, *flat)
             continue
-        _Sample(run, i, singular_pivot, flat).integrate()
+        _Sample(run, i, singular_pivot, flat, shared).integrate()
 
 
 class _Sample:
     """One sample's integration: its modes (``cst``, :mod:`mcchain.kernels.clearance`),
     scratch arrays, and the callbacks solve_ivp takes."""
 
-    def __init__(self, run: Any, i: int, pivot: float, flat: tuple[np.ndarray, ...]) -> None:
+    def __init__(
+        self, run: Any, i: int, pivot: float, flat: tuple[np.ndarray, ...], shared: tuple[Any, ...]
+    ) -> None:
+        """``shared``: the kernel model and the constraint pattern, built once per run."""
         from mcchain.kernels import clearance as cl
         from mcchain.kernels.forces import mass_diagonal
 
         model = run.model
         self.run, self.i, self.pivot, self.flat, self.cl = run, i, pivot, flat, cl
         self.model, self.ndof = model, model.ndof
-        self.km = model.kernel_model()
-        self.cols, self.first = model.constraint_pattern()
+        self.km, self.cols, self.first = shared
         self.joints = np.flatnonzero(model.joint_model)
         self.rows = model.joint_row[self.joints]
         ncon, ndof = model.ncon, model.ndof
@@ -72,6 +75,7 @@ class _Sample:
         self.g, self.phi, self.lam = np.zeros(ncon), np.zeros(ncon), np.zeros(ncon)
         self.row_law = np.zeros((ncon, 3))
         self.scratch = [np.zeros(ncon) for _ in range(4)]
+        self.jf, self.cf = np.zeros((model.njoint, 2)), np.zeros(model.njoint)
         self.minv = np.zeros(ndof)
         mass_diagonal(self.km, i, self.minv)
         self.minv = 1.0 / self.minv
@@ -275,9 +279,10 @@ class _Sample:
         for j in range(len(self.joints)):
             self.cst[j, cl.PKF] = max(self.cst[j, cl.PKF], self.lam[self.rows[j]])
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
-        jf, cf = np.zeros((model.njoint, 2)), np.zeros(model.njoint)
-        write_outputs(self.km, self.i, it, q, v, self.lam, self.cst, jf, cf, err, *self.flat,
-                      run.contact_history)  # fmt: skip
+        write_outputs(
+            self.km, self.i, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,
+            run.contact_history,
+        )  # fmt: skip
         for k in range(model.njoint):
             clearance_link = model.joint_kind[k] == JOINT_CLEARANCE and model.joint_model[k] == 0
             lost = clearance_link and self.lam[model.joint_row[k]] <= 0.0
