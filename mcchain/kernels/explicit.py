@@ -131,6 +131,20 @@ def ldl_solve(L, m, first, dinv, b):
 
 
 @njit(**JIT)
+def constraint_rates(B, cols, v, nu, m, out):
+    """Φ̇_r = B_r q̇ − ν_r of the m rows into ``out``, over each row's non-zeros (``cols``,
+    see :func:`index1_acceleration`); ``out`` may be ``nu`` itself."""
+    for r in range(m):
+        rate = -nu[r]
+        for c in range(cols.shape[1]):
+            k = cols[r, c]
+            if k < 0:
+                break
+            rate += B[r, k] * v[k]
+        out[r] = rate
+
+
+@njit(**JIT)
 def schur_matrix(B, minv, cols, first, m, S_out):
     """S = B M⁻¹ Bᵀ (m rows) into ``S_out`` over B's non-zeros, in the envelope ``first``
     (both triangles written; entries outside the envelope are never read)."""
@@ -209,14 +223,9 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, cols, first,
         constraint_jacobian(km, s, q, work_B)
         constraint_gamma(km, s, q, v, t, work_g)
         constraint_velocity_rhs(km, s, t, lam_out)  # ν, then Φ̇ = B q̇ − ν (drivers: −Φ_t)
+        constraint_rates(work_B, cols, v, lam_out, m, lam_out)
         for r in range(m):
-            rate = -lam_out[r]
-            for c in range(width):
-                k = cols[r, c]
-                if k < 0:
-                    break
-                rate += work_B[r, k] * v[k]
-            work_g[r] -= balpha2 * rate + bbeta2 * work_phi[r]
+            work_g[r] -= balpha2 * lam_out[r] + bbeta2 * work_phi[r]
         schur_matrix(work_B, minv, cols, first, m, work_S)
         for r in range(m):
             acc = -work_g[r]
@@ -259,15 +268,9 @@ def project_onto_link(km, s, q, v, t, minv, cols, first, cst, row_law, ptol, max
         constraint_residual(km, s, q, t, work_phi)
         constraint_jacobian(km, s, q, work_B)
         constraint_velocity_rhs(km, s, t, work_nu)
+        constraint_rates(work_B, cols, v, work_nu, m, work_rate)
         phimax = 0.0
         for r in range(m):
-            rate = -work_nu[r]
-            for c in range(width):
-                k = cols[r, c]
-                if k < 0:
-                    break
-                rate += work_B[r, k] * v[k]
-            work_rate[r] = rate
             if row_law[r, 0] == 1.0:
                 work_phi[r] = 0.0
                 work_rate[r] = 0.0
