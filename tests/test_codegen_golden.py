@@ -27,27 +27,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "9bd571752c655d8a0cc1cbdae963ce1437707e9aad88fb3b5adf5caa2e5ffb88",
-        "rk4-projection": "4dfcf561a25f719ca39c0ea6f5b38d8bb00e7a375f52a048db623c8598ed3bd5",
-        "rk45": "0c784e6ee987ad4a83d0005654b6c7197f93f2399751675d7d030fbd7d3216bf",
+        "rk4": "9d5c840d0ffb814465c38179bb0b9ebcf9ca9f67bde1f066011eccf5e2463017",
+        "rk4-projection": "3a08788eb69ff3bbc5abc46b59a2ae4acb669e831a5d998cfab010f0ddfe7600",
+        "rk45": "474f63dc79c3dca4d77c85364817d8fd41af01e72dcda5fd3730ccc93f0b071d",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "effb2624d9c5e6a2519f33a60f360e4176f1f079a391b700fd088176c97be176",
-        "rk4-projection": "feb2bb6879cae6250cbe01cf0127bf8b09a8a9cafef97e59b4073009d40572f9",
-        "rk45": "369eaab65e8b464810771f8230faadec176d59f74b403519c49a3a4fb7ed12a2",
+        "rk4": "c362c144368761ce7f90ce6b5079a88d29c78dcfd511da5dfd350d89b904156a",
+        "rk4-projection": "53d247d12e630c79a6c976981402219a4f32691d46753a56bd2b8f13a879ba03",
+        "rk45": "36619d6a211d6c860aba9b1b33f0c67beaacbdaea9acf38086484d8e6762ddd6",
     },
     "fourbar-clearance-auto": {
         "accel": "86e32d2d5657cb7fd633ef2b973c48781a8539dfe3db0e50d2dfee88ac957acb",
-        "rk4": "c5c73b7b4a6c64462518cc0db9267f4e9169dd23eacfa64bc7018df84424d391",
-        "rk4-projection": "51c3f97f7c023600dbc4874bd8862ebfb12a96a4bf2cd102c20cd4ba408a48d8",
-        "rk45": "83a1c0d1224191d323c277df4ba694fbf2d325f392a20efe16eebe72d97dfa77",
+        "rk4": "7ba4e63b7674cead741d3580cd73ba91134ef2a6be08ecfc4951937df013b58a",
+        "rk4-projection": "9d63279fcfb4f80ca6ca353ebbc017aee9daefb3db9273ef4da4de1e084b5bea",
+        "rk45": "381f6e3e25a0b86d48e96f00f1c3a99b040b344cb5c777fcd32a9a4e0b77c9fd",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "e2eb800723a2a8f84e713fcb69c828846f8662677c03ee6a605090b166f37816",
-        "rk4-projection": "1b5b27053ddac48aa39ad04a3537d0a2a1f2799fcc50774ebcf77342efdc0cba",
-        "rk45": "e883e19df2141cbccee694b5be3718cf935a8d61626cd39ad12580e8a9d289a9",
+        "rk4": "7a1bd80c30a0f676773f4075180a6e0361c41ddbfd9241657bb1861b99bf2049",
+        "rk4-projection": "16f120cb9b19cd3589cd96fa706a2af761eb81ec13693a3a9028360e12ba04f4",
+        "rk45": "9805c7cd13aaeaec9f089b6d0b71b65af953d5701d3e9f1726c91ca2d7a1a391",
     },
 }
 
@@ -85,7 +85,7 @@ FUNCTIONS = {
         "group_outputs_erkp",
         "group_project_erkp",
     },
-    "rk45": {"adaptive_run", "group_outputs_dp", "group_first_stage_dp"},
+    "rk45": {"adaptive_run", "group_outputs_dp", "group_first_stage_dp", "group_stage_dp"},
 }
 
 

@@ -125,10 +125,8 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("load_lam_dyn")
     em.emit(*(f"ah{j} = A[s, {j}] * h" for j in range(nstage)))
     block("stage_coefs")
-    em.emit("cs = cc[s]", *(f"aa{j} = A[s, {j}]" for j in range(nstage)))
-    block("stage_coefs_lane")
-    em.emit(*(f"aa{j} = A[0, {j}]" for j in range(nstage)), "hh = 0.0")
-    block("stage_coefs_zero")
+    em.emit(*(f"aa{j} = A[s, {j}]" for j in range(nstage)))
+    block("stage_coefs_row")
     em.emit(*(f"ah{j} = aa{j} * hh" for j in range(nstage)))
     block("stage_coefs_per_lane")
     for i in range(ndof):
@@ -150,8 +148,11 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     for k, j in cj.items():
         em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}")
     if cj:
-        em.emit(f"{at('wca')} = max({at('wca')}, wc2)")
+        em.emit(f"{at('wcc')} = wc2")
     block("store_stage")
+    if cj:
+        em.emit(f"{at('wca')} = max({at('wca')}, {at('wcc')})")
+    block("contact_stage_max")
     em.emit(
         *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(ndof)),
         *(f"{at('kv0', i)} = {at('kvc', i)}" for i in range(ndof)),
@@ -160,11 +161,17 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('sg')} = {at('sgc')}",
     )
     block("accept_zero")
-    em.emit(
-        *(f"{at(x, i)} = np.nan" for x in ("q", "v", "kq0", "kv0") for i in range(ndof)),
-        *(f"{at(x, r)} = np.nan" for x in ("lam", "lamc") for r in range(ncon)),
+    lm, rows = lay.lmax, lay.rows
+    b["kill_lane"] = "\n".join(
+        [
+            f"for r in range({2 * ndof}):",
+            f"    W[({rows['q']} + r) * {lm} + l] = np.nan",
+            f"    W[({rows['kq0']} + r) * {lm} + l] = np.nan",
+            f"for r in range({ncon}):",
+            f"    W[({rows['lam']} + r) * {lm} + l] = np.nan",
+            f"    W[({rows['lamc']} + r) * {lm} + l] = np.nan",
+        ]
     )
-    block("kill_lane")
     for row, name in (("lam", "contact_check"), ("lamc", "contact_check_c")):
         lines = []
         law_rows = {topo.joint_row[k] for k in topo.contact_joints}
@@ -237,28 +244,41 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("kinetic")
     em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(ndof)))
     block("scale_velocity")
-    # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)).
-    em.emit("en = 0.0")
-    for i in range(ndof):
-        for x in ("q", "v"):
-            new = " + ".join(f"bw[{j}] * {at(f'k{x}{j}', i)}" for j in range(nstage))
-            err = " + ".join(f"be[{j}] * {at(f'k{x}{j}', i)}" for j in range(nstage))
-            em.emit(
-                f"{at(x + 'n', i)} = {at(x, i)} + hh * ({new})",
-                f"e_ = hh * ({err}) / (atol + rtol * max(abs({at(x, i)}), abs({at(x + 'n', i)})))",
-                "en += e_ * e_",
-            )
-    em.emit(f"en = math.sqrt(en / {2 * ndof})", "en = en if en == en else np.inf")
-    block("error_norm")
-    em.emit(
-        *(f"{at(x, i)} = {at(x + 'n', i)}" for x in ("q", "v") for i in range(ndof)),
-        *(f"{at('kq0', i)} = {at(f'kq{nstage - 1}', i)}" for i in range(ndof)),
-        *(f"{at('kv0', i)} = {at(f'kv{nstage - 1}', i)}" for i in range(ndof)),
-        *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
-        f"{at('chk')} = {at('chkc')}",
-        f"{at('sg')} = {at('sga')}",
+
+    # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
+    # summed over q0, v0, q1, v1, ... Loops over the rows, not unrolled: numba's compile time
+    # grows faster than a function's length (the values are the same expressions).
+    def elem(row: str, offset: str, stride: int = 0) -> str:
+        return f"W[({rows[row] + stride} + {offset}) * {lm} + l]"
+
+    stride = 2 * ndof
+    new = " + ".join(f"bw[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
+    err = " + ".join(f"be[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
+    b["error_norm"] = "\n".join(
+        [
+            "en = 0.0",
+            f"for i in range({2 * ndof}):",
+            f"    r = (i % 2) * {ndof} + i // 2",
+            f"    y = {elem('q', 'r')}",
+            f"    yn = y + hh * ({new})",
+            f"    {elem('qn', 'r')} = yn",
+            f"    e_ = hh * ({err}) / (atol + rtol * max(abs(y), abs(yn)))",
+            "    en += e_ * e_",
+            f"en = math.sqrt(en / {2 * ndof})",
+            "en = en if en == en else np.inf",
+        ]
     )
-    block("accept")
+    b["accept"] = "\n".join(
+        [
+            f"for r in range({2 * ndof}):",
+            f"    {elem('q', 'r')} = {elem('qn', 'r')}",
+            f"    {elem('kq0', 'r')} = {elem('kq0', 'r', stride * (nstage - 1))}",
+            f"for r in range({ncon}):",
+            f"    {elem('lam', 'r')} = {elem('lamc', 'r')}",
+            f"{at('chk')} = {at('chkc')}",
+            f"{at('sg')} = {at('sga')}",
+        ]
+    )
     b.update(_contact_blocks(topo, lay, b["kill_lane"]))
     return b
 
@@ -500,7 +520,12 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
         "adaptive_run",
         DOPRI5,
         "dp",
-        (templates.ADAPTIVE_KERNEL, templates.OUTPUT_HELPER, templates.FIRST_STAGE_HELPER),
+        (
+            templates.ADAPTIVE_KERNEL,
+            templates.OUTPUT_HELPER,
+            templates.FIRST_STAGE_HELPER,
+            templates.STAGE_HELPER,
+        ),
     ),
 }
 """The variants of a topology's lane-kernel module: each holds only the functions that its

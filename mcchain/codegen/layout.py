@@ -54,8 +54,8 @@ CONTACT_ROW_MEANINGS = """\
 # at the accepted state; pdc, prc the same at the current stage; wjc the contact's pulsation^2
 # at the current stage; dwl time pressed quasi-statically (model auto: re-seat); nim impacts;
 # pkf peak contact force; pkd peak penetration; tff free-flight time; tse first separation
-# time; wca largest (contact pulsation)^2 since the last check; rsw lane to re-seat; e0 its
-# energy before the re-seat.
+# time; wca largest (contact pulsation)^2 since the last check; wcc the largest at the
+# current stage; rsw lane to re-seat; e0 its energy before the re-seat.
 """
 """Legend of the contact rows, written only into modules that have them."""
 
@@ -90,6 +90,7 @@ class Layout:
             for name in CONTACT_ROWS:
                 self.add(name, ncj)
             self.add("wca", 1)
+            self.add("wcc", 1)
             self.add("rsw", 1)
             self.add("e0", 1)
 

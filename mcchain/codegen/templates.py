@@ -128,6 +128,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     @@load_stage_sub
                     @@accel_stage
                     @@store_stage
+                    @@contact_stage_max
                     @@accumulate
                     @[sga] = @[sga] + sing
                 if s > 0:
@@ -264,24 +265,17 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 else:
                     @[hs] = 0.0
             for s in range(1, NSTAGE):
-                @@stage_coefs_lane
+                group_stage_SUFFIX(W, nl, s, A, cc[s], balpha2, bbeta2, tau)
                 keep = 0.0 if s == 1 else 1.0
-                for l in range(nl):  # lanes: schedule
-                    hh = @[hs]
-                    ts = @[tl] + cs * hh
-                    @@stage_coefs_per_lane
-                    @@load_params
-                    @@load_stage
-                    @@accel_stage
-                    @@store_stage
-                    @[sga] = @[sga] * keep + sing
+                for l in range(nl):
+                    @[sga] = @[sga] * keep + @[sgc]
+                    @@contact_stage_max
+                    nev[l] += 1 if run[l] else 0
                 for i in range(2 * NDOF):
                     src = (KCROW + i) * LMAXV
                     dst = (K0ROW + 2 * NDOF * s + i) * LMAXV
                     for l in range(nl):
                         W[dst + l] = W[src + l]
-                for l in range(nl):
-                    nev[l] += 1 if run[l] else 0
             # Error estimate, acceptance, next step.
             for l in range(nl):
                 if not run[l]:
@@ -426,22 +420,38 @@ RESEAT_REFRESH = """    if refresh:  # the re-seated lanes' first stage (FSAL) a
 """The re-seat's call of the first stage, in the adaptive variant only (the fixed-step ones
 have no first-stage helper)."""
 
-FIRST_STAGE_HELPER = '''
+STAGE_HELPER = '''
 @njit(**JIT)
-def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, reseated):
-    """Stage 0 at each lane's start (adaptive methods: later steps reuse their last stage);
-    with ``reseated`` = 1.0, only at the lanes flagged ``rsw`` (just re-seated). A float, not
-    a bool: numba would compile a literal True and a literal False apart."""
-    s = 0
-    @@stage_coefs_zero
-    for l in range(nl):
-        if reseated > 0.0 and @[rsw] == 0.0:
-            continue
-        ts = @[tl]
+def group_stage_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau):
+    """Stage ``s`` (node ``cs``) of every lane at its own time and step (rows ``tl``, ``hs``)
+    into the current stage's rows (kqc, kvc, lamc, chkc, sgc; with contact joints pdc, prc,
+    wjc, wcc). One copy of the stage for the adaptive loop and the first stage: numba's
+    compile time grows faster than the length of a function."""
+    @@stage_coefs_row
+    for l in range(nl):  # lanes: schedule
+        hh = @[hs]
+        ts = @[tl] + cs * hh
         @@stage_coefs_per_lane
         @@load_params
         @@load_stage
         @@accel_stage
         @@store_stage
+'''
+
+FIRST_STAGE_HELPER = '''
+@njit(**JIT)
+def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, reseated):
+    """Stage 0 at each lane's state (adaptive methods: later steps reuse their last stage);
+    with ``reseated`` = 1.0, kept only at the lanes flagged ``rsw`` (just re-seated): the
+    others' step and current-stage rows, which it also writes, are written again before
+    they are read. A float, not a bool: numba would compile a literal True and a literal
+    False apart."""
+    for l in range(nl):
+        @[hs] = 0.0
+    group_stage_SUFFIX(W, nl, np.int64(0), A, 0.0, balpha2, bbeta2, tau)
+    for l in range(nl):
+        if reseated > 0.0 and @[rsw] == 0.0:
+            continue
         @@accept_zero
+        @@contact_stage_max
 '''
