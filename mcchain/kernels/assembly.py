@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import INLINE, JIT
 from mcchain.kernels.forces import (
     applied_forces,
     mass_diagonal,
@@ -245,7 +245,8 @@ def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
             if not schur_factor_damped(J, minv, ma, n, S, ASSEMBLY_DAMPING):
                 return 2
         size = _norm(psi, ma)
-        start[:] = q
+        for i in range(n):  # not start[:] = q: numba compiles its shape-error message (2.7 s)
+            start[i] = q[i]
         project_onto_rows(J, minv, ma, n, S, psi, q)
         _assembly_residual(km, s, q, target, psi, J)
         # Far from the solution (a rough guess, large rotations) a full step can overshoot
@@ -285,7 +286,7 @@ def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
     return True
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     """Directions of the clearance joints' d from the ideal-joint mechanism at t = 0.
 
@@ -346,7 +347,7 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     return True
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def assemble_one(km, s, q, v):
     """Project q and v of sample ``s`` onto the constraints (t = 0), in place.
 

@@ -23,6 +23,12 @@ except ImportError:  # generating kernel source needs these options, not numba i
 JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 """Options of hand-written kernels (``@njit(**JIT)``)."""
 
+INLINE = dict(JIT, inline="always")
+"""Options of small helpers and of functions with one caller: numba inlines their body into
+the caller's before typing. Each function numba compiles on its own costs about 0.3 s
+(typing, and LLVM optimising and emitting it with every function it calls, again at every
+level of the call tree): the Quick start's cold compile lost a quarter this way."""
+
 LANE_JIT = dict(JIT, fastmath={"contract"})
 """Options of generated lane kernels (``mcchain.codegen`` writes them into the module's header).
 

@@ -23,7 +23,7 @@ from mcchain.kernels.assembly import (
     project_positions,
     schur_factor,
 )
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import INLINE, JIT
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
@@ -104,7 +104,7 @@ def _equilibrium_residual(km, s, q, lam, n, m, fscale, lscale, v_rest, B, F, R_o
     return norm, merit
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _flip_pulled_journals(km, s, q, lam):
     """Move every clearance journal with λ ≤ 0 to the mirror side of its bearing (d → −d)
     by translating its body (the bearing's if the journal is the ground). True if any."""
@@ -124,7 +124,7 @@ def _flip_pulled_journals(km, s, q, lam):
     return flipped
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _kkt_matrix(K, B, minv, mu, n, m, J_out):
     """J = [[K + μ M, Bᵀ], [B, 0]] into ``J_out`` (n + m, n + m)."""
     J_out[:, :] = 0.0
@@ -138,7 +138,7 @@ def _kkt_matrix(K, B, minv, mu, n, m, J_out):
             J_out[k, n + i] = B[i, k]
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _scaled_step_norm(step, n, size, fscale, lscale):
     """max |step| with x, y / L scale, θ as is, λ / F scale."""
     result = 0.0
@@ -153,7 +153,7 @@ def _scaled_step_norm(step, n, size, fscale, lscale):
     return result
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def equilibrium_one(km, s, q, lam, tol, max_iter, history):
     """Newton on (q, λ) for Φ(q) = 0, Bᵀλ = F(q), from q, in place.
 
@@ -376,7 +376,7 @@ def equilibrium_batch(
 # --------------------------------------------------------------------------------------
 # eigenpulsations
 # --------------------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**INLINE)
 def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
     """Eigenpulsations about the equilibrium (q, λ) of sample ``s``: (Nᵀ K N) v = p² (Nᵀ M N) v,
     N a null-space basis of B.
