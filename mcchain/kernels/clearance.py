@@ -28,7 +28,7 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
 )
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import INLINE, JIT
 from mcchain.kernels.contact import contact_crossing
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 
@@ -184,7 +184,7 @@ def law_rows(km, cst, row_law):
         row_law[r, 1] = cst[j, FN] * cst[j, FM]
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def contact_pulsation(km, cst, row_law):
     """max over the joints under the law of ω_c² = ∂F_n/∂δ · S_rr (1/s²; S_rr = 1/m*, the
     inverse effective mass along n), after the Schur solve filled ``row_law[:, 2]``."""
@@ -218,7 +218,7 @@ def contact_switch(km, cst, j, lam_r, t, d1):
             cst[j, TSE] = t
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
     """Whether joint ``k`` (model auto, under the law) may count this instant towards its
     re-seat dwell: pressed (δ > 0, F_n > 0) quasi-statically (|δ̇| ≤ RESEAT_RATE ω_c δ) and,

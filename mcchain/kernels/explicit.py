@@ -38,7 +38,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import INLINE, JIT
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
 from mcchain.kernels.joints import (
     constraint_gamma,
@@ -185,7 +185,7 @@ def replace_law_rows(S, m, first, row_law, rhs):
         rhs[r] = fn
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, cols, first, cst, row_law,
                         work_B, work_S, work_F, work_g, work_phi, qdd_out, lam_out):  # fmt: skip
     """q̈ and λ of M q̈ + Bᵀλ = F, B q̈ = γ − 2α Φ̇ − β² Φ at (q, v, t) for one sample.
@@ -251,7 +251,7 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, cols, first,
     return err
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def project_onto_link(km, s, q, v, t, minv, cols, first, cst, row_law, ptol, max_newton, tau,
                       work_B, work_S, work_phi, work_rate, work_nu, work_dinv):  # fmt: skip
     """Project q onto Φ(q, t) = 0 (Gauss–Newton in the M metric: dq = −M⁻¹Bᵀ S⁻¹ Φ; stops at

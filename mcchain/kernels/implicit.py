@@ -34,7 +34,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import INLINE, JIT
 from mcchain.kernels.explicit import (
     any_marked,
     finish_contact,
@@ -258,7 +258,7 @@ def generalized_alpha_run(
         nevals_out[s] = nev
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     """At a step's start (q, v, t) with the multipliers ``lam``: δ, δ̇ and ω_c² of every
     contact-law joint, then the switch of model auto and the bookkeeping of the step that
@@ -285,7 +285,7 @@ def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     return True
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _law_rows_newton(km, cst, row_law, lam, B, bp, gp, ndof, Kmat, rhs):
     """Rows of joints under the contact law in the Newton system: λ_r + β′x_r − F_n(q, q̇) = 0
     with Δλ_r = β′x_r, linearised as −(∂F_n/∂δ + γ′ ∂F_n/∂δ̇) B_r Δq + β′ x_r = F_n − λ_r
@@ -302,7 +302,7 @@ def _law_rows_newton(km, cst, row_law, lam, B, bp, gp, ndof, Kmat, rhs):
         rhs[ndof + r] = cst[j, FN] - lam[r]
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _tangent_add(km, s, q, v, t, lam, gp, K_out):
     """K_out[:ndof, :ndof] += ∂(Bᵀλ)/∂q − ∂F/∂q + γ′ C, all exact: the joints' second
     derivatives, the loads' and springs' stiffness, the dampers' position dependence at fixed
@@ -325,7 +325,7 @@ def _tangent_add(km, s, q, v, t, lam, gp, K_out):
             add_pair_outer(K_out, gp * damping, a, b, ux / length, uy / length, pax, pay, pbx, pby)
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def _index1(km, s, q, v, t, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law):
     """Solve [[M, Bᵀ], [B, 0]] [q̈; λ] = [F; γ] (dense, for a start state) into ``rhs``; a
     row under the contact law is λ_r = F_n."""
