@@ -53,6 +53,7 @@ from mcchain.runs import (
 from mcchain.viz.live import LiveOptions, LiveRun, check_live, live_summary
 
 if TYPE_CHECKING:
+    from mcchain.compile_ahead import CompileAhead
     from mcchain.ensemble.io import MergeStats
     from mcchain.parallel import ExecutionStats, SolveFn
 
@@ -170,6 +171,7 @@ def _compute(
     solve: SolveFn | None,
     progress: bool | None,
     live: LiveRun | None = None,
+    compile_ahead: CompileAhead | None = None,
 ) -> ExecutionStats:
     """Solve the chunks that have no part file yet, writing each as a part file (and
     streaming the ``--rerun`` samples they hold to ``live``)."""
@@ -228,6 +230,7 @@ def _compute(
             solve=solve,
             progress=bar,
             observe=observe,
+            compile_ahead=compile_ahead,
         )
     finally:
         bar.close()
@@ -309,6 +312,7 @@ def execute(
     keep_parts: bool = False,
     prepare_seconds: float = 0.0,
     rerun: LiveOptions | None = None,
+    compile_ahead: CompileAhead | None = None,
 ) -> RunResult:
     """Compute the missing chunks of a run folder, merge them, and complete ``run.json``.
 
@@ -364,6 +368,7 @@ def execute(
                     solve=solve,
                     progress=progress,
                     live=live,
+                    compile_ahead=compile_ahead,
                 )
             finally:
                 if live is not None:
@@ -435,29 +440,44 @@ def start_run(
     if run_dir is not None:
         check_new_run_dir(run_dir)
     _check_threads(threads, dask)
-    job = prepare_job(scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader)
-    check_live(rerun, job.nsample)
-    for line in job.warnings:
-        print(f"warning: {line}", file=sys.stderr)
-    prepare_seconds = time.perf_counter() - t0
-    folder = create_run_folder(out, job.scene_name, run_dir)
-    with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
-        f.write(job.scene_text)
-    argv = list(sys.argv if argv is None else argv)
-    record = _new_record(job, folder, argv, Path(scene_path))
-    return execute(
-        job,
-        folder,
-        record,
-        argv=argv,
-        dask=dask,
-        threads=threads,
-        solve=solve,
-        progress=progress,
-        keep_parts=keep_parts,
-        prepare_seconds=prepare_seconds,
-        rerun=rerun,
-    )
+    ahead = None
+    if loader is None and solve is None and dask is None and Path(scene_path).is_file():
+        from mcchain.compile_ahead import CompileAhead
+        from mcchain.parallel import announce_compile
+
+        ahead = CompileAhead.start(Path(scene_path), samples, seed)
+        if ahead is not None:
+            announce_compile(ahead=True)
+    try:
+        job = prepare_job(
+            scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
+        )
+        check_live(rerun, job.nsample)
+        for line in job.warnings:
+            print(f"warning: {line}", file=sys.stderr)
+        prepare_seconds = time.perf_counter() - t0
+        folder = create_run_folder(out, job.scene_name, run_dir)
+        with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
+            f.write(job.scene_text)
+        argv = list(sys.argv if argv is None else argv)
+        record = _new_record(job, folder, argv, Path(scene_path))
+        return execute(
+            job,
+            folder,
+            record,
+            argv=argv,
+            dask=dask,
+            threads=threads,
+            solve=solve,
+            progress=progress,
+            keep_parts=keep_parts,
+            prepare_seconds=prepare_seconds,
+            rerun=rerun,
+            compile_ahead=ahead,
+        )
+    finally:
+        if ahead is not None:
+            ahead.stop()
 
 
 def resume_run(

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from mcchain.compile_ahead import CompileAhead
     from mcchain.model import Model
 
 log = logging.getLogger(__name__)
@@ -158,34 +159,49 @@ def kernel_cache_folders() -> str:
 
 
 @contextmanager
-def compile_notice(after: float = COMPILE_NOTICE_AFTER, stream: Any = None) -> Iterator[None]:
+def compile_notice(
+    after: float = COMPILE_NOTICE_AFTER, stream: Any = None, announced_at: float | None = None
+) -> Iterator[None]:
     """Print one line on stderr if the block (the kernel warm-up) is still running after
-    ``after`` seconds: what is compiled, that it happens once, and where it is cached."""
+    ``after`` seconds: what is compiled, that it happens once, and where it is cached; then
+    how long it took. ``announced_at``: the line was printed then (:func:`announce_compile`),
+    only the time is printed, counted from then."""
     import threading
 
     stream = sys.stderr if stream is None else stream
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if announced_at is None else announced_at
     said = threading.Event()
+    if announced_at is not None:
+        said.set()
 
     def say() -> None:
         said.set()
-        print(
-            "compiling the numba kernels of this scene's analyses and topology: once per "
-            f"installation and topology, then loaded from the cache ({kernel_cache_folders()})",
-            file=stream,
-            flush=True,
-        )
+        announce_compile(stream)
 
     timer = threading.Timer(after, say)
     timer.daemon = True
-    timer.start()
+    if announced_at is None:
+        timer.start()
     try:
         yield
     finally:
         timer.cancel()
-        timer.join()  # a notice being printed ends before the ready line
+        if announced_at is None:
+            timer.join()  # a notice being printed ends before the ready line
         if said.is_set():
             print(f"kernels ready in {time.perf_counter() - t0:.1f} s", file=stream, flush=True)
+
+
+def announce_compile(stream: Any = None, ahead: bool = False) -> None:
+    """The compile notice's line (``ahead``: two processes compile, see
+    :mod:`mcchain.compile_ahead`)."""
+    how = " (in two processes)" if ahead else ""
+    print(
+        f"compiling the numba kernels of this scene's analyses and topology{how}: once per "
+        f"installation and topology, then loaded from the cache ({kernel_cache_folders()})",
+        file=sys.stderr if stream is None else stream,
+        flush=True,
+    )
 
 
 # -- in-process ------------------------------------------------------------------------------
@@ -210,8 +226,12 @@ def run_local(
     solve: SolveFn | None = None,
     progress: Progress | None = None,
     observe: ObserverFn | None = None,
+    compile_ahead: CompileAhead | None = None,
 ) -> ExecutionStats:
     """Solve ``chunks`` in this process, writing each on a thread apart from the compute.
+
+    ``compile_ahead``: the warm-up first waits for that helper process (it compiles into the
+    cache what the warm-up then loads).
 
     ``observe`` (optional) gets each solved chunk on this thread, after the chunk is handed
     to the writer, so that writing and observing overlap; the next chunk is solved after it
@@ -220,7 +240,10 @@ def run_local(
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
     t0 = time.perf_counter()
-    with compile_notice():
+    announced = None if compile_ahead is None else compile_ahead.started
+    with compile_notice(announced_at=announced):
+        if compile_ahead is not None:
+            compile_ahead.wait()
         solve(warm_model(model), scene)  # compile or load the cached kernels
     stats.warmup = time.perf_counter() - t0
     log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)

@@ -11,7 +11,13 @@ import numpy as np
 
 from mcchain.model import Model
 from mcchain.scene.models import Scene
-from mcchain.solvers.statics import assemble, solve_equilibrium, solve_modes, solve_modes_along
+from mcchain.solvers.statics import (
+    Assembled,
+    assemble,
+    solve_equilibrium,
+    solve_modes,
+    solve_modes_along,
+)
 
 
 def wrap_angles(q: np.ndarray) -> np.ndarray:
@@ -23,10 +29,13 @@ def wrap_angles(q: np.ndarray) -> np.ndarray:
     return q
 
 
-def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
+def solve_chunk(
+    model: Model, scene: Scene, assembled: Assembled | None = None
+) -> dict[str, np.ndarray]:
     """Run the scene's analyses on every sample of ``model``.
 
-    1. Assembly of the initial state (always).
+    1. Assembly of the initial state (always; ``assembled`` given: that state instead, as
+       :mod:`mcchain.compile_ahead` does to compile the rest without assembly).
     2. ``[equilibrium]`` or ``[modes]``: Newton equilibrium, then the eigen step, which
        also decides ``stable``; ``omega``, ``damped_omega``, ``damping_ratio`` and
        ``mode_shape`` (unless ``shapes = false``) are stored only with ``[modes]``.
@@ -38,7 +47,8 @@ def solve_chunk(model: Model, scene: Scene) -> dict[str, np.ndarray]:
     """
     nsample = model.nsample
     out: dict[str, np.ndarray] = {"parameters": np.asarray(model.parameters, dtype=np.float64)}
-    assembled = assemble(model)
+    if assembled is None:
+        assembled = assemble(model)
     status = assembled.status.copy()
     equilibrium = None
     if scene.equilibrium is not None or scene.modes is not None:

@@ -1,0 +1,102 @@
+"""Compile ahead: on a cold cache, a second process compiles what a chunk needs after assembly.
+
+A first run compiles two sets of numba kernels one after the other: assembly (for the scene
+check, before anything is written) and then the analyses and the time integrator (at the
+warm-up of the first chunk). Numba compiles on one core. With two cores or more and an empty
+cache, :meth:`CompileAhead.start` runs ``python -m mcchain.compile_ahead`` beside the scene
+check: it compiles the analyses and the integrator of the scene (it solves two samples from
+their written, unassembled state, so it compiles no assembly) into the same caches, and the
+run's warm-up waits for it (:meth:`CompileAhead.wait`), then loads them.
+
+It changes no value: the kernels are the same, compiled from the same sources into the same
+cache, whichever process compiles them. If the helper fails or cannot share the cache, the
+warm-up compiles what is missing itself, as without it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ENV_SWITCH = "MCCHAIN_COMPILE_AHEAD"
+"""``0`` turns the helper process off."""
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def assembly_is_cached() -> bool:
+    """True if numba's cache holds the assembly kernel (then the scene check compiles
+    nothing, and there is nothing to run beside it)."""
+    from mcchain.kernels import assembly
+
+    try:
+        index = assembly.assemble_batch._cache._cache_file._index_path
+    except AttributeError:  # another numba's internals: no helper
+        return True
+    return os.path.exists(index)
+
+
+class CompileAhead:
+    """The helper process of one run (see the module's docstring)."""
+
+    def __init__(self, process: subprocess.Popen[bytes]):
+        self.process = process
+        self.started = time.perf_counter()
+
+    @classmethod
+    def start(cls, scene_path: Path, samples: int | None, seed: int | None) -> CompileAhead | None:
+        """Start the helper for the scene at ``scene_path`` (with the run's ``--samples`` and
+        ``--seed``) if the cache is cold and a second core is free; else None."""
+        if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2 or assembly_is_cached():
+            return None
+        args = [sys.executable, "-m", "mcchain.compile_ahead", str(scene_path)]
+        args += [str(samples or 0), str(-1 if seed is None else seed)]
+        process = subprocess.Popen(
+            args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
+        return cls(process)
+
+    def wait(self) -> None:
+        """Wait until the helper has compiled (or failed: the caller compiles then)."""
+        self.process.wait()
+
+    def stop(self) -> None:
+        """End the helper if it still runs (the run failed before its warm-up)."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+
+
+def compile_for(scene_path: Path, samples: int | None, seed: int | None) -> None:
+    """Compile the kernels a chunk of the scene needs after assembly: solve its first two
+    samples from their written state (the kernels' types do not depend on the values)."""
+    import numpy as np
+
+    from mcchain.parallel import warm_model
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers import solve_chunk
+    from mcchain.solvers.statics import Assembled
+    from mcchain.status import STATUS_DTYPE
+
+    scene = load_scene(scene_path)
+    model = warm_model(compile_model(scene, nsample=samples, seed=seed))
+    shape = (model.nsample, model.ndof)
+    written = Assembled(
+        q=np.array(np.broadcast_to(model.q0, shape), dtype=np.float64, order="C"),
+        v=np.array(np.broadcast_to(model.v0, shape), dtype=np.float64, order="C"),
+        status=np.zeros(model.nsample, dtype=STATUS_DTYPE),
+    )
+    solve_chunk(model, scene, assembled=written)
+
+
+if __name__ == "__main__":
+    path, count, seed_arg = sys.argv[1:4]
+    compile_for(Path(path), int(count) or None, None if int(seed_arg) < 0 else int(seed_arg))

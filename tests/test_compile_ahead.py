@@ -1,0 +1,79 @@
+"""Compile ahead (mcchain.compile_ahead): on a cold cache a second process compiles the
+analyses while the scene check compiles assembly; it changes no value."""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_runs_support import REPO
+
+from mcchain import compile_ahead, execution, open_run
+from mcchain.compile_ahead import CompileAhead
+from mcchain.parallel import compile_notice
+
+SWEEP = REPO / "configs" / "clearance-sweep.toml"
+
+
+def test_start__no_helper_when_assembly_is_cached_on_one_core_or_switched_off(monkeypatch):
+    monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: True)
+    assert CompileAhead.start(SWEEP, 8, 0) is None
+    monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: False)
+    monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
+    assert CompileAhead.start(SWEEP, 8, 0) is None
+    monkeypatch.setattr(compile_ahead, "_cores", lambda: 2)
+    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
+    assert CompileAhead.start(SWEEP, 8, 0) is None
+
+
+def test_compile_for__solves_without_assembling(monkeypatch):
+    """The helper compiles everything but assembly: it never calls it."""
+    import mcchain.solvers as solvers
+
+    def no_assembly(*args, **kwargs):
+        raise AssertionError("the helper assembled")
+
+    monkeypatch.setattr(solvers, "assemble", no_assembly)
+    compile_ahead.compile_for(SWEEP, 8, 0)
+
+
+def test_compile_notice__announced_prints_only_the_time_since_the_announcement():
+    stream = io.StringIO()
+    with compile_notice(stream=stream, announced_at=0.0):
+        pass
+    (line,) = stream.getvalue().splitlines()
+    assert line.startswith("kernels ready in ")
+
+
+@pytest.mark.slow
+def test_cold_run__with_the_helper_gives_the_values_of_a_warm_run(tmp_path: Path) -> None:
+    """A run on empty caches (a fresh process) with the helper, then the same run in this
+    process from the warm cache: identical values."""
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
+        "MCCHAIN_CACHE_DIR": str(tmp_path / "mcchain"),
+        compile_ahead.ENV_SWITCH: "1",
+    }
+    command = ["mcchain.cli", "run", str(SWEEP), "--samples", "8", "--quiet"]
+    proc = subprocess.run(
+        [sys.executable, "-m", *command, "--run-dir", str(tmp_path / "cold")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1200,
+    )
+    assert proc.returncode == 0, proc.stderr
+    two_cores = len(os.sched_getaffinity(0)) >= 2
+    assert ("(in two processes)" in proc.stderr) == two_cores
+    assert "kernels ready in " in proc.stderr
+    warm = execution.start_run(SWEEP, samples=8, run_dir=tmp_path / "warm", progress=False)
+    with open_run(tmp_path / "cold") as cold, open_run(warm.folder) as ref:
+        for name in ("q_eq", "omega", "mode_shape", "joint_force_eq", "status"):
+            np.testing.assert_array_equal(cold[name].values, ref[name].values)
