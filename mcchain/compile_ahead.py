@@ -52,13 +52,13 @@ class CompileAhead:
         self.started = time.perf_counter()
 
     @classmethod
-    def start(cls, scene_path: Path, samples: int | None, seed: int | None) -> CompileAhead | None:
-        """Start the helper for the scene at ``scene_path`` (with the run's ``--samples`` and
-        ``--seed``) if the cache is cold and a second core is free; else None."""
+    def start(cls, scene_path: Path, seed: int | None) -> CompileAhead | None:
+        """Start the helper for the scene at ``scene_path`` (with the run's ``--seed``) if the
+        cache is cold and a second core is free; else None."""
         if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2 or assembly_is_cached():
             return None
-        args = [sys.executable, "-m", "mcchain.compile_ahead", str(scene_path)]
-        args += [str(samples or 0), str(-1 if seed is None else seed)]
+        seed_arg = str(-1 if seed is None else seed)
+        args = [sys.executable, "-m", "mcchain.compile_ahead", str(scene_path), seed_arg]
         process = subprocess.Popen(
             args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )
@@ -75,9 +75,11 @@ class CompileAhead:
             self.process.wait()
 
 
-def compile_for(scene_path: Path, samples: int | None, seed: int | None) -> None:
-    """Compile the kernels a chunk of the scene needs after assembly: solve its first two
-    samples from their written state (the kernels' types do not depend on the values)."""
+def compile_for(scene_path: Path, seed: int | None) -> None:
+    """Compile the kernels a chunk of the scene needs after assembly: solve two samples from
+    their written state. The kernels' types depend on neither the values nor the count, so
+    the helper samples only the smallest count the design allows (not the run's, which may
+    fill the memory)."""
     import numpy as np
 
     from mcchain.parallel import warm_model
@@ -87,7 +89,11 @@ def compile_for(scene_path: Path, samples: int | None, seed: int | None) -> None
     from mcchain.status import STATUS_DTYPE
 
     scene = load_scene(scene_path)
-    model = warm_model(compile_model(scene, nsample=samples, seed=seed))
+    sample = scene.sample
+    count = None
+    if sample is not None:
+        count = len(sample.vary) + 2 if sample.design == "saltelli" else 2
+    model = warm_model(compile_model(scene, nsample=count, seed=seed))
     shape = (model.nsample, model.ndof)
     written = Assembled(
         q=np.array(np.broadcast_to(model.q0, shape), dtype=np.float64, order="C"),
@@ -98,5 +104,5 @@ def compile_for(scene_path: Path, samples: int | None, seed: int | None) -> None
 
 
 if __name__ == "__main__":
-    path, count, seed_arg = sys.argv[1:4]
-    compile_for(Path(path), int(count) or None, None if int(seed_arg) < 0 else int(seed_arg))
+    path, seed_arg = sys.argv[1:3]
+    compile_for(Path(path), None if int(seed_arg) < 0 else int(seed_arg))

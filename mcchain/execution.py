@@ -445,7 +445,7 @@ def start_run(
         from mcchain.compile_ahead import CompileAhead
         from mcchain.parallel import announce_compile
 
-        ahead = CompileAhead.start(Path(scene_path), samples, seed)
+        ahead = CompileAhead.start(Path(scene_path), seed)
         if ahead is not None:
             announce_compile(ahead=True)
     try:

@@ -22,24 +22,26 @@ SWEEP = REPO / "configs" / "clearance-sweep.toml"
 
 def test_start__no_helper_when_assembly_is_cached_on_one_core_or_switched_off(monkeypatch):
     monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: True)
-    assert CompileAhead.start(SWEEP, 8, 0) is None
+    assert CompileAhead.start(SWEEP, 0) is None
     monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: False)
     monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
-    assert CompileAhead.start(SWEEP, 8, 0) is None
+    assert CompileAhead.start(SWEEP, 0) is None
     monkeypatch.setattr(compile_ahead, "_cores", lambda: 2)
     monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
-    assert CompileAhead.start(SWEEP, 8, 0) is None
+    assert CompileAhead.start(SWEEP, 0) is None
 
 
-def test_compile_for__solves_without_assembling(monkeypatch):
-    """The helper compiles everything but assembly: it never calls it."""
+@pytest.mark.parametrize("config", ["clearance-sweep", "clearance-sweep-sobol", "clearance-bar"])
+def test_compile_for__solves_without_assembling(monkeypatch, config):
+    """The helper compiles everything but assembly: it never calls it (a random design, a
+    Saltelli design, which needs a count that is a multiple of d + 2, and no [sample])."""
     import mcchain.solvers as solvers
 
     def no_assembly(*args, **kwargs):
         raise AssertionError("the helper assembled")
 
     monkeypatch.setattr(solvers, "assemble", no_assembly)
-    compile_ahead.compile_for(SWEEP, 8, 0)
+    compile_ahead.compile_for(REPO / "configs" / f"{config}.toml", 0)
 
 
 def test_compile_notice__announced_prints_only_the_time_since_the_announcement():
