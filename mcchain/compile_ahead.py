@@ -10,7 +10,9 @@ run's warm-up waits for it (:meth:`CompileAhead.wait`), then loads them.
 
 It changes no value: the kernels are the same, compiled from the same sources into the same
 cache, whichever process compiles them. If the helper fails or cannot share the cache, the
-warm-up compiles what is missing itself, as without it.
+warm-up compiles what is missing itself, as without it. On one core (or with
+``MCCHAIN_COMPILE_AHEAD=0``) there is no helper, but a cold run still says at its start that
+it compiles, instead of after the scene check's compile.
 """
 
 from __future__ import annotations
@@ -45,18 +47,22 @@ def assembly_is_cached() -> bool:
 
 
 class CompileAhead:
-    """The helper process of one run (see the module's docstring)."""
+    """A cold first run: its helper process (see the module's docstring), or None where
+    there is no second core or the helper is turned off. Either way the compile notice is
+    printed when the run starts (``started``), not after the scene check's silent compile."""
 
-    def __init__(self, process: subprocess.Popen[bytes]):
+    def __init__(self, process: subprocess.Popen[bytes] | None):
         self.process = process
         self.started = time.perf_counter()
 
     @classmethod
     def start(cls, scene_path: Path, seed: int | None) -> CompileAhead | None:
-        """Start the helper for the scene at ``scene_path`` (with the run's ``--seed``) if the
-        cache is cold and a second core is free; else None."""
-        if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2 or assembly_is_cached():
+        """On a cold cache: start the helper for the scene at ``scene_path`` (with the run's
+        ``--seed``) if a second core is free. None on a warm cache."""
+        if assembly_is_cached():
             return None
+        if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2:
+            return cls(None)
         seed_arg = str(-1 if seed is None else seed)
         args = [sys.executable, "-m", "mcchain.compile_ahead", str(scene_path), seed_arg]
         process = subprocess.Popen(
@@ -66,11 +72,12 @@ class CompileAhead:
 
     def wait(self) -> None:
         """Wait until the helper has compiled (or failed: the caller compiles then)."""
-        self.process.wait()
+        if self.process is not None:
+            self.process.wait()
 
     def stop(self) -> None:
         """End the helper if it still runs (the run failed before its warm-up)."""
-        if self.process.poll() is None:
+        if self.process is not None and self.process.poll() is None:
             self.process.kill()
             self.process.wait()
 

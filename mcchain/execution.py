@@ -447,7 +447,7 @@ def start_run(
 
         ahead = CompileAhead.start(Path(scene_path), seed)
         if ahead is not None:
-            announce_compile(ahead=True)
+            announce_compile(ahead=ahead.process is not None)
     try:
         job = prepare_job(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader

@@ -21,14 +21,20 @@ SWEEP = REPO / "configs" / "clearance-sweep.toml"
 
 
 def test_start__no_helper_when_assembly_is_cached_on_one_core_or_switched_off(monkeypatch):
+    """Warm: nothing. Cold on one core or switched off: no process (the notice still comes
+    at the start); waiting and stopping are no-ops."""
     monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: True)
     assert CompileAhead.start(SWEEP, 0) is None
     monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: False)
     monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
-    assert CompileAhead.start(SWEEP, 0) is None
+    alone = CompileAhead.start(SWEEP, 0)
+    assert alone is not None and alone.process is None
+    alone.wait()
+    alone.stop()
     monkeypatch.setattr(compile_ahead, "_cores", lambda: 2)
     monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
-    assert CompileAhead.start(SWEEP, 0) is None
+    off = CompileAhead.start(SWEEP, 0)
+    assert off is not None and off.process is None
 
 
 @pytest.mark.parametrize("config", ["clearance-sweep", "clearance-sweep-sobol", "clearance-bar"])
