@@ -123,8 +123,6 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("load_lam")
     em.emit(*(f"lam{r} = W[(lamrow + {r}) * {lay.lmax} + l]" for r in range(ncon)))
     block("load_lam_dyn")
-    em.emit(*(f"ah{j} = A[s, {j}] * h" for j in range(nstage)))
-    block("stage_coefs")
     em.emit(*(f"aa{j} = A[s, {j}]" for j in range(nstage)))
     block("stage_coefs_row")
     em.emit(*(f"ah{j} = aa{j} * hh" for j in range(nstage)))
@@ -161,15 +159,15 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         f"{at('sg')} = {at('sgc')}",
     )
     block("accept_zero")
-    lm, rows = lay.lmax, lay.rows
+    elem = lay.at_index
     b["kill_lane"] = "\n".join(
         [
             f"for r in range({2 * ndof}):",
-            f"    W[({rows['q']} + r) * {lm} + l] = np.nan",
-            f"    W[({rows['kq0']} + r) * {lm} + l] = np.nan",
+            f"    {elem('q', 'r')} = np.nan",
+            f"    {elem('kq0', 'r')} = np.nan",
             f"for r in range({ncon}):",
-            f"    W[({rows['lam']} + r) * {lm} + l] = np.nan",
-            f"    W[({rows['lamc']} + r) * {lm} + l] = np.nan",
+            f"    {elem('lam', 'r')} = np.nan",
+            f"    {elem('lamc', 'r')} = np.nan",
         ]
     )
     for row, name in (("lam", "contact_check"), ("lamc", "contact_check_c")):
@@ -248,9 +246,6 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
     # summed over q0, v0, q1, v1, ... Loops over the rows, not unrolled: numba's compile time
     # grows faster than a function's length (the values are the same expressions).
-    def elem(row: str, offset: str, stride: int = 0) -> str:
-        return f"W[({rows[row] + stride} + {offset}) * {lm} + l]"
-
     stride = 2 * ndof
     new = " + ".join(f"bw[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
     err = " + ".join(f"be[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))

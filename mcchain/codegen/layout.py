@@ -119,3 +119,8 @@ class Layout:
 
     def at(self, name: str, i: int = 0) -> str:
         return f"W[{(self.rows[name] + i) * self.lmax} + l]"
+
+    def at_index(self, name: str, index: str, shift: int = 0) -> str:
+        """Element of row ``name`` + ``shift`` + the loop variable ``index`` (generated loops
+        over rows)."""
+        return f"W[({self.rows[name] + shift} + {index}) * {self.lmax} + l]"
