@@ -356,6 +356,21 @@ def test_generalized_alpha__contact_law_converges_to_the_reference_at_second_ord
     assert force_error <= 5e-5
 
 
+def reseat_energy_growth(**keys) -> float:
+    """A damped journal under model auto (L–N, e 0.5, 0.3 s) that ends back on the link after
+    a contact: asserts that, and returns the largest growth of the energy between outputs,
+    per m g 2c (a re-seat must not add energy)."""
+    text = journal_scene(
+        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3, output_dt=1e-4,
+        **keys,
+    )  # fmt: skip
+    out = run(text)
+    mode = out["contact_mode"][0, :, 0]
+    assert out["status"][0] == 0 and mode[-1] == 0
+    assert np.any((mode[:-1] >= 1) & (mode[1:] == 0))
+    return float(np.max(np.diff(out["energy"][0])) / (MASS * GRAVITY * 2 * CLEARANCE))
+
+
 def test_generalized_alpha__auto_equals_the_link_bit_for_bit_and_reseats():
     """Model auto runs the link's Newton system until λ first reaches 0 (same kernel, the law's
     rows skipped): bit-identical outputs; a damped journal then re-seats without adding
@@ -369,16 +384,7 @@ def test_generalized_alpha__auto_equals_the_link_bit_for_bit_and_reseats():
     assert 50 < before.sum() < len(before)
     for name in ("q", "v", "joint_force", "contact_force", "energy", "constraint_error"):
         np.testing.assert_array_equal(auto[name][0, before], link[name][0, before], name)
-    text = journal_scene(
-        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3, output_dt=1e-4,
-        method="generalized-alpha", dt=2e-6,
-    )  # fmt: skip
-    out = run(text)
-    mode = out["contact_mode"][0, :, 0]
-    assert out["status"][0] == 0 and mode[-1] == 0
-    assert np.any((mode[:-1] >= 1) & (mode[1:] == 0))
-    growth = np.max(np.diff(out["energy"][0])) / (MASS * GRAVITY * 2 * CLEARANCE)
-    assert growth <= 1e-8
+    assert reseat_energy_growth(method="generalized-alpha", dt=2e-6) <= 1e-8
     coarse = run(journal_scene(method="generalized-alpha", dt=5e-4, output_dt=1e-3))
     assert coarse["status"][0] & CONTACT_STEP_TOO_LARGE
     assert np.isnan(coarse["q"][0, -1]).all()
@@ -415,16 +421,7 @@ def test_radau__auto_switches_where_the_link_lets_go_and_reseats_without_adding_
     for name in ("q", "v", "joint_force", "energy"):  # the link's Radau runs the lanes' accel
         a, b = auto[name][0, before], link[name][0, before]
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-8 * np.max(np.abs(b)), err_msg=name)
-    text = journal_scene(
-        law="lankarani-nikravesh", restitution=0.5, model="auto", t_end=0.3, output_dt=1e-4,
-        method="radau", rtol=1e-10, atol=1e-13,
-    )  # fmt: skip
-    out = run(text)
-    mode = out["contact_mode"][0, :, 0]
-    assert out["status"][0] == 0 and mode[-1] == 0
-    assert np.any((mode[:-1] >= 1) & (mode[1:] == 0))
-    growth = np.max(np.diff(out["energy"][0])) / (MASS * GRAVITY * 2 * CLEARANCE)
-    assert growth <= 1e-9
+    assert reseat_energy_growth(method="radau", rtol=1e-10, atol=1e-13) <= 1e-9
 
 
 def test_auto__every_sample_of_the_shipped_fourbar_separates_and_none_fails():
