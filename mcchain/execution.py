@@ -176,7 +176,7 @@ def _compute(
     """Solve the chunks that have no part file yet, writing each as a part file (and
     streaming the ``--rerun`` samples they hold to ``live``)."""
     from mcchain.ensemble.io import list_parts, write_part
-    from mcchain.ensemble.registry import build_dataset
+    from mcchain.ensemble.registry import chunk_variables
     from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
 
     chunks = plan_chunks(job.nsample, job.chunk_size)
@@ -199,10 +199,10 @@ def _compute(
 
     def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
         chunk = job.model.select(start, stop)
-        ds = build_dataset(
+        variables = chunk_variables(
             outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
         )
-        write_part(ds, parts_dir, start, stop)
+        write_part(variables, parts_dir, start, stop)
 
     observe = live.observe if live is not None else None
     bar = Progress(len(chunks), len(done), enabled=progress)

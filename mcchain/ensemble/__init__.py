@@ -1,7 +1,7 @@
 """The ensemble: variable registry (names, dims, units, dtypes), Datasets, netCDF I/O.
 
-* :mod:`mcchain.ensemble.registry` declares every variable once and builds/validates
-  Datasets from solver output dicts.
+* :mod:`mcchain.ensemble.registry` declares every variable once, builds a chunk's
+  variables (or a Dataset) from solver output dicts and validates Datasets.
 * :mod:`mcchain.ensemble.io` writes part files atomically and merges them by streaming into
   one compressed ``ensemble.nc``.
 """
@@ -22,9 +22,11 @@ from mcchain.ensemble.io import (
 from mcchain.ensemble.registry import (
     COORDINATES,
     VARIABLES,
+    ChunkVariables,
     VariableSpec,
     build_dataset,
     by_analysis,
+    chunk_variables,
     coerce_outputs,
     validate_dataset,
 )
@@ -32,12 +34,14 @@ from mcchain.ensemble.registry import (
 __all__ = [
     "COORDINATES",
     "VARIABLES",
+    "ChunkVariables",
     "MergeError",
     "MergeStats",
     "Part",
     "VariableSpec",
     "build_dataset",
     "by_analysis",
+    "chunk_variables",
     "coerce_outputs",
     "compression_options",
     "list_parts",

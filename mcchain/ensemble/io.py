@@ -35,6 +35,8 @@ if TYPE_CHECKING:
     import netCDF4
     import xarray as xr
 
+    from mcchain.ensemble.registry import ChunkVariables
+
 log = logging.getLogger(__name__)
 
 PART_PATTERN = re.compile(r"^part-(\d{12})-(\d{12})\.nc$")
@@ -157,30 +159,23 @@ def _set_attrs(var: Any, attrs: Mapping[str, Any]) -> None:
         var.setncattr(key, value)
 
 
-def _write_dataset(ds: xr.Dataset, path: Path) -> None:
+def _write_chunk(chunk: ChunkVariables, path: Path) -> None:
     import netCDF4
 
     nc = netCDF4.Dataset(path, "w", format="NETCDF4")
     try:
         nc.set_fill_off()
         nc.set_auto_maskandscale(False)
-        for dim, size in ds.sizes.items():
-            nc.createDimension(str(dim), size)
-        for name, var in [*ds.coords.items(), *ds.data_vars.items()]:
-            values = np.asarray(var.values)
+        for dim, size in chunk.sizes.items():
+            nc.createDimension(dim, size)
+        for name, (dims, values, var_attrs) in [*chunk.coords.items(), *chunk.data_vars.items()]:
+            values = np.asarray(values)
             dtype = _nc_dtype(values)
             contiguous = dtype is not str and 0 not in values.shape
-            out = nc.createVariable(
-                str(name), dtype, tuple(str(d) for d in var.dims), contiguous=contiguous
-            )
-            attrs = dict(var.attrs)
-            if name in ds.data_vars:
-                # Non-dimension coordinates of this variable (CF): param_units.
-                aux = [
-                    str(c)
-                    for c in ds.coords
-                    if c not in ds.dims and set(ds[c].dims) <= set(var.dims)
-                ]
+            out = nc.createVariable(name, dtype, dims, contiguous=contiguous)
+            attrs = dict(var_attrs)
+            if name in chunk.data_vars:
+                aux = chunk.auxiliary_coordinates(name)
                 if aux:
                     attrs["coordinates"] = " ".join(aux)
             if values.dtype.kind == "b":
@@ -192,7 +187,7 @@ def _write_dataset(ds: xr.Dataset, path: Path) -> None:
                     out[:] = values.astype(object)
                 else:
                     out[:] = values
-        _set_attrs(nc, ds.attrs)
+        _set_attrs(nc, chunk.attrs)
     finally:
         nc.close()
 
@@ -211,18 +206,20 @@ class Part:
     path: Path
 
 
-def write_part(ds: xr.Dataset, directory: Path, start: int, stop: int) -> Part:
-    """Write one chunk's Dataset atomically as a part file and return it.
+def write_part(chunk: ChunkVariables, directory: Path, start: int, stop: int) -> Part:
+    """Write one chunk's variables (:func:`~mcchain.ensemble.registry.chunk_variables`)
+    atomically as a part file and return it.
 
     The file becomes visible under its final name only once complete and on disk.
     """
     directory = Path(directory)
-    if ds.sizes.get("sample") != stop - start:
-        raise ValueError(f"part {start}:{stop}: dataset has {ds.sizes.get('sample')} samples")
+    samples = chunk.sizes.get("sample")
+    if samples != stop - start:
+        raise ValueError(f"part {start}:{stop}: the chunk has {samples} samples")
     path = directory / part_name(start, stop)
     tmp = temporary_name(path)
     try:
-        _write_dataset(ds, tmp)
+        _write_chunk(chunk, tmp)
         commit_file(tmp, path)
     finally:
         with suppress(FileNotFoundError):
