@@ -214,6 +214,15 @@ def _scipy_design(
     return np.clip(u, 2.0**-54, 1.0 - 2.0**-53)
 
 
+def _standard_normal_ppf(u: np.ndarray) -> np.ndarray:
+    """Φ⁻¹(u) element by element, u in (0, 1): the standard library's (Wichura's AS241,
+    within 6 ulp of ``scipy.special.ndtri``), 0.25 µs per value. Importing scipy.special
+    took 0.15-0.2 s of every warm run, more than a million values cost."""
+    from statistics import NormalDist
+
+    return np.asarray(np.frompyfunc(NormalDist().inv_cdf, 1, 1)(u), dtype=np.float64)
+
+
 def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
     """Map uniforms ``u`` in (0, 1) to the distribution's values (inverse CDF).
 
@@ -224,18 +233,15 @@ def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
     u = np.asarray(u, dtype=np.float64)
     a = dist.args
     kind = dist.kind
-    if kind == "uniform":  # without scipy.special: its import is 0.35 s of a warm run
+    if kind == "uniform":
         return a[0] + u * (a[1] - a[0])
     if kind == "choice":
         values = np.asarray(a, dtype=np.float64)
         k = np.minimum((u * len(values)).astype(np.int64), len(values) - 1)
         return values[k]
-    from scipy import special
-
-    if kind == "normal":
-        return a[0] + a[1] * special.ndtri(u)
-    if kind == "lognormal":
-        return np.exp(a[0] + a[1] * special.ndtri(u))
+    if kind in ("normal", "lognormal"):
+        z = _standard_normal_ppf(u)
+        return a[0] + a[1] * z if kind == "normal" else np.exp(a[0] + a[1] * z)
     if kind == "truncnormal":
         from scipy import stats
 
