@@ -471,6 +471,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         print(line)
     for line in describe_initial_state(written, assembled):
         print(line)
+    sim = getattr(scene, "simulate", None)
+    if sim is not None:
+        from mcchain.solvers.simulate import choose_kernels
+
+        choice = choose_kernels(sim, model.ndof, model.nsample)
+        print(f'simulate: {sim.method} on kernels = "{choice.kernels}" ({choice.reason})')
     warnings = model.meta.get("warnings") or []
     assert isinstance(warnings, list)
     for line in warnings:

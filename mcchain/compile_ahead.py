@@ -56,15 +56,20 @@ class CompileAhead:
         self.started = time.perf_counter()
 
     @classmethod
-    def start(cls, scene_path: Path, seed: int | None) -> CompileAhead | None:
+    def start(
+        cls, scene_path: Path, seed: int | None, samples: int | None = None
+    ) -> CompileAhead | None:
         """On a cold cache: start the helper for the scene at ``scene_path`` (with the run's
-        ``--seed``) if a second core is free. None on a warm cache."""
+        ``--seed`` and ``--samples``) if a second core is free. None on a warm cache."""
         if assembly_is_cached():
             return None
         if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2:
             return cls(None)
         seed_arg = str(-1 if seed is None else seed)
-        args = [sys.executable, "-m", "mcchain.compile_ahead", str(scene_path), seed_arg]
+        samples_arg = str(-1 if samples is None else samples)
+        args = [
+            sys.executable, "-m", "mcchain.compile_ahead", str(scene_path), seed_arg, samples_arg
+        ]  # fmt: skip
         process = subprocess.Popen(
             args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )
@@ -82,13 +87,15 @@ class CompileAhead:
             self.process.wait()
 
 
-def compile_for(scene_path: Path, seed: int | None) -> None:
+def compile_for(scene_path: Path, seed: int | None, samples: int | None = None) -> None:
     """Compile the kernels a chunk of the scene needs after assembly: solve two samples from
     their written state. The kernels' types depend on neither the values nor the count, so
     the helper samples only the smallest count the design allows (not the run's, which may
-    fill the memory)."""
+    fill the memory); ``[simulate] kernels = "auto"`` is resolved for the run's count
+    (``samples``, default the scene's), as the run resolves it."""
     import numpy as np
 
+    from mcchain.job import resolve_kernels
     from mcchain.parallel import warm_model
     from mcchain.scene import compile_model, load_scene
     from mcchain.solvers import solve_chunk
@@ -101,6 +108,8 @@ def compile_for(scene_path: Path, seed: int | None) -> None:
     if sample is not None:
         count = len(sample.vary) + 2 if sample.design == "saltelli" else 2
     model = warm_model(compile_model(scene, nsample=count, seed=seed))
+    run_count = samples if samples is not None else (sample.count if sample is not None else 1)
+    scene, _ = resolve_kernels(scene, model, run_count)
     shape = (model.nsample, model.ndof)
     written = Assembled(
         q=np.array(np.broadcast_to(model.q0, shape), dtype=np.float64, order="C"),
@@ -111,6 +120,10 @@ def compile_for(scene_path: Path, seed: int | None) -> None:
 
 
 if __name__ == "__main__":
-    path, seed_arg = sys.argv[1:3]
-    compile_for(Path(path), None if int(seed_arg) < 0 else int(seed_arg))
+    path, seed_arg, samples_arg = sys.argv[1:4]
+    compile_for(
+        Path(path),
+        None if int(seed_arg) < 0 else int(seed_arg),
+        None if int(samples_arg) < 0 else int(samples_arg),
+    )
     os._exit(0)  # the kernels are in the cache; the interpreter's teardown would only delay the run

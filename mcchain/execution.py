@@ -157,6 +157,7 @@ def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -
         "sessions": [],
         "error": None,
         "warnings": list(job.warnings),
+        "notes": list(job.notes),
         "kernels": _kernels(job),
     }
 
@@ -445,7 +446,7 @@ def start_run(
         from mcchain.compile_ahead import CompileAhead
         from mcchain.parallel import announce_compile
 
-        ahead = CompileAhead.start(Path(scene_path), seed)
+        ahead = CompileAhead.start(Path(scene_path), seed, samples)
         if ahead is not None:
             announce_compile(ahead=ahead.process is not None)
     try:
@@ -455,6 +456,8 @@ def start_run(
         check_live(rerun, job.nsample)
         for line in job.warnings:
             print(f"warning: {line}", file=sys.stderr)
+        for line in job.notes:
+            print(f"note: {line}", file=sys.stderr)
         prepare_seconds = time.perf_counter() - t0
         folder = create_run_folder(out, job.scene_name, run_dir)
         with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:

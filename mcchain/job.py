@@ -44,6 +44,8 @@ class Job:
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
+        notes: lines about choices made for the user, e.g. the loop kernels that
+            ``[simulate] kernels = "auto"`` took (:func:`resolve_kernels`).
     """
 
     scene: Any
@@ -59,6 +61,7 @@ class Job:
     steps_per_sample: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
         """Global attributes of ``ensemble.nc`` (and of every part file)."""
@@ -182,6 +185,7 @@ def prepare_job(
         raise RunError(f"--seed: must be an integer >= 0, got {seed!r}")
     path = Path(scene_path)
     scene, model = (loader or default_loader)(path, samples, seed)
+    scene, kernels_note = resolve_kernels(scene, model, int(model.nsample))
     from mcchain.scene.models import Storage
 
     # A scene without ``[storage]`` (a fake) gets the schema's defaults.
@@ -211,4 +215,21 @@ def prepare_job(
         steps_per_sample=_steps_per_sample(scene),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
+        notes=[] if kernels_note is None else [kernels_note],
     )
+
+
+def resolve_kernels(scene: Any, model: Model, nsample: int) -> tuple[Any, str | None]:
+    """The scene with ``[simulate] kernels = "auto"`` resolved for a run of ``nsample``
+    instances of ``model``'s topology (:func:`mcchain.solvers.simulate.choose_kernels`),
+    and a line for the user when that takes the loop kernels. A run resolves it once, for
+    all its samples, so every chunk, its resume and a Dask run integrate on the same path;
+    the resolved value is what ``ensemble.nc`` stores. Other scenes come back as given."""
+    sim = _section(scene, "simulate")
+    if getattr(sim, "kernels", None) != "auto":
+        return scene, None
+    from mcchain.solvers.simulate import choose_kernels
+
+    choice = choose_kernels(sim, int(model.ndof), nsample)
+    simulate = sim.model_copy(update={"kernels": choice.kernels})
+    return scene.model_copy(update={"simulate": simulate}), choice.note()

@@ -50,6 +50,25 @@ def test_compile_for__solves_without_assembling(monkeypatch, config):
     compile_ahead.compile_for(REPO / "configs" / f"{config}.toml", 0)
 
 
+def test_compile_for__resolves_auto_kernels_for_the_runs_count(monkeypatch, tmp_path):
+    """The helper solves two samples but compiles the path the run will take: ``[simulate]
+    kernels = "auto"`` is resolved for the run's ``--samples``, as the run resolves it."""
+    import mcchain.solvers as solvers
+    from mcchain.testing.factory import write_scene
+    from mcchain.testing.scenes import straight_chain_text
+
+    taken = []
+    monkeypatch.setattr(
+        solvers, "solve_chunk", lambda model, scene, **kw: taken.append(scene.simulate.kernels)
+    )
+    text = straight_chain_text([0.3] * 14, [1.0] * 14)
+    path = write_scene(tmp_path, text + "[simulate]\nt_end = 0.05\ndt = 1e-4\n", "chain14.toml")
+    compile_ahead.compile_for(path, 0, 4)
+    compile_ahead.compile_for(path, 0, 2000)
+    compile_ahead.compile_for(path, 0)  # the scene's count: 1
+    assert taken == ["loop", "lanes", "loop"]
+
+
 def test_compile_notice__announced_prints_only_the_time_since_the_announcement():
     stream = io.StringIO()
     with compile_notice(stream=stream, announced_at=0.0):

@@ -49,7 +49,7 @@ from mcchain.contact import CONTACT_SUMMARY
 from mcchain.errors import SceneError
 from mcchain.model import JOINT_CLEARANCE, JointKind, Model
 from mcchain.scene.loading import load_section
-from mcchain.scene.models import Simulate
+from mcchain.scene.models import LOOP_METHODS, Simulate
 from mcchain.solvers.threads import over_samples
 from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
@@ -627,6 +627,63 @@ METHODS: dict[str, Method] = {
 """Every integration method by its ``[simulate] method`` name."""
 
 
+LANE_COMPILE_S_PER_COORDINATE = 0.5
+"""Seconds the first run of a new topology spends compiling its rk4 lanes, per coordinate (3
+per body), beyond what the loop kernels need: 0.47-0.59 for chains of 8-32 bars
+(``benchmarks/bench_loop.py``, 2 cores)."""
+
+LOOP_EXTRA_S_PER_COORDINATE_STEP = 0.3e-6
+"""Seconds the loop kernels take beyond the lanes per instance-step, per coordinate:
+0.22-0.36 µs for chains of 8-32 bars (same benchmark)."""
+
+AUTO_LOOP_MIN_COMPILE_S = 20.0
+"""``kernels = "auto"`` considers the loop kernels only for topologies whose lanes would
+compile longer than this: the issue's budget for the first run of a new topology."""
+
+AUTO_LOOP_SHARE = 0.25
+"""... and only for runs whose extra time on the loop kernels stays under this share of
+that compile, so that rerunning the topology on the loop costs little against compiling
+its lanes once (which later runs would reuse)."""
+
+
+@dataclass(frozen=True)
+class KernelChoice:
+    """The kernels that integrate a run, and why (one line for the user)."""
+
+    kernels: str
+    reason: str
+
+    def note(self) -> str | None:
+        """The line a run prints when ``auto`` took the loop kernels (None otherwise)."""
+        if self.kernels != "loop" or not self.reason.startswith("auto"):
+            return None
+        return (
+            f'simulate.kernels: "loop" ({self.reason}); kernels = "lanes" compiles the '
+            "lanes once for this topology, the fastest per step"
+        )
+
+
+def choose_kernels(sim: Simulate, ndof: int, nsample: int) -> KernelChoice:
+    """Resolve ``[simulate] kernels`` for a run of ``nsample`` instances of ``ndof``
+    coordinates. ``"lanes"`` and ``"loop"`` stay as written; ``"auto"`` follows the cost
+    model of the constants above. The choice depends on the scene and the sample count only,
+    never on what a cache holds, so that a run, its resume and a Dask run agree."""
+    if sim.kernels != "auto":
+        return KernelChoice(sim.kernels, "as set in the scene")
+    if sim.method not in LOOP_METHODS:
+        return KernelChoice("lanes", f"auto: {sim.method} runs on the lanes only")
+    compile_s = LANE_COMPILE_S_PER_COORDINATE * ndof
+    work = nsample * max(1, round(sim.t_end / sim.dt))
+    extra_s = LOOP_EXTRA_S_PER_COORDINATE_STEP * ndof * work
+    estimate = (
+        f"the lanes of {ndof} coordinates compile in about {compile_s:.0f} s; "
+        f"{work:.3g} instance-steps take about {extra_s:.2g} s more on the loop"
+    )
+    if compile_s <= AUTO_LOOP_MIN_COMPILE_S or extra_s >= AUTO_LOOP_SHARE * compile_s:
+        return KernelChoice("lanes", f"auto: {estimate}")
+    return KernelChoice("loop", f"auto: {estimate}")
+
+
 def simulate(
     model: Model,
     sim: Simulate | Mapping[str, Any],
@@ -669,6 +726,9 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = load_section(Simulate, "simulate", sim)
+    if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.job)
+        choice = choose_kernels(settings, model.ndof, model.nsample)
+        settings = settings.model_copy(update={"kernels": choice.kernels})
     from mcchain.codegen.layout import LMAX
 
     lanes = LMAX if lanes is None else lanes
