@@ -4,9 +4,12 @@ A first run compiles two sets of numba kernels one after the other: assembly (fo
 check, before anything is written) and then the analyses and the time integrator (at the
 warm-up of the first chunk). Numba compiles on one core. With two cores or more and an empty
 cache, :meth:`CompileAhead.start` runs ``python -m mcchain.compile_ahead`` beside the scene
-check: it compiles the analyses and the integrator of the scene (it solves two samples from
-their written, unassembled state, so it compiles no assembly) into the same caches, and the
-run's warm-up waits for it (:meth:`CompileAhead.wait`), then loads them.
+check: it compiles the equilibrium and the integrator of the scene (it solves two samples
+from their written, unassembled state, so it compiles no assembly) into the same caches.
+The run's own process, its scene check done, compiles the eigen step meanwhile
+(:meth:`CompileAhead.compile_beside`: the two processes then finish at about the same
+time), and its warm-up waits for the helper (:meth:`CompileAhead.wait`), then loads the
+rest.
 
 It changes no value: the kernels are the same, compiled from the same sources into the same
 cache, whichever process compiles them. If the helper fails or cannot share the cache, the
@@ -22,6 +25,10 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mcchain.model import Model
 
 ENV_SWITCH = "MCCHAIN_COMPILE_AHEAD"
 """``0`` turns the helper process off."""
@@ -75,6 +82,12 @@ class CompileAhead:
         )
         return cls(process)
 
+    def compile_beside(self, model: Model, scene: Any) -> None:
+        """In the run's process, while the helper compiles the rest: the eigen step of the
+        scene (on one sample at its written state; the values are discarded)."""
+        if self.process is not None:
+            compile_modes(model, scene)
+
     def wait(self) -> None:
         """Wait until the helper has compiled (or failed: the caller compiles then)."""
         if self.process is not None:
@@ -116,7 +129,33 @@ def compile_for(scene_path: Path, seed: int | None, samples: int | None = None) 
         v=np.array(np.broadcast_to(model.v0, shape), dtype=np.float64, order="C"),
         status=np.zeros(model.nsample, dtype=STATUS_DTYPE),
     )
-    solve_chunk(model, scene, assembled=written)
+    solve_chunk(model, scene, assembled=written, with_modes=False)
+
+
+def compile_modes(model: Model, scene: Any) -> None:
+    """Compile (or load) the kernels of the eigen step that :func:`compile_for` leaves out,
+    as :func:`mcchain.solvers.solve_chunk` calls them, on one sample at its written state."""
+    if getattr(scene, "equilibrium", None) is None and getattr(scene, "modes", None) is None:
+        return
+    import numpy as np
+
+    from mcchain.solvers.statics import EquilibriumResult, solve_modes
+    from mcchain.status import STATUS_DTYPE
+
+    one = model.select(0, 1)
+    nan = np.full((1, one.njoint), np.nan)
+    at_rest = EquilibriumResult(
+        q=np.array(np.broadcast_to(one.q0, (1, one.ndof)), dtype=np.float64, order="C"),
+        lam=np.zeros((1, one.ncon)),
+        joint_force=np.full((1, one.njoint, 2), np.nan),
+        contact_force=nan,
+        iterations=np.zeros(1, dtype=np.int32),
+        history=np.full((1, 1, 2), np.nan),
+        status=np.zeros(1, dtype=STATUS_DTYPE),
+        joint_moment=nan,
+    )
+    modes = scene.modes
+    solve_modes(one, at_rest, shapes=modes is not None and modes.shapes, damped=modes is not None)
 
 
 if __name__ == "__main__":

@@ -230,8 +230,8 @@ def run_local(
 ) -> ExecutionStats:
     """Solve ``chunks`` in this process, writing each on a thread apart from the compute.
 
-    ``compile_ahead``: the warm-up first waits for that helper process (it compiles into the
-    cache what the warm-up then loads).
+    ``compile_ahead``: this process compiles the eigen step while that helper process
+    compiles the rest into the cache; the warm-up then waits for the helper and loads it.
 
     ``observe`` (optional) gets each solved chunk on this thread, after the chunk is handed
     to the writer, so that writing and observing overlap; the next chunk is solved after it
@@ -243,6 +243,7 @@ def run_local(
     announced = None if compile_ahead is None else compile_ahead.started
     with compile_notice(announced_at=announced):
         if compile_ahead is not None:
+            compile_ahead.compile_beside(model, scene)
             compile_ahead.wait()
         solve(warm_model(model), scene)  # compile or load the cached kernels
     stats.warmup = time.perf_counter() - t0

@@ -69,6 +69,30 @@ def test_compile_for__resolves_auto_kernels_for_the_runs_count(monkeypatch, tmp_
     assert taken == ["loop", "lanes", "loop"]
 
 
+def test_the_split__helper_without_the_eigen_step_run_process_with_it(monkeypatch):
+    """The helper solves without the eigen step (``with_modes=False``: no ``stable`` or
+    ``omega``); the run's process compiles it meanwhile, as ``solve_chunk`` calls it, and
+    only for scenes that have one."""
+    import mcchain.solvers.statics as statics
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers import solve_chunk
+
+    scene = load_scene(SWEEP)
+    model = compile_model(scene, nsample=3)
+    out = solve_chunk(model, scene, with_modes=False)
+    assert "q_eq" in out and not {"stable", "omega", "mode_shape"} & set(out)
+    assert {"stable", "omega", "mode_shape"} <= set(solve_chunk(model, scene))
+    calls = []
+    monkeypatch.setattr(
+        statics, "solve_modes", lambda m, eq, **kw: calls.append((m.nsample, eq.q.shape, kw))
+    )
+    compile_ahead.compile_modes(model, scene)
+    assert calls == [(1, (1, model.ndof), {"shapes": True, "damped": True})]
+    fourbar = load_scene(REPO / "configs" / "fourbar-clearance.toml")  # [simulate] only
+    compile_ahead.compile_modes(compile_model(fourbar, nsample=1), fourbar)
+    assert len(calls) == 1
+
+
 def test_compile_notice__announced_prints_only_the_time_since_the_announcement():
     stream = io.StringIO()
     with compile_notice(stream=stream, announced_at=0.0):

@@ -30,7 +30,7 @@ def wrap_angles(q: np.ndarray) -> np.ndarray:
 
 
 def solve_chunk(
-    model: Model, scene: Scene, assembled: Assembled | None = None
+    model: Model, scene: Scene, assembled: Assembled | None = None, *, with_modes: bool = True
 ) -> dict[str, np.ndarray]:
     """Run the scene's analyses on every sample of ``model``.
 
@@ -39,6 +39,8 @@ def solve_chunk(
     2. ``[equilibrium]`` or ``[modes]``: Newton equilibrium, then the eigen step, which
        also decides ``stable``; ``omega``, ``damped_omega``, ``damping_ratio`` and
        ``mode_shape`` (unless ``shapes = false``) are stored only with ``[modes]``.
+       ``with_modes=False`` leaves the eigen step out (and its outputs): the compile-ahead
+       helper's share, while the run's own process compiles the eigen step.
     3. ``[simulate]``: time integration from the assembled state or the equilibrium.
 
     Returns:
@@ -54,28 +56,31 @@ def solve_chunk(
     if scene.equilibrium is not None or scene.modes is not None:
         settings = scene.equilibrium
         equilibrium = solve_equilibrium(model, assembled.q, assembled.status, settings)
-        want_shapes = scene.modes is not None and scene.modes.shapes
-        modes = solve_modes(model, equilibrium, shapes=want_shapes, damped=scene.modes is not None)
-        status |= modes.status
         out["q_eq"] = wrap_angles(equilibrium.q).reshape(nsample, model.nbody, 3)
         out["joint_force_eq"] = equilibrium.joint_force
         if model.has_prismatic:
             out["joint_moment_eq"] = equilibrium.joint_moment
-        out["stable"] = modes.stable
         out["iterations"] = equilibrium.iterations
-        if scene.modes is not None:
-            out["omega"] = modes.omega
-            assert modes.damped_omega is not None and modes.damping_ratio is not None
-            out["damped_omega"] = modes.damped_omega
-            out["damping_ratio"] = modes.damping_ratio
-            if modes.shapes is not None:
-                out["mode_shape"] = modes.shapes.reshape(nsample, model.nmode, model.nbody, 3)
-            along = scene.modes.along
-            if along is not None:
-                driver = model.driver_names.index(along.driver)
-                cycle = solve_modes_along(model, driver, along.points, assembled.q, assembled.v)
-                out["omega_cycle"] = cycle.omega
-                out["cycle_phase"] = cycle.phase
+        if with_modes:
+            want_shapes = scene.modes is not None and scene.modes.shapes
+            damped = scene.modes is not None
+            modes = solve_modes(model, equilibrium, shapes=want_shapes, damped=damped)
+            status |= modes.status
+            out["stable"] = modes.stable
+            if scene.modes is not None:
+                out["omega"] = modes.omega
+                assert modes.damped_omega is not None and modes.damping_ratio is not None
+                out["damped_omega"] = modes.damped_omega
+                out["damping_ratio"] = modes.damping_ratio
+                if modes.shapes is not None:
+                    shapes = modes.shapes.reshape(nsample, model.nmode, model.nbody, 3)
+                    out["mode_shape"] = shapes
+        along = None if scene.modes is None else scene.modes.along
+        if along is not None:
+            driver = model.driver_names.index(along.driver)
+            cycle = solve_modes_along(model, driver, along.points, assembled.q, assembled.v)
+            out["omega_cycle"] = cycle.omega
+            out["cycle_phase"] = cycle.phase
     if scene.simulate is not None:
         from mcchain.solvers.simulate import simulate
 
