@@ -143,16 +143,15 @@ def compile_modes(model: Model, scene: Any) -> None:
     from mcchain.status import STATUS_DTYPE
 
     one = model.select(0, 1)
-    nan = np.full((1, one.njoint), np.nan)
     at_rest = EquilibriumResult(
         q=np.array(np.broadcast_to(one.q0, (1, one.ndof)), dtype=np.float64, order="C"),
         lam=np.zeros((1, one.ncon)),
         joint_force=np.full((1, one.njoint, 2), np.nan),
-        contact_force=nan,
+        contact_force=np.full((1, one.njoint), np.nan),
         iterations=np.zeros(1, dtype=np.int32),
         history=np.full((1, 1, 2), np.nan),
         status=np.zeros(1, dtype=STATUS_DTYPE),
-        joint_moment=nan,
+        joint_moment=np.full((1, one.njoint), np.nan),
     )
     modes = scene.modes
     solve_modes(one, at_rest, shapes=modes is not None and modes.shapes, damped=modes is not None)
