@@ -387,7 +387,12 @@ class Model:
 
     def kernel_model(self) -> Any:
         """What every kernel takes as ``km``: :meth:`kernel_arrays` as one numba structure
-        (:mod:`mcchain.kernels.kernel_model`), sharing the arrays."""
+        (:mod:`mcchain.kernels.kernel_model`), sharing the arrays; the arrays themselves
+        where the kernels run interpreted (their fields read the same way)."""
+        from mcchain.kernels import config
+
+        if config.INTERPRETED:
+            return self.kernel_arrays()
         from mcchain.kernels.kernel_model import as_struct
 
         return as_struct(self.kernel_arrays())

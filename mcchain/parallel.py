@@ -153,9 +153,9 @@ in less, so a warm run prints nothing)."""
 def kernel_cache_folders() -> str:
     """Where compiled kernels are kept, as the notice names them."""
     from mcchain.codegen.cache import cache_dir
-    from mcchain.kernels.config import NUMBA_CACHE
+    from mcchain.kernels.config import numba_cache
 
-    return f"numba: {NUMBA_CACHE} (NUMBA_CACHE_DIR); generated: {cache_dir()} (MCCHAIN_CACHE_DIR)"
+    return f"numba: {numba_cache()} (NUMBA_CACHE_DIR); generated: {cache_dir()} (MCCHAIN_CACHE_DIR)"
 
 
 @contextmanager

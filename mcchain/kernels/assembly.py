@@ -15,9 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from mcchain.kernels.config import INLINE, JIT
+from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.forces import (
     applied_forces,
     mass_diagonal,

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from mcchain.contact import (
     AUTO,
     CONTACT,
@@ -28,7 +26,7 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
 )
-from mcchain.kernels.config import INLINE, JIT
+from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.contact import contact_crossing
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 

@@ -10,15 +10,67 @@
 
 No kernel is ``parallel=True``: numba's parallel loops compiled every kernel's call tree once
 more (the threads of :mod:`mcchain.solvers.threads` run as fast).
+
+The kernels are decorated with :func:`njit`, which is numba's unless this process runs them
+interpreted (:func:`interpret_kernels`): as plain Python functions on the same arrays, one
+sample at a time, without importing numba.
 """
 
-from mcchain.caches import ensure_numba_cache
+from __future__ import annotations
 
-try:
-    NUMBA_CACHE = ensure_numba_cache()  # before any kernel is decorated with cache=True
-except ImportError:  # generating kernel source needs these options, not numba itself
-    NUMBA_CACHE = "none (numba is not importable)"
-"""Where numba caches the kernels (a writable folder; see :mod:`mcchain.caches`)."""
+import functools
+import sys
+from collections.abc import Callable
+from typing import Any
+
+INTERPRETED = False
+"""True where :func:`interpret_kernels` took effect: the kernels are plain Python."""
+
+
+def interpret_kernels() -> bool:
+    """Run the kernels of this process as plain Python, without numba, and return whether
+    they will: only possible before the first kernel module is imported (otherwise they stay
+    compiled, and nothing changes).
+
+    For a check of one instance (``mcchain validate``): importing numba and its first
+    dispatch cost about 0.6 s, the interpreted check of a small mechanism about 0.2 s. The
+    values are the same IEEE operations in the same order (no fast-math, no fused
+    multiply-add in these kernels), but a degenerate instance can raise where numba gives
+    inf or NaN (a Python float divided by zero, ``math.sqrt`` of a negative number): the
+    caller must treat any exception as "use the compiled kernels".
+    """
+    global INTERPRETED
+    loaded = [name for name in sys.modules if name.startswith("mcchain.kernels.")]
+    if any(name != __name__ for name in loaded) and not INTERPRETED:
+        return False
+    INTERPRETED = True
+    return True
+
+
+def njit(*args: Any, **options: Any) -> Any:
+    """``numba.njit(*args, **options)``, or the function unchanged where the kernels run
+    interpreted (:data:`INTERPRETED`)."""
+    if INTERPRETED:
+        if args and callable(args[0]):
+            return args[0]
+        return lambda function: function
+    numba_cache()  # a writable cache, before any kernel is decorated with cache=True
+    from numba import njit as numba_njit
+
+    decorate: Callable[..., Any] = numba_njit
+    return decorate(*args, **options)
+
+
+@functools.cache
+def numba_cache() -> str:
+    """Where numba caches the kernels (made writable first; see :mod:`mcchain.caches`)."""
+    from mcchain.caches import ensure_numba_cache
+
+    try:
+        return ensure_numba_cache()
+    except ImportError:  # generating kernel source needs these options, not numba itself
+        return "none (numba is not importable)"
+
 
 JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 """Options of hand-written kernels (``@njit(**JIT)``)."""

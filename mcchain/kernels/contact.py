@@ -23,8 +23,6 @@ zero gives inf/NaN under ``error_model="numpy"``).
 
 from __future__ import annotations
 
-from numba import njit
-
 from mcchain.contact import (
     FLORES,
     FRICTION_V0,
@@ -33,7 +31,7 @@ from mcchain.contact import (
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
 )
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 __all__ = [
     "FLORES",

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from mcchain.contact import CONTACT_STEP_LIMIT, RESEAT_NEWTON, RESEAT_TOLERANCE
 from mcchain.kernels.assembly import max_abs
@@ -38,7 +37,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import INLINE, JIT
+from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
 from mcchain.kernels.joints import (
     constraint_gamma,

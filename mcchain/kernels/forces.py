@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 from mcchain.kernels.joints import (
     TWO_PI,
     add_pair_column,

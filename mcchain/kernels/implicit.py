@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from mcchain.contact import CONTACT_STEP_LIMIT
 from mcchain.kernels.clearance import (
@@ -34,7 +33,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import INLINE, JIT
+from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.explicit import (
     any_marked,
     finish_contact,

@@ -22,9 +22,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 # numba reads module globals as compile-time constants
 from mcchain.kernels.tables import spline_at

@@ -10,9 +10,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 EPS = np.finfo(np.float64).eps
 

@@ -9,10 +9,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from mcchain.codegen.emitter import sincos_code
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 
 def _sincos_function() -> str:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from mcchain.kernels.assembly import (
     SCHUR_PIVOT_RTOL,
@@ -23,7 +22,7 @@ from mcchain.kernels.assembly import (
     project_positions,
     schur_factor,
 )
-from mcchain.kernels.config import INLINE, JIT
+from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,

@@ -10,9 +10,7 @@ velocity and acceleration rows need). The generated lane kernels carry a copy of
 
 from __future__ import annotations
 
-from numba import njit
-
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 
 @njit(**JIT)

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-import numba
+from mcchain.kernels import config
 
 BLOCKS_PER_THREAD = 4
 """Blocks per thread: items differ in cost (Newton iterations, adaptive steps), so a thread
@@ -31,13 +31,20 @@ def item_blocks(count: int, threads: int, min_block: int = 1) -> list[tuple[int,
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
 
+def _numba_threads() -> int:
+    import numba
+
+    return int(numba.get_num_threads())
+
+
 def over_samples(
     kernel: Callable[..., Any], count: int, *args: Any, min_block: int = MIN_BLOCK
 ) -> None:
     """Call ``kernel(start, stop, *args)`` on blocks covering ``0:count`` (samples, or lane
     groups with ``min_block=1``), on as many threads as numba may use
-    (``numba.get_num_threads()``, which ``--threads`` sets)."""
-    threads = numba.get_num_threads()
+    (``numba.get_num_threads()``, which ``--threads`` sets; one where the kernels run
+    interpreted, :func:`mcchain.kernels.config.interpret_kernels`)."""
+    threads = 1 if config.INTERPRETED else _numba_threads()
     blocks = item_blocks(count, threads, min_block)
     if threads == 1 or len(blocks) == 1:
         for start, stop in blocks:
