@@ -1,6 +1,6 @@
 """``mcchain validate`` from the command line runs its kernels interpreted (no numba):
-the same lines as the compiled kernels, bit for bit the same numbers, and a fallback to
-the compiled kernels where the interpreted check raises."""
+the same lines as the compiled kernels, values that agree with theirs to rounding, and a
+fallback to the compiled kernels where the interpreted check raises."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from test_cli_commands import in_process
 from test_runs_support import REPO
 
 from mcchain.scene import compile_model, load_scene
-from mcchain.solvers.statics import assemble, solve_equilibrium
+from mcchain.solvers import solve_chunk
 
 CONFIGS = sorted((REPO / "configs").glob("*.toml"))
 
@@ -46,21 +46,24 @@ def test_validate__imports_no_numba_from_the_command_line() -> None:
     assert not [name for name in imported if name.split(".")[0] in ("numba", "llvmlite")]
 
 
-def test_kernels__interpreted_and_compiled_give_the_same_bits(tmp_path: Path) -> None:
-    """Assembly and equilibrium of sampled instances: the interpreted kernels do the same
-    IEEE operations in the same order as the compiled ones (no fast-math, no FMA)."""
+def test_kernels__interpreted_agree_with_the_compiled_ones_to_rounding(tmp_path: Path) -> None:
+    """Assembly, equilibrium and modes of sampled instances, interpreted against compiled:
+    the same status bits and Newton iterations, values to rounding (Python's ``math.hypot``
+    and libm's may differ in the last place, so not always to the bit: 3 of 64 four-bar
+    samples differ, by 1 ulp in q and 2e-13 relative in ω)."""
     scenes = ["clearance-sweep", "fourbar-clearance-statics", "slider-crank-flores"]
     code = (
-        "import sys, numpy as np\n"
+        "import sys, warnings, numpy as np\n"
         "from mcchain.kernels.config import interpret_kernels\n"
         "assert interpret_kernels()\n"
         "from mcchain.scene import compile_model, load_scene\n"
-        "from mcchain.solvers.statics import assemble, solve_equilibrium\n"
+        "from mcchain.solvers import solve_chunk\n"
+        "warnings.simplefilter('ignore')\n"
         "for k, path in enumerate(sys.argv[2:]):\n"
-        "    model = compile_model(load_scene(path), nsample=4)\n"
-        "    a = assemble(model)\n"
-        "    e = solve_equilibrium(model, a.q, a.status)\n"
-        "    np.savez(f'{sys.argv[1]}/{k}.npz', q=a.q, status=a.status, q_eq=e.q, lam=e.lam)\n"
+        "    scene = load_scene(path).model_copy(update={'simulate': None})\n"
+        "    model = compile_model(scene, nsample=64 if scene.sample else None)\n"
+        "    with np.errstate(all='ignore'):\n"
+        "        np.savez(f'{sys.argv[1]}/{k}.npz', **solve_chunk(model, scene))\n"
         "print('numba' in sys.modules)\n"
     )
     paths = [str(REPO / "configs" / f"{name}.toml") for name in scenes]
@@ -68,14 +71,19 @@ def test_kernels__interpreted_and_compiled_give_the_same_bits(tmp_path: Path) ->
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "False"
     for k, path in enumerate(paths):
-        model = compile_model(load_scene(path), nsample=4)
-        a = assemble(model)
-        e = solve_equilibrium(model, a.q, a.status)
-        saved = np.load(tmp_path / f"{k}.npz")
-        np.testing.assert_array_equal(saved["q"], a.q)
-        np.testing.assert_array_equal(saved["status"], a.status)
-        np.testing.assert_array_equal(saved["q_eq"], e.q)
-        np.testing.assert_array_equal(saved["lam"], e.lam)
+        scene = load_scene(path).model_copy(update={"simulate": None})
+        model = compile_model(scene, nsample=64 if scene.sample else None)
+        compiled = solve_chunk(model, scene)
+        interpreted = np.load(tmp_path / f"{k}.npz")
+        assert sorted(interpreted.files) == sorted(compiled)
+        for name, value in compiled.items():
+            if value.dtype.kind in "biu":
+                np.testing.assert_array_equal(interpreted[name], value, err_msg=name)
+            else:
+                np.testing.assert_allclose(
+                    interpreted[name], value, rtol=1e-12, atol=1e-12 * np.nanmax(np.abs(value)),
+                    err_msg=name,
+                )  # fmt: skip
 
 
 def test_validate__falls_back_to_the_compiled_kernels_where_the_interpreted_check_raises(

@@ -34,10 +34,12 @@ def interpret_kernels() -> bool:
 
     For a check of one instance (``mcchain validate``): importing numba and its first
     dispatch cost about 0.6 s, the interpreted check of a small mechanism about 0.2 s. The
-    values are the same IEEE operations in the same order (no fast-math, no fused
-    multiply-add in these kernels), but a degenerate instance can raise where numba gives
-    inf or NaN (a Python float divided by zero, ``math.sqrt`` of a negative number): the
-    caller must treat any exception as "use the compiled kernels".
+    values agree with the compiled kernels' to rounding, not always to the bit (Python's
+    ``math.hypot`` and libm's can differ in the last place: a position by 1 ulp, an
+    eigenpulsation by 2e-13 relative), so a run, whose files must not depend on how it was
+    computed, never interprets. A degenerate instance can also raise where numba gives inf
+    or NaN (a Python float divided by zero, ``math.sqrt`` of a negative number): the caller
+    must treat any exception as "use the compiled kernels".
     """
     global INTERPRETED
     loaded = [name for name in sys.modules if name.startswith("mcchain.kernels.")]
