@@ -15,9 +15,10 @@ row reuses the caches the rows above it filled, as a user's session would:
    clearance joint under the contact law (rk45), a 32-bar chain (rk4);
 4. ``mcchain validate`` of the Quick start's scene, warm.
 
-``--quick`` leaves out the 32-bar chain. Writes ``benchmarks/results/startup/startup.md``
-and ``startup.png`` (ratios are measured in one run: absolute times drift on a shared
-machine).
+The two commits run row by row (one right after the other), each with its own caches, so
+that both see the same machine load. ``--quick`` leaves out the 32-bar chain. Writes
+``benchmarks/results/startup/startup.md`` and ``startup.png`` (ratios are measured in one
+run: absolute times drift on a shared machine).
 """
 
 from __future__ import annotations
@@ -106,18 +107,23 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
     return seconds, proc.stdout + proc.stderr
 
 
-def measure(tree: Path, parent: Path, quick: bool) -> dict[str, float]:
-    """Seconds of every row for the commit checked out in ``tree``."""
-    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=parent))
-    work = Path(tempfile.mkdtemp(prefix="work-", dir=parent))
-    seconds = {}
-    for name, args in _scenes(tree, work, quick).items():
-        if name == "validate, warm":
-            _time(tree, cache, work, args)  # load its kernels once
-        seconds[name], output = _time(tree, cache, work, args)
-        print(f"  {name}: {seconds[name]:.2f} s", flush=True)
-        if name == "quick start, cold":
-            print("   ", " / ".join(re.findall(r"^(?:wall|end to end).*$", output, re.M)))
+def measure(trees: dict[str, Path], parent: Path, quick: bool) -> dict[str, dict[str, float]]:
+    """Seconds of every row for each commit (checked out in ``trees``), row by row: each
+    row runs for one commit right after the other, so both see the same machine load (it
+    drifts by 30 % within minutes). Each commit has its own caches."""
+    caches = {ref: Path(tempfile.mkdtemp(prefix="cache-", dir=parent)) for ref in trees}
+    works = {ref: Path(tempfile.mkdtemp(prefix="work-", dir=parent)) for ref in trees}
+    rows = {ref: _scenes(tree, works[ref], quick) for ref, tree in trees.items()}
+    seconds: dict[str, dict[str, float]] = {ref: {} for ref in trees}
+    for name in next(iter(rows.values())):
+        for ref, tree in trees.items():
+            args = rows[ref][name]
+            if name == "validate, warm":
+                _time(tree, caches[ref], works[ref], args)  # load its kernels once
+            seconds[ref][name], output = _time(tree, caches[ref], works[ref], args)
+            print(f"  {ref}, {name}: {seconds[ref][name]:.2f} s", flush=True)
+            if name == "quick start, cold":
+                print("   ", " / ".join(re.findall(r"^(?:wall|end to end).*$", output, re.M)))
     return seconds
 
 
@@ -128,14 +134,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="leave out the 32-bar chain")
     args = parser.parse_args(argv)
     parent = Path(tempfile.mkdtemp(prefix="mcchain-startup-"))
-    results = {}
     labels = {}
+    trees = {}
     try:
         for ref in (args.before, args.after):
-            tree = _worktree(ref, parent)
-            labels[ref] = tree.name.removeprefix("tree-")
-            print(f"{ref} ({labels[ref]}):", flush=True)
-            results[ref] = measure(tree, parent, args.quick)
+            trees[ref] = _worktree(ref, parent)
+            labels[ref] = trees[ref].name.removeprefix("tree-")
+            print(f"{ref}: {labels[ref]}", flush=True)
+        results = measure(trees, parent, args.quick)
     finally:
         for tree in parent.glob("tree-*"):
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)])
@@ -156,8 +162,9 @@ def main(argv: list[str] | None = None) -> int:
     (OUT / "startup.md").write_text(
         f"# Start-up times: {b} against {a}\n\n"
         f"`python benchmarks/bench_startup.py --before {args.before} --after {args.after}"
-        f"{' --quick' if args.quick else ''}`, both measured in one run on {os.cpu_count()} "
-        "cores (each row reuses the caches the rows above it filled).\n\n" + table + "\n"
+        f"{' --quick' if args.quick else ''}`, on {os.cpu_count()} cores, the two commits "
+        "row by row (each row of one right after the same row of the other; each commit "
+        "reuses the caches its rows above filled).\n\n" + table + "\n"
     )
     _chart(before, after, b, a)
     return 0
