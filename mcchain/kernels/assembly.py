@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from mcchain.kernels.config import INLINE, JIT, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.forces import (
     applied_forces,
     mass_diagonal,
@@ -68,12 +68,12 @@ def length_scale(km, s):
         for side in range(2):
             arr = km.joint_point_a if side == 0 else km.joint_point_b
             i = s % arr.shape[0]
-            scale = max(scale, math.hypot(arr[i, k, 0], arr[i, k, 1]))
+            scale = max(scale, hypot(arr[i, k, 0], arr[i, k, 1]))
     for k in range(km.spring_point_a.shape[1]):
         for side in range(2):
             arr = km.spring_point_a if side == 0 else km.spring_point_b
             i = s % arr.shape[0]
-            scale = max(scale, math.hypot(arr[i, k, 0], arr[i, k, 1]))
+            scale = max(scale, hypot(arr[i, k, 0], arr[i, k, 1]))
     return scale if scale > 0.0 else 1.0
 
 
@@ -338,7 +338,7 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
         alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
         if alpha == alpha:
             continue
-        size = math.hypot(lam[2 * k], lam[2 * k + 1])
+        size = hypot(lam[2 * k], lam[2 * k + 1])
         if size > 1e-9 * fscale and size > 0.0:
             target[k, 0] = lam[2 * k] / size
             target[k, 1] = lam[2 * k + 1] / size
@@ -399,13 +399,13 @@ def assemble_one(km, s, q, v):
         if unset:
             ideal_joint_directions(km, s, q, v, minv, lscale, target, found)
         ig = s % km.gravity.shape[0]
-        gnorm = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1])
+        gnorm = hypot(km.gravity[ig, 0], km.gravity[ig, 1])
         for k in range(nj):
             if km.joint_kind[k] != JOINT_CLEARANCE or found[k]:
                 continue
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-            dist = math.hypot(dx, dy)
+            dist = hypot(dx, dy)
             if dist > 1e-3 * c and dist > 0.0:
                 target[k, 0] = dx / dist
                 target[k, 1] = dy / dist

@@ -26,7 +26,7 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
 )
-from mcchain.kernels.config import INLINE, JIT, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.contact import contact_crossing
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 
@@ -119,7 +119,7 @@ def contact_forces(km, s, q, v, cst, F_out):
         b = km.joint_body_b[k]
         pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
         ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
-        rho = math.hypot(dx, dy)
+        rho = hypot(dx, dy)
         ex = dx / rho
         ey = dy / rho
         pen = rho - c

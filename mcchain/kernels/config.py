@@ -19,12 +19,20 @@ sample at a time, without importing numba.
 from __future__ import annotations
 
 import functools
+import math
 import sys
 from collections.abc import Callable
 from typing import Any
 
 INTERPRETED = False
 """True where :func:`interpret_kernels` took effect: the kernels are plain Python."""
+
+hypot: Callable[[float, float], float] = math.hypot
+"""√(x² + y²) as the kernels call it: ``math.hypot``, which numba compiles to libm's
+``hypot``; ``numpy.hypot`` (libm's as well) where they run interpreted. Python's own
+``math.hypot`` can differ from libm's in the last place, and a position 1 ulp off moved an
+eigenpulsation by 2e-13: with libm's in both, interpreted and compiled kernels give the same
+bits on every shipped scene."""
 
 
 def interpret_kernels() -> bool:
@@ -34,18 +42,20 @@ def interpret_kernels() -> bool:
 
     For a check of one instance (``mcchain validate``): importing numba and its first
     dispatch cost about 0.6 s, the interpreted check of a small mechanism about 0.2 s. The
-    values agree with the compiled kernels' to rounding, not always to the bit (Python's
-    ``math.hypot`` and libm's can differ in the last place: a position by 1 ulp, an
-    eigenpulsation by 2e-13 relative), so a run, whose files must not depend on how it was
-    computed, never interprets. A degenerate instance can also raise where numba gives inf
-    or NaN (a Python float divided by zero, ``math.sqrt`` of a negative number): the caller
-    must treat any exception as "use the compiled kernels".
+    values are the compiled kernels' bit for bit on every shipped scene (the same IEEE
+    operations in the same order, libm's :data:`hypot` in both; tested), but a degenerate
+    instance can raise where numba gives inf or NaN (a Python float divided by zero,
+    ``math.sqrt`` of a negative number): the caller must treat any exception as "use the
+    compiled kernels".
     """
-    global INTERPRETED
+    global INTERPRETED, hypot
     loaded = [name for name in sys.modules if name.startswith("mcchain.kernels.")]
     if any(name != __name__ for name in loaded) and not INTERPRETED:
         return False
+    import numpy as np
+
     INTERPRETED = True
+    hypot = np.hypot
     return True
 
 

@@ -37,7 +37,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import INLINE, JIT, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
 from mcchain.kernels.joints import (
     constraint_gamma,
@@ -302,7 +302,7 @@ def contact_energy(km, s, q, cst):
             continue
         k = contact_joint_index(km, j)
         _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-        pen = math.hypot(dx, dy) - km.joint_clearance[s % km.joint_clearance.shape[0], k]
+        pen = hypot(dx, dy) - km.joint_clearance[s % km.joint_clearance.shape[0], k]
         stiffness = km.joint_contact_stiffness[s % km.joint_contact_stiffness.shape[0], k]
         expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
         energy += stiffness * max(pen, 0.0) ** (expo + 1.0) / (expo + 1.0)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from mcchain.kernels.config import JIT, njit
+from mcchain.kernels.config import JIT, hypot, njit
 from mcchain.kernels.joints import (
     TWO_PI,
     add_pair_column,
@@ -114,7 +114,7 @@ def applied_forces(km, s, q, v, t, F_out):
             fx = -stiffness * ux - damping * dux
             fy = -stiffness * uy - damping * duy
         else:
-            length = math.hypot(ux, uy)
+            length = hypot(ux, uy)
             ex = ux / length
             ey = uy / length
             tension = stiffness * (length - rest) + damping * (ex * dux + ey * duy)
@@ -155,7 +155,7 @@ def damper_stiffness_add(km, s, q, v, K_out):
         if isotropic:
             fx, fy = -damping * dux, -damping * duy
         else:
-            length = math.hypot(ux, uy)
+            length = hypot(ux, uy)
             ex, ey = ux / length, uy / length
             nx, ny = -ey, ex
             along, across = ex * dux + ey * duy, nx * dux + ny * duy
@@ -201,7 +201,7 @@ def damping_matrix_add(km, s, q, scale, C_out):
             add_pair_outer(C_out, damping, a, b, 1.0, 0.0, pax, pay, pbx, pby)
             add_pair_outer(C_out, damping, a, b, 0.0, 1.0, pax, pay, pbx, pby)
         else:
-            length = math.hypot(ux, uy)
+            length = hypot(ux, uy)
             add_pair_outer(C_out, damping, a, b, ux / length, uy / length, pax, pay, pbx, pby)
 
 
@@ -232,7 +232,7 @@ def applied_stiffness_add(km, s, q, t, K_out):
             wx = stiffness * ux
             wy = stiffness * uy
         else:
-            length = math.hypot(ux, uy)
+            length = hypot(ux, uy)
             ex = ux / length
             ey = uy / length
             tension = stiffness * (length - rest)
@@ -269,7 +269,7 @@ def potential_energy(km, s, q):
     for k in range(km.spring_body_a.shape[0]):
         _, _, _, _, ux, uy = spring_vectors(km, s, q, k)
         stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
-        stretch = math.hypot(ux, uy) - km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
+        stretch = hypot(ux, uy) - km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
         energy += 0.5 * stiffness * stretch * stretch
     return energy
 

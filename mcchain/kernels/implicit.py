@@ -33,7 +33,7 @@ from mcchain.kernels.clearance import (
     law_rows,
     record_stage0,
 )
-from mcchain.kernels.config import INLINE, JIT, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.explicit import (
     any_marked,
     finish_contact,
@@ -320,7 +320,7 @@ def _tangent_add(km, s, q, v, t, lam, gp, K_out):
             add_pair_outer(K_out, gp * damping, a, b, 1.0, 0.0, pax, pay, pbx, pby)
             add_pair_outer(K_out, gp * damping, a, b, 0.0, 1.0, pax, pay, pbx, pby)
         else:
-            length = math.hypot(ux, uy)
+            length = hypot(ux, uy)
             add_pair_outer(K_out, gp * damping, a, b, ux / length, uy / length, pax, pay, pbx, pby)
 
 

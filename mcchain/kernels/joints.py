@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 
-from mcchain.kernels.config import JIT, njit
+from mcchain.kernels.config import JIT, hypot, njit
 
 # numba reads module globals as compile-time constants
 from mcchain.kernels.tables import spline_at
@@ -181,7 +181,7 @@ def constraint_residual(km, s, q, t, phi_out):
             phi_out[row + 1] = thb - tha - rel
         else:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-            phi_out[row] = math.hypot(dx, dy) - c
+            phi_out[row] = hypot(dx, dy) - c
     for j in range(km.driver_body.shape[0]):
         if km.driver_joint[j] >= 0:
             start, rate = driver_start(km, s, j)
@@ -251,7 +251,7 @@ def constraint_jacobian(km, s, q, B_out):
                 B_out, row, a, b, *prismatic_normal(km, s, q, k), pax, pay, pbx, pby, dx, dy
             )
         else:
-            dist = math.hypot(dx, dy)
+            dist = hypot(dx, dy)
             if dist > 0.0:
                 ex = dx / dist
                 ey = dy / dist
@@ -315,7 +315,7 @@ def constraint_gamma(km, s, q, v, t, gamma_out):
             gamma_out[row] = prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa)
             gamma_out[row + 1] = 0.0
         else:
-            dist = math.hypot(dx, dy)
+            dist = hypot(dx, dy)
             ex = dx / dist
             ey = dy / dist
             ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
@@ -424,7 +424,7 @@ def constraint_hessian_add(km, s, q, lam, K_out):
             _prismatic_hessian_add(K_out, lam[row], a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
             continue
         else:
-            dist = math.hypot(dx, dy)
+            dist = hypot(dx, dy)
             ex = dx / dist
             ey = dy / dist
             lx = lam[row] * ex
@@ -468,7 +468,7 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
             contact_out[k] = -lam[row + 1]
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-            dist = math.hypot(dx, dy)
+            dist = hypot(dx, dy)
             force_out[k, 0] = -lam[row] * dx / dist
             force_out[k, 1] = -lam[row] * dy / dist
             contact_out[k] = lam[row]

@@ -22,7 +22,7 @@ from mcchain.kernels.assembly import (
     project_positions,
     schur_factor,
 )
-from mcchain.kernels.config import INLINE, JIT, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.forces import (
     applied_forces,
     applied_stiffness_add,
@@ -452,7 +452,7 @@ def modes_one(km, s, q, lam, omega_out, shapes_out, want_shapes):
             cnorm += Kr[i, j] * Kr[i, j]
     cnorm = math.sqrt(cnorm)
     ig = s % km.gravity.shape[0]
-    gravity_scale = math.hypot(km.gravity[ig, 0], km.gravity[ig, 1]) / length_scale(km, s)
+    gravity_scale = hypot(km.gravity[ig, 0], km.gravity[ig, 1]) / length_scale(km, s)
     threshold = ZERO_MODE_RTOL * max(cnorm, gravity_scale)
     mu = np.empty(f)
     W = np.empty((f, f))
