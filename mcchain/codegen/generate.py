@@ -608,6 +608,9 @@ def lane_kernels(topo: Topology, variant: str) -> ModuleType:
     that starts with the variant."""
     module = _MODULES.get((topo, variant))
     if module is None:
+        from mcchain.kernels.config import numba_cache
+
+        numba_cache()  # a writable numba cache before the module's kernels are decorated
         prefix = "mcchain_gen_" + variant.replace("-", "_")
         module = load_module(generate_source(topo, variant), prefix=prefix)
         _MODULES[(topo, variant)] = module
