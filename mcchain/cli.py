@@ -463,19 +463,40 @@ def describe_initial_state(model: Any, assembled: Any) -> list[str]:
 VALIDATE_COMPILED = "MCCHAIN_VALIDATE_COMPILED"
 """``1``: ``mcchain validate`` checks with the compiled kernels (its fallback process)."""
 
+INTERPRET_MAX_COORDINATES = 100
+"""Largest scene (3 coordinates per body) that ``mcchain validate`` checks interpreted: the
+interpreted check grows with the cube of the size (a 32-bar chain, 96 coordinates: 0.64 s,
+against 1.04 s compiled in all), the compiled one hardly."""
+
+_may_interpret = False
+"""Set by :func:`console_main`: this process only validates, so its kernels may run
+interpreted."""
+
+
+def _interpret_for(scene_path: Any) -> bool:
+    """Whether ``validate`` runs the kernels interpreted: only in a process that does
+    nothing else (:func:`console_main`), for a scene of at most
+    :data:`INTERPRET_MAX_COORDINATES` coordinates."""
+    if not _may_interpret or os.environ.get(VALIDATE_COMPILED) == "1":
+        return False
+    from mcchain.kernels.config import interpret_kernels
+    from mcchain.scene import load_scene
+
+    if 3 * len(load_scene(scene_path).body) > INTERPRET_MAX_COORDINATES:
+        return False
+    return interpret_kernels()
+
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    """Check the scene's nominal instance. From the command line the kernels run interpreted
-    (:func:`console_main`: no numba, about 0.6 s less); should the interpreted check raise
-    where numba would give inf or NaN (a degenerate instance), it runs again with the
-    compiled kernels in a fresh process."""
+    """Check the scene's nominal instance. From the command line, for a scene of moderate
+    size, the kernels run interpreted (:func:`_interpret_for`: no numba, about 0.6 s less);
+    should the interpreted check raise where numba would give inf or NaN (a degenerate
+    instance), it runs again with the compiled kernels in a fresh process."""
     import warnings
 
     import numpy as np
 
-    from mcchain.kernels import config
-
-    interpreted = config.INTERPRETED
+    interpreted = _interpret_for(args.scene)
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore" if interpreted else "warn"):
             if interpreted:  # numpy scalars warn where numba's float operations are silent
@@ -609,13 +630,11 @@ def console_main() -> NoReturn:
     recordings, temporary folders) still run and the streams are flushed first, so nothing
     written is lost. An exception :func:`main` does not handle exits the usual way.
 
-    ``validate`` runs its kernels interpreted here (:func:`_cmd_validate`), never when
+    ``validate`` may run its kernels interpreted here (:func:`_interpret_for`), never when
     :func:`main` is called in a process that may go on to solve.
     """
-    if sys.argv[1:2] == ["validate"] and os.environ.get(VALIDATE_COMPILED) != "1":
-        from mcchain.kernels.config import interpret_kernels
-
-        interpret_kernels()  # one instance to check: plain Python beats importing numba
+    global _may_interpret
+    _may_interpret = sys.argv[1:2] == ["validate"]
     code = main()
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):

@@ -46,6 +46,22 @@ def test_validate__imports_no_numba_from_the_command_line() -> None:
     assert not [name for name in imported if name.split(".")[0] in ("numba", "llvmlite")]
 
 
+def test_validate__a_large_scene_is_checked_compiled(tmp_path: Path) -> None:
+    """Over ``INTERPRET_MAX_COORDINATES`` (34 bars: 102 coordinates) the interpreted check
+    would be slower than loading numba (it grows with the cube of the size)."""
+    from mcchain.cli import INTERPRET_MAX_COORDINATES
+    from mcchain.testing.factory import write_scene
+    from mcchain.testing.scenes import straight_chain_text
+
+    n = INTERPRET_MAX_COORDINATES // 3 + 1
+    scene = write_scene(tmp_path, straight_chain_text([0.3] * n, [1.0] * n), "chain.toml")
+    proc = _python("-X", "importtime", "-m", "mcchain.cli", "validate", str(scene))
+    assert proc.returncode == 0, proc.stderr
+    imported = [line.rsplit("|", 1)[-1].strip() for line in proc.stderr.splitlines()]
+    assert "numba" in imported
+    assert f"coordinates: {3 * n}" in proc.stdout
+
+
 def test_kernels__interpreted_give_the_compiled_bits_on_every_shipped_scene(
     tmp_path: Path,
 ) -> None:
@@ -90,8 +106,7 @@ def test_validate__falls_back_to_the_compiled_kernels_where_the_interpreted_chec
     code = (
         "import sys\n"
         "from mcchain import cli\n"
-        "from mcchain.kernels.config import interpret_kernels\n"
-        "assert interpret_kernels()\n"
+        "cli._may_interpret = True  # as console_main sets it for validate\n"
         "def degenerate(path):\n"
         "    raise ZeroDivisionError('float division by zero')\n"
         "cli._validation_lines = degenerate\n"
