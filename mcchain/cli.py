@@ -492,15 +492,13 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     size, the kernels run interpreted (:func:`_interpret_for`: no numba, about 0.6 s less);
     should the interpreted check raise where numba would give inf or NaN (a degenerate
     instance), it runs again with the compiled kernels in a fresh process."""
-    import warnings
-
     import numpy as np
 
     interpreted = _interpret_for(args.scene)
+    # Interpreted, the kernels compute on numpy scalars, which warn where numba is silent.
+    quiet = np.errstate(all="ignore") if interpreted else contextlib.nullcontext()
     try:
-        with warnings.catch_warnings(), np.errstate(all="ignore" if interpreted else "warn"):
-            if interpreted:  # numpy scalars warn where numba's float operations are silent
-                warnings.simplefilter("ignore", RuntimeWarning)
+        with quiet:
             lines = _validation_lines(args.scene)
     except McchainError:
         raise

@@ -648,14 +648,16 @@ its lanes once (which later runs would reuse)."""
 
 @dataclass(frozen=True)
 class KernelChoice:
-    """The kernels that integrate a run, and why (one line for the user)."""
+    """The kernels that integrate a run, and why (one line for the user); ``auto``: chosen
+    by ``kernels = "auto"``, not written in the scene."""
 
     kernels: str
     reason: str
+    auto: bool = True
 
     def note(self) -> str | None:
         """The line a run prints when ``auto`` took the loop kernels (None otherwise)."""
-        if self.kernels != "loop" or not self.reason.startswith("auto"):
+        if self.kernels != "loop" or not self.auto:
             return None
         return (
             f'simulate.kernels: "loop" ({self.reason}); kernels = "lanes" compiles the '
@@ -669,7 +671,7 @@ def choose_kernels(sim: Simulate, ndof: int, nsample: int) -> KernelChoice:
     model of the constants above. The choice depends on the scene and the sample count only,
     never on what a cache holds, so that a run, its resume and a Dask run agree."""
     if sim.kernels != "auto":
-        return KernelChoice(sim.kernels, "as set in the scene")
+        return KernelChoice(sim.kernels, "as set in the scene", auto=False)
     if sim.method not in LOOP_METHODS:
         return KernelChoice("lanes", f"auto: {sim.method} runs on the lanes only")
     compile_s = LANE_COMPILE_S_PER_COORDINATE * ndof
