@@ -98,3 +98,35 @@ def ensure_numba_cache() -> str:
     warn_fallback("NUMBA_CACHE_DIR", in_tree.parent, fallback)
     config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
     return str(fallback)
+
+
+def numba_index_folder() -> Path | None:
+    """The folder in which numba keeps the index files of mcchain's hand-written kernels
+    (``mcchain/kernels``), worked out as :func:`ensure_numba_cache` and numba's cache
+    locators choose it, without importing numba or a kernel module. None where numba would
+    use its user-wide folder (a read-only installation without ``NUMBA_CACHE_DIR``), which
+    this does not look up."""
+    import hashlib
+
+    sources = os.path.dirname(os.path.abspath(__file__)) + os.sep + "kernels"
+    configured = os.environ.get("NUMBA_CACHE_DIR")
+    if configured:
+        root = Path(configured) if writable(Path(configured)) else temporary_cache("numba")
+        return root / ("kernels_" + hashlib.sha1(sources.encode()).hexdigest())
+    in_tree = Path(sources) / "__pycache__"
+    return in_tree if writable(in_tree) else None
+
+
+def kernels_cached(kernels: list[str]) -> bool | None:
+    """Whether numba's cache holds an index for every kernel named in ``kernels``
+    (``"module.function"`` in ``mcchain.kernels``, e.g. ``"assembly.assemble_batch"``),
+    without importing numba or the kernels: a kernel module's import decorates its kernels,
+    which imports numba (0.4 s). None: cannot tell (:func:`numba_index_folder`).
+
+    An index names the function's first line, which this does not parse: any line counts.
+    A kernel edited since it was cached is compiled again however this answers."""
+    folder = numba_index_folder()
+    if folder is None:
+        return None
+    suffix = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
+    return all(any(folder.glob(f"{name}-*{suffix}")) for name in kernels)

@@ -302,6 +302,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return _fail("run: a SCENE.toml (or --resume RUN) is required")
         if args.out is not None and args.run_dir is not None:
             return _fail("--run-dir: cannot be combined with --out")
+        first_run = None
+        if _may_interpret and args.dask is None:
+            from mcchain.first_run import choose
+
+            first_run = choose(args.scene, args.samples, args.seed)
         result = execution.start_run(
             args.scene,
             samples=args.samples,
@@ -314,6 +319,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             argv=argv,
             progress=progress,
             rerun=live,
+            first_run=first_run,
         )
     for line in result.summary():
         print(line)
@@ -463,14 +469,10 @@ def describe_initial_state(model: Any, assembled: Any) -> list[str]:
 VALIDATE_COMPILED = "MCCHAIN_VALIDATE_COMPILED"
 """``1``: ``mcchain validate`` checks with the compiled kernels (its fallback process)."""
 
-INTERPRET_MAX_COORDINATES = 100
-"""Largest scene (3 coordinates per body) that ``mcchain validate`` checks interpreted: the
-interpreted check grows with the cube of the size (a 32-bar chain, 96 coordinates: 0.64 s,
-against 1.04 s compiled in all), the compiled one hardly."""
-
 _may_interpret = False
-"""Set by :func:`console_main`: this process only validates, so its kernels may run
-interpreted."""
+"""Set by :func:`console_main`: this process only validates or runs one scene, so its
+kernels may run interpreted (``validate``: :func:`_interpret_for`; ``run``:
+:mod:`mcchain.first_run`)."""
 
 
 def _interpret_for(scene_path: Any) -> bool:
@@ -479,7 +481,7 @@ def _interpret_for(scene_path: Any) -> bool:
     :data:`INTERPRET_MAX_COORDINATES` coordinates."""
     if not _may_interpret or os.environ.get(VALIDATE_COMPILED) == "1":
         return False
-    from mcchain.kernels.config import interpret_kernels
+    from mcchain.kernels.config import INTERPRET_MAX_COORDINATES, interpret_kernels
     from mcchain.scene import load_scene
 
     if 3 * len(load_scene(scene_path).body) > INTERPRET_MAX_COORDINATES:
@@ -628,11 +630,12 @@ def console_main() -> NoReturn:
     recordings, temporary folders) still run and the streams are flushed first, so nothing
     written is lost. An exception :func:`main` does not handle exits the usual way.
 
-    ``validate`` may run its kernels interpreted here (:func:`_interpret_for`), never when
-    :func:`main` is called in a process that may go on to solve.
+    ``validate`` and ``run`` may run their kernels interpreted here (:func:`_interpret_for`,
+    :mod:`mcchain.first_run`), never when :func:`main` is called in a process that may go
+    on to solve.
     """
     global _may_interpret
-    _may_interpret = sys.argv[1:2] == ["validate"]
+    _may_interpret = sys.argv[1:2] in (["validate"], ["run"])
     code = main()
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):

@@ -16,10 +16,16 @@ cache, whichever process compiles them. If the helper fails or cannot share the 
 warm-up compiles what is missing itself, as without it. On one core (or with
 ``MCCHAIN_COMPILE_AHEAD=0``) there is no helper, but a cold run still says at its start that
 it compiles, instead of after the scene check's compile.
+
+A small statics run on a cold cache compiles nothing itself: its kernels run interpreted
+(:mod:`mcchain.first_run`), and :func:`start_background` starts a detached process that
+compiles them all for the next runs, one such process at a time (a lock in
+``MCCHAIN_CACHE_DIR/compile``, with its log).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -43,14 +49,10 @@ def _cores() -> int:
 
 def assembly_is_cached() -> bool:
     """True if numba's cache holds the assembly kernel (then the scene check compiles
-    nothing, and there is nothing to run beside it)."""
-    from mcchain.kernels import assembly
+    nothing, and there is nothing to run beside it), or if that cannot be told."""
+    from mcchain.caches import kernels_cached
 
-    try:
-        index = assembly.assemble_batch._cache._cache_file._index_path
-    except AttributeError:  # another numba's internals: no helper
-        return True
-    return os.path.exists(index)
+    return kernels_cached(["assembly.assemble_batch"]) is not False
 
 
 class CompileAhead:
@@ -100,12 +102,15 @@ class CompileAhead:
             self.process.wait()
 
 
-def compile_for(scene_path: Path, seed: int | None, samples: int | None = None) -> None:
+def compile_for(
+    scene_path: Path, seed: int | None, samples: int | None = None, *, whole: bool = False
+) -> None:
     """Compile the kernels a chunk of the scene needs after assembly: solve two samples from
     their written state. The kernels' types depend on neither the values nor the count, so
     the helper samples only the smallest count the design allows (not the run's, which may
     fill the memory); ``[simulate] kernels = "auto"`` is resolved for the run's count
-    (``samples``, default the scene's), as the run resolves it."""
+    (``samples``, default the scene's), as the run resolves it. ``whole``: all a run calls,
+    the scene check and the eigen step too (then it solves from the assembled state)."""
     import numpy as np
 
     from mcchain.job import resolve_kernels
@@ -129,7 +134,15 @@ def compile_for(scene_path: Path, seed: int | None, samples: int | None = None) 
         v=np.array(np.broadcast_to(model.v0, shape), dtype=np.float64, order="C"),
         status=np.zeros(model.nsample, dtype=STATUS_DTYPE),
     )
-    solve_chunk(model, scene, assembled=written, with_modes=False)
+    if whole:
+        from mcchain.job import written_state
+        from mcchain.solvers.statics import check_scene, initial_state_warnings
+
+        check_scene(model)
+        initial_state_warnings(*written_state(scene))
+        solve_chunk(model, scene)
+    else:
+        solve_chunk(model, scene, assembled=written, with_modes=False)
 
 
 def compile_modes(model: Model, scene: Any) -> None:
@@ -157,11 +170,111 @@ def compile_modes(model: Model, scene: Any) -> None:
     solve_modes(one, at_rest, shapes=modes is not None and modes.shapes, damped=modes is not None)
 
 
+# -- in the background, for the next runs -----------------------------------------------------
+
+BACKGROUND = "--background"
+"""The helper's first argument when it compiles for the next runs (:func:`start_background`)."""
+
+
+def background_files() -> tuple[Path, Path]:
+    """The lock file a background compile holds while it runs, and its log."""
+    from mcchain.caches import mcchain_cache
+
+    folder = mcchain_cache("compile")
+    return folder / "background.lock", folder / "background.log"
+
+
+def background_running() -> bool:
+    """Whether a background compile (:func:`start_background`) holds its lock now."""
+    import fcntl
+
+    try:
+        fd = os.open(background_files()[0], os.O_RDONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def wait_background() -> None:
+    """Wait until no background compile runs (for benchmarks and tests)."""
+    import fcntl
+
+    with contextlib.suppress(FileNotFoundError):
+        fd = os.open(background_files()[0], os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH)
+        finally:
+            os.close(fd)
+
+
+def start_background(scene_path: Path, seed: int | None, samples: int | None) -> str:
+    """Start a process that compiles every kernel of the scene into the caches, for the
+    next runs, while this run goes on with its kernels interpreted
+    (:mod:`mcchain.first_run`). It is detached: it outlives the run (which may end first),
+    and an interrupt of the run does not reach it. One at a time: a second one started
+    meanwhile finds the lock held and exits.
+
+    Returns:
+        What the run's note says of it: that it started (with its log), that one is
+        already running, or that ``MCCHAIN_COMPILE_AHEAD=0`` turned it off.
+    """
+    import fcntl
+
+    if os.environ.get(ENV_SWITCH, "1") == "0":
+        return f"nothing compiles them meanwhile ({ENV_SWITCH}=0)"
+    lock, log_path = background_files()
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return f"a process compiles them already (log: {log_path})"
+        seed_arg = str(-1 if seed is None else seed)
+        samples_arg = str(-1 if samples is None else samples)
+        args = [
+            sys.executable, "-m", "mcchain.compile_ahead", BACKGROUND, str(scene_path),
+            seed_arg, samples_arg,
+        ]  # fmt: skip
+        with open(log_path, "ab") as log_file:
+            # The process inherits the locked file: the lock is its own from the start (no
+            # moment without it), until it exits.
+            process = subprocess.Popen(
+                args, stdin=subprocess.DEVNULL, stdout=log_file, stderr=subprocess.STDOUT,
+                start_new_session=True, pass_fds=(fd,),
+            )  # fmt: skip
+    finally:
+        os.close(fd)
+    return (
+        f"a background process compiles them for the next runs (pid {process.pid}, log: {log_path})"
+    )
+
+
+def compile_in_background(scene_path: Path, seed: int | None, samples: int | None) -> None:
+    """The background process's work (under the lock it inherited): all that the scene's
+    run calls (:func:`compile_for` with ``whole``), with a line in the log before and
+    after."""
+    t0 = time.perf_counter()
+    print(f"{time.strftime('%H:%M:%S')} pid {os.getpid()} {scene_path}: compiling", flush=True)
+    compile_for(scene_path, seed, samples, whole=True)
+    print(f"{time.strftime('%H:%M:%S')} pid {os.getpid()} done in {time.perf_counter() - t0:.1f} s")
+
+
 if __name__ == "__main__":
-    path, seed_arg, samples_arg = sys.argv[1:4]
-    compile_for(
+    background = sys.argv[1] == BACKGROUND
+    path, seed_arg, samples_arg = sys.argv[2:5] if background else sys.argv[1:4]
+    if background:
+        with contextlib.suppress(OSError):
+            os.nice(5)  # the interpreted run beside it keeps its core
+    (compile_in_background if background else compile_for)(
         Path(path),
         None if int(seed_arg) < 0 else int(seed_arg),
         None if int(samples_arg) < 0 else int(samples_arg),
     )
+    sys.stdout.flush()
     os._exit(0)  # the kernels are in the cache; the interpreter's teardown would only delay the run

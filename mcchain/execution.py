@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcchain.errors import RunError
+from mcchain.errors import McchainError, RunError
 from mcchain.job import Job, Loader, check_positive, prepare_job
 from mcchain.provenance import git_state, host_info, software_versions
 from mcchain.runs import (
@@ -55,6 +55,7 @@ from mcchain.viz.live import LiveOptions, LiveRun, check_live, live_summary
 if TYPE_CHECKING:
     from mcchain.compile_ahead import CompileAhead
     from mcchain.ensemble.io import MergeStats
+    from mcchain.first_run import FirstRun
     from mcchain.parallel import ExecutionStats, SolveFn
 
 log = logging.getLogger("mcchain")
@@ -430,19 +431,29 @@ def start_run(
     progress: bool | None = None,
     keep_parts: bool = False,
     rerun: LiveOptions | None = None,
+    first_run: FirstRun | None = None,
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
     Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices) happens
     before the folder is created: a bad input raises ``SceneError``/``RunError`` and writes
     nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
+
+    ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
+    the console script only): a background process compiles them for the next runs, and
+    should the interpreted kernels raise, the process becomes the compiled run (or its
+    resume, once the folder exists).
     """
     t0 = time.perf_counter()
     if run_dir is not None:
         check_new_run_dir(run_dir)
     _check_threads(threads, dask)
     ahead = None
-    if loader is None and solve is None and dask is None and Path(scene_path).is_file():
+    folder: Path | None = None
+    interpreted = first_run is not None and loader is None and solve is None and dask is None
+    if interpreted:
+        pass  # the kernels compile in the background once the scene has passed its checks
+    elif loader is None and solve is None and dask is None and Path(scene_path).is_file():
         from mcchain.compile_ahead import CompileAhead
         from mcchain.parallel import announce_compile
 
@@ -454,6 +465,12 @@ def start_run(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
         check_live(rerun, job.nsample)
+        if interpreted:
+            from mcchain.compile_ahead import start_background
+
+            background = start_background(Path(scene_path), seed, samples)
+            assert first_run is not None
+            job.notes.append(first_run.note(job.nsample, background))
         for line in job.warnings:
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
@@ -478,6 +495,12 @@ def start_run(
             rerun=rerun,
             compile_ahead=ahead,
         )
+    except Exception as exc:
+        if not interpreted or isinstance(exc, (McchainError, OSError)):
+            raise
+        from mcchain.first_run import run_compiled
+
+        run_compiled(resume=folder, reason=exc)
     finally:
         if ahead is not None:
             ahead.stop()

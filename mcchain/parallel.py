@@ -208,6 +208,10 @@ def announce_compile(stream: Any = None, ahead: bool = False) -> None:
 
 
 def _set_threads(threads: int | None) -> int:
+    from mcchain.kernels import config
+
+    if config.INTERPRETED:
+        return 1  # plain Python: the kernels run on this thread (solvers.threads)
     import numba
 
     if threads is not None:

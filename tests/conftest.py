@@ -1,5 +1,8 @@
 """Test-wide settings.
 
+Processes the tests start never run their kernels interpreted on a cold cache
+(``MCCHAIN_INTERPRET_COLD=0``), unless a test asks for it.
+
 Hypothesis: under CI (``CI`` set, as ``.ci/run`` does) every property test is derandomized,
 so a CI run cannot fail on a draw that a developer's run never made; the example database is
 off there too. Developers' runs keep random draws (and the database) to find new failures.
@@ -17,6 +20,10 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
 settings.register_profile("dev", print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+# A ``mcchain run`` the tests start as a process keeps the compiled kernels, whatever the
+# cache holds: the interpreted first run (mcchain.first_run) has tests of its own.
+os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 
 
 @pytest.fixture

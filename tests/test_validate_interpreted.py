@@ -49,7 +49,7 @@ def test_validate__imports_no_numba_from_the_command_line() -> None:
 def test_validate__a_large_scene_is_checked_compiled(tmp_path: Path) -> None:
     """Over ``INTERPRET_MAX_COORDINATES`` (34 bars: 102 coordinates) the interpreted check
     would be slower than loading numba (it grows with the cube of the size)."""
-    from mcchain.cli import INTERPRET_MAX_COORDINATES
+    from mcchain.kernels.config import INTERPRET_MAX_COORDINATES
     from mcchain.testing.factory import write_scene
     from mcchain.testing.scenes import straight_chain_text
 

@@ -1,0 +1,247 @@
+"""The first run on a cold cache (mcchain.first_run): a small statics run goes interpreted,
+with the compiled run's ``ensemble.nc`` byte for byte, while a background process compiles
+the kernels for the next runs (mcchain.compile_ahead); the cache is read without numba."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from test_cli_commands import in_process
+from test_runs_support import REPO
+
+from mcchain import compile_ahead, execution, first_run
+from mcchain.caches import kernels_cached, numba_index_folder
+from mcchain.errors import SceneError
+
+CONFIGS = REPO / "configs"
+
+
+def _cold_run(config: Path, tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``mcchain run`` from the command line on empty caches, interpreted without the probe
+    and without the background compile (which would take a core for a minute)."""
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
+        "MCCHAIN_CACHE_DIR": str(tmp_path / "mcchain"),
+        first_run.ENV_SWITCH: "1",
+        compile_ahead.ENV_SWITCH: "0",
+    }
+    command = ["-X", "importtime", "-m", "mcchain.cli", "run", str(config), "--quiet", *args]
+    return subprocess.run(
+        [sys.executable, *command], env=env, cwd=tmp_path, capture_output=True, text=True,
+        timeout=600,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("config", "samples"),
+    [("clearance-sweep", "512"), ("fourbar-clearance-statics", "16"), ("paper-bar", None)],
+)
+def test_cold_run__interpreted_writes_the_compiled_runs_ensemble_byte_for_byte(
+    config: str, samples: str | None, tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """Interpreted in a fresh process, without numba; then compiled in this one: the same
+    bytes (a sweep, a four-bar with a clearance joint, a scene without [sample])."""
+    count = [] if samples is None else ["--samples", samples]
+    cold = _cold_run(CONFIGS / f"{config}.toml", tmp_path, *count, "--run-dir", "cold")
+    assert cold.returncode == 0, cold.stderr[-3000:]
+    assert "run them interpreted (the same values); nothing compiles them" in cold.stderr
+    imported = [line.rsplit("|", 1)[-1].strip() for line in cold.stderr.splitlines()]
+    assert not [name for name in imported if name.split(".")[0] in ("numba", "llvmlite")]
+    run = in_process(monkeypatch, capsys)
+    scene = CONFIGS / f"{config}.toml"
+    warm = run("run", scene, *count, "--quiet", "--run-dir", "warm", cwd=tmp_path)
+    assert warm.returncode == 0, warm.stderr
+    cold_nc = (tmp_path / "cold" / "ensemble.nc").read_bytes()
+    assert cold_nc == (tmp_path / "warm" / "ensemble.nc").read_bytes()
+
+
+@pytest.fixture(autouse=True)
+def _switch_unset(monkeypatch: pytest.MonkeyPatch) -> None:
+    """As a user has it (the test suite sets ``MCCHAIN_INTERPRET_COLD=0``)."""
+    monkeypatch.delenv(first_run.ENV_SWITCH, raising=False)
+
+
+def test_numba_index_folder__is_where_numba_indexes_the_kernels() -> None:
+    """Worked out without numba, checked against numba's own locator."""
+    from mcchain.kernels import assembly
+
+    index = assembly.assemble_batch._cache._cache_file._index_path
+    assert Path(os.path.dirname(index)) == numba_index_folder()
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers import solve_chunk
+
+    scene = load_scene(CONFIGS / "clearance-bar.toml")
+    solve_chunk(compile_model(scene), scene)
+    assert kernels_cached(first_run.STATICS_KERNELS) is True
+    assert kernels_cached([*first_run.STATICS_KERNELS, "statics.no_such_kernel"]) is False
+
+
+def test_kernels_cached__an_empty_cache_folder(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    folder = numba_index_folder()
+    assert folder is not None and folder.parent == tmp_path / "numba"
+    assert folder.name.startswith("kernels_")
+    assert kernels_cached(first_run.STATICS_KERNELS) is False
+
+
+def _choose(monkeypatch, config: str, *, cached=False, per_sample=1e-3, samples=None):
+    """:func:`first_run.choose` with the cache state and the probe's result given, and the
+    exec recorded instead of made."""
+    import mcchain.caches
+    import mcchain.kernels.config
+
+    monkeypatch.setattr(mcchain.caches, "kernels_cached", lambda names: cached)
+    monkeypatch.setattr(mcchain.kernels.config, "interpret_kernels", lambda: True)
+    monkeypatch.setattr(first_run, "_probe", lambda scene, seed: per_sample)
+
+    class Exec(Exception):
+        pass
+
+    def run_compiled(resume=None, reason=None):
+        raise Exec
+
+    monkeypatch.setattr(first_run, "run_compiled", run_compiled)
+    try:
+        return first_run.choose(CONFIGS / f"{config}.toml", samples, None)
+    except Exec:
+        return "exec"
+
+
+def test_choose__a_small_statics_run_on_a_cold_cache(monkeypatch) -> None:
+    """clearance-sweep: 10,000 samples; at 1 ms each the projection (10 s) is the budget."""
+    chosen = _choose(monkeypatch, "clearance-sweep", per_sample=first_run.BUDGET_S / 10_000)
+    assert chosen == first_run.FirstRun(first_run.BUDGET_S / 10_000)
+    too_slow = first_run.BUDGET_S / 10_000 * 1.001
+    assert _choose(monkeypatch, "clearance-sweep", per_sample=too_slow) == "exec"
+    assert _choose(monkeypatch, "clearance-sweep", per_sample=too_slow, samples=9_990) is not None
+    assert _choose(monkeypatch, "clearance-sweep", cached=True) is None
+    assert _choose(monkeypatch, "clearance-sweep", cached=None) is None  # cannot tell
+
+
+def test_choose__never_for_a_simulation_a_large_scene_or_when_switched_off(
+    monkeypatch, tmp_path: Path
+) -> None:
+    from mcchain.kernels.config import INTERPRET_MAX_COORDINATES
+    from mcchain.testing.factory import write_scene
+    from mcchain.testing.scenes import straight_chain_text
+
+    assert _choose(monkeypatch, "fourbar-clearance") is None  # [simulate]
+    n = INTERPRET_MAX_COORDINATES // 3 + 1
+    chain = straight_chain_text([0.3] * n, [1.0] * n) + "[equilibrium]\n"
+    path = write_scene(tmp_path, chain, "chain.toml")
+    monkeypatch.setattr(first_run, "_probe", lambda scene, seed: 0.0)
+    assert first_run.choose(path, None, None) is None
+    monkeypatch.setenv(first_run.ENV_SWITCH, "0")
+    assert _choose(monkeypatch, "clearance-sweep") is None
+    monkeypatch.setenv(first_run.ENV_SWITCH, "1")
+    assert _choose(monkeypatch, "clearance-sweep", per_sample=1.0) == first_run.FirstRun(None)
+    bad = write_scene(tmp_path, "[scene]\nname = 3\n", "bad.toml")
+    assert first_run.choose(bad, None, None) is None  # the run reports it
+
+
+def test_choose__a_probe_that_raises_runs_compiled(monkeypatch) -> None:
+    _choose(monkeypatch, "clearance-sweep")
+
+    def probe(scene, seed):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(first_run, "_probe", probe)
+    with pytest.raises(Exception) as caught:
+        first_run.choose(CONFIGS / "clearance-sweep.toml", None, None)
+    assert type(caught.value).__name__ == "Exec"
+
+
+def test_run_compiled__execs_the_command_or_its_resume(monkeypatch, capsys) -> None:
+    calls = []
+    monkeypatch.setattr(os, "execve", lambda path, args, env: calls.append((path, args, env)))
+    argv = ["mcchain", "run", "scene.toml", "--samples", "5", "--threads=2", "--quiet"]
+    monkeypatch.setattr(sys, "argv", argv)
+    first_run.run_compiled()
+    first_run.run_compiled(Path("runs/x"), ZeroDivisionError("float division by zero"))
+    (path, args, env), (_, resumed, _) = calls
+    assert path == sys.executable and args[:3] == [sys.executable, "-m", "mcchain.cli"]
+    assert args[3:] == argv[1:] and env[first_run.ENV_SWITCH] == "0"
+    assert resumed[3:] == ["run", "--resume", "runs/x", "--threads", "2", "--quiet"]
+    note = capsys.readouterr().err
+    assert "interpreted kernels raised (ZeroDivisionError: float division by zero)" in note
+
+
+def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_resume(
+    monkeypatch, tmp_path: Path
+) -> None:
+    """A chunk raising in the interpreted kernels: the run is resumed compiled from the
+    folder it made (the exec is recorded here); a scene error is reported as always."""
+    calls = []
+
+    def run_compiled(resume=None, reason=None):
+        calls.append((resume, type(reason).__name__))
+        raise SystemExit(0)
+
+    monkeypatch.setattr(first_run, "run_compiled", run_compiled)
+    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
+
+    def solve(model, scene):
+        if model.nsample > 1:
+            raise ZeroDivisionError("float division by zero")
+        return {}
+
+    chosen = first_run.FirstRun(1e-3)
+    with pytest.raises(ZeroDivisionError):  # a custom solve is not the interpreted kernels
+        execution.start_run(
+            CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "r",
+            progress=False, first_run=chosen, solve=solve,
+        )  # fmt: skip
+    assert calls == []
+    monkeypatch.setattr(execution, "_compute", lambda *a, **k: 1 / 0)
+    with pytest.raises(SystemExit):
+        execution.start_run(
+            CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "s",
+            progress=False, first_run=chosen,
+        )  # fmt: skip
+    assert [(path.resolve(), name) for path, name in calls] == [
+        ((tmp_path / "s").resolve(), "ZeroDivisionError")
+    ]
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scene]\nname = 3\n")
+    with pytest.raises(SceneError):
+        execution.start_run(bad, run_dir=tmp_path / "t", progress=False, first_run=chosen)
+    assert len(calls) == 1 and not (tmp_path / "t").exists()
+
+
+def test_background_compile__one_at_a_time_detached_and_logged(monkeypatch, tmp_path: Path) -> None:
+    """The process holds the lock from its start (inherited), so that a second start finds it
+    held and starts nothing; waiting ends when it is done. The kernels are in this suite's
+    cache already: it loads them."""
+    import fcntl
+
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(REPO))
+    monkeypatch.delenv(compile_ahead.ENV_SWITCH, raising=False)
+    lock, log = compile_ahead.background_files()
+    assert not compile_ahead.background_running()
+    compile_ahead.wait_background()  # no lock file yet: nothing to wait for
+    started = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    assert started.startswith("a background process compiles them for the next runs (pid ")
+    assert compile_ahead.background_running()
+    second = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    assert second == f"a process compiles them already (log: {log})"
+    compile_ahead.wait_background()
+    assert not compile_ahead.background_running()
+    lines = log.read_text().splitlines()
+    assert len(lines) == 2 and lines[0].endswith("clearance-bar.toml: compiling")
+    assert " done in " in lines[1]
+    fd = os.open(lock, os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # another holder: nothing starts
+    try:
+        assert compile_ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5) == second
+    finally:
+        os.close(fd)
+    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
+    off = compile_ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5)
+    assert off == "nothing compiles them meanwhile (MCCHAIN_COMPILE_AHEAD=0)"
