@@ -74,14 +74,10 @@ class CompileAhead:
             return None
         if os.environ.get(ENV_SWITCH, "1") == "0" or _cores() < 2:
             return cls(None)
-        seed_arg = str(-1 if seed is None else seed)
-        samples_arg = str(-1 if samples is None else samples)
-        args = [
-            sys.executable, "-m", "mcchain.compile_ahead", str(scene_path), seed_arg, samples_arg
-        ]  # fmt: skip
         process = subprocess.Popen(
-            args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-        )
+            _command(scene_path, seed, samples), stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
         return cls(process)
 
     def compile_beside(self, model: Model, scene: Any) -> None:
@@ -100,6 +96,15 @@ class CompileAhead:
         if self.process is not None and self.process.poll() is None:
             self.process.kill()
             self.process.wait()
+
+
+def _command(scene_path: Path, seed: int | None, samples: int | None, *first: str) -> list[str]:
+    """The command line of a helper process (``first``: :data:`BACKGROUND`, or nothing for
+    :func:`compile_for`)."""
+    seed_arg = str(-1 if seed is None else seed)
+    samples_arg = str(-1 if samples is None else samples)
+    module = [sys.executable, "-m", "mcchain.compile_ahead", *first]
+    return [*module, str(scene_path), seed_arg, samples_arg]
 
 
 def compile_for(
@@ -122,10 +127,7 @@ def compile_for(
 
     scene = load_scene(scene_path)
     sample = scene.sample
-    count = None
-    if sample is not None:
-        count = len(sample.vary) + 2 if sample.design == "saltelli" else 2
-    model = warm_model(compile_model(scene, nsample=count, seed=seed))
+    model = warm_model(compile_model(scene, nsample=_helper_count(scene), seed=seed))
     run_count = samples if samples is not None else (sample.count if sample is not None else 1)
     scene, _ = resolve_kernels(scene, model, run_count)
     shape = (model.nsample, model.ndof)
@@ -143,6 +145,29 @@ def compile_for(
         solve_chunk(model, scene)
     else:
         solve_chunk(model, scene, assembled=written, with_modes=False)
+
+
+def _compile_check_and_modes(scene_path: Path, seed: int | None) -> None:
+    """What a cold compiled run's own process compiles beside the helper: the scene check
+    (assembly) and the eigen step."""
+    from mcchain.job import written_state
+    from mcchain.parallel import warm_model
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers.statics import check_scene, initial_state_warnings
+
+    scene = load_scene(scene_path)
+    model = warm_model(compile_model(scene, nsample=_helper_count(scene), seed=seed))
+    check_scene(model)
+    initial_state_warnings(*written_state(scene))
+    compile_modes(model, scene)
+
+
+def _helper_count(scene: Any) -> int | None:
+    """The smallest sample count the scene's design allows (None: no ``[sample]``)."""
+    sample = scene.sample
+    if sample is None:
+        return None
+    return len(sample.vary) + 2 if sample.design == "saltelli" else 2
 
 
 def compile_modes(model: Model, scene: Any) -> None:
@@ -235,12 +260,7 @@ def start_background(scene_path: Path, seed: int | None, samples: int | None) ->
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return f"a process compiles them already (log: {log_path})"
-        seed_arg = str(-1 if seed is None else seed)
-        samples_arg = str(-1 if samples is None else samples)
-        args = [
-            sys.executable, "-m", "mcchain.compile_ahead", BACKGROUND, str(scene_path),
-            seed_arg, samples_arg,
-        ]  # fmt: skip
+        args = _command(scene_path, seed, samples, BACKGROUND)
         with open(log_path, "ab") as log_file:
             # The process inherits the locked file: the lock is its own from the start (no
             # moment without it), until it exits.
@@ -258,9 +278,16 @@ def start_background(scene_path: Path, seed: int | None, samples: int | None) ->
 def compile_in_background(scene_path: Path, seed: int | None, samples: int | None) -> None:
     """The background process's work (under the lock it inherited): all that the scene's
     run calls (:func:`compile_for` with ``whole``), with a line in the log before and
-    after."""
+    after. With two cores or more it shares the work as a cold compiled run does: a helper
+    process compiles the analyses (:func:`compile_for`) while this one compiles the scene
+    check's assembly and the eigen step; then this one loads them all, compiling what is
+    left (the glue of a whole chunk)."""
     t0 = time.perf_counter()
     print(f"{time.strftime('%H:%M:%S')} pid {os.getpid()} {scene_path}: compiling", flush=True)
+    if _cores() >= 2:
+        helper = subprocess.Popen(_command(scene_path, seed, samples), stdin=subprocess.DEVNULL)
+        _compile_check_and_modes(scene_path, seed)
+        helper.wait()
     compile_for(scene_path, seed, samples, whole=True)
     print(f"{time.strftime('%H:%M:%S')} pid {os.getpid()} done in {time.perf_counter() - t0:.1f} s")
 

@@ -118,6 +118,13 @@ def _status_counts(path: Path) -> dict[str, int]:
     return total
 
 
+def _interpreted() -> bool:
+    """Whether this process ran the kernels interpreted (:mod:`mcchain.first_run`)."""
+    from mcchain.kernels import config
+
+    return config.INTERPRETED
+
+
 def _kernels(job: Job) -> str | None:
     """The path that integrates the run's time histories (``[simulate] kernels``), or None."""
     sim = getattr(job.scene, "simulate", None)
@@ -265,6 +272,7 @@ def _complete(
         samples_computed=stats.samples,
         scheduler=stats.scheduler,
         threads=stats.threads,
+        kernels_interpreted=_interpreted(),
         timings=timings,
     )
     summed: dict[str, float] = {}

@@ -16,6 +16,7 @@ from test_runs_support import REPO
 from mcchain import compile_ahead, execution, first_run
 from mcchain.caches import kernels_cached, numba_index_folder
 from mcchain.errors import SceneError
+from mcchain.runs import read_record
 
 CONFIGS = REPO / "configs"
 
@@ -59,6 +60,8 @@ def test_cold_run__interpreted_writes_the_compiled_runs_ensemble_byte_for_byte(
     assert warm.returncode == 0, warm.stderr
     cold_nc = (tmp_path / "cold" / "ensemble.nc").read_bytes()
     assert cold_nc == (tmp_path / "warm" / "ensemble.nc").read_bytes()
+    sessions = [read_record(tmp_path / name)["sessions"] for name in ("cold", "warm")]
+    assert [s[-1]["kernels_interpreted"] for s in sessions] == [True, False]
 
 
 @pytest.fixture(autouse=True)
