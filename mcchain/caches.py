@@ -103,25 +103,35 @@ def ensure_numba_cache() -> str:
 def numba_index_folder() -> Path | None:
     """The folder in which numba keeps the index files of mcchain's hand-written kernels
     (``mcchain/kernels``), worked out as :func:`ensure_numba_cache` and numba's cache
-    locators choose it, without importing numba or a kernel module. None where numba would
-    use its user-wide folder (a read-only installation without ``NUMBA_CACHE_DIR``), which
-    this does not look up."""
+    locators choose it (``NUMBA_CACHE_DIR``, else ``__pycache__`` beside the sources, else
+    numba's user-wide folder, else the temporary one), without importing numba or a kernel
+    module. None on Windows, whose user-wide folder this does not look up."""
     import hashlib
 
     sources = os.path.dirname(os.path.abspath(__file__)) + os.sep + "kernels"
+    subpath = "kernels_" + hashlib.sha1(sources.encode()).hexdigest()
     configured = os.environ.get("NUMBA_CACHE_DIR")
     if configured:
         root = Path(configured) if writable(Path(configured)) else temporary_cache("numba")
-        return root / ("kernels_" + hashlib.sha1(sources.encode()).hexdigest())
+        return root / subpath
     in_tree = Path(sources) / "__pycache__"
-    return in_tree if writable(in_tree) else None
+    if writable(in_tree):
+        return in_tree
+    if sys.platform == "win32":
+        return None
+    if sys.platform == "darwin":
+        user_wide = Path.home() / "Library" / "Caches" / "numba"
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        user_wide = Path(base) / "numba"
+    return (user_wide if writable(user_wide) else temporary_cache("numba")) / subpath
 
 
 def kernels_cached(kernels: list[str]) -> bool | None:
     """Whether numba's cache holds an index for every kernel named in ``kernels``
     (``"module.function"`` in ``mcchain.kernels``, e.g. ``"assembly.assemble_batch"``),
     without importing numba or the kernels: a kernel module's import decorates its kernels,
-    which imports numba (0.4 s). None: cannot tell (:func:`numba_index_folder`).
+    which imports numba (0.4 s). None: cannot tell (Windows, :func:`numba_index_folder`).
 
     An index names the function's first line, which this does not parse: any line counts.
     A kernel edited since it was cached is compiled again however this answers."""

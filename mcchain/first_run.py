@@ -8,7 +8,7 @@ operations in the same order, libm's ``hypot`` in both (tested on every shipped 
 a run's ``ensemble.nc`` is the same file either way). So on a cold cache a small statics
 run is interpreted, and a detached process compiles the kernels into the cache meanwhile
 (:func:`mcchain.compile_ahead.start_background`): the next run loads them. Which way a run
-went is in ``run.json`` (its notes) only.
+went is in ``run.json`` only (its notes, and ``kernels_interpreted`` in its session).
 
 :func:`choose` decides, before any kernel module is imported, and only in a process that
 does nothing but this run (``mcchain run SCENE`` from the console script, never a process

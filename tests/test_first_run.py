@@ -85,6 +85,35 @@ def test_numba_index_folder__is_where_numba_indexes_the_kernels() -> None:
     assert kernels_cached([*first_run.STATICS_KERNELS, "statics.no_such_kernel"]) is False
 
 
+def test_numba_index_folder__each_of_numbas_choices(tmp_path: Path, monkeypatch) -> None:
+    """``NUMBA_CACHE_DIR``, and the user-wide folder where the sources' ``__pycache__``
+    cannot be written: the folders numba's own locators give for the assembly kernel."""
+    import inspect
+
+    from numba.core import caching, config
+
+    import mcchain.caches
+    from mcchain.kernels import assembly
+
+    function = assembly.assemble_batch.py_func
+    source = inspect.getfile(function)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "numba"))
+    provided = caching.UserProvidedCacheLocator(function, source).get_cache_path()
+    assert numba_index_folder() == Path(provided)
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "home-cache"))
+    writable = mcchain.caches.writable
+    monkeypatch.setattr(
+        mcchain.caches,
+        "writable",
+        lambda folder: "__pycache__" not in str(folder) and writable(folder),
+    )
+    user_wide = caching.UserWideCacheLocator(function, source).get_cache_path()
+    assert numba_index_folder() == Path(user_wide)
+    assert Path(user_wide).parent == tmp_path / "home-cache" / "numba"
+
+
 def test_kernels_cached__an_empty_cache_folder(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     folder = numba_index_folder()
