@@ -260,7 +260,7 @@ def start_background(scene_path: Path, seed: int | None, samples: int | None) ->
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return f"a process compiles them already (log: {log_path})"
-        args = _command(scene_path, seed, samples, BACKGROUND)
+        args = _command(Path(scene_path).resolve(), seed, samples, BACKGROUND)
         with open(log_path, "ab") as log_file:
             # The process inherits the locked file: the lock is its own from the start (no
             # moment without it), until it exits.
