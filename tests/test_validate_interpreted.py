@@ -69,6 +69,33 @@ def test_kernels__interpreted_give_the_compiled_bits_on_every_shipped_scene(
     each, interpreted against compiled: bit for bit. Both call libm's hypot
     (``config.hypot``); with Python's own ``math.hypot`` 3 of 64 four-bar samples differed
     by 1 ulp in q."""
+    _assert_same_bits([str(path) for path in CONFIGS], tmp_path)
+
+
+def test_kernels__interpreted_give_the_compiled_bits_on_random_chains(tmp_path: Path) -> None:
+    """What the interpreted first run (mcchain.first_run) relies on, on mechanisms nobody
+    wrote by hand: random chains of 1-5 bars mixing clearance, ideal and prismatic joints,
+    springs and applied forces, 8 random samples each of their masses and clearances."""
+    from mcchain.testing.factory import chain_scene_text, write_scene
+
+    mixes = [
+        dict(nbody=1, clearance_joints=(0,)),
+        dict(nbody=2, clearance_joints=(1,), springs=1),
+        dict(nbody=3, clearance_joints=(0, 2), forces=2),
+        dict(nbody=3, prismatic_joints=(1,), springs=1),
+        dict(nbody=4, clearance_joints=(1, 3), springs=2, forces=1),
+        dict(nbody=5, clearance_joints=(0, 2, 4), spread=1.0),
+    ]
+    paths = []
+    for seed, mix in enumerate(mixes):
+        text = chain_scene_text(**mix, seed=seed, sample=8)  # type: ignore[arg-type]
+        paths.append(str(write_scene(tmp_path, text, f"chain{seed}.toml")))
+    _assert_same_bits(paths, tmp_path)
+
+
+def _assert_same_bits(paths: list[str], tmp_path: Path) -> None:
+    """Each scene's statics solved interpreted in a fresh process (no numba), then compiled
+    here: the same arrays, bit for bit (NaN where NaN)."""
     code = (
         "import sys, warnings, numpy as np\n"
         "from mcchain.kernels.config import interpret_kernels\n"
@@ -83,7 +110,6 @@ def test_kernels__interpreted_give_the_compiled_bits_on_every_shipped_scene(
         "        np.savez(f'{sys.argv[1]}/{k}.npz', **solve_chunk(model, scene))\n"
         "print('numba' in sys.modules)\n"
     )
-    paths = [str(path) for path in CONFIGS]
     proc = _python("-c", code, str(tmp_path), *paths)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "False"
@@ -94,7 +120,14 @@ def test_kernels__interpreted_give_the_compiled_bits_on_every_shipped_scene(
         interpreted = np.load(tmp_path / f"{k}.npz")
         assert sorted(interpreted.files) == sorted(compiled), path
         for name, value in compiled.items():
-            np.testing.assert_array_equal(interpreted[name], value, err_msg=f"{path}: {name}")
+            if value.dtype.kind == "f":  # the bits: -0.0 and 0.0 differ, NaN equals NaN
+                value = np.where(np.isnan(value), np.nan, value).view(np.uint64)
+                other = np.where(np.isnan(interpreted[name]), np.nan, interpreted[name])
+                np.testing.assert_array_equal(
+                    other.view(np.uint64), value, err_msg=f"{path}: {name}"
+                )
+            else:
+                np.testing.assert_array_equal(interpreted[name], value, err_msg=f"{path}: {name}")
 
 
 def test_validate__falls_back_to_the_compiled_kernels_where_the_interpreted_check_raises(
