@@ -211,19 +211,9 @@ def background_files() -> tuple[Path, Path]:
 
 def background_running() -> bool:
     """Whether a background compile (:func:`start_background`) holds its lock now."""
-    import fcntl
+    from mcchain.runs import file_locked
 
-    try:
-        fd = os.open(background_files()[0], os.O_RDONLY)
-    except FileNotFoundError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-    return False
+    return file_locked(background_files()[0])
 
 
 def wait_background() -> None:

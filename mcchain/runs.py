@@ -158,8 +158,13 @@ def drop_lock(folder: Path) -> None:
 
 def is_locked(folder: Path) -> bool:
     """Whether a live process executes the run."""
+    return file_locked(Path(folder) / LOCK)
+
+
+def file_locked(path: Path) -> bool:
+    """Whether a live process holds the lock (``flock``) of the file at ``path``."""
     try:
-        fd = os.open(Path(folder) / LOCK, os.O_RDONLY)
+        fd = os.open(path, os.O_RDONLY)
     except FileNotFoundError:
         return False
     try:
