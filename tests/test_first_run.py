@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from test_cli_commands import in_process
@@ -277,3 +278,29 @@ def test_background_compile__one_at_a_time_detached_and_logged(monkeypatch, tmp_
     monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
     off = compile_ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5)
     assert off == "nothing compiles them meanwhile (MCCHAIN_COMPILE_AHEAD=0)"
+
+
+def test_probe__times_one_sample_then_a_block(monkeypatch) -> None:
+    """The probe's calls (compiled here, interpreted in a cold run), on a clock that reads
+    1 ms more each time: one sample, then a block of the other PROBE_SAMPLES - 1 random
+    samples of the design's ranges (300 would fit in 0.3 s); a scene without [sample] has
+    one instance, timed alone."""
+    import mcchain.solvers
+    from mcchain.scene import load_scene
+
+    sizes = []
+    solve = mcchain.solvers.solve_chunk
+
+    def counted(model, scene, **kw):
+        sizes.append((model.nsample, scene.sample.design if scene.sample else None))
+        return solve(model, scene, **kw)
+
+    monkeypatch.setattr(mcchain.solvers, "solve_chunk", counted)
+    clock = iter(range(100))  # a clock that reads 1 ms more at every reading
+
+    monkeypatch.setattr(first_run, "time", SimpleNamespace(perf_counter=lambda: next(clock) / 1e3))
+    assert first_run._probe(load_scene(CONFIGS / "clearance-sweep.toml"), 3) == 1e-3 / 31
+    assert sizes == [(1, "random"), (first_run.PROBE_SAMPLES - 1, "random")]
+    sizes.clear()
+    assert first_run._probe(load_scene(CONFIGS / "paper-bar.toml"), None) == pytest.approx(1e-3)
+    assert sizes == [(1, None)]
