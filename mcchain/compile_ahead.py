@@ -119,55 +119,58 @@ def compile_for(
     import numpy as np
 
     from mcchain.job import resolve_kernels
-    from mcchain.parallel import warm_model
-    from mcchain.scene import compile_model, load_scene
     from mcchain.solvers import solve_chunk
     from mcchain.solvers.statics import Assembled
     from mcchain.status import STATUS_DTYPE
 
-    scene = load_scene(scene_path)
+    scene, model = _helper_model(scene_path, seed)
     sample = scene.sample
-    model = warm_model(compile_model(scene, nsample=_helper_count(scene), seed=seed))
     run_count = samples if samples is not None else (sample.count if sample is not None else 1)
     scene, _ = resolve_kernels(scene, model, run_count)
+    if whole:
+        _compile_check(scene, model)
+        solve_chunk(model, scene)
+        return
     shape = (model.nsample, model.ndof)
     written = Assembled(
         q=np.array(np.broadcast_to(model.q0, shape), dtype=np.float64, order="C"),
         v=np.array(np.broadcast_to(model.v0, shape), dtype=np.float64, order="C"),
         status=np.zeros(model.nsample, dtype=STATUS_DTYPE),
     )
-    if whole:
-        from mcchain.job import written_state
-        from mcchain.solvers.statics import check_scene, initial_state_warnings
-
-        check_scene(model)
-        initial_state_warnings(*written_state(scene))
-        solve_chunk(model, scene)
-    else:
-        solve_chunk(model, scene, assembled=written, with_modes=False)
+    solve_chunk(model, scene, assembled=written, with_modes=False)
 
 
 def _compile_check_and_modes(scene_path: Path, seed: int | None) -> None:
     """What a cold compiled run's own process compiles beside the helper: the scene check
     (assembly) and the eigen step."""
-    from mcchain.job import written_state
-    from mcchain.parallel import warm_model
-    from mcchain.scene import compile_model, load_scene
-    from mcchain.solvers.statics import check_scene, initial_state_warnings
-
-    scene = load_scene(scene_path)
-    model = warm_model(compile_model(scene, nsample=_helper_count(scene), seed=seed))
-    check_scene(model)
-    initial_state_warnings(*written_state(scene))
+    scene, model = _helper_model(scene_path, seed)
+    _compile_check(scene, model)
     compile_modes(model, scene)
 
 
-def _helper_count(scene: Any) -> int | None:
-    """The smallest sample count the scene's design allows (None: no ``[sample]``)."""
+def _compile_check(scene: Any, model: Model) -> None:
+    """The scene check a run makes before anything is written (:func:`mcchain.job.
+    default_loader`): assembly of the samples and of the scene as written."""
+    from mcchain.job import written_state
+    from mcchain.solvers.statics import check_scene, initial_state_warnings
+
+    check_scene(model)
+    initial_state_warnings(*written_state(scene))
+
+
+def _helper_model(scene_path: Path, seed: int | None) -> tuple[Any, Model]:
+    """The scene at ``scene_path`` and its first samples for a helper to solve: the
+    smallest count its design allows (two; d + 2 for Saltelli's), or its one instance
+    without ``[sample]``."""
+    from mcchain.parallel import warm_model
+    from mcchain.scene import compile_model, load_scene
+
+    scene = load_scene(scene_path)
     sample = scene.sample
-    if sample is None:
-        return None
-    return len(sample.vary) + 2 if sample.design == "saltelli" else 2
+    count = None
+    if sample is not None:
+        count = len(sample.vary) + 2 if sample.design == "saltelli" else 2
+    return scene, warm_model(compile_model(scene, nsample=count, seed=seed))
 
 
 def compile_modes(model: Model, scene: Any) -> None:

@@ -458,10 +458,9 @@ def start_run(
     _check_threads(threads, dask)
     ahead = None
     folder: Path | None = None
-    interpreted = first_run is not None and loader is None and solve is None and dask is None
-    if interpreted:
-        pass  # the kernels compile in the background once the scene has passed its checks
-    elif loader is None and solve is None and dask is None and Path(scene_path).is_file():
+    real = loader is None and solve is None and dask is None  # the real scene and kernels
+    interpreted = first_run is not None and real  # compiled in the background, after the checks
+    if real and not interpreted and Path(scene_path).is_file():
         from mcchain.compile_ahead import CompileAhead
         from mcchain.parallel import announce_compile
 
