@@ -27,27 +27,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "9d5c840d0ffb814465c38179bb0b9ebcf9ca9f67bde1f066011eccf5e2463017",
-        "rk4-projection": "3a08788eb69ff3bbc5abc46b59a2ae4acb669e831a5d998cfab010f0ddfe7600",
-        "rk45": "474f63dc79c3dca4d77c85364817d8fd41af01e72dcda5fd3730ccc93f0b071d",
+        "rk4": "91cc34773b535c4c97cb240eb44b5ca1272b2b4c055ef39e2269bbd90ed6e16d",
+        "rk4-projection": "0e8154f385f56b8cb4b541a7c5616f34809bec0407b7d7eaa47d7b972410bea9",
+        "rk45": "a20a393f8f4b439e5eefe65f64c2d3e6ed49773089ca2322f9b90575b69e5ceb",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "c362c144368761ce7f90ce6b5079a88d29c78dcfd511da5dfd350d89b904156a",
-        "rk4-projection": "53d247d12e630c79a6c976981402219a4f32691d46753a56bd2b8f13a879ba03",
-        "rk45": "36619d6a211d6c860aba9b1b33f0c67beaacbdaea9acf38086484d8e6762ddd6",
+        "rk4": "98d2ced30b83e8b3c7f98c98824778430180bfebe4e96903b49ee8d40456e21f",
+        "rk4-projection": "1fd4ef4022be94ada27f5065068e951f576d455576435fb4692cd756ad2ecc5e",
+        "rk45": "af8d8b479e138a9d434551bda0838e835775f3cee28a1acbf699e4f7db786e34",
     },
     "fourbar-clearance-auto": {
         "accel": "86e32d2d5657cb7fd633ef2b973c48781a8539dfe3db0e50d2dfee88ac957acb",
-        "rk4": "7ba4e63b7674cead741d3580cd73ba91134ef2a6be08ecfc4951937df013b58a",
-        "rk4-projection": "9d63279fcfb4f80ca6ca353ebbc017aee9daefb3db9273ef4da4de1e084b5bea",
-        "rk45": "381f6e3e25a0b86d48e96f00f1c3a99b040b344cb5c777fcd32a9a4e0b77c9fd",
+        "rk4": "c3b2bd23ce34b37492f7e48ab84fbff61b71e899538f125a92223cf00d686a84",
+        "rk4-projection": "3ebe75fb631107a2df40c5e18240c16eb736f8fd6fe1240653d8382942e23915",
+        "rk45": "ea8e20ee1a8b824cf599cc866e969c9147259255f69cfc1e7353f9761d29eddf",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "7a1bd80c30a0f676773f4075180a6e0361c41ddbfd9241657bb1861b99bf2049",
-        "rk4-projection": "16f120cb9b19cd3589cd96fa706a2af761eb81ec13693a3a9028360e12ba04f4",
-        "rk45": "9805c7cd13aaeaec9f089b6d0b71b65af953d5701d3e9f1726c91ca2d7a1a391",
+        "rk4": "cd0d02b3df40355abf7bad0cc8c5a7fef635bb11f574f3cf8a48b872568ce77a",
+        "rk4-projection": "09ca72e59ae621c2d11005c6b8aa7beb33f6259ceb2e9a0bc517a13bcc821a2c",
+        "rk45": "943c2db043e259687a8d9c729a1970fa0267eaec8bd20375599f04a35f2646af",
     },
 }
 

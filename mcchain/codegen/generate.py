@@ -4,13 +4,15 @@ One module per variant (:data:`VARIANTS`: ``accel``, ``rk4``, ``rk4-projection``
 holding only the functions that variant's entry points call.
 :func:`generate_source` fills the templates (``templates.py``) with the emitter's blocks
 (``emitter.py``) for the work-array rows of ``layout.py``, then schedules the lane loops
-(``schedule.py``); :func:`lane_kernels` writes the text to the cache and imports it
-(``cache.py``; numba is imported then, by the generated module).
+(``schedule.py``); :func:`lane_kernels` compiles the text (``native.py``; with
+``MCCHAIN_LANE_COMPILER=numba``, writes it to the cache and imports it: ``cache.py``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 import re
 from types import ModuleType
 
@@ -20,6 +22,7 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.native import NativeModule
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (
@@ -598,20 +601,33 @@ def _table_constants(topo: Topology) -> str:
     return "\n".join(lines)
 
 
-_MODULES: dict[tuple[Topology, str], ModuleType] = {}
+LaneKernels = ModuleType | NativeModule
+"""A topology's lane kernels: entry points called with numpy arrays and scalars."""
+
+_MODULES: dict[tuple[Topology, str], LaneKernels] = {}
 
 
-def lane_kernels(topo: Topology, variant: str) -> ModuleType:
+def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
     """The compiled lane kernels of a topology for one :data:`VARIANTS` key (``accel`` and
-    ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``). numba compiles each on
-    first call; the machine code is cached on disk beside the module, under a file name
-    that starts with the variant."""
+    ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``).
+
+    Each entry point compiles on its first call (:mod:`mcchain.codegen.native`: the text
+    straight to LLVM, a few seconds where numba took 20-30 s for a four-bar with a contact
+    joint) and its machine code is cached under ``MCCHAIN_CACHE_DIR/native``, in files
+    named after the variant. ``MCCHAIN_LANE_COMPILER=numba`` compiles the same text with
+    ``@njit`` instead (the reference of the tests and ``benchmarks/bench_native.py``; the
+    same numbers)."""
     module = _MODULES.get((topo, variant))
     if module is None:
-        from mcchain.kernels.config import numba_cache
-
-        numba_cache()  # a writable numba cache before the module's kernels are decorated
         prefix = "mcchain_gen_" + variant.replace("-", "_")
-        module = load_module(generate_source(topo, variant), prefix=prefix)
+        source = generate_source(topo, variant)
+        if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba":
+            from mcchain.kernels.config import numba_cache
+
+            numba_cache()  # a writable numba cache before the module's kernels are decorated
+            module = load_module(source, prefix=prefix)
+        else:
+            digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+            module = NativeModule(source, f"{prefix}_{digest}")
         _MODULES[(topo, variant)] = module
     return module

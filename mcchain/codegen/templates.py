@@ -70,10 +70,10 @@ _GROUP_SETUP = """
         s0 = g * lanes
         nl = min(lanes, nsample - s0)
         W = np.zeros(NROW * LMAXV)
-        st = np.zeros(lanes, np.uint32)
-        tdv = np.full(lanes, np.nan)
-        tsg = np.full(lanes, np.nan)
-        tcl = np.full(lanes, np.nan)
+        st = np.zeros(LMAXV, np.uint32)
+        tdv = np.full(LMAXV, np.nan)
+        tsg = np.full(LMAXV, np.nan)
+        tcl = np.full(LMAXV, np.nan)
         for l in range(nl):
             for k in range(NSLOT):
                 W[(PROW + k) * LMAXV + l] = P[k, s0 + l]
@@ -196,12 +196,12 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     for g in range(g_start, g_stop):'''
     + _GROUP_SETUP
     + """
-        iout = np.zeros(lanes, np.int64)
-        nstp = np.zeros(lanes, np.int64)
-        nrej = np.zeros(lanes, np.int64)
-        nev = np.zeros(lanes, np.int64)
-        run = np.zeros(lanes, np.bool_)
-        hl = np.zeros(lanes)
+        iout = np.zeros(LMAXV, np.int64)
+        nstp = np.zeros(LMAXV, np.int64)
+        nrej = np.zeros(LMAXV, np.int64)
+        nev = np.zeros(LMAXV, np.int64)
+        run = np.zeros(LMAXV, np.bool_)
+        hl = np.zeros(LMAXV)
         for l in range(nl):
             @[tl] = t0
             @[hs] = 0.0

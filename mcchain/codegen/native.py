@@ -1,0 +1,1013 @@
+"""Generated lane-kernel modules compiled to machine code without numba's type inference.
+
+The generated text (``generate.py``) is plain Python over a small subset: scalars
+(float64, int64, uint32, bool), arrays indexed element by element, ``for … in range``,
+``while``, ``if``, calls of the module's own functions, ``max``/``min``/``abs``/
+``math.sqrt``/``**``. numba types every operation of that text against its operator
+templates, about 1 ms a site, and lowers it in Python: 20-30 s for a four-bar with a
+contact joint (benchmarks/results/startup/breakdown.md). Here each function is translated
+to LLVM IR in one pass over its syntax tree, with the types the text implies, and handed
+to numba's own code generator (the same LLVM passes, target machine and fast-math flag
+``contract`` as ``@njit``), so the machine code is that of the numba-compiled text.
+
+The entry points are called from Python through ``ctypes`` (which releases the GIL, so the
+thread blocks of :mod:`mcchain.solvers.threads` run side by side), with every argument
+packed into one int64 vector: an array as its data address, shape and strides (bytes), a
+float as its bits. Machine code is cached on disk per (text, entry, argument types, CPU).
+
+Semantics follow numba's: Python's integer floor division and modulo, ``max``/``min`` as
+``select(b > a, b, a)``, bool and integer operands promoted to float64 or int64, an array
+index without wrap-around (the generated text never indexes from the end).
+"""
+
+from __future__ import annotations
+
+import ast
+import ctypes
+import hashlib
+import math
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from llvmlite import ir
+
+from mcchain.caches import mcchain_cache
+
+F64, I64, U32, BOOL = "f64", "i64", "u32", "bool"
+"""Scalar types of the translated text."""
+F32 = "f32"
+"""An element type of arrays only (outputs stored in single precision): read as float64."""
+
+_DOUBLE = ir.DoubleType()
+_I64 = ir.IntType(64)
+_I32 = ir.IntType(32)
+_I8 = ir.IntType(8)
+_I1 = ir.IntType(1)
+_VALUE_TYPE = {F64: _DOUBLE, I64: _I64, U32: _I32, BOOL: _I1}
+_MEMORY_TYPE = {F64: _DOUBLE, F32: ir.FloatType(), I64: _I64, U32: _I32, BOOL: _I8}
+_DTYPES = {"float64": F64, "float32": F32, "int64": I64, "uint32": U32, "bool": BOOL}
+_NUMPY_DTYPES = {"np.float64": F64, "np.int64": I64, "np.uint32": U32, "np.bool_": BOOL}
+_CONSTANTS = {
+    "np.nan": math.nan,
+    "math.nan": math.nan,
+    "np.inf": math.inf,
+    "math.inf": math.inf,
+    "math.pi": math.pi,
+}
+
+
+@dataclass(frozen=True)
+class Array:
+    """An array argument or local: element type, dimensions, C-contiguous or strided."""
+
+    dtype: str
+    ndim: int
+    contiguous: bool
+
+
+@dataclass(frozen=True)
+class Tuple:
+    """A tuple of scalars (what a function such as ``contact_crossing`` returns)."""
+
+    items: tuple[str, ...]
+
+
+Type = str | Array | Tuple
+Returned = str | Tuple | None
+"""What a function returns: a scalar, a tuple of scalars, or nothing."""
+
+
+class TranslationError(Exception):
+    """The generated text uses something outside the translated subset (a bug of the
+    generator, never of a scene)."""
+
+
+def type_of_value(value: Any) -> Type:
+    """The translated type of an argument passed from Python."""
+    if isinstance(value, np.ndarray):
+        dtype = _DTYPES.get(value.dtype.name)
+        if dtype is None:
+            raise TypeError(f"arrays of {value.dtype} are not supported")
+        return Array(dtype, value.ndim, bool(value.flags.c_contiguous))
+    if isinstance(value, (bool, np.bool_)):
+        return BOOL
+    if isinstance(value, (int, np.integer)):
+        return I64
+    if isinstance(value, (float, np.floating)):
+        return F64
+    raise TypeError(f"arguments of type {type(value).__name__} are not supported")
+
+
+def _unify(a: str, b: str) -> str:
+    """numba's promotion of two scalar operands: float64 if either is, else int64."""
+    if a == b and a != U32:
+        return a
+    return F64 if F64 in (a, b) else I64
+
+
+@dataclass
+class _ArrayValue:
+    ty: Array
+    data: ir.Value  # pointer to the first element (memory type)
+    shape: list[ir.Value]
+    strides: list[ir.Value]  # bytes
+
+
+@dataclass
+class _Loop:
+    head: ir.Block  # continue
+    exit: ir.Block  # break
+
+
+class _FunctionTranslator:
+    """One specialisation of one function of the module: its IR function."""
+
+    def __init__(
+        self,
+        module: ModuleTranslator,
+        fn: ast.FunctionDef,
+        argtypes: tuple[Type, ...],
+        name: str,
+        return_type: Returned,
+    ) -> None:
+        self.module = module
+        self.fn = fn
+        self.argtypes = argtypes
+        self.return_type = return_type
+        self.returned: list[Type] = []
+        params: list[ir.Type] = []
+        for ty in argtypes:
+            if isinstance(ty, Array):
+                params += [_MEMORY_TYPE[ty.dtype].as_pointer()] + [_I64] * (2 * ty.ndim)
+            elif isinstance(ty, Tuple):
+                raise TranslationError(f"{fn.name}: tuple arguments are not supported")
+            else:
+                params.append(_VALUE_TYPE[ty])
+        ret = ir.VoidType() if return_type is None else _llvm_type(return_type)
+        self.function = ir.Function(module.ir_module, ir.FunctionType(ret, params), name)
+        self.function.linkage = "internal"
+        entry = self.function.append_basic_block("entry")
+        self.alloca_builder = ir.IRBuilder(entry)
+        body = self.function.append_basic_block("body")
+        self.builder = ir.IRBuilder(body)
+        self.exit = self.function.append_basic_block("exit")
+        self.ret_slot = None if return_type is None else self._alloca(_llvm_type(return_type))
+        self.vars: dict[str, tuple[ir.Value, str]] = {}  # scalar name: (slot, type)
+        self.arrays: dict[str, _ArrayValue] = {}
+        self.tuples: dict[str, tuple[ir.Value, Tuple]] = {}
+        self.loops: list[_Loop] = []
+        args = iter(self.function.args)
+        for arg, ty in zip(fn.args.args, argtypes, strict=True):
+            if isinstance(ty, Array):
+                data = next(args)
+                shape = [next(args) for _ in range(ty.ndim)]
+                strides = [next(args) for _ in range(ty.ndim)]
+                self.arrays[arg.arg] = _ArrayValue(ty, data, shape, strides)
+            elif isinstance(ty, str):
+                self._store_var(arg.arg, next(args), ty)
+
+    # -- the function ---------------------------------------------------------------------
+
+    def translate(self) -> ir.Function:
+        self._statements(self.fn.body)
+        if not self.builder.block.is_terminated:
+            self.builder.branch(self.exit)
+        self.alloca_builder.branch(self.function.blocks[1])
+        b = ir.IRBuilder(self.exit)
+        if self.ret_slot is None:
+            b.ret_void()
+        else:
+            b.ret(b.load(self.ret_slot))
+        return self.function
+
+    def _alloca(self, ty: ir.Type, count: int | None = None) -> ir.Value:
+        size = None if count is None else ir.Constant(_I64, count)
+        return self.alloca_builder.alloca(ty, size=size)
+
+    def _store_var(self, name: str, value: ir.Value, ty: str) -> None:
+        if name in self.arrays or name in self.tuples:
+            raise TranslationError(f"{self.fn.name}: {name} changes kind")
+        slot = self.vars.get(name)
+        if slot is None:
+            slot = (self._alloca(_VALUE_TYPE[ty]), ty)
+            self.vars[name] = slot
+        elif slot[1] != ty:
+            if _unify(slot[1], ty) != slot[1]:
+                raise TranslationError(f"{self.fn.name}: {name} is {slot[1]}, then {ty}")
+            value = self._cast(value, ty, slot[1])
+        self.builder.store(value, slot[0])
+
+    # -- statements -----------------------------------------------------------------------
+
+    def _statements(self, body: list[ast.stmt]) -> None:
+        for stmt in body:
+            if self.builder.block.is_terminated:
+                return  # code after break/continue/return
+            self._statement(stmt)
+
+    def _statement(self, stmt: ast.stmt) -> None:
+        b = self.builder
+        if isinstance(stmt, ast.Assign):
+            if len(stmt.targets) != 1:
+                raise TranslationError("chained assignment")
+            self._assign(stmt.targets[0], stmt.value)
+        elif isinstance(stmt, ast.AugAssign):
+            load = _as_load(stmt.target)
+            self._assign(stmt.target, ast.BinOp(load, stmt.op, stmt.value))
+        elif isinstance(stmt, ast.Expr):
+            if isinstance(stmt.value, ast.Constant):
+                return  # a docstring
+            if not isinstance(stmt.value, ast.Call):
+                raise TranslationError(f"expression statement {ast.unparse(stmt)}")
+            self._call(stmt.value)
+        elif isinstance(stmt, ast.For):
+            self._for(stmt)
+        elif isinstance(stmt, ast.While):
+            self._while(stmt)
+        elif isinstance(stmt, ast.If):
+            cond = self._truth(*self._scalar(stmt.test))
+            then = self.function.append_basic_block()
+            orelse = self.function.append_basic_block() if stmt.orelse else None
+            after = self.function.append_basic_block()
+            b.cbranch(cond, then, orelse or after)
+            b.position_at_end(then)
+            self._statements(stmt.body)
+            if not b.block.is_terminated:
+                b.branch(after)
+            if orelse is not None:
+                b.position_at_end(orelse)
+                self._statements(stmt.orelse)
+                if not b.block.is_terminated:
+                    b.branch(after)
+            b.position_at_end(after)
+        elif isinstance(stmt, ast.Break):
+            b.branch(self.loops[-1].exit)
+        elif isinstance(stmt, ast.Continue):
+            b.branch(self.loops[-1].head)
+        elif isinstance(stmt, ast.Pass):
+            pass
+        elif isinstance(stmt, ast.Return):
+            if stmt.value is not None:
+                value, ty = self._expr(stmt.value)
+                self.returned.append(ty)
+                if self.ret_slot is not None:
+                    if ty != self.return_type:
+                        if not (isinstance(ty, str) and isinstance(self.return_type, str)):
+                            raise TranslationError(f"{self.fn.name} returns {ty}, not that")
+                        value = self._cast(value, ty, self.return_type)
+                    b.store(value, self.ret_slot)
+            b.branch(self.exit)
+        else:
+            raise TranslationError(f"statement {ast.unparse(stmt)}")
+
+    def _assign(self, target: ast.expr, value_node: ast.expr) -> None:
+        if isinstance(target, ast.Name):
+            if isinstance(value_node, ast.Call) and _name(value_node.func) in (
+                "np.zeros",
+                "np.full",
+            ):
+                self._local_array(target.id, value_node)
+                return
+            value, ty = self._expr(value_node)
+            if isinstance(ty, Tuple):
+                self.tuples[target.id] = (value, ty)
+            elif isinstance(ty, Array):
+                raise TranslationError(f"array assignment {ast.unparse(target)}")
+            else:
+                self._store_var(target.id, value, ty)
+        elif isinstance(target, ast.Tuple):
+            value, ty = self._expr(value_node)
+            if not isinstance(ty, Tuple) or len(ty.items) != len(target.elts):
+                raise TranslationError(f"unpacking {ast.unparse(value_node)}")
+            for k, elt in enumerate(target.elts):
+                if not isinstance(elt, ast.Name):
+                    raise TranslationError("nested unpacking")
+                self._store_var(elt.id, self.builder.extract_value(value, k), ty.items[k])
+        elif isinstance(target, ast.Subscript):
+            arr = self._array(target.value)
+            value, ty = self._scalar(value_node)
+            indices = _index_nodes(target.slice)
+            if any(isinstance(i, ast.Slice) for i in indices):
+                self._fill_slice(arr, indices, value, ty)
+                return
+            ptr = self._element_ptr(arr, [self._index(i) for i in indices])
+            self._store_element(ptr, value, ty, arr.ty.dtype)
+        else:
+            raise TranslationError(f"assignment to {ast.unparse(target)}")
+
+    def _store_element(self, ptr: ir.Value, value: ir.Value, ty: Type, dtype: str) -> None:
+        if isinstance(ty, (Array, Tuple)):
+            raise TranslationError("storing a non-scalar into an array")
+        if dtype == F32:
+            value = self.builder.fptrunc(self._cast(value, ty, F64), _MEMORY_TYPE[F32])
+        else:
+            value = self._cast(value, ty, dtype)
+        if dtype == BOOL:
+            value = self.builder.zext(value, _I8)
+        self.builder.store(value, ptr)
+
+    def _local_array(self, name: str, call: ast.Call) -> None:
+        """``np.zeros(n[, dtype])`` or ``np.full(n, value)`` with a constant ``n``: stack
+        storage allocated once, filled where the statement stands."""
+        if name in self.arrays:
+            raise TranslationError(f"{self.fn.name}: array {name} assigned twice")
+        size = self.module.constant_int(call.args[0])
+        if _name(call.func) == "np.zeros":
+            dtype = _NUMPY_DTYPES[_name(call.args[1])] if len(call.args) > 1 else F64
+            fill: tuple[ir.Value, Type] = (ir.Constant(_I64, 0), I64)
+        else:
+            fill = self._scalar(call.args[1])
+            dtype = fill[1] if isinstance(fill[1], str) else F64
+        data = self._alloca(_MEMORY_TYPE[dtype], size)
+        arr = _ArrayValue(
+            Array(dtype, 1, True),
+            data,
+            [ir.Constant(_I64, size)],
+            [ir.Constant(_I64, _MEMORY_TYPE[dtype].get_abi_size(self.module.target_data))],
+        )
+        self.arrays[name] = arr
+        self._fill_slice(arr, [ast.Slice()], *fill)
+
+    def _fill_slice(self, arr: _ArrayValue, indices: list[ast.expr], value: ir.Value, ty: Type):
+        """``a[i, j, :] = value``: a loop over every ``:`` axis."""
+        fixed = [None if isinstance(i, ast.Slice) else self._index(i) for i in indices]
+        if any(isinstance(i, ast.Slice) and (i.lower or i.upper or i.step) for i in indices):
+            raise TranslationError("only whole-axis slices are supported")
+
+        def nest(axis: int, index: list[ir.Value]) -> None:
+            if axis == len(fixed):
+                ptr = self._element_ptr(arr, index)
+                self._store_element(ptr, value, ty, arr.ty.dtype)
+                return
+            if fixed[axis] is not None:
+                nest(axis + 1, [*index, fixed[axis]])
+                return
+            self._counted_loop(
+                ir.Constant(_I64, 0),
+                arr.shape[axis],
+                ir.Constant(_I64, 1),
+                lambda i: nest(axis + 1, [*index, i]),
+            )
+
+        nest(0, [])
+
+    def _counted_loop(
+        self,
+        start: ir.Value,
+        stop: ir.Value,
+        step: ir.Value,
+        body: Callable[[ir.Value], None],
+        var: str | None = None,
+        positive: bool = True,
+    ) -> None:
+        """``for i in range(start, stop, step)``: ``body(i)`` builds the body; with
+        ``var``, ``i`` is also stored in that variable."""
+        b = self.builder
+        counter = self._alloca(_I64)
+        b.store(start, counter)
+        head = self.function.append_basic_block()
+        loop = self.function.append_basic_block()
+        latch = self.function.append_basic_block()
+        after = self.function.append_basic_block()
+        b.branch(head)
+        b.position_at_end(head)
+        i = b.load(counter)
+        more = b.icmp_signed("<" if positive else ">", i, stop)
+        b.cbranch(more, loop, after)
+        b.position_at_end(loop)
+        if var is not None:
+            self._store_var(var, i, I64)
+        self.loops.append(_Loop(latch, after))
+        body(i)
+        self.loops.pop()
+        if not b.block.is_terminated:
+            b.branch(latch)
+        b.position_at_end(latch)
+        b.store(b.add(b.load(counter), step), counter)
+        b.branch(head)
+        b.position_at_end(after)
+
+    def _for(self, stmt: ast.For) -> None:
+        call = stmt.iter
+        if not (
+            isinstance(call, ast.Call)
+            and _name(call.func) == "range"
+            and isinstance(stmt.target, ast.Name)
+            and not stmt.orelse
+        ):
+            raise TranslationError(f"loop {ast.unparse(stmt.iter)}")
+        args = [self._cast(*self._scalar(a), I64) for a in call.args]
+        one = ir.Constant(_I64, 1)
+        start, stop, step = (
+            (ir.Constant(_I64, 0), args[0], one) if len(args) == 1 else (*args[:2], one)
+        )
+        positive = True
+        if len(args) == 3:
+            step = args[2]
+            positive = self.module.constant_int(call.args[2]) > 0
+        target = stmt.target.id
+        self._counted_loop(
+            start, stop, step, lambda _i: self._statements(stmt.body), target, positive
+        )
+
+    def _while(self, stmt: ast.While) -> None:
+        if stmt.orelse:
+            raise TranslationError("while … else")
+        b = self.builder
+        head = self.function.append_basic_block()
+        loop = self.function.append_basic_block()
+        after = self.function.append_basic_block()
+        b.branch(head)
+        b.position_at_end(head)
+        b.cbranch(self._truth(*self._scalar(stmt.test)), loop, after)
+        b.position_at_end(loop)
+        self.loops.append(_Loop(head, after))
+        self._statements(stmt.body)
+        self.loops.pop()
+        if not b.block.is_terminated:
+            b.branch(head)
+        b.position_at_end(after)
+
+    # -- expressions ----------------------------------------------------------------------
+
+    def _expr(self, node: ast.expr) -> tuple[ir.Value, Type]:
+        b = self.builder
+        if isinstance(node, ast.Constant):
+            v = node.value
+            if isinstance(v, bool):
+                return ir.Constant(_I1, int(v)), BOOL
+            if isinstance(v, int):
+                return ir.Constant(_I64, v), I64
+            if isinstance(v, float):
+                return ir.Constant(_DOUBLE, v), F64
+            raise TranslationError(f"constant {v!r}")
+        if isinstance(node, ast.Name):
+            if node.id in self.vars:
+                slot, ty = self.vars[node.id]
+                return b.load(slot), ty
+            if node.id in self.tuples:
+                return self.tuples[node.id]
+            if node.id in self.module.scalars:
+                return self._expr(ast.Constant(self.module.scalars[node.id]))
+            raise TranslationError(f"{self.fn.name}: {node.id} used before it is assigned")
+        if isinstance(node, ast.Attribute):
+            name = _name(node)
+            if name in _CONSTANTS:
+                return ir.Constant(_DOUBLE, _CONSTANTS[name]), F64
+            raise TranslationError(f"attribute {name}")
+        if isinstance(node, ast.BinOp):
+            return self._binop(node.op, self._scalar(node.left), self._scalar(node.right))
+        if isinstance(node, ast.UnaryOp):
+            value, ty = self._scalar(node.operand)
+            if isinstance(node.op, ast.Not):
+                return b.not_(self._truth(value, ty)), BOOL
+            if isinstance(node.op, ast.UAdd):
+                return value, ty
+            if isinstance(node.op, ast.USub):
+                if ty == F64:  # as numba: -0.0 - x (a NaN keeps its sign bit)
+                    return b.fsub(ir.Constant(_DOUBLE, -0.0), value), F64
+                return b.neg(self._cast(value, ty, I64)), I64
+            raise TranslationError(f"unary {ast.unparse(node)}")
+        if isinstance(node, ast.Compare):
+            result = None
+            left = self._scalar(node.left)
+            for op, right_node in zip(node.ops, node.comparators, strict=True):
+                right = self._scalar(right_node)
+                one = self._compare(op, left, right)
+                result = one if result is None else b.and_(result, one)
+                left = right
+            return result, BOOL
+        if isinstance(node, ast.BoolOp):
+            # Operands without side effects: both evaluated (numba branches; same value).
+            values = [self._truth(*self._scalar(v)) for v in node.values]
+            result = values[0]
+            for v in values[1:]:
+                result = b.and_(result, v) if isinstance(node.op, ast.And) else b.or_(result, v)
+            return result, BOOL
+        if isinstance(node, ast.IfExp):
+            return self._ifexp(node)
+        if isinstance(node, ast.Tuple):
+            items = [self._scalar(e) for e in node.elts]
+            tup = Tuple(tuple(t for _, t in items))
+            struct = ir.Constant(_llvm_type(tup), ir.Undefined)
+            for k, (value, _t) in enumerate(items):
+                struct = b.insert_value(struct, value, k)
+            return struct, tup
+        if isinstance(node, ast.Call):
+            result = self._call(node)
+            if result is None:
+                raise TranslationError(f"{ast.unparse(node)} returns nothing")
+            return result
+        if isinstance(node, ast.Subscript):
+            return self._subscript(node)
+        raise TranslationError(f"expression {ast.unparse(node)}")
+
+    def _scalar(self, node: ast.expr) -> tuple[ir.Value, str]:
+        value, ty = self._expr(node)
+        if not isinstance(ty, str):
+            raise TranslationError(f"{ast.unparse(node)} is not a scalar")
+        return value, ty
+
+    def _ifexp(self, node: ast.IfExp) -> tuple[ir.Value, str]:
+        """``a if c else b`` with branches (an array read in the branch not taken may be
+        out of bounds); LLVM makes it a select where it can."""
+        b = self.builder
+        cond = self._truth(*self._scalar(node.test))
+        then = self.function.append_basic_block()
+        orelse = self.function.append_basic_block()
+        after = self.function.append_basic_block()
+        b.cbranch(cond, then, orelse)
+        b.position_at_end(then)
+        v1, t1 = self._scalar(node.body)
+        then_end = b.block
+        b.position_at_end(orelse)
+        v2, t2 = self._scalar(node.orelse)
+        orelse_end = b.block
+        ty = t1 if t1 == t2 else _unify(t1, t2)
+        v2 = self._cast(v2, t2, ty)
+        b.branch(after)
+        b.position_at_end(then_end)
+        v1 = self._cast(v1, t1, ty)
+        b.branch(after)
+        b.position_at_end(after)
+        phi = b.phi(_VALUE_TYPE[ty])
+        phi.add_incoming(v1, then_end)
+        phi.add_incoming(v2, orelse_end)
+        return phi, ty
+
+    def _binop(
+        self, op: ast.operator, left: tuple[ir.Value, str], right: tuple[ir.Value, str]
+    ) -> tuple[ir.Value, str]:
+        b = self.builder
+        (lv, lt), (rv, rt) = left, right
+        if isinstance(op, (ast.BitAnd, ast.BitOr, ast.BitXor)):
+            if lt == BOOL and rt == BOOL:
+                ty, lc, rc = BOOL, lv, rv
+            else:
+                ty, lc, rc = I64, self._cast(lv, lt, I64), self._cast(rv, rt, I64)
+            fn = {ast.BitAnd: b.and_, ast.BitOr: b.or_, ast.BitXor: b.xor}[type(op)]
+            return fn(lc, rc), ty
+        ty = F64 if isinstance(op, ast.Div) else _unify(lt, rt)
+        if isinstance(op, ast.Pow):
+            if ty != F64:
+                raise TranslationError("integer power")
+            fn = self.module.intrinsic("llvm.pow", _DOUBLE, 2)
+            return b.call(fn, [self._cast(lv, lt, F64), self._cast(rv, rt, F64)]), F64
+        x, y = self._cast(lv, lt, ty), self._cast(rv, rt, ty)
+        if ty == F64:
+            fn = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}
+            if type(op) not in fn:
+                raise TranslationError(f"float operator {type(op).__name__}")
+            return fn[type(op)](x, y), F64
+        if isinstance(op, (ast.Add, ast.Sub, ast.Mult)):
+            fn = {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}
+            return fn[type(op)](x, y), I64
+        if isinstance(op, (ast.FloorDiv, ast.Mod)):
+            # Python's rounding toward -inf: fix C's truncation where the signs differ.
+            q, r = b.sdiv(x, y), b.srem(x, y)
+            zero = ir.Constant(_I64, 0)
+            fix = b.and_(b.icmp_signed("!=", r, zero), b.icmp_signed("<", b.xor(r, y), zero))
+            if isinstance(op, ast.FloorDiv):
+                return b.sub(q, b.zext(fix, _I64)), I64
+            return b.select(fix, b.add(r, y), r), I64
+        raise TranslationError(f"operator {type(op).__name__}")
+
+    def _compare(
+        self, op: ast.cmpop, left: tuple[ir.Value, str], right: tuple[ir.Value, str]
+    ) -> ir.Value:
+        (lv, lt), (rv, rt) = left, right
+        symbol = {
+            ast.Lt: "<",
+            ast.LtE: "<=",
+            ast.Gt: ">",
+            ast.GtE: ">=",
+            ast.Eq: "==",
+            ast.NotEq: "!=",
+        }[type(op)]
+        ty = _unify(lt, rt)
+        x, y = self._cast(lv, lt, ty), self._cast(rv, rt, ty)
+        if ty == F64:
+            if symbol == "!=":
+                return self.builder.fcmp_unordered("!=", x, y)
+            return self.builder.fcmp_ordered(symbol, x, y)
+        return self.builder.icmp_signed(symbol, x, y)
+
+    def _call(self, node: ast.Call) -> tuple[ir.Value, str | Tuple] | None:
+        """A call's value and type; None for a function that returns nothing."""
+        b = self.builder
+        name = _name(node.func)
+        if name in ("max", "min"):
+            acc = self._scalar(node.args[0])
+            for arg in node.args[1:]:
+                v = self._scalar(arg)
+                ty = _unify(acc[1], v[1])
+                a, x = self._cast(acc[0], acc[1], ty), self._cast(v[0], v[1], ty)
+                take = self._compare(ast.Gt() if name == "max" else ast.Lt(), (x, ty), (a, ty))
+                acc = (b.select(take, x, a), ty)
+            return acc
+        if name == "abs":
+            value, ty = self._scalar(node.args[0])
+            if ty == F64:
+                return b.call(self.module.intrinsic("llvm.fabs", _DOUBLE, 1), [value]), F64
+            value = self._cast(value, ty, I64)
+            return b.select(
+                b.icmp_signed("<", value, ir.Constant(_I64, 0)), b.neg(value), value
+            ), I64
+        if name == "math.sqrt":
+            value = self._cast(*self._scalar(node.args[0]), F64)
+            return b.call(self.module.intrinsic("llvm.sqrt", _DOUBLE, 1), [value]), F64
+        if name in ("np.int64", "int"):
+            return self._cast(*self._scalar(node.args[0]), I64), I64
+        if name in ("np.float64", "float"):
+            return self._cast(*self._scalar(node.args[0]), F64), F64
+        if name in self.module.functions:
+            values: list[ir.Value] = []
+            types: list[Type] = []
+            for arg in node.args:
+                if isinstance(arg, ast.Name) and (
+                    arg.id in self.arrays or arg.id in self.module.tables
+                ):
+                    arr = self._array(arg)
+                    values += [arr.data, *arr.shape, *arr.strides]
+                    types.append(arr.ty)
+                else:
+                    value, ty = self._scalar(arg)
+                    values.append(value)
+                    types.append(ty)
+            callee, ret = self.module.specialize(name, tuple(types))
+            result = b.call(callee, values)
+            return None if ret is None else (result, ret)
+        raise TranslationError(f"call of {name}")
+
+    def _subscript(self, node: ast.Subscript) -> tuple[ir.Value, Type]:
+        base = node.value
+        if isinstance(base, ast.Attribute) and base.attr == "shape":
+            arr = self._array(base.value)
+            return arr.shape[self.module.constant_int(node.slice)], I64
+        if isinstance(base, ast.Name) and base.id in self.tuples:
+            value, ty = self.tuples[base.id]
+            k = self.module.constant_int(node.slice)
+            return self.builder.extract_value(value, k), ty.items[k]
+        arr = self._array(base)
+        ptr = self._element_ptr(arr, [self._index(i) for i in _index_nodes(node.slice)])
+        value = self.builder.load(ptr)
+        if arr.ty.dtype == BOOL:
+            value = self.builder.icmp_unsigned("!=", value, ir.Constant(_I8, 0))
+        if arr.ty.dtype == F32:
+            return self.builder.fpext(value, _DOUBLE), F64
+        return value, arr.ty.dtype
+
+    def _array(self, node: ast.expr) -> _ArrayValue:
+        if isinstance(node, ast.Name):
+            if node.id in self.arrays:
+                return self.arrays[node.id]
+            if node.id in self.module.tables:
+                return self.module.table(node.id)
+        raise TranslationError(f"{ast.unparse(node)} is not an array")
+
+    def _index(self, node: ast.expr) -> ir.Value:
+        value, ty = self._scalar(node)
+        if ty not in (I64, U32, BOOL):
+            raise TranslationError(f"index {ast.unparse(node)} is {ty}")
+        return self._cast(value, ty, I64)
+
+    def _element_ptr(self, arr: _ArrayValue, index: list[ir.Value]) -> ir.Value:
+        b = self.builder
+        if len(index) != arr.ty.ndim:
+            raise TranslationError("an array indexed with fewer indices than dimensions")
+        if arr.ty.contiguous:
+            linear = index[0]
+            for k in range(1, arr.ty.ndim):
+                linear = b.add(b.mul(linear, arr.shape[k]), index[k])
+            return b.gep(arr.data, [linear], inbounds=True)
+        offset = b.mul(index[0], arr.strides[0])
+        for k in range(1, arr.ty.ndim):
+            offset = b.add(offset, b.mul(index[k], arr.strides[k]))
+        raw = b.gep(b.bitcast(arr.data, _I8.as_pointer()), [offset], inbounds=True)
+        return b.bitcast(raw, arr.data.type)
+
+    # -- values ---------------------------------------------------------------------------
+
+    def _truth(self, value: ir.Value, ty: Type) -> ir.Value:
+        if ty == BOOL:
+            return value
+        if ty == F64:
+            return self.builder.fcmp_unordered("!=", value, ir.Constant(_DOUBLE, 0.0))
+        if ty in (I64, U32):
+            return self.builder.icmp_signed("!=", value, ir.Constant(value.type, 0))
+        raise TranslationError("truth of a non-scalar")
+
+    def _cast(self, value: ir.Value, src: str, dst: str) -> ir.Value:
+        """numba's conversion between scalar types."""
+        b = self.builder
+        if src == dst:
+            return value
+        if dst == BOOL:
+            return self._truth(value, src)
+        if dst == F64:
+            if src == BOOL or src == U32:
+                return b.uitofp(value, _DOUBLE)
+            return b.sitofp(value, _DOUBLE)
+        if src == F64:
+            return b.fptosi(value, _VALUE_TYPE[dst])
+        if dst == I64:
+            return b.zext(value, _I64)  # from bool or uint32
+        if dst == U32:
+            return b.trunc(value, _I32) if src == I64 else b.zext(value, _I32)
+        raise TranslationError(f"conversion {src} → {dst}")
+
+
+def _llvm_type(ty: Type) -> ir.Type:
+    if isinstance(ty, Tuple):
+        return ir.LiteralStructType([_VALUE_TYPE[t] for t in ty.items])
+    if isinstance(ty, Array):
+        raise TranslationError("functions returning arrays are not supported")
+    return _VALUE_TYPE[ty]
+
+
+def _name(node: ast.expr) -> str:
+    """``np.zeros`` for the node of ``np.zeros``; "" for anything but names and attributes."""
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return f"{_name(node.value)}.{node.attr}"
+    return ""
+
+
+def _index_nodes(node: ast.expr) -> list[ast.expr]:
+    return list(node.elts) if isinstance(node, ast.Tuple) else [node]
+
+
+def _as_load(target: ast.expr) -> ast.expr:
+    """The target of ``x += …`` read as an expression."""
+    node = ast.parse(ast.unparse(target), mode="eval").body
+    return node
+
+
+class ModuleTranslator:
+    """The functions of one generated module as one LLVM IR module, each specialised on the
+    argument types it is called with."""
+
+    def __init__(self, source: str, symbol_prefix: str, target_data: Any) -> None:
+        self.tree = ast.parse(source)
+        self.prefix = symbol_prefix
+        self.target_data = target_data
+        self.ir_module = ir.Module(name=symbol_prefix)
+        self.functions: dict[str, ast.FunctionDef] = {}
+        self.scalars: dict[str, float | int | bool] = {}
+        self.tables: dict[str, tuple[float, ...]] = {}
+        self._tables: dict[str, _ArrayValue] = {}
+        self._specialised: dict[tuple[str, tuple[Type, ...]], tuple[ir.Function, Returned]] = {}
+        self._intrinsics: dict[str, ir.Function] = {}
+        for node in self.tree.body:
+            if isinstance(node, ast.FunctionDef):
+                self.functions[node.name] = node
+            elif isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name):
+                name = node.targets[0].id
+                try:
+                    value = ast.literal_eval(node.value)
+                except ValueError:
+                    continue  # JIT = dict(...)
+                if isinstance(value, (tuple, list)):
+                    self.tables[name] = tuple(float(v) for v in value)
+                elif isinstance(value, (int, float, bool)):
+                    self.scalars[name] = value
+
+    def constant_int(self, node: ast.expr) -> int:
+        """The value of an integer expression made of literals and module constants."""
+        text = ast.unparse(node)
+        try:
+            value = eval(compile(ast.Expression(node), "<size>", "eval"), {}, dict(self.scalars))
+        except Exception as exc:
+            raise TranslationError(f"{text} is not a constant") from exc
+        if not isinstance(value, int):
+            raise TranslationError(f"{text} is not an integer constant")
+        return value
+
+    def intrinsic(self, name: str, ty: ir.Type, nargs: int) -> ir.Function:
+        fn = self._intrinsics.get(name)
+        if fn is None:
+            fn = self.ir_module.declare_intrinsic(name, [ty], ir.FunctionType(ty, [ty] * nargs))
+            self._intrinsics[name] = fn
+        return fn
+
+    def table(self, name: str) -> _ArrayValue:
+        """A module constant tuple (a table law's knots or coefficients) as a constant
+        array."""
+        arr = self._tables.get(name)
+        if arr is None:
+            values = self.tables[name]
+            aty = ir.ArrayType(_DOUBLE, len(values))
+            glob = ir.GlobalVariable(self.ir_module, aty, f"{self.prefix}.{name}")
+            glob.global_constant = True
+            glob.linkage = "internal"
+            glob.initializer = ir.Constant(aty, list(values))
+            zero = ir.Constant(ir.IntType(32), 0)
+            arr = _ArrayValue(
+                Array(F64, 1, True),
+                glob.gep([zero, zero]),
+                [ir.Constant(_I64, len(values))],
+                [ir.Constant(_I64, 8)],
+            )
+            self._tables[name] = arr
+        return arr
+
+    def specialize(self, name: str, argtypes: tuple[Type, ...]) -> tuple[ir.Function, Returned]:
+        """The IR function of ``name`` for these argument types, translated on first use."""
+        key = (name, argtypes)
+        done = self._specialised.get(key)
+        if done is not None:
+            return done
+        fn = self.functions[name]
+        symbol = f"{self.prefix}.{name}.{len(self._specialised)}"
+        ret: Returned = None
+        if any(isinstance(n, ast.Return) and n.value is not None for n in ast.walk(fn)):
+            # Its return type, from a first translation into a scratch module.
+            scratch = ModuleTranslator.__new__(ModuleTranslator)
+            scratch.__dict__.update(self.__dict__)
+            scratch.ir_module = ir.Module(name="scratch")
+            scratch._specialised = dict(self._specialised)
+            scratch._intrinsics = {}
+            scratch._tables = {}
+            probe = _FunctionTranslator(scratch, fn, argtypes, symbol, None)
+            probe.translate()
+            first = probe.returned[0]
+            if isinstance(first, Array):
+                raise TranslationError(f"{name} returns an array")
+            ret = first
+            for other in probe.returned[1:]:
+                if other != ret:
+                    if isinstance(ret, str) and isinstance(other, str):
+                        ret = _unify(ret, other)
+                    else:
+                        raise TranslationError(f"{name} returns {ret} and {other}")
+        translator = _FunctionTranslator(self, fn, argtypes, symbol, ret)
+        self._specialised[key] = (translator.function, ret)
+        translator.translate()
+        return translator.function, ret
+
+    def entry(self, name: str, argtypes: tuple[Type, ...]) -> str:
+        """An external ``void <symbol>(int64 *argv)`` that unpacks ``argv`` (see
+        :func:`pack_arguments`) and calls ``name``; its symbol."""
+        callee, ret = self.specialize(name, argtypes)
+        if ret is not None:
+            raise TranslationError(f"entry point {name} returns a value")
+        symbol = f"{self.prefix}.{name}.entry"
+        fnty = ir.FunctionType(ir.VoidType(), [_I64.as_pointer()])
+        fn = ir.Function(self.ir_module, fnty, symbol)
+        b = ir.IRBuilder(fn.append_basic_block())
+        argv = fn.args[0]
+        slot = 0
+
+        def word() -> ir.Value:
+            nonlocal slot
+            value = b.load(b.gep(argv, [ir.Constant(_I64, slot)], inbounds=True))
+            slot += 1
+            return value
+
+        values: list[ir.Value] = []
+        for ty in argtypes:
+            if isinstance(ty, Array):
+                values.append(b.inttoptr(word(), _MEMORY_TYPE[ty.dtype].as_pointer()))
+                values += [word() for _ in range(2 * ty.ndim)]
+            elif ty == F64:
+                values.append(b.bitcast(word(), _DOUBLE))
+            elif ty == BOOL:
+                values.append(b.trunc(word(), _I1))
+            elif ty == U32:
+                values.append(b.trunc(word(), _I32))
+            else:
+                values.append(word())
+        b.call(callee, values)
+        b.ret_void()
+        return symbol
+
+
+def pack_arguments(args: tuple[Any, ...]) -> np.ndarray:
+    """The int64 vector an entry point reads: per array its data address, shape and strides
+    (bytes), per float its bits, per integer or bool its value."""
+    words: list[int] = []
+    for value in args:
+        if isinstance(value, np.ndarray):
+            words.append(value.ctypes.data)
+            words += value.shape
+            words += value.strides
+        elif isinstance(value, (float, np.floating)) and not isinstance(value, bool):
+            words.append(int(np.float64(value).view(np.int64)))
+        else:
+            words.append(int(value))
+    return np.array(words, dtype=np.int64)
+
+
+_BACKEND_HASH = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+
+_ENTRY = ctypes.CFUNCTYPE(None, ctypes.c_void_p)
+
+
+def _codegen() -> Any:
+    from numba.core.registry import cpu_target
+
+    return cpu_target.target_context.codegen()
+
+
+class NativeModule:
+    """The entry points of a generated module, compiled on first call per argument types
+    (as numba's dispatcher does) and cached on disk. ``contract``: float operations may fuse
+    into multiply-adds (the lane kernels' ``fastmath={"contract"}``); without it, every
+    operation rounds as in Python."""
+
+    def __init__(self, source: str, name: str, contract: bool = True) -> None:
+        self.source = source
+        self.name = name
+        self.contract = contract
+        self._digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+        self._compiled: dict[tuple[str, tuple[Type, ...]], tuple[Any, Any]] = {}
+        self._functions = {
+            node.name for node in ast.parse(source).body if isinstance(node, ast.FunctionDef)
+        }
+
+    def __getattr__(self, name: str) -> Callable[..., None]:
+        if name.startswith("_") or name not in self.__dict__.get("_functions", ()):
+            raise AttributeError(name)
+
+        def call(*args: Any) -> None:
+            self._call(name, args)
+
+        call.__name__ = name
+        return call
+
+    def _call(self, name: str, args: tuple[Any, ...]) -> None:
+        argtypes = tuple(type_of_value(a) for a in args)
+        key = (name, argtypes)
+        compiled = self._compiled.get(key)
+        if compiled is None:
+            from numba.core.compiler_lock import global_compiler_lock
+
+            with global_compiler_lock:  # one compile at a time, as numba's dispatchers
+                compiled = self._compiled.get(key)
+                if compiled is None:
+                    compiled = self._load_or_compile(name, argtypes)
+                    self._compiled[key] = compiled
+        argv = pack_arguments(args)
+        compiled[0](argv.ctypes.data)
+
+    def _load_or_compile(self, name: str, argtypes: tuple[Type, ...]) -> tuple[Any, Any]:
+        codegen = _codegen()
+        key = repr(
+            (self._digest, name, argtypes, self.contract, _BACKEND_HASH, codegen.magic_tuple())
+        )
+        digest = hashlib.sha256(key.encode()).hexdigest()[:24]
+        path = mcchain_cache("native") / f"{self.name}-{name}-{digest}.bin"
+        symbol = f"{self.name}.{name}.entry"
+        library = None
+        if path.exists():
+            try:
+                library = codegen.unserialize_library(pickle.loads(path.read_bytes()))
+            except Exception:
+                library = None  # a stale or partial file: compile again
+        if library is None:
+            translator = ModuleTranslator(self.source, self.name, _target_data(codegen))
+            symbol = translator.entry(name, argtypes)
+            if self.contract:
+                _contract(translator.ir_module)
+            library = codegen.create_library(f"{self.name}.{name}")
+            library.enable_object_caching()
+            library.add_ir_module(translator.ir_module)
+            library.finalize()
+            library.get_pointer_to_function(symbol)
+            _write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
+        address = library.get_pointer_to_function(symbol)
+        if not address:
+            raise RuntimeError(f"{symbol} missing from its compiled library")
+        return _ENTRY(address), library
+
+
+def _target_data(codegen: Any) -> Any:
+    from llvmlite import binding
+
+    return binding.create_target_data(codegen._data_layout)
+
+
+def _contract(module: ir.Module) -> None:
+    """The fast-math flag ``contract`` on every float operation, as numba sets it for the
+    lane kernels (``LANE_JIT``)."""
+    from numba.core.cpu_options import FastMathOptions
+    from numba.core.fastmathpass import rewrite_module
+
+    rewrite_module(module, FastMathOptions({"contract"}))
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except OSError:
+        pass  # an unwritable cache: the next process compiles again

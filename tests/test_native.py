@@ -1,0 +1,288 @@
+"""codegen.native: the generated text compiled without numba's type inference.
+
+References: the same functions run as plain Python (every operator and construct of the
+translated subset, on hypothesis' values), and numba itself: the lane kernels compiled by
+numba from the same text give the same bits, history by history, on the scenes of every
+variant (the four-bar under the contact law among them).
+
+Bit for bit means every number; a NaN only has to be a NaN at the same place. Its sign bit
+is not kept by LLVM (``-x + y`` may become ``y - x``) nor by x86 (a fused multiply-add
+returns the first NaN of its operands, in the order the register allocator picked): the
+four-bar's joint force at a contact joint is NaN at t = 0 in 14 places, with the sign bit
+set by numba and clear here.
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mcchain.codegen import generate
+from mcchain.codegen.native import NativeModule, TranslationError
+from mcchain.testing.comparisons import simulate_float64
+from mcchain.testing.scenes import model_of, scene_model
+
+SOURCE = """
+import math
+
+import numpy as np
+
+TABLE = (0.5, 1.5, 2.5, 3.5)
+SIZE = 3
+
+
+def integers(a, b, out):
+    out[0] = a // b
+    out[1] = a % b
+    out[2] = a * b - a + 7
+    out[3] = -a
+    out[4] = abs(a)
+    out[5] = min(a, b, 3)
+    out[6] = max(a, b)
+    out[7] = (a & 12) | (b & 3)
+    out[8] = 1 if a < b <= 9 else 0
+    out[9] = np.int64(a / b * 4.0)
+
+
+def floats(x, y, n, out):
+    out[0] = x / y
+    out[1] = (abs(x) + 1.0) ** (y * 1e-5)
+    out[2] = max(x, y)
+    out[3] = min(x, y)
+    out[4] = max(y, x)
+    out[5] = abs(x)
+    out[6] = math.sqrt(abs(y))
+    out[7] = -x + n
+    out[8] = x * 2.0 + y * n
+    out[9] = (x > y) * 1.0 + (x != y) * 2.0 + (x == y) * 4.0 + (not (x <= y)) * 8.0
+    out[10] = x if x >= y else math.nan
+    out[11] = n / 4
+    out[12] = np.inf if x < 0.0 or y < 0.0 else -np.inf
+
+
+def control(n, out):
+    total = 0
+    k = 0
+    while True:
+        k += 1
+        if k > n:
+            break
+        if k % 3 == 0:
+            continue
+        elif k % 5 == 0:
+            total += 100
+        else:
+            total += k
+    out[0] = total
+    for i in range(n, 0, -2):
+        out[1] += i
+    for i in range(2, n):
+        for j in range(i):
+            if j == 2:
+                break
+            out[2] += i * j
+    acc = 0.0
+    for i in range(SIZE):
+        acc = acc + TABLE[i] if i != 1 else acc
+    out[3] = acc
+
+
+def pair(a, b):
+    s = a + b
+    if s > 0.0:
+        return s, a - b
+    return -s, b - a
+
+
+def lookup(table, x):
+    return table[1] * x
+
+
+def arrays(M, V, flags, counts, out32, out3):
+    lo, hi = 0.0, 1.0
+    local = np.zeros(4, np.uint32)
+    marks = np.zeros(4, np.bool_)
+    fill = np.full(SIZE, np.nan)
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            M[i, j] = M[i, j] * 2.0 + V[j] + hi - lo
+    for k in range(4):
+        local[k] = counts[k]
+        local[k] |= 8
+        marks[k] = (local[k] & 1) != 0
+        flags[k] = marks[k] and not flags[k]
+    s, d = pair(V[0], V[1])
+    counts[0] = local[0] + local[3]
+    out32[0] = s / 3.0
+    out32[1] = d
+    out32[2] = fill[2]
+    out32[3] = lookup(TABLE, d)
+    out3[1, 0, :] = -1.0
+    out3[0, 1, 1] = out3.shape[2]
+"""
+
+
+def _python(name: str, *args: Any) -> None:
+    namespace: dict[str, Any] = {}
+    exec(SOURCE, namespace)
+    namespace[name](*args)
+
+
+@pytest.fixture(scope="module")
+def native() -> NativeModule:
+    module = NativeModule(SOURCE, "mcchain_test_native", contract=False)  # Python's rounding
+    module.integers(1, 1, np.zeros(10, np.int64))  # compiled before hypothesis' deadline
+    module.floats(1.0, 1.0, 1, np.zeros(13))
+    return module
+
+
+def _both(native: NativeModule, name: str, *args: Any) -> tuple[list[Any], list[Any]]:
+    """Arguments after the native call and after the Python one (arrays copied)."""
+    mine = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+    ref = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+    getattr(native, name)(*mine)
+    _python(name, *ref)
+    return mine, ref
+
+
+def _assert_same_bits(mine: np.ndarray, ref: np.ndarray) -> None:
+    """Bit for bit, NaNs at the same places (module docstring)."""
+    assert mine.dtype == ref.dtype
+    if mine.dtype.kind == "f":
+        nan = np.isnan(mine)
+        np.testing.assert_array_equal(nan, np.isnan(ref))
+        mine, ref = np.where(nan, 0, mine), np.where(nan, 0, ref)
+    assert mine.tobytes() == ref.tobytes(), (mine, ref)
+
+
+small = st.integers(-50, 50)
+
+
+@given(a=small, b=small.filter(lambda v: v != 0))
+def test_integers__python_semantics(native, a, b):
+    mine, ref = _both(native, "integers", a, b, np.zeros(10, np.int64))
+    _assert_same_bits(mine[-1], ref[-1])
+
+
+finite = st.floats(-1e6, 1e6, allow_nan=False).filter(lambda v: abs(v) > 1e-6)
+
+
+@given(x=finite | st.just(math.nan), y=finite, n=small)
+def test_floats__python_semantics_nan_order_included(native, x, y, n):
+    mine, ref = _both(native, "floats", x, y, n, np.zeros(13))
+    _assert_same_bits(mine[-1], ref[-1])
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 16])
+def test_control__loops_branches_break_continue(native, n):
+    mine, ref = _both(native, "control", n, np.zeros(4, np.int64))
+    _assert_same_bits(mine[-1], ref[-1])
+
+
+def test_arrays__strided_views_locals_tuples_tables_float32(native):
+    rng = np.random.default_rng(3)
+    M = rng.normal(size=(3, 8))[:, ::2]  # a strided view
+    assert not M.flags.c_contiguous
+    V = rng.normal(size=4)
+    flags = np.array([True, False, True, False])
+    counts = np.array([1, 2, 3, 5], np.uint32)
+    args = (M, V, flags, counts, np.zeros(4, np.float32), np.zeros((2, 2, 3)))
+    mine, ref = _both(native, "arrays", *args)
+    for a, b in zip(mine, ref, strict=True):
+        _assert_same_bits(np.ascontiguousarray(a), np.ascontiguousarray(b))
+
+
+def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, monkeypatch):
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    out = np.zeros(10, np.int64)
+    NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, out)
+    files = list((tmp_path / "native").iterdir())
+    assert len(files) == 1
+    state = pickle.loads(files[0].read_bytes())
+    assert state[1] == "object"  # machine code, not IR: nothing to optimise on load
+    again = np.zeros(10, np.int64)
+    NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, again)  # loaded
+    files[0].write_bytes(b"not a library")
+    third = np.zeros(10, np.int64)
+    NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, third)  # compiled again
+    assert out.tolist() == again.tolist() == third.tolist()
+    assert out[:2].tolist() == [2, 1]
+    assert pickle.loads(files[0].read_bytes())[1] == "object"
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "out[0] = [1, 2][0]",  # a list
+        "out[0] = x @ x",  # an operator outside the subset
+        "out[0] = y",  # a name never assigned
+        "x = 1.0\n    x = out",  # an array into a scalar
+    ],
+)
+def test_translation__outside_the_subset_is_refused(body):
+    module = NativeModule(f"def f(x, out):\n    {body}\n", "mcchain_test_refused")
+    with pytest.raises(TranslationError):
+        module.f(1.0, np.zeros(1))
+
+
+def test_entry_points__unknown_names_are_attribute_errors(native):
+    with pytest.raises(AttributeError):
+        native.no_such_function  # noqa: B018
+
+
+# -- the lane kernels against numba's compile of the same text ------------------------------
+
+
+def _histories(model, settings, compiler: str, monkeypatch) -> dict[str, Any]:
+    monkeypatch.setenv("MCCHAIN_LANE_COMPILER", compiler)
+    generate._MODULES.clear()
+    try:
+        return simulate_float64(model, settings)
+    finally:
+        generate._MODULES.clear()
+
+
+def _assert_bit_identical(native: dict[str, Any], numba: dict[str, Any]) -> None:
+    assert native.keys() == numba.keys()
+    for key, value in native.items():
+        if isinstance(value, np.ndarray):
+            _assert_same_bits(value, numba[key])
+        else:
+            assert value == numba[key], key
+
+
+CONTACT_FOURBAR = {"t_end": 0.05, "dt": 1e-5, "output_dt": 1e-3, "method": "rk45"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("scene", "settings"),
+    [
+        ("double_pendulum", {"t_end": 0.2, "dt": 1e-3, "output_dt": 1e-2, "method": "rk4"}),
+        (
+            "double_pendulum",
+            {"t_end": 0.2, "dt": 1e-3, "output_dt": 1e-2, "method": "rk4-projection"},
+        ),
+        ("double_pendulum", {"t_end": 0.2, "dt": 1e-3, "output_dt": 1e-2, "method": "rk45"}),
+        ("double_pendulum", {"t_end": 0.05, "dt": 1e-3, "output_dt": 1e-2, "method": "radau"}),
+        ("fourbar-contact", CONTACT_FOURBAR),
+    ],
+    ids=["rk4", "rk4-projection", "rk45", "radau-accel", "fourbar-contact-rk45"],
+)
+def test_lanes__bit_identical_to_numba(scene, settings, monkeypatch):
+    if scene == "fourbar-contact":
+        from pathlib import Path
+
+        text = (Path(__file__).parents[1] / "configs" / "fourbar-clearance.toml").read_text()
+        model = model_of(text, nsample=8, name="fourbar-clearance")
+    else:
+        model = scene_model(scene, nsample=8)
+    native = _histories(model, settings, "native", monkeypatch)
+    numba = _histories(model, settings, "numba", monkeypatch)
+    _assert_bit_identical(native, numba)
