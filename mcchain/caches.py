@@ -2,11 +2,12 @@
 
 Three caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
 ``__pycache__``, else numba's user-wide folder), and in ``MCCHAIN_CACHE_DIR``
-(:func:`mcchain_cache`) mcchain's generated lane modules and the quasi-random sample designs
-drawn before (:func:`mcchain.scene.sampling.unit_design`). A cache that cannot be
-written (a read-only home or installation) never stops a run: the cache moves to the
-temporary folder, with one warning line on stderr, and kernels then compile once per
-machine boot instead of once per installation.
+(:func:`mcchain_cache`) the machine code of the generated lane kernels (``native``,
+:mod:`mcchain.codegen.native`; ``generated``: their text, where numba compiles them) and the
+quasi-random sample designs drawn before (:func:`mcchain.scene.sampling.unit_design`). A
+cache that cannot be written (a read-only home or installation) never stops a run: the cache
+moves to the temporary folder, with one warning line on stderr, and kernels then compile once
+per machine boot instead of once per installation.
 """
 
 from __future__ import annotations

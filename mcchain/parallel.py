@@ -152,10 +152,13 @@ in less, so a warm run prints nothing)."""
 
 def kernel_cache_folders() -> str:
     """Where compiled kernels are kept, as the notice names them."""
-    from mcchain.codegen.cache import cache_dir
+    from mcchain.caches import mcchain_cache
     from mcchain.kernels.config import numba_cache
 
-    return f"numba: {numba_cache()} (NUMBA_CACHE_DIR); generated: {cache_dir()} (MCCHAIN_CACHE_DIR)"
+    return (
+        f"numba: {numba_cache()} (NUMBA_CACHE_DIR); lane kernels: {mcchain_cache('native')} "
+        "(MCCHAIN_CACHE_DIR)"
+    )
 
 
 @contextmanager
@@ -197,7 +200,7 @@ def announce_compile(stream: Any = None, ahead: bool = False) -> None:
     :mod:`mcchain.compile_ahead`)."""
     how = " (in two processes)" if ahead else ""
     print(
-        f"compiling the numba kernels of this scene's analyses and topology{how}: once per "
+        f"compiling the kernels of this scene's analyses and topology{how}: once per "
         f"installation and topology, then loaded from the cache ({kernel_cache_folders()})",
         file=sys.stderr if stream is None else stream,
         flush=True,

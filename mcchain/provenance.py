@@ -20,7 +20,7 @@ from typing import Any
 
 from mcchain import __version__
 
-DEPENDENCIES = ("numpy", "numba", "scipy", "xarray", "netCDF4", "pydantic")
+DEPENDENCIES = ("numpy", "numba", "llvmlite", "scipy", "xarray", "netCDF4", "pydantic")
 """Packages whose versions are recorded in ``ensemble.nc`` and ``run.json``."""
 
 

@@ -231,6 +231,21 @@ def test_translation__outside_the_subset_is_refused(body):
         module.f(1.0, np.zeros(1))
 
 
+def test_entry_points__each_library_keeps_its_own_helpers():
+    """Two entry points compile into two libraries of one JIT engine; their helpers carry
+    the same names but other argument types, and each must call its own."""
+    source = (
+        "def twice(x):\n    return x * 2\n\n"
+        "def ints(out):\n    out[0] = twice(3)\n\n"
+        "def floats(out):\n    out[0] = twice(1.25)\n"
+    )
+    module = NativeModule(source, "mcchain_test_helpers")
+    a, b = np.zeros(1), np.zeros(1)
+    module.ints(a)
+    module.floats(b)
+    assert (a[0], b[0]) == (6.0, 2.5)
+
+
 def test_entry_points__unknown_names_are_attribute_errors(native):
     with pytest.raises(AttributeError):
         native.no_such_function  # noqa: B018

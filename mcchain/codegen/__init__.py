@@ -1,7 +1,8 @@
-"""Generated lane kernels: the Python that writes numba source for one scene topology.
+"""Generated lane kernels: the Python that writes kernel source for one scene topology, and
+the compiler that turns it into machine code.
 
-Pure Python: importing this package never imports numba (the generated module does, when
-:func:`mcchain.codegen.generate.lane_kernels` loads it). A group of ``lanes`` instances is
+Importing this package never imports numba (:func:`mcchain.codegen.generate.lane_kernels`
+does, for numba's LLVM code generator). A group of ``lanes`` instances is
 advanced in lockstep with the instance index innermost, the lane count a run-time argument,
 the step one fused function body and sin/cos a branch-free polynomial (PERFORMANCE.md). To
 get a fused body without paying for what a scene does not have, the straight-line code for
@@ -18,7 +19,11 @@ Modules, one job each:
 * ``layout``: the rows of the flat work array ``W`` and their length ``LMAX``.
 * ``templates``: the texts of the time loops the emitter's blocks are put into.
 * ``schedule``: demand-order scheduling of the generated lane loops.
-* ``cache``: the on-disk cache of generated modules, and loading one.
+* ``native``: the generated text translated to LLVM IR in one pass and compiled with numba's
+  code generator (no type inference: seconds where ``@njit`` took minutes), called through
+  ``ctypes``, its machine code cached on disk.
+* ``cache``: the on-disk cache of generated module texts, and importing one (the lanes
+  compiled by ``@njit`` instead, ``MCCHAIN_LANE_COMPILER=numba``: the reference).
 * ``generate``: :func:`~mcchain.codegen.generate.generate_source` and
   :func:`~mcchain.codegen.generate.lane_kernels`, the entry points, per topology and variant
   (the functions one method calls: ``accel``, ``rk4``, ``rk4-projection``, ``rk45``).

@@ -151,7 +151,7 @@ class _FunctionTranslator:
                 params.append(_VALUE_TYPE[ty])
         ret = ir.VoidType() if return_type is None else _llvm_type(return_type)
         self.function = ir.Function(module.ir_module, ir.FunctionType(ret, params), name)
-        self.function.linkage = "internal"
+        self.function.linkage = "internal"  # names repeat between libraries
         entry = self.function.append_basic_block("entry")
         self.alloca_builder = ir.IRBuilder(entry)
         body = self.function.append_basic_block("body")
@@ -325,6 +325,7 @@ class _FunctionTranslator:
             fill = self._scalar(call.args[1])
             dtype = fill[1] if isinstance(fill[1], str) else F64
         data = self._alloca(_MEMORY_TYPE[dtype], size)
+        data.align = LOCAL_ARRAY_ALIGN
         arr = _ArrayValue(
             Array(dtype, 1, True),
             data,
@@ -369,6 +370,11 @@ class _FunctionTranslator:
         """``for i in range(start, stop, step)``: ``body(i)`` builds the body; with
         ``var``, ``i`` is also stored in that variable."""
         b = self.builder
+        if not isinstance(stop, ir.Constant):
+            # A run-time bound LLVM can also bound from above (nl <= LMAXV lanes) would make
+            # it fold the loop's tail into masked loads and stores, slow on AMD CPUs; numba's
+            # range loops hide that bound, and so does this (an empty asm: "some int64").
+            stop = b.asm(ir.FunctionType(_I64, [_I64]), "", "=r,0", [stop], side_effect=False)
         counter = self._alloca(_I64)
         b.store(start, counter)
         head = self.function.append_basic_block()
@@ -852,62 +858,100 @@ class ModuleTranslator:
         translator.translate()
         return translator.function, ret
 
-    def entry(self, name: str, argtypes: tuple[Type, ...]) -> str:
-        """An external ``void <symbol>(int64 *argv)`` that unpacks ``argv`` (see
-        :func:`pack_arguments`) and calls ``name``; its symbol."""
+    def entry(self, name: str, argtypes: tuple[Type, ...], symbol: str) -> None:
+        """An external ``void <symbol>(...)`` called through ``ctypes``
+        (:func:`ctypes_argument`): an array comes as its ``PyArrayObject *``, whose data,
+        shape and strides it reads (:data:`ARRAY_FIELDS`); a float as a double, an integer
+        or bool as an int64."""
         callee, ret = self.specialize(name, argtypes)
         if ret is not None:
             raise TranslationError(f"entry point {name} returns a value")
-        symbol = f"{self.prefix}.{name}.entry"
-        fnty = ir.FunctionType(ir.VoidType(), [_I64.as_pointer()])
-        fn = ir.Function(self.ir_module, fnty, symbol)
+        params: list[ir.Type] = []
+        for ty in argtypes:
+            if isinstance(ty, Tuple):
+                raise TranslationError(f"entry point {name} takes a tuple")
+            params.append(_I8.as_pointer() if isinstance(ty, Array) else _ENTRY_TYPE[ty])
+        fn = ir.Function(self.ir_module, ir.FunctionType(ir.VoidType(), params), symbol)
         b = ir.IRBuilder(fn.append_basic_block())
-        argv = fn.args[0]
-        slot = 0
 
-        def word() -> ir.Value:
-            nonlocal slot
-            value = b.load(b.gep(argv, [ir.Constant(_I64, slot)], inbounds=True))
-            slot += 1
-            return value
+        def field(obj: ir.Value, offset: int, ty: ir.Type) -> ir.Value:
+            at = b.gep(obj, [ir.Constant(_I64, offset)], inbounds=True)
+            return b.load(b.bitcast(at, ty.as_pointer()))
 
         values: list[ir.Value] = []
-        for ty in argtypes:
+        for ty, arg in zip(argtypes, fn.args, strict=True):
             if isinstance(ty, Array):
-                values.append(b.inttoptr(word(), _MEMORY_TYPE[ty.dtype].as_pointer()))
-                values += [word() for _ in range(2 * ty.ndim)]
-            elif ty == F64:
-                values.append(b.bitcast(word(), _DOUBLE))
-            elif ty == BOOL:
-                values.append(b.trunc(word(), _I1))
-            elif ty == U32:
-                values.append(b.trunc(word(), _I32))
+                data = field(arg, ARRAY_FIELDS["data"], _I8.as_pointer())
+                values.append(b.bitcast(data, _MEMORY_TYPE[ty.dtype].as_pointer()))
+                for what in ("shape", "strides"):
+                    vector = field(arg, ARRAY_FIELDS[what], _I64.as_pointer())
+                    for k in range(ty.ndim):
+                        values.append(b.load(b.gep(vector, [ir.Constant(_I64, k)])))
+            elif ty in (BOOL, U32):
+                values.append(b.trunc(arg, _VALUE_TYPE[ty]))
             else:
-                values.append(word())
+                values.append(arg)
         b.call(callee, values)
         b.ret_void()
-        return symbol
 
 
-def pack_arguments(args: tuple[Any, ...]) -> np.ndarray:
-    """The int64 vector an entry point reads: per array its data address, shape and strides
-    (bytes), per float its bits, per integer or bool its value."""
-    words: list[int] = []
-    for value in args:
-        if isinstance(value, np.ndarray):
-            words.append(value.ctypes.data)
-            words += value.shape
-            words += value.strides
-        elif isinstance(value, (float, np.floating)) and not isinstance(value, bool):
-            words.append(int(np.float64(value).view(np.int64)))
-        else:
-            words.append(int(value))
-    return np.array(words, dtype=np.int64)
+LOCAL_ARRAY_ALIGN = 64
+"""Bytes a local array is aligned to (a cache line): the lane kernels' work rows are one SIMD
+register each, and a row split between two lines costs two loads (numba aligns its arrays
+to 32 bytes)."""
+
+_ENTRY_TYPE = {F64: _DOUBLE, I64: _I64, U32: _I64, BOOL: _I64}
+"""How an entry point receives a scalar (``ctypes``' double and int64)."""
+
+ARRAY_FIELDS = {"data": 16, "shape": 32, "strides": 40}
+"""Byte offsets in NumPy's ``PyArrayObject`` (its ABI, NumPy 1 and 2, CPython without free
+threading) of the data pointer and the pointers to the shape and the strides (bytes);
+checked against NumPy before the first call (:func:`_check_array_fields`)."""
+
+
+def ctypes_argument(ty: Type) -> Any:
+    """The ``ctypes`` type an entry point takes for an argument of type ``ty``."""
+    if isinstance(ty, Array):
+        return ctypes.py_object
+    if isinstance(ty, Tuple):
+        raise TypeError("tuple arguments are not supported")
+    return ctypes.c_double if ty == F64 else ctypes.c_int64
+
+
+def _check_array_fields() -> None:
+    """Raise if :data:`ARRAY_FIELDS` do not hold for this NumPy (reading them would then
+    be reading garbage)."""
+    probe = np.zeros((3, 5))[:, ::2]
+    base = id(probe)
+
+    def read(offset: int) -> int:
+        return int(ctypes.c_int64.from_address(base + offset).value)
+
+    shape = [ctypes.c_int64.from_address(read(ARRAY_FIELDS["shape"]) + 8 * k).value for k in (0, 1)]
+    strides = [
+        ctypes.c_int64.from_address(read(ARRAY_FIELDS["strides"]) + 8 * k).value for k in (0, 1)
+    ]
+    if (read(ARRAY_FIELDS["data"]), tuple(shape), tuple(strides)) != (
+        probe.ctypes.data,
+        probe.shape,
+        probe.strides,
+    ):
+        raise RuntimeError("this NumPy's array layout is not the one mcchain.codegen.native reads")
 
 
 _BACKEND_HASH = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 
-_ENTRY = ctypes.CFUNCTYPE(None, ctypes.c_void_p)
+
+def _fingerprint_function() -> Callable[[Any], Any]:
+    """The key of an argument's type as numba's dispatcher computes it (C, ~0.2 µs an
+    argument; radau calls ``accel`` from Python at every evaluation); where numba's C
+    helper moved, the same key built in Python (slower)."""
+    try:
+        from numba._dispatcher import compute_fingerprint
+
+        return compute_fingerprint  # type: ignore[no-any-return]
+    except ImportError:
+        return type_of_value
 
 
 def _codegen() -> Any:
@@ -927,7 +971,8 @@ class NativeModule:
         self.name = name
         self.contract = contract
         self._digest = hashlib.sha256(source.encode()).hexdigest()[:20]
-        self._compiled: dict[tuple[str, tuple[Type, ...]], tuple[Any, Any]] = {}
+        self._entries: dict[tuple[Any, ...], tuple[Any, Any]] = {}
+        self._fingerprint = _fingerprint_function()
         self._functions = {
             node.name for node in ast.parse(source).body if isinstance(node, ast.FunctionDef)
         }
@@ -936,35 +981,42 @@ class NativeModule:
         if name.startswith("_") or name not in self.__dict__.get("_functions", ()):
             raise AttributeError(name)
 
+        fingerprint = self._fingerprint
+
         def call(*args: Any) -> None:
-            self._call(name, args)
+            key = (name, *map(fingerprint, args))
+            entry = self._entries.get(key)
+            if entry is None:
+                entry = self._entry(name, key, args)
+            entry[0](*args)
 
         call.__name__ = name
         return call
 
-    def _call(self, name: str, args: tuple[Any, ...]) -> None:
+    def _entry(self, name: str, key: tuple[Any, ...], args: tuple[Any, ...]) -> tuple[Any, Any]:
+        from numba.core.compiler_lock import global_compiler_lock
+
         argtypes = tuple(type_of_value(a) for a in args)
-        key = (name, argtypes)
-        compiled = self._compiled.get(key)
-        if compiled is None:
-            from numba.core.compiler_lock import global_compiler_lock
+        with global_compiler_lock:  # one compile at a time, as numba's dispatchers
+            entry = self._entries.get(key)
+            if entry is None:
+                _check_array_fields()
+                library, address = self._load_or_compile(name, argtypes)
+                proto = ctypes.CFUNCTYPE(None, *map(ctypes_argument, argtypes))
+                entry = (proto(address), library)  # the library keeps the code alive
+                self._entries[key] = entry
+        return entry
 
-            with global_compiler_lock:  # one compile at a time, as numba's dispatchers
-                compiled = self._compiled.get(key)
-                if compiled is None:
-                    compiled = self._load_or_compile(name, argtypes)
-                    self._compiled[key] = compiled
-        argv = pack_arguments(args)
-        compiled[0](argv.ctypes.data)
-
-    def _load_or_compile(self, name: str, argtypes: tuple[Type, ...]) -> tuple[Any, Any]:
+    def _load_or_compile(self, name: str, argtypes: tuple[Type, ...]) -> tuple[Any, int]:
+        """The compiled library of entry point ``name`` for ``argtypes``, from the disk
+        cache or compiled now, and the address of its entry function."""
         codegen = _codegen()
         key = repr(
             (self._digest, name, argtypes, self.contract, _BACKEND_HASH, codegen.magic_tuple())
         )
         digest = hashlib.sha256(key.encode()).hexdigest()[:24]
         path = mcchain_cache("native") / f"{self.name}-{name}-{digest}.bin"
-        symbol = f"{self.name}.{name}.entry"
+        symbol = f"{self.name}.{name}.{digest}"  # unique in the process's JIT engine
         library = None
         if path.exists():
             try:
@@ -972,8 +1024,9 @@ class NativeModule:
             except Exception:
                 library = None  # a stale or partial file: compile again
         if library is None:
-            translator = ModuleTranslator(self.source, self.name, _target_data(codegen))
-            symbol = translator.entry(name, argtypes)
+            # Symbols unique in the process's JIT engine, which holds every library.
+            translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
+            translator.entry(name, argtypes, symbol)
             if self.contract:
                 _contract(translator.ir_module)
             library = codegen.create_library(f"{self.name}.{name}")
@@ -985,7 +1038,7 @@ class NativeModule:
         address = library.get_pointer_to_function(symbol)
         if not address:
             raise RuntimeError(f"{symbol} missing from its compiled library")
-        return _ENTRY(address), library
+        return library, address
 
 
 def _target_data(codegen: Any) -> Any:
