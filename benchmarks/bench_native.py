@@ -8,8 +8,9 @@ For each scene, with each compiler, side by side:
 * **lanes**: a warm run of ``--samples`` instances on one thread, ``kernel`` of its
   ``run.json`` (the best of ``--rounds``, the two compilers alternating, so both see the
   same machine load), in ns per instance-step;
-* **values**: whether the two ensembles hold the same numbers (every variable, NaN at the
-  same places).
+* **values**: how far apart the two ensembles are: the largest difference of any variable,
+  relative to that variable's largest magnitude (0: the same bits; NaN must fall at the same
+  places).
 
     python benchmarks/bench_native.py [--quick] [--rounds 3] [--samples 256]
 
@@ -87,19 +88,27 @@ def _run(scene: Path, env: dict[str, str], out: Path, samples: int, threads: int
     return record
 
 
-def _same_values(a: Path, b: Path) -> bool:
+def _largest_difference(a: Path, b: Path) -> tuple[float, str]:
+    """The largest difference between two ensembles' variables, relative to the variable's
+    largest magnitude, and that variable's name (inf: NaN at different places, or other
+    values differ)."""
     import xarray as xr
 
+    worst, where = 0.0, ""
     with xr.open_dataset(a / "ensemble.nc") as x, xr.open_dataset(b / "ensemble.nc") as y:
         for name in x.data_vars:
             u, v = x[name].values, y[name].values
-            if u.dtype.kind == "f":
-                if not np.array_equal(np.isnan(u), np.isnan(v)):
-                    return False
+            if u.dtype.kind != "f":
+                gap = 0.0 if np.array_equal(u, v) else np.inf
+            elif not np.array_equal(np.isnan(u), np.isnan(v)):
+                gap = np.inf
+            else:
                 u, v = np.nan_to_num(u, nan=0.0), np.nan_to_num(v, nan=0.0)
-            if u.tobytes() != v.tobytes():
-                return False
-    return True
+                scale = np.abs(u).max(initial=0.0)
+                gap = float(np.abs(u - v).max(initial=0.0) / scale) if scale > 0 else 0.0
+            if gap > worst:
+                worst, where = gap, str(name)
+    return worst, where
 
 
 def measure(rows: dict[str, tuple[Path, int]], work: Path, samples: int, rounds: int) -> dict:
@@ -131,8 +140,8 @@ def measure(rows: dict[str, tuple[Path, int]], work: Path, samples: int, rounds:
         for compiler in COMPILERS:
             row[f"lanes {compiler}"] = best[compiler]
             del row[f"env {compiler}"]
-        row["same values"] = _same_values(folders["numba"], folders["native"])
-        print(f"  {name}: lanes {best}, same values {row['same values']}", flush=True)
+        row["difference"] = _largest_difference(folders["numba"], folders["native"])
+        print(f"  {name}: lanes {best}, difference {row['difference']}", flush=True)
         results[name] = row
     return results
 
@@ -145,11 +154,12 @@ def _table(results: dict, samples: int, rounds: int) -> str:
         "Compile: the first run of the topology, numba's cache warm for every other kernel. "
         f"Lanes: {samples} instances (radau: 16) on one thread, best of {rounds} alternating "
         "runs, ns per nominal instance-step (t_end / dt; rk45 adapts its steps, radau calls "
-        "the accelerations from scipy). Values: every variable of the two ensembles equal "
-        "(NaN at the same places).",
+        "the accelerations from scipy). Difference: the largest of any variable between the "
+        "two ensembles, relative to that variable's largest magnitude (0: the same bits, NaN "
+        "at the same places).",
         "",
         "| scene | compile numba, s | compile native, s | × | lanes numba, ns | "
-        "lanes native, ns | native / numba | same values |",
+        "lanes native, ns | native / numba | difference |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for name, r in results.items():
@@ -157,9 +167,13 @@ def _table(results: dict, samples: int, rounds: int) -> str:
             f"| {name} | {r['compile numba']:.2f} | {r['compile native']:.2f} | "
             f"{r['compile numba'] / r['compile native']:.1f}× | {r['lanes numba']:.0f} | "
             f"{r['lanes native']:.0f} | {r['lanes native'] / r['lanes numba']:.2f} | "
-            f"{'yes' if r['same values'] else 'NO'} |"
+            f"{_difference_text(*r['difference'])} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _difference_text(gap: float, name: str) -> str:
+    return "0 (same bits)" if gap == 0 else f"{gap:.1e} ({name})"
 
 
 def _chart(results: dict) -> None:
@@ -180,7 +194,7 @@ def _chart(results: dict) -> None:
     left.invert_yaxis()
     left.set_xlabel("first run of the topology: lane compile, s")
     right.set_xlabel("lanes, ns per instance-step (one thread)")
-    left.legend(loc="lower right")
+    left.legend(loc="upper right")
     fig.suptitle("Lane kernels: numba @njit against mcchain.codegen.native (same text)")
     fig.tight_layout()
     fig.savefig(OUT / "native.png", dpi=120)

@@ -214,25 +214,25 @@ def _simulate_section(**keys):
 
 
 def test_choose_kernels__auto_takes_the_loop_only_for_short_runs_of_large_topologies():
-    """``kernels = "auto"``: the loop kernels where the lanes would compile > 20 s (0.5 s
-    per coordinate) and the loop's extra time (0.3 µs per coordinate and instance-step)
-    stays under a quarter of that compile; written values are kept."""
+    """``kernels = "auto"``: the loop kernels where the lanes would compile > 20 s (1 ms
+    per squared coordinate count) and the loop's extra time (0.23 µs per coordinate and
+    instance-step) stays under a quarter of that compile; written values are kept."""
     from mcchain.solvers.simulate import choose_kernels
 
     auto = _simulate_section()
     assert choose_kernels(_simulate_section(kernels="lanes"), 96, 1).kernels == "lanes"
     assert choose_kernels(_simulate_section(kernels="loop"), 6, 10**6).kernels == "loop"
-    assert choose_kernels(auto, 40, 1).kernels == "lanes"  # a 20 s compile is within budget
-    assert choose_kernels(auto, 42, 1).kernels == "loop"
-    # 96 coordinates: 48 s of compile; 2.88e-5 s per instance-step; a quarter: 12 s
-    assert choose_kernels(auto, 96, 833).kernels == "loop"  # 416,500 steps: 11.995 s
-    assert choose_kernels(auto, 96, 834).kernels == "lanes"  # 417,000 steps: 12.010 s
+    assert choose_kernels(auto, 141, 1).kernels == "lanes"  # 19.9 s of compile: in budget
+    assert choose_kernels(auto, 142, 1).kernels == "loop"
+    # 200 coordinates: 40 s of compile; 4.6e-5 s per instance-step; a quarter: 10 s
+    assert choose_kernels(auto, 200, 434).kernels == "loop"  # 217,000 steps: 9.982 s
+    assert choose_kernels(auto, 200, 435).kernels == "lanes"  # 217,500 steps: 10.005 s
     assert choose_kernels(_simulate_section(method="rk45"), 96, 1).kernels == "lanes"
-    note = choose_kernels(auto, 96, 1).note()
+    note = choose_kernels(auto, 200, 1).note()
     assert note is not None and note.startswith('simulate.kernels: "loop" (auto: ')
-    assert 'kernels = "lanes"' in note and "96 coordinates" in note
-    assert choose_kernels(auto, 96, 834).note() is None
-    assert choose_kernels(_simulate_section(kernels="loop"), 96, 1).note() is None
+    assert 'kernels = "lanes"' in note and "200 coordinates" in note
+    assert choose_kernels(auto, 200, 435).note() is None
+    assert choose_kernels(_simulate_section(kernels="loop"), 200, 1).note() is None
 
 
 def test_prepare_job__resolves_auto_once_for_the_whole_run(tmp_path):
@@ -240,15 +240,15 @@ def test_prepare_job__resolves_auto_once_for_the_whole_run(tmp_path):
     stored settings and the note agree; ``simulate`` alone resolves it from its model."""
     from mcchain.job import prepare_job
 
-    n = 14  # 42 coordinates: the lanes would compile for about 21 s
+    n = 48  # 144 coordinates: the lanes would compile for about 21 s
     text = straight_chain_text([0.3] * n, [1.0] * n) + (
         '[simulate]\nt_end = 0.05\ndt = 1e-4\nmethod = "rk4"\n'
     )
-    scene = write_scene(tmp_path, text, "chain14.toml")
+    scene = write_scene(tmp_path, text, "chain48.toml")
     short = prepare_job(scene, samples=4)
     assert short.scene.simulate.kernels == "loop"
     assert short.settings["scene"]["simulate"]["kernels"] == "loop"
-    assert len(short.notes) == 1 and "42 coordinates" in short.notes[0]
-    long = prepare_job(scene, samples=2000)  # 1e6 instance-steps: 12.6 s more on the loop
+    assert len(short.notes) == 1 and "144 coordinates" in short.notes[0]
+    long = prepare_job(scene, samples=2000)  # 1e6 instance-steps: 33 s more on the loop
     assert long.scene.simulate.kernels == "lanes" and long.notes == []
     assert long.settings["scene"]["simulate"]["kernels"] == "lanes"
