@@ -191,7 +191,7 @@ def _chart(before: dict[str, float], after: dict[str, float], b: str, a: str) ->
 
     names = list(after)
     y = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(8, 0.6 * len(names) + 1.2))
+    fig, ax = plt.subplots(figsize=(9.5, 0.6 * len(names) + 1.2))
     ax.barh(y - 0.2, [before[n] for n in names], 0.4, label=b, color="0.6")
     ax.barh(y + 0.2, [after[n] for n in names], 0.4, label=a, color="C0")
     goals = [(GOALS[n], i) for i, n in enumerate(names) if GOALS[n] is not None]
@@ -201,7 +201,7 @@ def _chart(before: dict[str, float], after: dict[str, float], b: str, a: str) ->
     ax.set_xscale("log")
     ax.set_xlabel("wall time of the command, s (log)")
     ax.set_title("Time to first result: cold and warm starts")
-    ax.legend(loc="lower right")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))  # clear of the bars and goals
     fig.tight_layout()
     fig.savefig(OUT / "startup.png", dpi=120)
 

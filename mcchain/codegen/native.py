@@ -11,9 +11,10 @@ to numba's own code generator (the same LLVM passes, target machine and fast-mat
 ``contract`` as ``@njit``), so the machine code is that of the numba-compiled text.
 
 The entry points are called from Python through ``ctypes`` (which releases the GIL, so the
-thread blocks of :mod:`mcchain.solvers.threads` run side by side), with every argument
-packed into one int64 vector: an array as its data address, shape and strides (bytes), a
-float as its bits. Machine code is cached on disk per (text, entry, argument types, CPU).
+thread blocks of :mod:`mcchain.solvers.threads` run side by side): an array is passed as its
+``PyArrayObject *``, whose data pointer, shape and strides the entry reads, a float as a
+double, an integer as an int64; the arguments' types are keyed as numba's dispatcher keys
+them. Machine code is cached on disk per (text, entry, argument types, CPU, this file).
 
 Semantics follow numba's: Python's integer floor division and modulo, ``max``/``min`` as
 ``select(b > a, b, a)``, bool and integer operands promoted to float64 or int64, an array
