@@ -246,6 +246,47 @@ def test_entry_points__each_library_keeps_its_own_helpers():
     assert (a[0], b[0]) == (6.0, 2.5)
 
 
+LANES = """
+def lanes(W, nl, out):
+    for l in range(nl):  # lanes: independent
+        a = W[0 + l] * 2.0
+        W[8 + l] = a + W[16 + l]
+        out[l] = max(a, 1.0)
+    for l in range(nl):
+        out[l] += W[8 + l]
+"""
+
+
+def test_independent_loops__said_parallel_to_llvm_same_values():
+    """A loop marked ``# lanes: independent``: its loads and stores in one distinct access
+    group that its latch names ``llvm.loop.parallel_accesses`` (the IR verifies); the
+    unmarked loop's are not; the values are Python's."""
+    from llvmlite import binding
+
+    from mcchain.codegen.native import Array, ModuleTranslator, _codegen, _target_data
+
+    argtypes = (Array("f64", 1, True), "i64", Array("f64", 1, True))
+    translator = ModuleTranslator(LANES, "mcchain_test_lanes", _target_data(_codegen()))
+    translator.entry("lanes", argtypes, "mcchain_test_lanes_entry")
+    text = str(translator.ir_module)
+    binding.parse_assembly(text).verify()
+    assert text.count('!"llvm.loop.parallel_accesses"') == 1
+    assert text.count("!llvm.loop ") == 1 and "= distinct !{}" in text
+    body = text[text.index("define internal") :]
+    tagged = [line for line in body.splitlines() if "!llvm.access.group" in line]
+    # W[0 + l], W[16 + l] and out[l] read, W[8 + l] and out[l] written, the scalar a's slot
+    assert sum(" load " in t for t in tagged) >= 2 and sum("store " in t for t in tagged) >= 3
+
+    W, out = np.arange(24.0), np.zeros(8)
+    ref_W, ref_out = W.copy(), out.copy()
+    NativeModule(LANES, "mcchain_test_lanes").lanes(W, 5, out)
+    namespace: dict[str, Any] = {}
+    exec(LANES, namespace)
+    namespace["lanes"](ref_W, 5, ref_out)
+    _assert_same_bits(W, ref_W)
+    _assert_same_bits(out, ref_out)
+
+
 def test_entry_points__unknown_names_are_attribute_errors(native):
     with pytest.raises(AttributeError):
         native.no_such_function  # noqa: B018

@@ -40,6 +40,7 @@ import numpy as np
 from llvmlite import ir
 
 from mcchain.caches import mcchain_cache
+from mcchain.codegen.schedule import INDEPENDENT_MARK
 
 F64, I64, U32, BOOL = "f64", "i64", "u32", "bool"
 """Scalar types of the translated text."""
@@ -368,9 +369,12 @@ class _FunctionTranslator:
         body: Callable[[ir.Value], None],
         var: str | None = None,
         positive: bool = True,
+        independent: bool = False,
     ) -> None:
         """``for i in range(start, stop, step)``: ``body(i)`` builds the body; with
-        ``var``, ``i`` is also stored in that variable."""
+        ``var``, ``i`` is also stored in that variable. ``independent``: the iterations
+        touch disjoint memory (:data:`INDEPENDENT_MARK`), said to LLVM as
+        ``llvm.loop.parallel_accesses``."""
         b = self.builder
         if not isinstance(stop, ir.Constant):
             # A run-time bound LLVM can also bound from above (nl <= LMAXV lanes) would make
@@ -392,14 +396,34 @@ class _FunctionTranslator:
         if var is not None:
             self._store_var(var, i, I64)
         self.loops.append(_Loop(latch, after))
+        first_new = len(self.function.blocks)
         body(i)
         self.loops.pop()
         if not b.block.is_terminated:
             b.branch(latch)
         b.position_at_end(latch)
         b.store(b.add(b.load(counter), step), counter)
-        b.branch(head)
+        back = b.branch(head)
+        if independent:
+            self._mark_parallel([loop, *self.function.blocks[first_new:]], back)
         b.position_at_end(after)
+
+    def _mark_parallel(self, blocks: list[ir.Block], back: ir.Instruction) -> None:
+        """Every load and store of ``blocks`` (a loop's body) in one access group, and the
+        loop's latch branch ``back`` naming that group parallel: LLVM's loop vectoriser and
+        load elimination then skip their dependence checks, which compare each pair of the
+        body's accesses. An access already in an inner loop's group stays in that one only
+        (the outer loop is then analysed as any other: slower to compile, never wrong)."""
+        module = self.module.ir_module
+        group = _DistinctNode(module, [])
+        for block in blocks:
+            for instr in block.instructions:
+                if isinstance(instr, (ir.LoadInstr, ir.StoreInstr)):
+                    instr.metadata.setdefault("llvm.access.group", group)
+        parallel = module.add_metadata(
+            [ir.MetaDataString(module, "llvm.loop.parallel_accesses"), group]
+        )
+        back.set_metadata("llvm.loop", _DistinctNode(module, [parallel], self_reference=True))
 
     def _for(self, stmt: ast.For) -> None:
         call = stmt.iter
@@ -420,9 +444,11 @@ class _FunctionTranslator:
             step = args[2]
             positive = self.module.constant_int(call.args[2]) > 0
         target = stmt.target.id
+        independent = self.module.lines[stmt.lineno - 1].rstrip().endswith(INDEPENDENT_MARK)
         self._counted_loop(
-            start, stop, step, lambda _i: self._statements(stmt.body), target, positive
-        )
+            start, stop, step, lambda _i: self._statements(stmt.body), target, positive,
+            independent,
+        )  # fmt: skip
 
     def _while(self, stmt: ast.While) -> None:
         if stmt.orelse:
@@ -758,12 +784,34 @@ def _as_load(target: ast.expr) -> ast.expr:
     return node
 
 
+class _DistinctNode(ir.values.MDValue):
+    """``distinct !{...}`` (llvmlite's ``add_metadata`` makes uniqued nodes only), with
+    itself as first operand where ``self_reference`` (a loop ID)."""
+
+    def __init__(self, module: ir.Module, operands: list[Any], self_reference: bool = False):
+        super().__init__(module, operands, name=str(len(module.metadata)))
+        self.self_reference = self_reference
+
+    def descr(self, buf: list[str]) -> None:
+        operands = [op.get_reference() for op in self.operands]
+        if self.self_reference:
+            operands.insert(0, self.get_reference())
+        buf += ("distinct !{" + ", ".join(operands) + "}", "\n")
+
+    def __eq__(self, other: object) -> bool:
+        return self is other
+
+    def __hash__(self) -> int:
+        return id(self)
+
+
 class ModuleTranslator:
     """The functions of one generated module as one LLVM IR module, each specialised on the
     argument types it is called with."""
 
     def __init__(self, source: str, symbol_prefix: str, target_data: Any) -> None:
         self.tree = ast.parse(source)
+        self.lines = source.split("\n")
         self.prefix = symbol_prefix
         self.target_data = target_data
         self.ir_module = ir.Module(name=symbol_prefix)

@@ -9,6 +9,11 @@ _NAME = re.compile(r"\b[A-Za-z_]\w*\b")
 _ASSIGN = re.compile(r"^(\w+)\s*([-+*]?)=\s*(.*)$")
 _ROW = re.compile(r"W\[[^\]]+\]")
 
+INDEPENDENT_MARK = "# lanes: independent"
+"""The comment ending the line of a ``for`` loop whose iterations read and write disjoint
+memory: a lane loop whose lane ``l`` touches only ``W[row * LMAX + l]`` and its own
+sample's elements. :mod:`mcchain.codegen.native` tells LLVM so."""
+
 
 def schedule_lane_loops(text: str) -> str:
     """Reorder the body of every lane loop marked ``# lanes: schedule`` so that each value is
@@ -38,7 +43,7 @@ def schedule_lane_loops(text: str) -> str:
             j += 1
         body = [b.strip() for b in lines[i + 1 : j] if b.strip()]
         pad = " " * _indent(lines[i + 1])
-        out.append(line[: line.index("#")].rstrip())
+        out.append(line[: line.index("#")].rstrip() + "  " + INDEPENDENT_MARK)
         out.extend(pad + b for b in demand_order(body))
         i = j
     return "\n".join(out)

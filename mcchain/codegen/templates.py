@@ -312,7 +312,7 @@ OUTPUT_HELPER = '''
 def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
                          out_dtq, out_cerr, out_en@CT):
     """Outputs of lanes lo..hi-1 at time t_now into history index ``it``."""
-    for l in range(lo, hi):
+    for l in range(lo, hi):  # lanes: independent
         @@load_params
         @@load_state
         @@load_lam_dyn
