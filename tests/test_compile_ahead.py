@@ -61,8 +61,8 @@ def test_compile_for__resolves_auto_kernels_for_the_runs_count(monkeypatch, tmp_
     monkeypatch.setattr(
         solvers, "solve_chunk", lambda model, scene, **kw: taken.append(scene.simulate.kernels)
     )
-    text = straight_chain_text([0.3] * 48, [1.0] * 48)  # 144 coordinates
-    path = write_scene(tmp_path, text + "[simulate]\nt_end = 0.05\ndt = 1e-4\n", "chain48.toml")
+    text = straight_chain_text([0.3] * 60, [1.0] * 60)  # 180 coordinates
+    path = write_scene(tmp_path, text + "[simulate]\nt_end = 0.05\ndt = 1e-4\n", "chain60.toml")
     compile_ahead.compile_for(path, 0, 4)
     compile_ahead.compile_for(path, 0, 2000)
     compile_ahead.compile_for(path, 0)  # the scene's count: 1

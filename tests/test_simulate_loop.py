@@ -214,24 +214,25 @@ def _simulate_section(**keys):
 
 
 def test_choose_kernels__auto_takes_the_loop_only_for_short_runs_of_large_topologies():
-    """``kernels = "auto"``: the loop kernels where the lanes would compile > 20 s (1 ms
-    per squared coordinate count) and the loop's extra time (0.23 µs per coordinate and
-    instance-step) stays under a quarter of that compile; written values are kept."""
+    """``kernels = "auto"``: the loop kernels where the lanes would compile > 20 s (30 ms
+    per coordinate and 0.46 ms per squared coordinate count) and the loop's extra time
+    (0.27 µs per coordinate and instance-step) stays under a quarter of that compile;
+    written values are kept."""
     from mcchain.solvers.simulate import choose_kernels
 
     auto = _simulate_section()
     assert choose_kernels(_simulate_section(kernels="lanes"), 96, 1).kernels == "lanes"
     assert choose_kernels(_simulate_section(kernels="loop"), 6, 10**6).kernels == "loop"
-    assert choose_kernels(auto, 141, 1).kernels == "lanes"  # 19.9 s of compile: in budget
-    assert choose_kernels(auto, 142, 1).kernels == "loop"
-    # 200 coordinates: 40 s of compile; 4.6e-5 s per instance-step; a quarter: 10 s
-    assert choose_kernels(auto, 200, 434).kernels == "loop"  # 217,000 steps: 9.982 s
-    assert choose_kernels(auto, 200, 435).kernels == "lanes"  # 217,500 steps: 10.005 s
+    assert choose_kernels(auto, 178, 1).kernels == "lanes"  # 19.9 s of compile: in budget
+    assert choose_kernels(auto, 179, 1).kernels == "loop"  # 20.1 s
+    # 200 coordinates: 24.4 s of compile; 5.4e-5 s per instance-step; a quarter: 6.1 s
+    assert choose_kernels(auto, 200, 225).kernels == "loop"  # 112,500 steps: 6.075 s
+    assert choose_kernels(auto, 200, 226).kernels == "lanes"  # 113,000 steps: 6.102 s
     assert choose_kernels(_simulate_section(method="rk45"), 96, 1).kernels == "lanes"
     note = choose_kernels(auto, 200, 1).note()
     assert note is not None and note.startswith('simulate.kernels: "loop" (auto: ')
     assert 'kernels = "lanes"' in note and "200 coordinates" in note
-    assert choose_kernels(auto, 200, 435).note() is None
+    assert choose_kernels(auto, 200, 226).note() is None
     assert choose_kernels(_simulate_section(kernels="loop"), 200, 1).note() is None
 
 
@@ -240,15 +241,15 @@ def test_prepare_job__resolves_auto_once_for_the_whole_run(tmp_path):
     stored settings and the note agree; ``simulate`` alone resolves it from its model."""
     from mcchain.job import prepare_job
 
-    n = 48  # 144 coordinates: the lanes would compile for about 21 s
+    n = 60  # 180 coordinates: the lanes would compile for about 20.3 s
     text = straight_chain_text([0.3] * n, [1.0] * n) + (
         '[simulate]\nt_end = 0.05\ndt = 1e-4\nmethod = "rk4"\n'
     )
-    scene = write_scene(tmp_path, text, "chain48.toml")
+    scene = write_scene(tmp_path, text, "chain60.toml")
     short = prepare_job(scene, samples=4)
     assert short.scene.simulate.kernels == "loop"
     assert short.settings["scene"]["simulate"]["kernels"] == "loop"
-    assert len(short.notes) == 1 and "144 coordinates" in short.notes[0]
-    long = prepare_job(scene, samples=2000)  # 1e6 instance-steps: 33 s more on the loop
+    assert len(short.notes) == 1 and "180 coordinates" in short.notes[0]
+    long = prepare_job(scene, samples=2000)  # 1e6 instance-steps: 49 s more on the loop
     assert long.scene.simulate.kernels == "lanes" and long.notes == []
     assert long.settings["scene"]["simulate"]["kernels"] == "lanes"

@@ -627,16 +627,17 @@ METHODS: dict[str, Method] = {
 """Every integration method by its ``[simulate] method`` name."""
 
 
-LANE_COMPILE_S_PER_COORDINATE_SQUARED = 1.0e-3
+LANE_COMPILE_S_PER_COORDINATE = 0.03
+LANE_COMPILE_S_PER_COORDINATE_SQUARED = 0.46e-3
 """Seconds the first run of a new topology spends compiling its rk4 lanes beyond what the
-loop kernels need, per squared coordinate count (3 coordinates per body): 0.93-1.02 ms for
-chains of 32-64 bars (``benchmarks/bench_loop.py``, 2 cores; 9 s for 32 bars, 37 s for
-64). Quadratic, as LLVM's loop vectoriser checks each pair of the stage loop's memory
-accesses; smaller topologies compile sooner than the square says (1.2 s for 8 bars)."""
+loop kernels need: these two per coordinate (3 per body) and per squared coordinate count,
+summed. Fitted to chains of 32 and 64 bars (``benchmarks/bench_loop.py``, 2 cores: 7.1 s
+and 22.6 s), within 0.4 s of 16 and 48 bars. The square is LLVM's loop vectoriser, whose
+work grows with the square of a stage loop's length."""
 
-LOOP_EXTRA_S_PER_COORDINATE_STEP = 0.23e-6
+LOOP_EXTRA_S_PER_COORDINATE_STEP = 0.27e-6
 """Seconds the loop kernels take beyond the lanes per instance-step, per coordinate:
-0.17-0.25 µs for chains of 8-64 bars (same benchmark)."""
+0.22-0.30 µs for chains of 16-64 bars (same benchmark)."""
 
 AUTO_LOOP_MIN_COMPILE_S = 20.0
 """``kernels = "auto"`` considers the loop kernels only for topologies whose lanes would
@@ -676,7 +677,9 @@ def choose_kernels(sim: Simulate, ndof: int, nsample: int) -> KernelChoice:
         return KernelChoice(sim.kernels, "as set in the scene", auto=False)
     if sim.method not in LOOP_METHODS:
         return KernelChoice("lanes", f"auto: {sim.method} runs on the lanes only")
-    compile_s = LANE_COMPILE_S_PER_COORDINATE_SQUARED * ndof**2
+    compile_s = (
+        LANE_COMPILE_S_PER_COORDINATE * ndof + LANE_COMPILE_S_PER_COORDINATE_SQUARED * ndof**2
+    )
     work = nsample * max(1, round(sim.t_end / sim.dt))
     extra_s = LOOP_EXTRA_S_PER_COORDINATE_STEP * ndof * work
     estimate = (
