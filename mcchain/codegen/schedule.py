@@ -26,7 +26,8 @@ def schedule_lane_loops(text: str) -> str:
     unchanged). The body is straight-line code: names are renamed to single assignments,
     then the lines are emitted depth-first from the stores to W, in their original order;
     loads and stores of the same W element keep their order. Values are the same
-    expressions, so results do not change.
+    expressions, so results do not change. Such a body reads and writes its lane's rows
+    only (``W[c + l]``), so the loop comes out marked :data:`INDEPENDENT_MARK`.
     """
     lines = text.split("\n")
     out: list[str] = []
