@@ -216,6 +216,24 @@ def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, mo
     assert pickle.loads(files[0].read_bytes())[1] == "object"
 
 
+def test_machine_code__an_unwritable_cache_compiles_into_a_temporary_one(
+    tmp_path, monkeypatch, capsys
+):
+    """``MCCHAIN_CACHE_DIR`` under a regular file: the entry compiles and runs, its machine
+    code goes to ``<tmp>/mcchain-native-<uid>`` (mcchain.caches), at most one warning."""
+    from mcchain import caches
+
+    (tmp_path / "a-file").write_text("")
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "a-file" / "cache"))
+    monkeypatch.setattr(caches, "_warned", set())
+    out = np.zeros(10, np.int64)
+    NativeModule(SOURCE, "mcchain_test_unwritable").integers(7, 3, out)
+    assert out[:2].tolist() == [2, 1]
+    assert list(caches.temporary_cache("native").glob("mcchain_test_unwritable-integers-*"))
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "MCCHAIN_CACHE_DIR" in err[0] and "cannot be written" in err[0]
+
+
 @pytest.mark.parametrize(
     "body",
     [
