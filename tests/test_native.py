@@ -234,6 +234,34 @@ def test_machine_code__an_unwritable_cache_compiles_into_a_temporary_one(
     assert len(err) == 1 and "MCCHAIN_CACHE_DIR" in err[0] and "cannot be written" in err[0]
 
 
+def test_array_layout__a_numpy_laid_out_otherwise_falls_back_to_numba(monkeypatch, capsys):
+    """Where the ``PyArrayObject`` fields are not where the entries read them (checked
+    without following a wrong pointer), the lanes compile with numba, with one warning."""
+    from types import ModuleType
+
+    from mcchain.codegen import native
+    from mcchain.codegen.topology import Topology
+
+    assert native.array_layout_ok()
+    monkeypatch.setattr(native, "ARRAY_FIELDS", {**native.ARRAY_FIELDS, "data": 24})
+    monkeypatch.setattr(generate, "_MODULES", {})
+    native.array_layout_ok.cache_clear()
+    generate._native_usable.cache_clear()
+    try:
+        assert not native.array_layout_ok()
+        topo = Topology.from_model(scene_model("double_pendulum"))
+        assert isinstance(generate.lane_kernels(topo, "rk4"), ModuleType)  # numba's @njit
+        assert isinstance(generate.lane_kernels(topo, "accel"), ModuleType)
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and "compile with numba instead" in err[0]
+        monkeypatch.setattr(native, "ARRAY_FIELDS", {**native.ARRAY_FIELDS, "nd": 28})
+        native.array_layout_ok.cache_clear()
+        assert not native.array_layout_ok()
+    finally:
+        native.array_layout_ok.cache_clear()
+        generate._native_usable.cache_clear()
+
+
 @pytest.mark.parametrize(
     "body",
     [

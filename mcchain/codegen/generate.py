@@ -10,10 +10,12 @@ holding only the functions that variant's entry points call.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
 import re
+import sys
 from types import ModuleType
 
 import numpy as np
@@ -22,7 +24,7 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
-from mcchain.codegen.native import NativeModule
+from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (
@@ -607,6 +609,22 @@ LaneKernels = ModuleType | NativeModule
 _MODULES: dict[tuple[Topology, str], LaneKernels] = {}
 
 
+@functools.cache
+def _native_usable() -> bool:
+    """Whether :mod:`mcchain.codegen.native` can call its entries with this NumPy; if not,
+    one warning (once per process) and the lanes compile with numba."""
+    if array_layout_ok():
+        return True
+    print(
+        "mcchain: warning: this NumPy's array layout is not the one mcchain.codegen.native "
+        "reads: the lane kernels compile with numba instead (slower to compile, the same "
+        "values)",
+        file=sys.stderr,
+        flush=True,
+    )
+    return False
+
+
 def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
     """The compiled lane kernels of a topology for one :data:`VARIANTS` key (``accel`` and
     ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``).
@@ -616,12 +634,13 @@ def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
     joint) and its machine code is cached under ``MCCHAIN_CACHE_DIR/native``, in files
     named after the variant. ``MCCHAIN_LANE_COMPILER=numba`` compiles the same text with
     ``@njit`` instead (the reference of the tests and ``benchmarks/bench_native.py``; the
-    same numbers)."""
+    same numbers; also where this NumPy's array layout is not the one the native entries
+    read, with a warning)."""
     module = _MODULES.get((topo, variant))
     if module is None:
         prefix = "mcchain_gen_" + variant.replace("-", "_")
         source = generate_source(topo, variant)
-        if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba":
+        if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba" or not _native_usable():
             from mcchain.kernels.config import numba_cache
 
             numba_cache()  # a writable numba cache before the module's kernels are decorated

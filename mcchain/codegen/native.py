@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import ast
 import ctypes
+import functools
 import hashlib
 import math
 import os
@@ -953,10 +954,10 @@ to 32 bytes)."""
 _ENTRY_TYPE = {F64: _DOUBLE, I64: _I64, U32: _I64, BOOL: _I64}
 """How an entry point receives a scalar (``ctypes``' double and int64)."""
 
-ARRAY_FIELDS = {"data": 16, "shape": 32, "strides": 40}
+ARRAY_FIELDS = {"data": 16, "nd": 24, "shape": 32, "strides": 40}
 """Byte offsets in NumPy's ``PyArrayObject`` (its ABI, NumPy 1 and 2, CPython without free
 threading) of the data pointer and the pointers to the shape and the strides (bytes);
-checked against NumPy before the first call (:func:`_check_array_fields`)."""
+checked against NumPy before the first call (:func:`array_layout_ok`)."""
 
 
 def ctypes_argument(ty: Type) -> Any:
@@ -968,25 +969,25 @@ def ctypes_argument(ty: Type) -> Any:
     return ctypes.c_double if ty == F64 else ctypes.c_int64
 
 
-def _check_array_fields() -> None:
-    """Raise if :data:`ARRAY_FIELDS` do not hold for this NumPy (reading them would then
-    be reading garbage)."""
+@functools.cache
+def array_layout_ok() -> bool:
+    """Whether :data:`ARRAY_FIELDS` hold for this NumPy (the entries would read garbage
+    otherwise; :func:`mcchain.codegen.generate.lane_kernels` then compiles with numba). The
+    shape and strides pointers are followed only once the data pointer and the dimension
+    count, read inside the array object itself, are right."""
     probe = np.zeros((3, 5))[:, ::2]
     base = id(probe)
 
-    def read(offset: int) -> int:
-        return int(ctypes.c_int64.from_address(base + offset).value)
+    def read(address: int, ctype: Any = ctypes.c_int64) -> int:
+        return int(ctype.from_address(address).value)
 
-    shape = [ctypes.c_int64.from_address(read(ARRAY_FIELDS["shape"]) + 8 * k).value for k in (0, 1)]
-    strides = [
-        ctypes.c_int64.from_address(read(ARRAY_FIELDS["strides"]) + 8 * k).value for k in (0, 1)
-    ]
-    if (read(ARRAY_FIELDS["data"]), tuple(shape), tuple(strides)) != (
-        probe.ctypes.data,
-        probe.shape,
-        probe.strides,
-    ):
-        raise RuntimeError("this NumPy's array layout is not the one mcchain.codegen.native reads")
+    if read(base + ARRAY_FIELDS["data"]) != probe.ctypes.data:
+        return False
+    if read(base + ARRAY_FIELDS["nd"], ctypes.c_int32) != probe.ndim:
+        return False
+    shape = tuple(read(read(base + ARRAY_FIELDS["shape"]) + 8 * k) for k in (0, 1))
+    strides = tuple(read(read(base + ARRAY_FIELDS["strides"]) + 8 * k) for k in (0, 1))
+    return (shape, strides) == (probe.shape, probe.strides)
 
 
 _BACKEND_HASH = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
@@ -1053,7 +1054,8 @@ class NativeModule:
         with global_compiler_lock:  # one compile at a time, as numba's dispatchers
             entry = self._entries[name].get(key)
             if entry is None:
-                _check_array_fields()
+                if not array_layout_ok():
+                    raise RuntimeError("this NumPy's array layout is not the one entries read")
                 library, address = self._load_or_compile(name, argtypes)
                 proto = ctypes.CFUNCTYPE(None, *map(ctypes_argument, argtypes))
                 entry = (proto(address), library)  # the library keeps the code alive
