@@ -221,11 +221,16 @@ def test_machine_code__an_unwritable_cache_compiles_into_a_temporary_one(
 ):
     """``MCCHAIN_CACHE_DIR`` under a regular file: the entry compiles and runs, its machine
     code goes to ``<tmp>/mcchain-native-<uid>`` (mcchain.caches), at most one warning."""
+    import tempfile
+
     from mcchain import caches
 
     (tmp_path / "a-file").write_text("")
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "a-file" / "cache"))
     monkeypatch.setattr(caches, "_warned", set())
+    # a fresh temporary folder, so that only this compile can have written the file found
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     out = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_unwritable").integers(7, 3, out)
     assert out[:2].tolist() == [2, 1]
@@ -243,7 +248,8 @@ def test_array_layout__a_numpy_laid_out_otherwise_falls_back_to_numba(monkeypatc
     from mcchain.codegen.topology import Topology
 
     assert native.array_layout_ok()
-    monkeypatch.setattr(native, "ARRAY_FIELDS", {**native.ARRAY_FIELDS, "data": 24})
+    fields = dict(native.ARRAY_FIELDS)
+    monkeypatch.setattr(native, "ARRAY_FIELDS", {**fields, "data": 24})
     monkeypatch.setattr(generate, "_MODULES", {})
     native.array_layout_ok.cache_clear()
     generate._native_usable.cache_clear()
@@ -254,7 +260,8 @@ def test_array_layout__a_numpy_laid_out_otherwise_falls_back_to_numba(monkeypatc
         assert isinstance(generate.lane_kernels(topo, "accel"), ModuleType)
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and "compile with numba instead" in err[0]
-        monkeypatch.setattr(native, "ARRAY_FIELDS", {**native.ARRAY_FIELDS, "nd": 28})
+        # the dimension count read from the data pointer's low half: a multiple of 16, never 2
+        monkeypatch.setattr(native, "ARRAY_FIELDS", {**fields, "nd": 16})
         native.array_layout_ok.cache_clear()
         assert not native.array_layout_ok()
     finally:
