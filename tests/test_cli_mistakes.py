@@ -5,8 +5,6 @@ the run, a run whose every sample failed, a run folder removed while the run goe
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 from test_cli_commands import assert_scene_refused, assert_usage_error, in_process
 

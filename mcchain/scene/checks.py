@@ -2,8 +2,8 @@
 
 Duplicate or reserved names, references to unknown bodies, sampled and perturbation paths,
 distribution supports against the parameter's domain, counts against the design, ``output_dt``
-against ``dt``, clearances against the size of the mechanism (a clearance written in mm). Each failure is one :class:`~mcchain.errors.SceneError` line
-``key.path: reason``.
+against ``dt``, clearances against the size of the mechanism (a clearance written in mm).
+Each failure is one :class:`~mcchain.errors.SceneError` line ``key.path: reason``.
 """
 
 from __future__ import annotations
