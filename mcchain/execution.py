@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import errno
 import json
 import logging
 import os
@@ -29,9 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcchain.errors import McchainError, RunError
+from mcchain.errors import McchainError, RunError, RunFailed
 from mcchain.job import Job, Loader, check_positive, prepare_job
 from mcchain.provenance import git_state, host_info, software_versions
+from mcchain.resources import check_disk
 from mcchain.runs import (
     COMPLETED,
     DEFAULT_OUT,
@@ -71,6 +73,20 @@ class RunResult:
 
     folder: Path
     record: dict[str, Any]
+    failed: int = 0
+    """Samples carrying a failure flag (:data:`mcchain.status.FAILURE_BITS`)."""
+
+    @property
+    def all_failed(self) -> bool:
+        """Whether every sample of the run failed (the CLI then exits with 3)."""
+        return self.failed > 0 and self.failed == int(self.record["samples"])
+
+    def counts_line(self) -> str:
+        """``ok 0, diverged 10, ...``: the status counts that are not 0, ``ok`` always."""
+        counts = self.record.get("status_counts") or {}
+        return ", ".join(
+            f"{k} {v}" for k, v in counts.items() if k != "samples" and (v or k == "ok")
+        )
 
     def summary(self) -> list[str]:
         """Human lines for the CLI (the folder is printed after them)."""
@@ -99,14 +115,16 @@ class RunResult:
         return lines
 
 
-def _status_counts(path: Path) -> dict[str, int]:
-    """Status counts of a merged ensemble, read block by block."""
+def _status_counts(path: Path) -> tuple[dict[str, int], int]:
+    """Status counts of a merged ensemble, read block by block, and how many samples carry
+    a failure flag."""
     import netCDF4
     import numpy as np
 
-    from mcchain.status import counts
+    from mcchain.status import FAILURE_BITS, counts
 
     total: dict[str, int] = {}
+    failed = 0
     with netCDF4.Dataset(path) as nc:
         var = nc["status"]
         n = var.shape[0]
@@ -114,8 +132,9 @@ def _status_counts(path: Path) -> dict[str, int]:
             block = np.asarray(var[b0 : min(b0 + (1 << 20), n)])
             for key, value in counts(block).items():
                 total[key] = total.get(key, 0) + value
+            failed += int(np.count_nonzero(block & FAILURE_BITS))
         total["samples"] = int(n)
-    return total
+    return total, failed
 
 
 def _interpreted() -> bool:
@@ -399,7 +418,10 @@ def execute(
                 merged.seconds,
                 merged.throughput,
             )
-            counts = _status_counts(folder / ENSEMBLE)
+            counts, failed = _status_counts(folder / ENSEMBLE)
+            total = time.perf_counter() - t_start + prepare_seconds
+            _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
+            write_record(folder, record)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
@@ -407,12 +429,16 @@ def execute(
             record["error"] = message or type(exc).__name__
             session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
             log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
-            write_record(folder, record)
+            outside = _outside_failure(job, folder, exc)
+            try:
+                write_record(folder, record)
+            except OSError:
+                if outside is None:
+                    raise
+            if outside is not None:
+                raise outside from exc
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
-        total = time.perf_counter() - t_start + prepare_seconds
-        _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
-        write_record(folder, record)
         log.info("run completed: %s", json.dumps(counts))
         if not keep_parts:
             for part in list_parts(parts_dir):
@@ -420,7 +446,7 @@ def execute(
             with contextlib.suppress(OSError):
                 parts_dir.rmdir()
         drop_lock(folder)  # still held: a completed run keeps no lock file
-    return RunResult(folder, record)
+    return RunResult(folder, record, failed)
 
 
 def start_run(
@@ -482,6 +508,7 @@ def start_run(
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
+        check_disk(job.disk, out if run_dir is None else run_dir)
         prepare_seconds = time.perf_counter() - t0
         folder = create_run_folder(out, job.scene_name, run_dir)
         with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
@@ -565,6 +592,7 @@ def resume_run(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
     check_live(rerun, job.nsample)
+    check_disk(job.disk, folder, _missing_samples(job, folder / PARTS))
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
     argv = list(sys.argv if argv is None else argv)
@@ -581,6 +609,55 @@ def resume_run(
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
     )
+
+
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+"""``OSError`` numbers of a file system with no room left (full, or over the user's quota)."""
+
+
+def _outside_failure(job: Job, folder: Path, exc: BaseException) -> RunFailed | None:
+    """The one-line :class:`RunFailed` of a run that failed for a reason outside the scene
+    and the code, with the finished chunks kept: its folder removed or made unwritable, or
+    its file system full (``ENOSPC``, or netCDF's "HDF error" while less space is free
+    than the run still writes); None for any other failure (which is re-raised as is)."""
+    resume = f"mcchain run --resume {folder}"
+    if not folder.is_dir():
+        return RunFailed(
+            f"{folder}: the run folder was removed while the run went; its results are lost "
+            "with it (run the scene again)"
+        )
+    parts_dir = folder / PARTS
+    for place in (folder, parts_dir):
+        if place.is_dir() and not os.access(place, os.W_OK | os.X_OK):
+            return RunFailed(
+                f"{place}: the run folder was made unwritable while the run went; the "
+                f"finished chunks are kept: make it writable and complete it with: {resume}"
+            )
+    if not isinstance(exc, (OSError, RuntimeError)):
+        return None
+    from mcchain.ensemble.io import list_parts
+    from mcchain.resources import free_space, size_text
+
+    free, _ = free_space(folder)
+    missing = _missing_samples(job, parts_dir) if parts_dir.is_dir() else job.nsample
+    need = None if job.disk is None else job.disk.peak(missing)
+    full = isinstance(exc, OSError) and exc.errno in DISK_FULL_ERRNOS
+    if not full and not ("HDF error" in str(exc) and need is not None and need > free):
+        return None
+    needed = "" if need is None else f"the run still needs up to {size_text(need)} and "
+    done = len(list_parts(parts_dir)) if parts_dir.is_dir() else 0
+    kept = f"{done} finished chunk{'' if done == 1 else 's'} kept"
+    return RunFailed(
+        f"{folder}: the disk is full: {needed}its file system has {size_text(free)} free; "
+        f"{kept}: free space and complete it with: {resume}"
+    )
+
+
+def _missing_samples(job: Job, parts_dir: Path) -> int:
+    """Samples of ``job`` that no finished part file in ``parts_dir`` holds."""
+    from mcchain.ensemble.io import list_parts
+
+    return job.nsample - sum(p.stop - p.start for p in list_parts(parts_dir))
 
 
 DAMAGED_ENSEMBLE = "ensemble.damaged.nc"

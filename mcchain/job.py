@@ -22,6 +22,7 @@ from mcchain.errors import RunError
 
 if TYPE_CHECKING:
     from mcchain.model import Model
+    from mcchain.resources import DiskEstimate
 
 Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
 """``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
@@ -41,6 +42,8 @@ class Job:
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
         steps_per_sample: integration steps per sample (``None`` without ``[simulate]``).
+        disk: what the run writes (:class:`mcchain.resources.DiskEstimate`; ``None`` for a
+            scene that is not a real one, the tests' fakes).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
@@ -59,6 +62,7 @@ class Job:
     compression: str
     complevel: int
     steps_per_sample: int | None = None
+    disk: DiskEstimate | None = None
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -201,6 +205,8 @@ def prepare_job(
         text = path.read_text(encoding="utf-8")
     name = getattr(_section(scene, "scene"), "name", None) or path.stem
     nsample = int(model.nsample)
+    from mcchain.resources import estimate_disk
+
     return Job(
         scene=scene,
         model=model,
@@ -213,6 +219,7 @@ def prepare_job(
         compression=str(storage.compression),
         complevel=int(storage.complevel),
         steps_per_sample=_steps_per_sample(scene),
+        disk=estimate_disk(scene, model, nsample, int(chunk)),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
         notes=[] if kernels_note is None else [kernels_note],
