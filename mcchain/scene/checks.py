@@ -186,8 +186,8 @@ def check_scene(scene: Scene) -> None:
         _check_contact(scene, where, joint, clearance_joint, sampled)
         path = f"joint.{joint.name}.clearance"
         written = targets.get(path)
-        dist = scene.sample.vary[written] if written and scene.sample else None
-        _check_clearance_scale(scene, i, where, dist, written)
+        sampled_as = scene.sample.vary[written] if written and scene.sample else None
+        _check_clearance_scale(scene, i, where, sampled_as, written)
 
     along = scene.modes.along if scene.modes is not None else None
     if along is not None and along.driver not in {d.body for d in scene.driver if not d.slides}:
