@@ -6,6 +6,7 @@ the run, a run whose every sample failed, a run folder removed while the run goe
 from __future__ import annotations
 
 import errno
+import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -77,13 +78,18 @@ TB = 10**12
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory: pytest.TempPathFactory) -> bytes:
-    """The ensemble.nc of an uninterrupted run of :data:`SWEEP` with :data:`RUN_ARGS`."""
+def completed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An uninterrupted run of :data:`SWEEP` with :data:`RUN_ARGS`."""
     from mcchain.execution import start_run
 
     out = tmp_path_factory.mktemp("reference")
-    result = start_run(SWEEP, samples=300, chunk_size=100, out=out, progress=False)
-    return (result.folder / "ensemble.nc").read_bytes()
+    return start_run(SWEEP, samples=300, chunk_size=100, out=out, progress=False).folder
+
+
+@pytest.fixture(scope="module")
+def reference(completed: Path) -> bytes:
+    """The bytes of :func:`completed`'s ensemble.nc."""
+    return (completed / "ensemble.nc").read_bytes()
 
 
 class FillingDisk:
@@ -282,3 +288,79 @@ def test_all_failed__some_failures_exit_0(tmp_path, monkeypatch, capsys):
         "run", SWEEP, "--samples", "20", "--out", "runs", "--quiet", cwd=tmp_path
     )
     assert ran.returncode == 0 and ran.stderr == "", ran.stderr
+
+
+# -- the run folder removed or made unwritable -------------------------------------------------
+
+
+def _at_second_part(monkeypatch: pytest.MonkeyPatch, action: Any) -> None:
+    """``action(run folder)`` just before the second part file is written."""
+    from mcchain.ensemble import io
+
+    write_part, count = io.write_part, [0]
+
+    def part(chunk: Any, directory: Path, start: int, stop: int) -> Any:
+        count[0] += 1
+        if count[0] == 2:
+            action(Path(directory).parent)
+        return write_part(chunk, directory, start, stop)
+
+    monkeypatch.setattr(io, "write_part", part)
+
+
+def test_folder_removed__one_line_naming_it_exit_1(tmp_path, monkeypatch, capsys):
+    _at_second_part(monkeypatch, shutil.rmtree)
+    ran = in_process(monkeypatch, capsys)("run", SWEEP, *RUN_ARGS, "--out", "runs", cwd=tmp_path)
+    assert list((tmp_path / "runs").iterdir()) == []
+    assert_one_line(ran, 1, "runs/", "-clearance-sweep: the run folder was removed while the run")
+    assert ran.stdout == ""
+
+
+def test_folder_made_unwritable__one_line_naming_it_exit_1(tmp_path, monkeypatch, capsys):
+    """The folder's permission taken away (as a non-root user sees it: os.access says no and
+    a new file cannot be made); its finished chunk is kept."""
+    locked: list[Path] = []
+    access = os.access
+
+    def lock(folder: Path) -> None:
+        locked.extend([folder.resolve(), (folder / "parts").resolve()])
+
+    def denied(path: Any, mode: int, *args: Any, **kwargs: Any) -> bool:
+        return False if Path(path).resolve() in locked else access(path, mode, *args, **kwargs)
+
+    def chunk(variables: Any, path: Path) -> None:
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+
+    from mcchain.ensemble import io
+
+    write_chunk = io._write_chunk
+    monkeypatch.setattr(os, "access", denied)
+    monkeypatch.setattr(
+        io, "_write_chunk", lambda v, p: chunk(v, p) if locked else write_chunk(v, p)
+    )
+    _at_second_part(monkeypatch, lock)
+    ran = in_process(monkeypatch, capsys)("run", SWEEP, *RUN_ARGS, "--out", "runs", cwd=tmp_path)
+    (folder,) = (tmp_path / "runs").iterdir()
+    name = Path("runs") / folder.name
+    assert_one_line(
+        ran, 1, f"{name}: the run folder was made unwritable while the run went; the finished "
+        f"chunks are kept: make it writable and complete it with: mcchain run --resume {name}"
+    )  # fmt: skip
+    assert len(list((folder / "parts").iterdir())) == 1
+
+
+# -- show --save onto an existing file ---------------------------------------------------------
+
+
+def test_show_save__an_existing_file_is_refused_without_force(
+    tmp_path, monkeypatch, capsys, completed
+):
+    """Refused before the run is opened, the file untouched; --force overwrites it."""
+    (tmp_path / "old.rrd").write_bytes(b"an earlier recording")
+    run = in_process(monkeypatch, capsys)
+    ran = run("show", completed, "--samples", "0", "--save", "old.rrd", cwd=tmp_path)
+    assert_usage_error(ran, "--save: old.rrd already exists (add --force to overwrite it)")
+    assert (tmp_path / "old.rrd").read_bytes() == b"an earlier recording"
+    ran = run("show", completed, "--samples", "0", "--save", "old.rrd", "--force", cwd=tmp_path)
+    assert ran.returncode == 0 and ran.stdout == "samples 0\nold.rrd\n", ran.stderr
+    assert (tmp_path / "old.rrd").read_bytes()[:4] == b"RRF2"  # a rerun recording now
