@@ -620,6 +620,8 @@ def _outside_failure(job: Job, folder: Path, exc: BaseException) -> RunFailed | 
     and the code, with the finished chunks kept: its folder removed or made unwritable, or
     its file system full (``ENOSPC``, or netCDF's "HDF error" while less space is free
     than the run still writes); None for any other failure (which is re-raised as is)."""
+    if not isinstance(exc, Exception):  # Ctrl-C: "interrupted", exit 130
+        return None
     resume = f"mcchain run --resume {folder}"
     if not folder.is_dir():
         return RunFailed(
