@@ -217,8 +217,9 @@ class DiskEstimate:
 
     def line(self) -> str:
         """The line of ``mcchain validate``: the peak and its parts."""
+        samples = f"{self.nsample} sample{'' if self.nsample == 1 else 's'}"
         return (
-            f"disk: a run of {self.nsample} samples writes up to {size_text(self.peak())} at "
+            f"disk: a run of {samples} writes up to {size_text(self.peak())} at "
             f"its merge (part files {size_text(self.parts())} + ensemble.nc up to "
             f"{size_text(self.merged)}; {size_text(self.sample_bytes)} per sample uncompressed)"
         )
