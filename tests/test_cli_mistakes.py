@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 from test_cli_commands import assert_scene_refused, assert_usage_error, in_process
 
+from mcchain.errors import SceneError
 from mcchain.testing.factory import clearance_bar_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,12 +60,47 @@ def test_units__a_clearance_in_mm_is_one_line_exit_2(
     assert_usage_error(ran("validate", "scene.toml", cwd=tmp_path), fragment, METRES)
 
 
-def test_units__clearances_up_to_the_share_pass(tmp_path, monkeypatch, capsys):
-    """25 mm on the bar (its limit) and a normal whose mean + 4 std is 24 mm load."""
+def test_units__clearances_up_to_the_share_pass() -> None:
+    """25 mm on the bar (its limit), a normal whose mean + 4 std is 24 mm, a lognormal whose
+    exp(mu + 4 sigma) is 24.8 mm and a choice up to 25 mm load."""
     from mcchain.scene import load_scene_text
 
     load_scene_text(BAR.replace("clearance = 0.001", "clearance = 0.025"))
     load_scene_text(BAR + VARY.format(dist="normal = [0.016, 0.002]"))
+    load_scene_text(BAR + VARY.format(dist="lognormal = [-4.097, 0.1]"))
+    load_scene_text(BAR + VARY.format(dist="choice = [1e-3, 0.025]"))
+    with pytest.raises(SceneError, match=r"lognormal: exp\(mu \+ 4 sigma\) 0.0252"):
+        load_scene_text(BAR + VARY.format(dist="lognormal = [-4.08, 0.1]"))
+
+
+@pytest.mark.parametrize(
+    ("config", "joint", "expected"),
+    [
+        ("fourbar-clearance", "B", (0.125, "the centre of mass of body 'rocker'")),
+        ("fourbar-clearance", "O4", (0.125, "the centre of mass of body 'rocker'")),
+        ("fourbar-clearance", "A", (0.05, "the centre of mass of body 'crank'")),
+        # the pin sits at the slider's centre of mass: the rod's half length counts
+        ("slider-crank-flores", "B", (0.06, "the centre of mass of body 'rod'")),
+        ("paper-bar", "O", (0.5, "the centre of mass of body 'bar'")),
+    ],
+)
+def test_units__neighbouring_dimension_of_the_shipped_joints(config, joint, expected) -> None:
+    from mcchain.scene import load_scene
+    from mcchain.scene.checks import neighbouring_dimension
+
+    scene = load_scene(REPO / "configs" / f"{config}.toml")
+    index = [j.name for j in scene.joint].index(joint)
+    assert neighbouring_dimension(scene, index) == expected
+
+
+def test_units__a_lone_joint_at_the_centre_of_mass_is_not_checked() -> None:
+    """A disc pinned at its centre to the ground: no distance to measure a clearance by."""
+    from mcchain.scene import load_scene_text
+    from mcchain.scene.checks import neighbouring_dimension
+
+    disc = BAR.replace("[-0.5, 0.0]]", "[0.0, 0.0]]").replace("[0.0, -0.501]", "[0.0, -0.001]")
+    assert neighbouring_dimension(load_scene_text(disc), 0) is None
+    load_scene_text(disc.replace("clearance = 0.001", "clearance = 0.5"))
 
 
 # -- disk --------------------------------------------------------------------------------------
