@@ -426,10 +426,10 @@ def execute(
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
             message = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).strip()
-            record["error"] = message or type(exc).__name__
+            outside = _outside_failure(job, folder, exc)
+            record["error"] = str(outside) if outside else message or type(exc).__name__
             session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
             log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
-            outside = _outside_failure(job, folder, exc)
             try:
                 write_record(folder, record)
             except OSError:

@@ -15,6 +15,7 @@ import pytest
 from test_cli_commands import assert_scene_refused, assert_usage_error, in_process
 
 from mcchain.errors import SceneError
+from mcchain.runs import read_record
 from mcchain.testing.factory import clearance_bar_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -378,11 +379,13 @@ def test_folder_made_unwritable__one_line_naming_it_exit_1(tmp_path, monkeypatch
     ran = in_process(monkeypatch, capsys)("run", SWEEP, *RUN_ARGS, "--out", "runs", cwd=tmp_path)
     (folder,) = (tmp_path / "runs").iterdir()
     name = Path("runs") / folder.name
-    assert_one_line(
+    line = assert_one_line(
         ran, 1, f"{name}: the run folder was made unwritable while the run went; the finished "
         f"chunks are kept: make it writable and complete it with: mcchain run --resume {name}"
     )  # fmt: skip
     assert len(list((folder / "parts").iterdir())) == 1
+    record = read_record(folder)  # only os.access says no here: run.json is still written
+    assert record["status"] == "FAILED" and record["error"] == line.removeprefix("mcchain: error: ")
 
 
 # -- show --save onto an existing file ---------------------------------------------------------
