@@ -361,7 +361,9 @@ def execute(
     session's ``rerun`` entry). The stream is closed before the merge.
 
     A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
-    with a note naming the folder to resume.
+    with a note naming the folder to resume; a failure from outside (a full disk, the
+    folder removed or made unwritable: :func:`_outside_failure`) raises :class:`RunFailed`
+    instead, one line that says so, and ``run.json`` is left as it is if it cannot be written.
     """
     from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries
 
@@ -469,9 +471,9 @@ def start_run(
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
-    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices) happens
-    before the folder is created: a bad input raises ``SceneError``/``RunError`` and writes
-    nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
+    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices, the disk
+    space: :func:`mcchain.resources.check_disk`) happens before the folder is created: a
+    bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
 
     ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
     the console script only): a background process compiles them for the next runs, and
@@ -498,6 +500,7 @@ def start_run(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
         check_live(rerun, job.nsample)
+        check_disk(job.disk, out if run_dir is None else run_dir)
         if interpreted:
             from mcchain.compile_ahead import start_background
 
@@ -508,7 +511,6 @@ def start_run(
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
-        check_disk(job.disk, out if run_dir is None else run_dir)
         prepare_seconds = time.perf_counter() - t0
         folder = create_run_folder(out, job.scene_name, run_dir)
         with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
@@ -564,6 +566,9 @@ def resume_run(
     ``ensemble.damaged.nc``): the chunks whose part files are gone (a completed run keeps
     none) are computed again, and runs are deterministic, so the file is the one the run
     wrote first.
+
+    A resume whose missing part files and merge would not fit in the free space is refused
+    before anything changes (:func:`mcchain.resources.check_disk`).
     """
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
 
