@@ -473,7 +473,8 @@ def start_run(
 
     Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices, the disk
     space: :func:`mcchain.resources.check_disk`) happens before the folder is created: a
-    bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
+    bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams
+    samples to rerun while the run goes (:class:`LiveOptions`).
 
     ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
     the console script only): a background process compiles them for the next runs, and
