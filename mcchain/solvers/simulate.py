@@ -758,7 +758,8 @@ def simulate(
             by a singular evaluation reports every call up to it); ``rejected_steps`` -1,
             scipy does not count them. generalized-alpha: the steps completed (up to a
             failure), ``rejected_steps`` 0, ``evaluations`` 1 (the start's index-1 solve) +
-            one residual per Newton iteration. Samples failed on entry: all 0 (radau's
+            one residual per Newton iteration (+ 1: the index-1 solve after a last step
+            shortened to land on t_end). Samples failed on entry: all 0 (radau's
             ``rejected_steps`` -1).
 
     Returns:
