@@ -221,9 +221,10 @@ def _check_section(folder: Path) -> str:
 
 def _figures_section(report: Report, out: Path) -> str:
     parts = ["<h2>Figures</h2>"]
-    for path in report.written:
-        if path.suffix != ".png" or path.parent.resolve() != out.resolve():
-            continue
+    # the decision first, then the figures in the order the report drew them
+    pngs = [p for p in report.written if p.suffix == ".png" and p.parent.resolve() == out.resolve()]
+    pngs.sort(key=lambda p: p.name != "requirements.png")
+    for path in pngs:
         parts.append(
             f'<figure><img src="{_e(path.name)}" alt="{_e(path.name)}">'
             f"<figcaption><b>{_e(path.name)}</b>: {_e(caption(path.name))}</figcaption></figure>"
