@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_cli_commands import Ran, assert_usage_error
-from test_decision_closed_form import J_HIGH, J_LOW, LIMIT, A, M, pinned_bar_text
+from test_decision_closed_form import J_HIGH, J_LOW, LIMIT, A, M, pinned_bar_text, run_pinned_bar
 
 from mcchain.testing.closed_forms import bar_pulsation, pinned_bar_exceedance
 from mcchain.viz.report_requirements import binned_failure, exceedance
@@ -21,21 +21,7 @@ SAMPLES = 600
 
 @pytest.fixture(scope="module")
 def reported_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    import contextlib
-    import io
-
-    from mcchain.cli import main
-
-    folder = tmp_path_factory.mktemp("reported")
-    (folder / "bar.toml").write_text(pinned_bar_text(SAMPLES))
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        assert (
-            main(["run", str(folder / "bar.toml"), "--out", str(folder / "runs"), "--quiet"]) == 0
-        )
-        run = Path(out.getvalue().strip().splitlines()[-1])
-        assert main(["report", str(run)]) == 0
-    return run
+    return run_pinned_bar(tmp_path_factory.mktemp("reported"), SAMPLES, ["report"])
 
 
 class Page(HTMLParser):
