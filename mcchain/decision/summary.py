@@ -350,7 +350,12 @@ def summary_lines(
             lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
             lines += alloc
     if summaries:
-        if design in EXACT_DESIGNS:
+        if design is None:
+            lines.append(
+                "intervals: the scene has no [sample]: its instances are all the same, so the "
+                "binomial interval describes no scatter (add a [sample] table)"
+            )
+        elif design in EXACT_DESIGNS:
             lines.append(
                 "intervals: exact Clopper-Pearson (independent random draws); each verdict "
                 "is wrong with probability at most (1 - confidence)/2"
