@@ -278,9 +278,12 @@ def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
         "fail": f"FAIL: P(fail) > {_g(s.target)} shown",
         UNDECIDED: f"UNDECIDED: the interval contains the target {_g(s.target)}",
     }[s.decision]
-    approx = (
-        "" if s.exact else f" [approximate: design {design!r} does not draw independent samples]"
-    )
+    if s.exact:
+        approx = ""
+    elif design is None:
+        approx = " [approximate: no [sample], the instances are all the same]"
+    else:
+        approx = f" [approximate: design {design!r} does not draw independent samples]"
     lines = [
         f"requirement {s.name} ({limit}; target {_g(s.target)}, confidence {_g(s.confidence)}): "
         f"{words}{approx}",
