@@ -353,12 +353,7 @@ def summary_lines(
             lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
             lines += alloc
     if summaries:
-        if design is None:
-            lines.append(
-                "intervals: the scene has no [sample]: its instances are all the same, so the "
-                "binomial interval describes no scatter (add a [sample] table)"
-            )
-        elif design in EXACT_DESIGNS:
+        if design in EXACT_DESIGNS:
             lines.append(
                 "intervals: exact Clopper-Pearson (independent random draws); each verdict "
                 "is wrong with probability at most (1 - confidence)/2"
@@ -367,6 +362,9 @@ def summary_lines(
             lines.append(
                 f"intervals: binomial (Clopper-Pearson), APPROXIMATE for design {design!r}: "
                 'its samples are not independent draws; use design = "random" for a decision'
+                if design is not None
+                else "intervals: the scene has no [sample]: its instances are all the same, so "
+                "the binomial interval describes no scatter (add a [sample] table)"
             )
     return lines
 
