@@ -329,6 +329,9 @@ def _requirement_lines(folder: Path) -> list[str]:
     ds = open_ensemble(folder / ENSEMBLE)
     try:
         return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+    except Exception as exc:  # the ensemble is complete: a summary error must not fail the run
+        log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
+        return [f"requirements: the summary failed ({exc}); see the run log"]
     finally:
         ds.close()
 
@@ -424,8 +427,6 @@ def execute(
                 merged.throughput,
             )
             counts = _status_counts(folder / ENSEMBLE)
-            if getattr(job.scene, "requirement", None):
-                record["requirements"] = _requirement_lines(folder)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
@@ -436,6 +437,8 @@ def execute(
             write_record(folder, record)
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
+        if getattr(job.scene, "requirement", None):
+            record["requirements"] = _requirement_lines(folder)
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
         write_record(folder, record)
