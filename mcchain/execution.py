@@ -329,9 +329,6 @@ def _requirement_lines(folder: Path) -> list[str]:
     ds = open_ensemble(folder / ENSEMBLE)
     try:
         return summary_lines(summarize(ds), allocations(ds), design_of(ds))
-    except Exception as exc:  # the ensemble is complete: a summary error must not fail the run
-        log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
-        return [f"requirements: the summary failed ({exc}); see the run log"]
     finally:
         ds.close()
 
@@ -438,7 +435,11 @@ def execute(
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
         if getattr(job.scene, "requirement", None):
-            record["requirements"] = _requirement_lines(folder)
+            try:
+                record["requirements"] = _requirement_lines(folder)
+            except Exception as exc:  # the ensemble is complete: this must not fail the run
+                log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
+                record["requirements"] = [f"requirements: the summary failed ({exc}); see run.log"]
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
         write_record(folder, record)
