@@ -112,6 +112,7 @@ class RunResult:
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))
+        lines += r.get("requirements") or []
         return lines
 
 
@@ -203,6 +204,7 @@ def _compute(
 ) -> ExecutionStats:
     """Solve the chunks that have no part file yet, writing each as a part file (and
     streaming the ``--rerun`` samples they hold to ``live``)."""
+    from mcchain.decision.requirements import job_requirements
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
     from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
@@ -225,10 +227,19 @@ def _compute(
     if not missing:
         return ExecutionStats(scheduler="none (all chunks present)")
 
+    requirements = job_requirements(job)
+
     def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
         chunk = job.model.select(start, stop)
+        if requirements is not None:
+            outputs = requirements.add_to(outputs)
         variables = chunk_variables(
-            outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
+            outputs,
+            chunk,
+            start=start,
+            history_dtype=job.history_dtype,
+            attrs=attrs,
+            **(requirements.chunk_keywords() if requirements is not None else {}),
         )
         write_part(variables, parts_dir, start, stop)
 
@@ -330,6 +341,19 @@ def _complete(
         record["workers"] = stats.worker_info
 
 
+def _requirement_lines(folder: Path) -> list[str]:
+    """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
+    from the merged ensemble; ``mcchain export --requirements`` writes it with the CSVs."""
+    from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
+    from mcchain.ensemble.io import open_ensemble
+
+    ds = open_ensemble(folder / ENSEMBLE)
+    try:
+        return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+    finally:
+        ds.close()
+
+
 def execute(
     job: Job,
     folder: Path,
@@ -426,6 +450,14 @@ def execute(
                 merged.throughput,
             )
             counts, failed = _status_counts(folder / ENSEMBLE)
+            if getattr(job.scene, "requirement", None):
+                try:
+                    record["requirements"] = _requirement_lines(folder)
+                except Exception as error:  # the ensemble is complete: this must not fail the run
+                    log.error("requirement summary failed: %s\n%s", error, traceback.format_exc())
+                    record["requirements"] = [
+                        f"requirements: the summary failed ({error}); see run.log"
+                    ]
             total = time.perf_counter() - t_start + prepare_seconds
             _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
             write_record(folder, record)
