@@ -135,6 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--resume", metavar="RUN", help="complete an interrupted run folder")
     run.add_argument(
+        "--extend",
+        metavar="RUN",
+        help="add --samples N samples to a completed run (the same design continued)",
+    )
+    run.add_argument(
         "--remerge",
         action="store_true",
         help="with --resume: rebuild the run's ensemble.nc (a damaged one is kept as "
@@ -271,7 +276,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
     progress = False if args.quiet else None
     live = _live_options(args)
     argv = ["mcchain", *sys.argv[1:]]
-    if args.resume is not None:
+    if args.extend is not None:
+        conflicting = [
+            flag
+            for flag, value in (
+                ("SCENE", args.scene),
+                ("--seed", args.seed),
+                ("--chunk-size", args.chunk_size),
+                ("--out", args.out),
+                ("--run-dir", args.run_dir),
+                ("--resume", args.resume),
+                ("--remerge", args.remerge or None),
+            )
+            if value is not None
+        ]
+        if conflicting:
+            return _fail(f"--extend: cannot be combined with {', '.join(conflicting)}")
+        if args.samples is None:
+            return _fail("--extend: give the number of samples to add: --samples N")
+        result = execution.extend_run(
+            args.extend,
+            args.samples,
+            dask=args.dask,
+            threads=args.threads,
+            argv=argv,
+            progress=progress,
+            rerun=live,
+        )
+    elif args.resume is not None:
         conflicting = [
             flag
             for flag, value in (

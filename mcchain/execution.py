@@ -24,7 +24,7 @@ import re
 import sys
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -174,7 +174,9 @@ def _compute(
     job: Job,
     parts_dir: Path,
     attrs: Mapping[str, Any],
+    chunks: Sequence[tuple[int, int]],
     *,
+    base: int = 0,
     dask: str | None,
     threads: int | None,
     solve: SolveFn | None,
@@ -182,21 +184,22 @@ def _compute(
     live: LiveRun | None = None,
     compile_ahead: CompileAhead | None = None,
 ) -> ExecutionStats:
-    """Solve the chunks that have no part file yet, writing each as a part file (and
-    streaming the ``--rerun`` samples they hold to ``live``)."""
+    """Solve the ``chunks`` that have no part file yet and do not lie in the first ``base``
+    samples (those ``ensemble.nc`` holds before ``--extend`` adds to it), writing each as a
+    part file (and streaming the ``--rerun`` samples they hold to ``live``)."""
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
-    from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
+    from mcchain.parallel import ExecutionStats, Progress, run_dask, run_local
 
-    chunks = plan_chunks(job.nsample, job.chunk_size)
     done = {(p.start, p.stop) for p in list_parts(parts_dir)}
     if done - set(chunks):
         raise RunError(f"{parts_dir}: part files do not match chunk size {job.chunk_size}")
+    done |= {c for c in chunks if c[1] <= base}
     missing = [c for c in chunks if c not in done]
     log.info(
         "scene %s: %d samples, %d chunks of %d, %d to compute",
         job.scene_name,
-        job.nsample,
+        chunks[-1][1],
         len(chunks),
         job.chunk_size,
         len(missing),
@@ -323,8 +326,15 @@ def execute(
     prepare_seconds: float = 0.0,
     rerun: LiveOptions | None = None,
     compile_ahead: CompileAhead | None = None,
+    grow: GrowFn | None = None,
 ) -> RunResult:
     """Compute the missing chunks of a run folder, merge them, and complete ``run.json``.
+
+    The run has ``run.json["samples"]`` samples, chunked by :func:`run_chunks`. While an
+    ``--extend`` is unfinished, ``ensemble.nc`` holds the samples the run had before it
+    (:func:`extension_base`): they are merged with the new parts, never computed again.
+    ``grow(folder, nsample)`` (``[sample] until``) is asked after the chunks are computed
+    whether the run needs more samples: it returns the new count, or None to stop.
 
     Phases timed in ``run.json["timings"]`` (seconds, summed over sessions): ``prepare``
     (load, compile, check), ``warmup`` (kernel compile/cache load, cluster start),
@@ -344,9 +354,11 @@ def execute(
     A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
     with a note naming the folder to resume.
     """
-    from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries
+    from mcchain.ensemble.io import Part, list_parts, merge_parts, remove_temporaries
 
     t_start = time.perf_counter()
+    base = extension_base(folder, record)
+    nsample = int(record["samples"])
     session: dict[str, Any] = {"argv": list(argv), "start": _now(), "end": None, "pid": os.getpid()}
     record.update(status=RUNNING, end=None, error=None, pid=os.getpid())
     record["sessions"].append(session)
@@ -373,6 +385,8 @@ def execute(
                     job,
                     parts_dir,
                     job.attributes(versions),
+                    run_chunks(record, job.chunk_size),
+                    base=base,
                     dask=dask,
                     threads=threads,
                     solve=solve,
@@ -383,12 +397,36 @@ def execute(
             finally:
                 if live is not None:
                     live.close()
+            while grow is not None:
+                more = grow(folder, nsample)
+                if more is None:
+                    break
+                record["restarts"] = sorted({*record.get("restarts", []), nsample})
+                nsample = record["samples"] = int(more)
+                record["chunks"] = len(run_chunks(record, job.chunk_size))
+                write_record(folder, record)
+                added = _compute(
+                    job,
+                    parts_dir,
+                    job.attributes(versions),
+                    run_chunks(record, job.chunk_size),
+                    dask=dask,
+                    threads=threads,
+                    solve=solve,
+                    progress=progress,
+                )
+                stats = _add_stats(stats, added)
+            parts = list_parts(parts_dir)
+            if base:
+                parts = [Part(0, base, folder / ENSEMBLE), *parts]
+            grown = base > 0 or nsample != job.nsample
             merged = merge_parts(
-                list_parts(parts_dir),
+                parts,
                 folder / ENSEMBLE,
                 compression=job.compression,
                 complevel=job.complevel,
-                nsample=job.nsample,
+                nsample=nsample,
+                attrs=job.resized(nsample).attributes(versions) if grown else None,
             )
             log.info(
                 "merged %d parts into %s: %.1f MB -> %.1f MB in %.2f s (%.0f MB/s)",
@@ -412,6 +450,8 @@ def execute(
             raise
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
+        if record.get("extensions"):
+            record["extensions"][-1].setdefault("end", session["end"])
         write_record(folder, record)
         log.info("run completed: %s", json.dumps(counts))
         if not keep_parts:
@@ -564,6 +604,7 @@ def resume_run(
         raise RunError(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
+    job = _keep_kernels(job, record.get("kernels"))
     check_live(rerun, job.nsample)
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
@@ -580,6 +621,45 @@ def resume_run(
         keep_parts=keep_parts,
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
+    )
+
+
+GrowFn = Callable[[Path, int], "int | None"]
+"""``grow(folder, nsample) -> new count or None``: whether a run whose first ``nsample``
+samples are computed (as part files in ``folder``) needs more (``[sample] until``)."""
+
+
+def run_chunks(record: Mapping[str, Any], chunk_size: int) -> list[tuple[int, int]]:
+    """The chunks of a run: ``run.json["samples"]`` in chunks of ``chunk_size``, the chunking
+    starting again at every count the run had before it grew (``run.json["restarts"]``)."""
+    from mcchain.parallel import plan_chunks
+
+    return plan_chunks(int(record["samples"]), chunk_size, record.get("restarts", ()))
+
+
+def extension_base(folder: Path, record: Mapping[str, Any]) -> int:
+    """How many samples an unfinished ``--extend`` keeps from ``ensemble.nc`` (0 if none:
+    no extension under way, or ``--remerge`` moved the file aside)."""
+    extensions = record.get("extensions") or []
+    if not extensions or "end" in extensions[-1] or not (Path(folder) / ENSEMBLE).exists():
+        return 0
+    return int(extensions[-1]["from"])
+
+
+def _add_stats(a: ExecutionStats, b: ExecutionStats) -> ExecutionStats:
+    """The figures of two executions of one session (``until`` batches), summed."""
+    from dataclasses import replace
+
+    last = b if b.chunks else a
+    return replace(
+        last,
+        chunks=a.chunks + b.chunks,
+        samples=a.samples + b.samples,
+        warmup=a.warmup + b.warmup,
+        compute=a.compute + b.compute,
+        kernel=a.kernel + b.kernel,
+        write=a.write + b.write,
+        worker_info=a.worker_info + b.worker_info,
     )
 
 
@@ -605,3 +685,106 @@ def _check_threads(threads: int | None, dask: str | None) -> None:
         limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
         if threads > limit:
             raise RunError(f"--threads: at most {limit} on this machine, got {threads}")
+
+
+CONTINUABLE_DESIGNS = ("random", "sobol")
+"""Designs whose sample i does not depend on the count, so a run can be continued."""
+
+
+def extend_run(
+    run: str | Path,
+    samples: int,
+    *,
+    dask: str | None = None,
+    threads: int | None = None,
+    argv: Sequence[str] | None = None,
+    loader: Loader | None = None,
+    solve: SolveFn | None = None,
+    progress: bool | None = None,
+    keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
+) -> RunResult:
+    """Add ``samples`` samples to a completed run (``mcchain run --extend RUN --samples N``).
+
+    The design is continued: samples ``n .. n + samples - 1`` are the ones a run of
+    ``n + samples`` would have drawn (``random``: the same Philox stream; ``sobol``: the
+    same scrambled sequence, continued), computed as new part files (chunked from ``n``)
+    and merged with ``ensemble.nc`` into a new ``ensemble.nc``. The result is, variable by
+    variable, the ensemble of one run with the total count. A design whose points depend on
+    the count (``lhs``, ``saltelli``) is refused, as is a scene without ``[sample]``.
+
+    The run keeps its kernels (``run.json["kernels"]``), so every sample of it is computed
+    on one path. The old ``ensemble.nc`` stays in place until the merged one replaces it:
+    an interrupted extension is completed by ``mcchain run --resume RUN``.
+    """
+    from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
+
+    t0 = time.perf_counter()
+    check_positive("--samples", samples)
+    folder = resolve_run(run)
+    record = read_record(folder)
+    if is_locked(folder):
+        raise RunError(f"{run}: the run is being executed by another process")
+    ensemble = folder / ENSEMBLE
+    if record.get("status") != COMPLETED or not ensemble.exists():
+        raise RunError(
+            f"--extend: {run} is not completed (complete it first: mcchain run --resume {run})"
+        )
+    try:
+        open_ensemble(ensemble).close()
+    except DamagedEnsemble as exc:
+        raise RunError(f"--extend: {exc}") from None
+    _check_threads(threads, dask)
+    old = int(record["samples"])
+    total = old + samples
+    job = prepare_job(
+        folder / SCENE_COPY,
+        samples=total,
+        seed=record.get("seed"),
+        chunk_size=int(record["chunk_size"]),
+        loader=loader,
+    )
+    sample = getattr(job.scene, "sample", None)
+    if sample is None:
+        raise RunError("--extend: the scene has no [sample] section (one instance, no design)")
+    design = getattr(sample, "design", "random")
+    if design not in CONTINUABLE_DESIGNS:
+        raise RunError(
+            f'--extend: design "{design}" cannot be continued (its points depend on the '
+            f"count); run the scene again with --samples {total}"
+        )
+    job = _keep_kernels(job, record.get("kernels"))
+    check_live(rerun, total)
+    record.setdefault("extensions", []).append({"from": old, "to": total, "start": _now()})
+    record["restarts"] = sorted({*record.get("restarts", []), old})
+    record["samples"] = total
+    record["chunks"] = len(run_chunks(record, job.chunk_size))
+    argv = list(sys.argv if argv is None else argv)
+    return execute(
+        job,
+        folder,
+        record,
+        argv=argv,
+        dask=dask,
+        threads=threads,
+        solve=solve,
+        progress=progress,
+        keep_parts=keep_parts,
+        prepare_seconds=time.perf_counter() - t0,
+        rerun=rerun,
+    )
+
+
+def _keep_kernels(job: Job, kernels: str | None) -> Job:
+    """``job`` integrating on ``kernels`` (the path a run took, ``run.json["kernels"]``):
+    ``[simulate] kernels = "auto"`` chooses by the sample count, and a run that grew must not
+    change path halfway."""
+    sim = getattr(job.scene, "simulate", None)
+    if kernels is None or sim is None or getattr(sim, "kernels", None) in (None, kernels):
+        return job
+    from dataclasses import replace
+
+    from mcchain.job import resolved_settings
+
+    scene = job.scene.model_copy(update={"simulate": sim.model_copy(update={"kernels": kernels})})
+    return replace(job, scene=scene, settings=resolved_settings(scene, job.nsample, job.seed))
