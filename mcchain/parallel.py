@@ -21,6 +21,7 @@ Progress (chunks done, samples/s, ETA) goes to stderr through tqdm, only on a te
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import sys
@@ -75,7 +76,7 @@ def plan_chunks(
     bounds = sorted({0, nsample, *(b for b in restarts if 0 < b < nsample)})
     return [
         (s, min(s + chunk_size, stop))
-        for begin, stop in zip(bounds[:-1], bounds[1:], strict=True)
+        for begin, stop in itertools.pairwise(bounds)
         for s in range(begin, stop, chunk_size)
     ]
 
