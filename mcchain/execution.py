@@ -93,6 +93,10 @@ class RunResult:
                 else ""
             ),
         ]
+        until = r.get("until")
+        if until and until.get("stopped"):
+            looks = len(until.get("looks", []))
+            lines.append(f"until decided: {until['stopped']} ({looks} looks, {until['method']})")
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))
@@ -333,7 +337,7 @@ def execute(
     The run has ``run.json["samples"]`` samples, chunked by :func:`run_chunks`. While an
     ``--extend`` is unfinished, ``ensemble.nc`` holds the samples the run had before it
     (:func:`extension_base`): they are merged with the new parts, never computed again.
-    ``grow(folder, nsample)`` (``[sample] until``) is asked after the chunks are computed
+    ``grow(folder, record, nsample)`` (``[sample] until``) is asked after the chunks are computed
     whether the run needs more samples: it returns the new count, or None to stop.
 
     Phases timed in ``run.json["timings"]`` (seconds, summed over sessions): ``prepare``
@@ -398,7 +402,7 @@ def execute(
                 if live is not None:
                     live.close()
             while grow is not None:
-                more = grow(folder, nsample)
+                more = grow(folder, record, nsample)
                 if more is None:
                     break
                 record["restarts"] = sorted({*record.get("restarts", []), nsample})
@@ -511,7 +515,12 @@ def start_run(
         job = prepare_job(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
-        check_live(rerun, job.nsample)
+        from mcchain.decision.until import sequential_job
+
+        job, grow = sequential_job(
+            job, Path(scene_path), seed=seed, chunk_size=chunk_size, loader=loader
+        )
+        check_live(rerun, job.model.nsample)
         if interpreted:
             from mcchain.compile_ahead import start_background
 
@@ -528,6 +537,8 @@ def start_run(
             f.write(job.scene_text)
         argv = list(sys.argv if argv is None else argv)
         record = _new_record(job, folder, argv, Path(scene_path))
+        if grow is not None:
+            record["until"] = grow.describe()
         return execute(
             job,
             folder,
@@ -541,6 +552,7 @@ def start_run(
             prepare_seconds=prepare_seconds,
             rerun=rerun,
             compile_ahead=ahead,
+            grow=grow,
         )
     except Exception as exc:
         if not interpreted or isinstance(exc, (McchainError, OSError)):
@@ -604,6 +616,19 @@ def resume_run(
         raise RunError(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
+    grow = None
+    if record.get("until"):
+        from mcchain.decision.until import sequential_job
+
+        job, grow = sequential_job(
+            job,
+            folder / SCENE_COPY,
+            seed=record.get("seed"),
+            chunk_size=int(record["chunk_size"]),
+            loader=loader,
+            batch=int(record["until"]["batch"]),
+            nsample=job.nsample,
+        )
     job = _keep_kernels(job, record.get("kernels"))
     check_live(rerun, job.nsample)
     if remerge and ensemble.exists():
@@ -621,12 +646,14 @@ def resume_run(
         keep_parts=keep_parts,
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
+        grow=grow,
     )
 
 
-GrowFn = Callable[[Path, int], "int | None"]
-"""``grow(folder, nsample) -> new count or None``: whether a run whose first ``nsample``
-samples are computed (as part files in ``folder``) needs more (``[sample] until``)."""
+GrowFn = Callable[[Path, dict[str, Any], int], "int | None"]
+"""``grow(folder, record, nsample) -> new count or None``: whether a run whose first
+``nsample`` samples are computed (as part files in ``folder``) needs more (``[sample]
+until``); it may note what it saw in ``record`` (``run.json``), written next."""
 
 
 def run_chunks(record: Mapping[str, Any], chunk_size: int) -> list[tuple[int, int]]:

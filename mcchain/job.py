@@ -68,7 +68,7 @@ class Job:
         the model is kept (it must hold at least ``nsample`` samples), the settings follow."""
         if nsample > self.model.nsample:
             raise ValueError(f"nsample: the model holds {self.model.nsample}, asked {nsample}")
-        settings = resolved_settings(self.scene, nsample, self.seed)
+        settings = {**self.settings, **resolved_settings(self.scene, nsample, self.seed)}
         return replace(self, nsample=int(nsample), settings=settings)
 
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
