@@ -191,6 +191,7 @@ def _compute(
     """Solve the ``chunks`` that have no part file yet and do not lie in the first ``base``
     samples (those ``ensemble.nc`` holds before ``--extend`` adds to it), writing each as a
     part file (and streaming the ``--rerun`` samples they hold to ``live``)."""
+    from mcchain.decision.requirements import job_requirements
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
     from mcchain.parallel import ExecutionStats, Progress, run_dask, run_local
@@ -213,10 +214,19 @@ def _compute(
     if not missing:
         return ExecutionStats(scheduler="none (all chunks present)")
 
+    requirements = job_requirements(job)
+
     def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
         chunk = job.model.select(start, stop)
+        if requirements is not None:
+            outputs = requirements.add_to(outputs)
         variables = chunk_variables(
-            outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
+            outputs,
+            chunk,
+            start=start,
+            history_dtype=job.history_dtype,
+            attrs=attrs,
+            **(requirements.chunk_keywords() if requirements is not None else {}),
         )
         write_part(variables, parts_dir, start, stop)
 
