@@ -433,7 +433,7 @@ def execute(
             parts = list_parts(parts_dir)
             if base:
                 parts = [Part(0, base, folder / ENSEMBLE), *parts]
-            grown = base > 0 or nsample != job.nsample
+            grown = base > 0 or bool(record.get("restarts")) or nsample != job.nsample
             merged = merge_parts(
                 parts,
                 folder / ENSEMBLE,
