@@ -100,6 +100,7 @@ class RunResult:
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))
+        lines += r.get("requirements") or []
         return lines
 
 
@@ -326,6 +327,19 @@ def _complete(
         record["workers"] = stats.worker_info
 
 
+def _requirement_lines(folder: Path) -> list[str]:
+    """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
+    from the merged ensemble; ``mcchain export --requirements`` writes it with the CSVs."""
+    from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
+    from mcchain.ensemble.io import open_ensemble
+
+    ds = open_ensemble(folder / ENSEMBLE)
+    try:
+        return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+    finally:
+        ds.close()
+
+
 def execute(
     job: Job,
     folder: Path,
@@ -452,6 +466,8 @@ def execute(
                 merged.throughput,
             )
             counts = _status_counts(folder / ENSEMBLE)
+            if getattr(job.scene, "requirement", None):
+                record["requirements"] = _requirement_lines(folder)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
