@@ -331,11 +331,13 @@ def _requirement_lines(folder: Path) -> list[str]:
     """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
     from the merged ensemble; ``mcchain export --requirements`` writes it with the CSVs."""
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
+    from mcchain.decision.until import sequential_settings
     from mcchain.ensemble.io import open_ensemble
 
     ds = open_ensemble(folder / ENSEMBLE)
     try:
-        return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+        sequential = sequential_settings(ds.attrs)
+        return summary_lines(summarize(ds), allocations(ds), design_of(ds), sequential)
     finally:
         ds.close()
 

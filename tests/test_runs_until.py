@@ -9,6 +9,7 @@ interval decides, hold the samples of one run of that count bit for bit, and sto
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from test_runs_extend import assert_same_values
 from mcchain import execution, runs
 from mcchain.cli import main
 from mcchain.decision.sequential import confidence_sequence
+from mcchain.decision.summary import export_requirements
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 
 pytestmark = pytest.mark.slow  # real solvers
@@ -99,6 +101,14 @@ def test_until__stops_at_the_first_decided_look_with_the_samples_of_one_run(tmp_
     lower, upper = confidence_sequence(k, counts, 0.95, 0.01)
     assert looks[-1]["requirements"]["rolling"]["p_lower"] == lower.max() > 0.01
     assert looks[-1]["requirements"]["rolling"]["p_upper"] == upper.min()
+    # The export reports that interval and its verdict, and says which interval it is.
+    csv_path, _, txt_path = export_requirements(result.folder)
+    with open(csv_path, encoding="utf-8") as f:
+        (row,) = list(csv.DictReader(f))
+    assert float(row["p_lower"]) == pytest.approx(lower.max(), rel=1e-12)
+    assert float(row["p_upper"]) == pytest.approx(upper.min(), rel=1e-12)
+    assert row["verdict"] == "fail" and int(row["samples"]) == final
+    assert "intervals: sequential" in txt_path.read_text(encoding="utf-8")
     # One run of the final count, no until: the same samples bit for bit.
     plain = write(tmp_path, "plain.toml", scene_text(0.05, 0.01, until=""))
     reference = execution.start_run(
