@@ -200,6 +200,26 @@ def build_parser() -> argparse.ArgumentParser:
     )
     export.add_argument("--out", metavar="FILE", help="the file (default RUN/export/samples.csv)")
 
+    check = sub.add_parser(
+        "check",
+        help="re-solve a subset of a run with a tighter integration and count flipped verdicts",
+        description="re-solve a subset of a run's samples with rtol/atol (or dt) TIGHTEN times "
+        "tighter; per requirement, how many verdicts flip and how far the outputs move "
+        "(RUN/export/check.csv); the run's ensemble is not touched",
+        named_errors=True,
+    )
+    check.add_argument("run", help="run folder (or its id under runs/)")
+    check.add_argument(
+        "--tighten", type=float, required=True, metavar="F", help="tightening factor (e.g. 10)"
+    )
+    check.add_argument(
+        "--samples",
+        type=_positive,
+        default=64,
+        metavar="M",
+        help="samples re-solved, spread evenly over the run (default 64)",
+    )
+
     return parser
 
 
@@ -638,6 +658,16 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_check(args: argparse.Namespace) -> int:
+    from mcchain.decision.check import check_run
+
+    result = check_run(args.run, args.tighten, args.samples)
+    for line in result.lines():
+        print(line)
+    print(result.csv)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -658,6 +688,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "show": _cmd_show,
             "report": _cmd_report,
             "export": _cmd_export,
+            "check": _cmd_check,
         }[command]
         return handler(args)
     except McchainError as exc:

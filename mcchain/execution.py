@@ -657,7 +657,7 @@ def resume_run(
             batch=int(record["until"]["batch"]),
             nsample=job.nsample,
         )
-    job = _keep_kernels(job, record.get("kernels"))
+    job = keep_kernels(job, record.get("kernels"))
     check_live(rerun, job.nsample)
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
@@ -808,7 +808,7 @@ def extend_run(
             f'--extend: design "{design}" cannot be continued (its points depend on the '
             f"count); run the scene again with --samples {total}"
         )
-    job = _keep_kernels(job, record.get("kernels"))
+    job = keep_kernels(job, record.get("kernels"))
     check_live(rerun, total)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": _now()})
     record["restarts"] = sorted({*record.get("restarts", []), old})
@@ -830,7 +830,7 @@ def extend_run(
     )
 
 
-def _keep_kernels(job: Job, kernels: str | None) -> Job:
+def keep_kernels(job: Job, kernels: str | None) -> Job:
     """``job`` integrating on ``kernels`` (the path a run took, ``run.json["kernels"]``):
     ``[simulate] kernels = "auto"`` chooses by the sample count, and a run that grew must not
     change path halfway."""

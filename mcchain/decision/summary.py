@@ -396,7 +396,8 @@ def _csv_value(value: Any) -> Any:
     return value
 
 
-def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+def write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+    """A CSV of ``rows`` under ``columns``, written atomically (floats exactly, NaN as NaN)."""
     import io
 
     from mcchain.ensemble.io import write_text_atomic
@@ -417,8 +418,8 @@ def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
     rows = allocations(ds)
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / "requirements.csv", folder / "allocation.csv", folder / "requirements.txt"]
-    _write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
-    _write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
+    write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
+    write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
     write_text_atomic(
         paths[2],
         "\n".join(summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs)))
