@@ -220,6 +220,26 @@ def build_parser() -> argparse.ArgumentParser:
         help="samples re-solved, spread evenly over the run (default 64)",
     )
 
+    rare = sub.add_parser(
+        "rare",
+        help="estimate a rare failure probability by subset simulation",
+        description="estimate P(fail) of one requirement by subset simulation (Au & Beck "
+        "2001) on the scene's kernels; writes a run folder with export/subset.csv",
+        named_errors=True,
+    )
+    rare.add_argument("scene", metavar="SCENE.toml", help="scene file with [[requirement]]")
+    rare.add_argument("--requirement", required=True, metavar="NAME", help="the requirement")
+    rare.add_argument(
+        "--per-level",
+        type=_positive,
+        default=1000,
+        metavar="N",
+        help="samples per level, a multiple of 10 (default 1000)",
+    )
+    rare.add_argument("--seed", type=_seed, metavar="S", help="override [sample] seed")
+    rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
+    rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
+
     return parser
 
 
@@ -668,6 +688,26 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_rare(args: argparse.Namespace) -> int:
+    from mcchain.decision.rare import rare_run
+
+    if args.out is not None and args.run_dir is not None:
+        return _fail("--run-dir: cannot be combined with --out")
+    result = rare_run(
+        args.scene,
+        args.requirement,
+        per_level=args.per_level,
+        seed=args.seed,
+        out=args.out or "runs",
+        run_dir=args.run_dir,
+        argv=["mcchain", *sys.argv[1:]],
+    )
+    for line in result.lines():
+        print(line)
+    print(result.folder)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -689,6 +729,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "report": _cmd_report,
             "export": _cmd_export,
             "check": _cmd_check,
+            "rare": _cmd_rare,
         }[command]
         return handler(args)
     except McchainError as exc:
