@@ -268,10 +268,15 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
         + ")",
     )
     parser.add_argument(
+        "--failed",
+        metavar="NAME",
+        help="samples failing requirement NAME, farthest beyond its limit first (--limit)",
+    )
+    parser.add_argument(
         "--limit",
         type=int,
         default=DEFAULT_LIMIT,
-        help=f"most samples --status alone picks (default {DEFAULT_LIMIT})",
+        help=f"most samples --status or --failed picks (default {DEFAULT_LIMIT})",
     )
     parser.add_argument(
         "--magnify",
@@ -634,6 +639,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         worst=args.worst,
         status=args.status,
         limit=args.limit,
+        failed=args.failed,
         save=args.save,
         serve=args.serve,
         connect=args.connect,

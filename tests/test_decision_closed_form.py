@@ -74,25 +74,30 @@ def read_csv(path: Path) -> tuple[list[str], list[dict[str, str]]]:
         return list(reader.fieldnames or []), list(reader)
 
 
-@pytest.fixture(scope="module")
-def pinned_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One run of the pinned bar and its exported requirement files."""
+def run_pinned_bar(folder: Path, count: int, then: list[str]) -> Path:
+    """``mcchain run`` of the pinned bar (``count`` samples) in this process, then the
+    command ``then`` on the run (``["export", "--requirements"]``); returns the run folder,
+    with what both printed in ``printed.txt``."""
     import contextlib
     import io
 
     from mcchain.cli import main
 
-    folder = tmp_path_factory.mktemp("pinned")
-    (folder / "bar.toml").write_text(pinned_bar_text(SAMPLES))
+    (folder / "bar.toml").write_text(pinned_bar_text(count))
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert (
-            main(["run", str(folder / "bar.toml"), "--out", str(folder / "runs"), "--quiet"]) == 0
-        )
+        runs = str(folder / "runs")
+        assert main(["run", str(folder / "bar.toml"), "--out", runs, "--quiet"]) == 0
         run = Path(out.getvalue().strip().splitlines()[-1])
-        assert main(["export", str(run), "--requirements"]) == 0
+        assert main([then[0], str(run), *then[1:]]) == 0
     (run / "printed.txt").write_text(out.getvalue())
     return run
+
+
+@pytest.fixture(scope="module")
+def pinned_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One run of the pinned bar and its exported requirement files."""
+    return run_pinned_bar(tmp_path_factory.mktemp("pinned"), SAMPLES, ["export", "--requirements"])
 
 
 def test_closed_form__exact_values_are_consistent() -> None:

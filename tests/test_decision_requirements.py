@@ -155,3 +155,50 @@ def test_requirement_met__stored_per_sample_chunk_independent(
     J = ds["parameters"].values[:, 0]
     exact = bar_pulsation(2.0, J, 0.5) <= 3.4
     assert met.values[:, 0].tolist() == exact.astype(int).tolist()
+
+
+def _requirement(**kw: object) -> object:
+    from mcchain.scene.models import Requirement
+
+    return Requirement.model_validate({"name": "r", "output": "omega", **kw})
+
+
+def test_summary__undefined_counted_apart_and_undecided_sample_count() -> None:
+    from mcchain.decision.stats import samples_to_decide
+    from mcchain.decision.summary import requirement_lines, summarize_requirement
+
+    requirement = _requirement(max=1.0, target=0.01)
+    values = np.r_[np.zeros(296), [2.0, 2.0, math.nan, math.nan]]  # 4 failures, 2 undefined
+    met = requirement_met(values, requirement)
+    s = summarize_requirement(requirement, values, met, "random")
+    assert (s.samples, s.failures, s.undefined) == (300, 4, 2)
+    assert s.verdict == "undecided"
+    assert s.samples_needed == samples_to_decide(4, 300, 0.01, 0.95) > 300
+    # the 99 % quantile is x_(297) of 300 with the NaN samples at +inf, beyond the limit
+    assert s.quantile == 2.0 and math.isnan(s.quantile_upper)
+    text = "\n".join(requirement_lines(s, "random"))
+    assert f"about {int(s.samples_needed)} samples" in text
+    assert "368 needed" in text
+
+
+def test_summary__both_limits_quantile_on_the_side_failing_more() -> None:
+    from mcchain.decision.summary import summarize_requirement
+
+    requirement = _requirement(min=-1.0, max=1.0, target=0.05)
+    values = np.r_[np.linspace(-0.9, 0.9, 88), np.full(10, -2.0), np.full(2, 2.0)]
+    s = summarize_requirement(requirement, values, requirement_met(values, requirement), "lhs")
+    assert s.side == "min" and s.level == 0.05 and s.failures == 12
+    assert s.quantile == np.sort(values)[math.ceil(100 * 0.05) - 1]
+    assert s.verdict == "fail (approximate)"
+
+
+def test_summary__no_failure_gives_the_success_run_figures() -> None:
+    from mcchain.decision.summary import requirement_lines, summarize_requirement
+
+    requirement = _requirement(max=1.0, target=0.01)
+    values = np.zeros(100)
+    s = summarize_requirement(requirement, values, requirement_met(values, requirement), "random")
+    text = "\n".join(requirement_lines(s, "random"))
+    assert "n = ln(1 - C)/ln(1 - p) = 298.073" in text
+    assert "the two-sided interval above needs 368" in text
+    assert "about 368 samples (268 more)" in text
