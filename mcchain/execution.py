@@ -633,13 +633,7 @@ def resume_run(
             raise RunError(f"{run}: already completed, but {exc}") from None
         raise RunError(f"{run}: already completed")
     _check_threads(threads, dask)
-    job = prepare_job(
-        folder / SCENE_COPY,
-        samples=int(record["samples"]),
-        seed=record.get("seed"),
-        chunk_size=int(record["chunk_size"]),
-        loader=loader,
-    )
+    job = recorded_job(folder, record, loader=loader)
     if job.nsample != record["samples"]:
         raise RunError(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
@@ -792,13 +786,7 @@ def extend_run(
     _check_threads(threads, dask)
     old = int(record["samples"])
     total = old + samples
-    job = prepare_job(
-        folder / SCENE_COPY,
-        samples=total,
-        seed=record.get("seed"),
-        chunk_size=int(record["chunk_size"]),
-        loader=loader,
-    )
+    job = recorded_job(folder, record, samples=total, loader=loader)
     sample = getattr(job.scene, "sample", None)
     if sample is None:
         raise RunError("--extend: the scene has no [sample] section (one instance, no design)")
@@ -827,6 +815,24 @@ def extend_run(
         keep_parts=keep_parts,
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
+    )
+
+
+def recorded_job(
+    folder: Path,
+    record: Mapping[str, Any],
+    *,
+    samples: int | None = None,
+    loader: Loader | None = None,
+) -> Job:
+    """The job of an existing run: its ``scene.toml`` with the recorded seed and chunk size,
+    and ``samples`` samples (default the recorded count)."""
+    return prepare_job(
+        Path(folder) / SCENE_COPY,
+        samples=int(record["samples"]) if samples is None else samples,
+        seed=record.get("seed"),
+        chunk_size=int(record["chunk_size"]),
+        loader=loader,
     )
 
 

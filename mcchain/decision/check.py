@@ -273,17 +273,9 @@ def check_run(
 
 def _run_job(folder: Path, record: Mapping[str, Any]) -> Job:
     """The run's job as it ran (scene copy, count, seed, kernels)."""
-    from mcchain.execution import keep_kernels
-    from mcchain.job import prepare_job
-    from mcchain.runs import SCENE_COPY
+    from mcchain.execution import keep_kernels, recorded_job
 
-    job = prepare_job(
-        folder / SCENE_COPY,
-        samples=int(record["samples"]),
-        seed=record.get("seed"),
-        chunk_size=int(record["chunk_size"]),
-    )
-    return keep_kernels(job, record.get("kernels"))
+    return keep_kernels(recorded_job(folder, record), record.get("kernels"))
 
 
 def _write_values(tight: xr.Dataset, path: Path) -> Path:
