@@ -639,7 +639,11 @@ def resume_run(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
     grow = None
-    if record.get("until"):
+    if record.get("until") and record.get("extensions"):  # an until run extended since
+        from mcchain.decision.until import keep_sequential
+
+        job = keep_sequential(job, record)
+    elif record.get("until"):
         from mcchain.decision.until import sequential_job
 
         job, grow = sequential_job(
@@ -797,6 +801,9 @@ def extend_run(
             f"count); run the scene again with --samples {total}"
         )
     job = keep_kernels(job, record.get("kernels"))
+    from mcchain.decision.until import keep_sequential
+
+    job = keep_sequential(job, record)
     check_live(rerun, total)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": _now()})
     record["restarts"] = sorted({*record.get("restarts", []), old})

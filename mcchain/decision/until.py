@@ -116,6 +116,16 @@ def look_at(ds: xr.Dataset, nsample: int, batch: int) -> dict[str, Any]:
     return {"samples": int(nsample), "requirements": out}
 
 
+def keep_sequential(job: Job, record: Mapping[str, Any]) -> Job:
+    """``job`` (an ``--extend`` of a run made with ``until``) with the run's ``sequential``
+    settings entry: the confidence sequence holds at every count, so the extended run still
+    reports it (its looks: every batch, then the total)."""
+    until = record.get("until")
+    if until:
+        job.settings[SETTINGS_KEY] = {k: until[k] for k in ("method", "batch", "max_count")}
+    return job
+
+
 def sequential_job(
     job: Job,
     scene_path: Path,
