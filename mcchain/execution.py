@@ -468,8 +468,6 @@ def execute(
                 merged.throughput,
             )
             counts = _status_counts(folder / ENSEMBLE)
-            if getattr(job.scene, "requirement", None):
-                record["requirements"] = _requirement_lines(folder)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
@@ -480,6 +478,12 @@ def execute(
             write_record(folder, record)
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
+        if getattr(job.scene, "requirement", None):
+            try:
+                record["requirements"] = _requirement_lines(folder)
+            except Exception as exc:  # the ensemble is complete: this must not fail the run
+                log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
+                record["requirements"] = [f"requirements: the summary failed ({exc}); see run.log"]
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
         if record.get("extensions"):

@@ -53,6 +53,10 @@ BAD_REQUIREMENTS = {
         REQ.replace("select = {{ mode = 0 }}", "").format(extra="max = 4.0"),
         "requirement.p0.select: omega has dim 'mode': select one entry, e.g. { mode = 0 }",
     ),
+    "select a number": (
+        REQ.replace("mode = 0", "mode = 1.5").format(extra="max = 4.0"),
+        "requirement.p0.select.mode: expected a label (a string) or a 0-based index",
+    ),
     "index out of range": (
         REQ.replace("mode = 0", "mode = 3").format(extra="max = 4.0"),
         "requirement.p0.select.mode: index 3 outside 0..0 of dim mode",

@@ -294,9 +294,12 @@ def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
         "fail": f"FAIL: P(fail) > {_g(s.target)} shown",
         UNDECIDED: f"UNDECIDED: the interval contains the target {_g(s.target)}",
     }[s.decision]
-    approx = (
-        "" if s.exact else f" [approximate: design {design!r} does not draw independent samples]"
-    )
+    if s.exact:
+        approx = ""
+    elif design is None:
+        approx = " [approximate: no [sample], the instances are all the same]"
+    else:
+        approx = f" [approximate: design {design!r} does not draw independent samples]"
     lines = [
         f"requirement {s.name} ({limit}; target {_g(s.target)}, confidence {_g(s.confidence)}): "
         f"{words}{approx}",
@@ -385,6 +388,9 @@ def summary_lines(
             lines.append(
                 f"intervals: binomial (Clopper-Pearson), APPROXIMATE for design {design!r}: "
                 'its samples are not independent draws; use design = "random" for a decision'
+                if design is not None
+                else "intervals: the scene has no [sample]: its instances are all the same, so "
+                "the binomial interval describes no scatter (add a [sample] table)"
             )
     return lines
 

@@ -30,6 +30,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainValidator,
     PrivateAttr,
     Strict,
     field_validator,
@@ -634,6 +635,18 @@ def _check_requirement_name(value: str) -> str:
     return value
 
 
+def _label_or_index(value: Any) -> str | int:
+    if isinstance(value, bool) or not isinstance(value, str | int):
+        raise ValueError(
+            f"expected a label (a string) or a 0-based index (an integer), got {value!r}"
+        )
+    return value
+
+
+LabelOrIndex = Annotated[str | int, PlainValidator(_label_or_index)]
+"""A ``select`` entry: a label such as ``"B"`` or an index such as ``0``."""
+
+
 class Requirement(_Section):
     """``[[requirement]]``: a limit on a per-sample output and the largest acceptable
     probability of breaking it.
@@ -652,7 +665,7 @@ class Requirement(_Section):
         description="a per-sample ensemble variable this scene produces (``peak_contact_force``, "
         "``omega``, ``q_eq``, ...); required."
     )
-    select: dict[str, Annotated[str, Strict()] | Int] = Field(
+    select: dict[str, LabelOrIndex] = Field(
         default_factory=dict,
         description="one entry for each of the output's dimensions besides ``sample``: a label "
         '(``{ joint = "B" }``) or a 0-based index (``{ mode = 0 }``); default none (an output '
