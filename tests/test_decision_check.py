@@ -137,3 +137,17 @@ def test_check__refusals_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, err
     assert not (folder / "check").exists() and not (folder / "export").exists()
+
+
+def test_tightened_scene__dt_for_fixed_steps_tolerances_for_adaptive() -> None:
+    from test_runs_extend import scene_text as rk4_text
+
+    from mcchain.decision.check import tightened_scene
+    from mcchain.scene import load_scene_text
+
+    fixed, said = tightened_scene(load_scene_text(rk4_text("random")), 10)
+    assert fixed.simulate.dt == 1e-5 and said == "dt 0.0001 -> 1e-05 s"
+    assert fixed.simulate.output_dt == 1e-3 and fixed.simulate.t_end == 0.02
+    adaptive, said = tightened_scene(load_scene_text(scene_text()), 10)
+    assert (adaptive.simulate.rtol, adaptive.simulate.atol) == (1e-8, 1e-11)
+    assert adaptive.simulate.dt == 1e-7  # the first step of rk45 is left as written

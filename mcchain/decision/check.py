@@ -88,12 +88,18 @@ def tightened_scene(scene: Any, factor: float) -> tuple[Any, str]:
             "tolerance): no time integration to tighten"
         )
     if sim.method in ADAPTIVE_METHODS:
-        update = {"rtol": sim.rtol / factor, "atol": sim.atol / factor}
+        update = {"rtol": _divided(sim.rtol, factor), "atol": _divided(sim.atol, factor)}
         said = f"rtol {sim.rtol:g} -> {update['rtol']:g}, atol {sim.atol:g} -> {update['atol']:g}"
     else:
-        update = {"dt": sim.dt / factor}
+        update = {"dt": _divided(sim.dt, factor)}
         said = f"dt {sim.dt:g} -> {update['dt']:g} s"
     return scene.model_copy(update={"simulate": sim.model_copy(update=update)}), said
+
+
+def _divided(value: float, factor: float) -> float:
+    """``value / factor`` to 15 significant digits: 1e-10 / 10 is the 1e-11 the table
+    prints, not the 1.0000000000000001e-11 of binary division."""
+    return float(f"{value / factor:.15g}")
 
 
 def _differences(base: np.ndarray, tight: np.ndarray) -> tuple[float, float, float, float]:
