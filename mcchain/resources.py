@@ -260,10 +260,13 @@ def free_space(path: Any) -> tuple[int, Path]:
     return shutil.disk_usage(folder).free, folder
 
 
-def check_disk(estimate: DiskEstimate | None, folder: Any, samples: int | None = None) -> None:
+def check_disk(
+    estimate: DiskEstimate | None, folder: Any, samples: int | None = None, retry: str = ""
+) -> None:
     """Raise :class:`RunError` when the bytes a run still writes (its ``samples`` samples
     yet to compute, default all, and the merge) exceed the free space of ``folder``'s file
-    system; ``folder`` is the run folder, or where it will be made."""
+    system; ``folder`` is the run folder, or where it will be made. ``retry`` names what to
+    do again once there is room (``"resume"``, ``"extend"``) for a run that exists."""
     if estimate is None:
         return
     need = estimate.peak(samples)
@@ -273,10 +276,10 @@ def check_disk(estimate: DiskEstimate | None, folder: Any, samples: int | None =
     n = estimate.nsample if samples is None else samples
     parts = f"part files of {n} samples {size_text(estimate.parts(samples))} + " if n else ""
     hint = (
-        "lower the count, store fewer times ([simulate] output_dt) or float32 histories, or "
-        "write elsewhere (--out, --run-dir)"
-        if samples is None
-        else "free space, then resume"
+        f"free space, then {retry}"
+        if retry
+        else "lower the count, store fewer times ([simulate] output_dt) or float32 histories, "
+        "or write elsewhere (--out, --run-dir)"
     )
     raise RunError(
         f"disk: the run needs up to {size_text(need)} more at its merge ({parts}ensemble.nc "

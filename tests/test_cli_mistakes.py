@@ -403,3 +403,21 @@ def test_show_save__an_existing_file_is_refused_without_force(
     ran = run("show", completed, "--samples", "0", "--save", "old.rrd", "--force", cwd=tmp_path)
     assert ran.returncode == 0 and ran.stdout == "samples 0\nold.rrd\n", ran.stderr
     assert (tmp_path / "old.rrd").read_bytes()[:4] == b"RRF2"  # a rerun recording now
+
+
+def test_disk__an_extension_that_does_not_fit_is_refused(tmp_path, monkeypatch, capsys, completed):
+    """``run --extend`` counts its new part files and the merged file of the total count
+    (the old ensemble.nc is already on disk); refused, the run unchanged."""
+    folder = tmp_path / completed.name
+    shutil.copytree(completed, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    disk = FillingDisk(monkeypatch)
+    disk.full = True  # 40 kB free
+    ran = in_process(monkeypatch, capsys)(
+        "run", "--extend", folder, "--samples", "1000", "--quiet", cwd=tmp_path
+    )
+    assert_usage_error(
+        ran, "disk: the run needs up to ", "more at its merge (part files of 1000 samples ",
+        "+ ensemble.nc up to ", "has 40 kB free: free space, then extend"
+    )  # fmt: skip
+    assert {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()} == before
