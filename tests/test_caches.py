@@ -118,3 +118,52 @@ def test_designs__a_rerun_reads_the_same_points_without_importing_scipy_stats(
     blocked_first, unwritable = draw(tmp_path / "a-file" / "cache", "blocked")
     assert blocked_first == "True"
     np.testing.assert_array_equal(unwritable, drawn)
+
+
+@pytest.fixture
+def own_tmp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A temporary folder of this test's own (``tempfile.gettempdir()``), empty."""
+    import tempfile
+
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    monkeypatch.setattr(caches, "_fresh", {})
+    return folder
+
+
+def test_temporary_cache__made_private(own_tmp: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = caches.temporary_cache("native")
+    assert folder == own_tmp / f"mcchain-native-{os.getuid()}"
+    assert folder.stat().st_mode & 0o777 == 0o700
+    assert caches.temporary_cache("native") == folder and capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("other", ["mode", "owner", "link"])
+def test_temporary_cache__a_folder_made_before_by_another_user_is_not_used(
+    own_tmp: Path, other: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The predictable folder exists already, writable by all (any user can test that), owned
+    by another user (root can), or a link to another folder: a planted cache file in it is
+    never read; a fresh private folder takes its place for this process, with one warning."""
+    planted = own_tmp / f"mcchain-native-{os.getuid()}"
+    if other == "link":
+        (own_tmp / "elsewhere").mkdir(mode=0o700)
+        planted.symlink_to(own_tmp / "elsewhere")
+    else:
+        planted.mkdir()
+        planted.chmod(0o777 if other == "mode" else 0o700)
+    if other == "owner":
+        if os.getuid() != 0:
+            pytest.skip("only root can give a folder to another user")  # "mode" covers it
+        os.chown(planted, 65534, 65534)
+    (planted / "mcchain_gen-accel-0.bin").write_bytes(b"planted")
+    folder = caches.temporary_cache("native")
+    assert folder != planted and folder.parent == own_tmp
+    assert folder.name.startswith(f"mcchain-native-{os.getuid()}-")
+    assert folder.stat().st_mode & 0o777 == 0o700 and not any(folder.iterdir())
+    assert caches.temporary_cache("native") == folder  # the same one for the process
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and str(planted) in err[0] and "is not private" in err[0]
+    reason = {"mode": "mode 0777", "owner": "owned by uid 65534", "link": "symbolic link"}
+    assert reason[other] in err[0]
