@@ -125,6 +125,39 @@ def _interpreted() -> bool:
     return config.INTERPRETED
 
 
+def kernel_compiler(job: Job) -> str:
+    """What compiled the kernels this process runs, as ``run.json``'s sessions and the
+    ensemble's attributes record it: ``"interpreted"`` (:mod:`mcchain.first_run`: plain
+    Python, no compile), ``"native"`` (the generated lane kernels of a ``[simulate]`` on
+    ``kernels = "lanes"`` through :mod:`mcchain.codegen.native`) or ``"numba"`` (the
+    hand-written kernels, and the lane kernels with ``MCCHAIN_LANE_COMPILER=numba`` or
+    where this NumPy's layout sends them to numba: their last bits may differ)."""
+    if _interpreted():
+        return "interpreted"
+    kernels = _kernels(job)
+    if kernels is None or kernels == "loop":
+        return "numba"
+    from mcchain.codegen.native import lane_compiler
+
+    return lane_compiler()
+
+
+def _kernel_target(job: Job) -> dict[str, Any] | None:
+    """The CPU the generated lane kernels were generated and compiled for (their text
+    depends on its SIMD width: :func:`mcchain.codegen.layout.target_cpu`), or None where
+    the run uses none."""
+    kernels = _kernels(job)
+    if _interpreted() or kernels is None or kernels == "loop":
+        return None
+    import hashlib
+
+    from mcchain.codegen.layout import LMAX, target_cpu
+
+    name, features = target_cpu()
+    digest = hashlib.sha256(features.encode()).hexdigest()[:16]
+    return {"cpu": name, "features_sha256": digest, "lane_width": LMAX}
+
+
 def _kernels(job: Job) -> str | None:
     """The path that integrates the run's time histories (``[simulate] kernels``), or None."""
     sim = getattr(job.scene, "simulate", None)
@@ -273,6 +306,8 @@ def _complete(
         scheduler=stats.scheduler,
         threads=stats.threads,
         kernels_interpreted=_interpreted(),
+        kernel_compiler=kernel_compiler(job),
+        kernel_target=_kernel_target(job),
         timings=timings,
     )
     summed: dict[str, float] = {}
@@ -372,7 +407,7 @@ def execute(
                 stats = _compute(
                     job,
                     parts_dir,
-                    job.attributes(versions),
+                    {**job.attributes(versions), "kernel_compiler": kernel_compiler(job)},
                     dask=dask,
                     threads=threads,
                     solve=solve,
