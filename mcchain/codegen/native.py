@@ -359,7 +359,8 @@ class _FunctionTranslator:
         else:  # on the heap: a thread's stack may be small (512 KiB on macOS, 128 KiB musl)
             nbytes = -(-size * itemsize // LOCAL_ARRAY_ALIGN) * LOCAL_ARRAY_ALIGN
             align = ir.Constant(_I64, LOCAL_ARRAY_ALIGN)
-            raw = self.alloca_builder.call(self.module.libc("aligned_alloc"), [align, nbytes])
+            size_arg = ir.Constant(_I64, nbytes)
+            raw = self.alloca_builder.call(self.module.libc("aligned_alloc"), [align, size_arg])
             self.heap.append(raw)
             data = self.alloca_builder.bitcast(raw, _MEMORY_TYPE[dtype].as_pointer())
         arr = _ArrayValue(
