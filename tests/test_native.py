@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mcchain.codegen import generate
@@ -611,3 +611,130 @@ def test_target__numbas_cpu_settings_not_the_hosts_flags(monkeypatch):
     assert layout.target_cpu() == ("skylake-avx512", "+avx2,+avx512f,+fma")
     assert layout.simd_doubles(layout.target_cpu()[1]) == 8
     assert layout.simd_doubles("+avx2,-avx512f,+fma") == 4
+
+
+# -- random programs of the generator's subset, against numba ---------------------------------
+
+NFLOAT, NINT, NOUT = 3, 3, 6
+
+
+@st.composite
+def _float_expr(draw: Any, depth: int = 0) -> str:
+    leaves = [
+        *(f"f{k}" for k in range(NFLOAT)),
+        *(f"x[{k}]" for k in range(4)),
+        *(f"i{k}" for k in range(NINT)),
+        "m",
+        "0.5", "-1.25", "3.0", "1e-3",
+    ]  # fmt: skip
+    if depth >= 3 or draw(st.booleans()):
+        return draw(st.sampled_from(leaves))
+    kind = draw(st.sampled_from(["bin", "bin", "call", "neg", "ifexp"]))
+    a = draw(_float_expr(depth + 1))
+    if kind == "neg":
+        return f"(-{a})"
+    if kind == "call":
+        fn = draw(st.sampled_from(["max", "min", "abs", "sqrt"]))
+        if fn == "abs":
+            return f"abs({a})"
+        if fn == "sqrt":
+            return f"math.sqrt(abs({a}))"
+        return f"{fn}({a}, {draw(_float_expr(depth + 1))})"
+    b = draw(_float_expr(depth + 1))
+    if kind == "ifexp":
+        return f"({a} if {draw(_condition(depth + 1))} else {b})"
+    return f"({a} {draw(st.sampled_from(['+', '-', '*', '/']))} {b})"
+
+
+@st.composite
+def _int_expr(draw: Any, depth: int = 0) -> str:
+    leaves = [*(f"i{k}" for k in range(NINT)), *(f"k[{j}]" for j in range(4)), "0", "3", "-7"]
+    if depth >= 3 or draw(st.booleans()):
+        return draw(st.sampled_from(leaves))
+    a, b = draw(_int_expr(depth + 1)), draw(_int_expr(depth + 1))
+    op = draw(st.sampled_from(["+", "-", "*", "//", "%", "max", "min"]))
+    if op in ("//", "%"):
+        return f"({a} {op} (abs({b}) + 1))"
+    if op in ("max", "min"):
+        return f"{op}({a}, {b})"
+    return f"({a} {op} {b})"
+
+
+@st.composite
+def _condition(draw: Any, depth: int = 0) -> str:
+    kind = draw(st.sampled_from(["cmp", "cmp", "int", "and", "or", "not", "guard"]))
+    if depth >= 2:
+        kind = "cmp"
+    op = draw(st.sampled_from(["<", "<=", ">", ">=", "==", "!="]))
+    if kind == "cmp":
+        return f"{draw(_float_expr(2))} {op} {draw(_float_expr(2))}"
+    if kind == "int":
+        return f"{draw(_int_expr(2))} {op} {draw(_int_expr(2))}"
+    if kind == "not":
+        return f"not ({draw(_condition(depth + 1))})"
+    if kind == "guard":  # the read is valid only where the index check holds
+        i = draw(st.sampled_from([f"i{k}" for k in range(NINT)]))
+        return f"0 <= {i} < 4 and x[{i}] {op} {draw(_float_expr(2))}"
+    word = "and" if kind == "and" else "or"
+    return f"({draw(_condition(depth + 1))}) {word} ({draw(_condition(depth + 1))})"
+
+
+@st.composite
+def _statements(draw: Any, indent: str, depth: int = 0) -> list[str]:
+    lines: list[str] = []
+    for _ in range(draw(st.integers(1, 4))):
+        kind = draw(st.sampled_from(["float", "int", "out", "mix", "if", "for"]))
+        if depth >= 2 and kind in ("if", "for"):
+            kind = "out"
+        if kind == "float":
+            lines.append(f"{indent}f{draw(st.integers(0, NFLOAT - 1))} = {draw(_float_expr())}")
+        elif kind == "int":
+            lines.append(f"{indent}i{draw(st.integers(0, NINT - 1))} = {draw(_int_expr())}")
+        elif kind == "out":
+            lines.append(f"{indent}out[{draw(st.integers(0, NOUT - 1))}] += {draw(_float_expr())}")
+        elif kind == "mix":  # m is an int until this runs: numba's promotion to float64
+            lines.append(f"{indent}m = m + {draw(_float_expr())}")
+        elif kind == "if":
+            lines.append(f"{indent}if {draw(_condition())}:")
+            lines += draw(_statements(indent + "    ", depth + 1))
+            if draw(st.booleans()):
+                lines.append(f"{indent}else:")
+                lines += draw(_statements(indent + "    ", depth + 1))
+        else:
+            lines.append(f"{indent}for j in range(min(abs({draw(_int_expr(1))}), 4)):")
+            lines += draw(_statements(indent + "    ", depth + 1))
+    return lines
+
+
+@st.composite
+def programs(draw: Any) -> str:
+    """A function ``prog(x, k, out)`` of the translated subset: float and int variables,
+    arithmetic of both, numba's promotion of an int to float64 (``m``), comparisons, short-
+    circuit ``and``/``or``/``not`` guarding array reads, ``… if … else …``, ``if``/``else``,
+    counted loops, ``max``/``min``/``abs``/``math.sqrt``."""
+    head = [f"    f{j} = x[{j}]" for j in range(NFLOAT)]
+    head += [f"    i{j} = k[{j}]" for j in range(NINT)]
+    head.append("    m = 0")
+    body = draw(_statements("    "))
+    tail = [f"    out[{NOUT - 1}] += m"]
+    return "import math\n\n\ndef prog(x, k, out):\n" + "\n".join(head + body + tail) + "\n"
+
+
+finite = st.floats(-1e3, 1e3, allow_nan=False)
+
+
+@pytest.mark.slow
+@settings(max_examples=15, deadline=None)  # a numba compile each (1-3 s)
+@given(
+    source=programs(),
+    x=st.lists(finite | st.sampled_from([0.0, -0.0, math.inf, math.nan]), min_size=4, max_size=4),
+    k=st.lists(st.integers(-5, 6), min_size=4, max_size=4),
+)
+def test_random_programs__the_bits_of_numba(source, x, k):
+    """The translator against numba's compile of the same text (the lane kernels' options,
+    ``contract`` included), bit for bit (a NaN only at the same place: module docstring)."""
+    xs, ks = np.array(x), np.array(k, dtype=np.int64)
+    mine, ref = np.zeros(NOUT), np.zeros(NOUT)
+    NativeModule(source, "mcchain_test_random").prog(xs, ks, mine)
+    _numba(source, "prog")(xs, ks, ref)
+    _assert_same_bits(mine, ref)
