@@ -167,3 +167,11 @@ def test_temporary_cache__a_folder_made_before_by_another_user_is_not_used(
     assert len(err) == 1 and str(planted) in err[0] and "is not private" in err[0]
     reason = {"mode": "mode 0777", "owner": "owned by uid 65534", "link": "symbolic link"}
     assert reason[other] in err[0]
+
+
+def test_suite__caches_in_a_temporary_folder_unless_told(tmp_path_factory) -> None:
+    """tests/conftest.py: no test writes to the developer's ~/.cache/mcchain."""
+    root = Path(os.environ["MCCHAIN_CACHE_DIR"])
+    home = Path(os.path.expanduser("~")) / ".cache" / "mcchain"
+    assert root.resolve() != home.resolve()
+    assert caches.mcchain_cache("native").parent == root

@@ -201,18 +201,26 @@ def test_arrays__strided_views_locals_tuples_tables_float32(native):
 
 
 def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, monkeypatch):
+    """Counted: the second module loads the file (no compile), the third compiles again."""
+    from mcchain.codegen import native as native_module
+
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    counts = {"compiled": 0, "loaded": 0}
+    monkeypatch.setattr(native_module, "COUNTS", counts)
     out = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, out)
+    assert counts == {"compiled": 1, "loaded": 0}
     files = list((tmp_path / "native").iterdir())
     assert len(files) == 1
     state = pickle.loads(files[0].read_bytes())
     assert state[1] == "object"  # machine code, not IR: nothing to optimise on load
     again = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, again)  # loaded
+    assert counts == {"compiled": 1, "loaded": 1}
     files[0].write_bytes(b"not a library")
     third = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, third)  # compiled again
+    assert counts == {"compiled": 2, "loaded": 1}
     assert out.tolist() == again.tolist() == third.tolist()
     assert out[:2].tolist() == [2, 1]
     assert pickle.loads(files[0].read_bytes())[1] == "object"
