@@ -475,6 +475,7 @@ def start_run(
     keep_parts: bool = False,
     rerun: LiveOptions | None = None,
     first_run: FirstRun | None = None,
+    background_off: str | None = None,
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
@@ -485,7 +486,9 @@ def start_run(
     ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
     the console script only): a background process compiles them for the next runs, and
     should the interpreted kernels raise, the process becomes the compiled run (or its
-    resume, once the folder exists).
+    resume, once the folder exists). ``background_off``: what switched that background
+    compile off (``--no-background-compile``, the user's config file), or None
+    (:func:`mcchain.compile_ahead.why_not_background` has the other reasons).
     """
     t0 = time.perf_counter()
     if run_dir is not None:
@@ -507,10 +510,16 @@ def start_run(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
         check_live(rerun, job.nsample)
-        if interpreted:
-            from mcchain.compile_ahead import start_background
+        if real:
+            from mcchain.compile_ahead import background_failure_note
 
-            background = start_background(Path(scene_path), seed, samples)
+            failed = background_failure_note()
+            if failed is not None:
+                job.warnings.append(failed)
+        if interpreted:
+            from mcchain.compile_ahead import background_note
+
+            background = background_note(Path(scene_path), seed, samples, background_off)
             assert first_run is not None
             job.notes.append(first_run.note(job.nsample, background))
         for line in job.warnings:

@@ -39,6 +39,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -83,11 +84,19 @@ class FirstRun:
         )
 
 
-def choose(scene_path: str | Path, samples: int | None, seed: int | None) -> FirstRun | None:
+def choose(
+    scene_path: str | Path,
+    samples: int | None,
+    seed: int | None,
+    now: Callable[[], float] = time.time,
+) -> FirstRun | None:
     """Whether this run goes interpreted (see the module's docstring): a :class:`FirstRun`
-    if so, None to go on compiled as usual. Where the probe says no, the process is
-    replaced by the same command with compiled kernels (:func:`run_compiled`), and this
-    does not return."""
+    if so, None to go on compiled as usual. Where the probe says no, or where a background
+    compile already running should end sooner than the run interpreted would (from when it
+    started and the length of the last one: :func:`mcchain.compile_ahead.
+    background_remaining`, on the clock ``now``), the process is replaced by the same
+    command with compiled kernels (:func:`run_compiled`, after waiting for that compile),
+    and this does not return."""
     switch = os.environ.get(ENV_SWITCH)
     if switch == "0":
         return None
@@ -121,6 +130,12 @@ def choose(scene_path: str | Path, samples: int | None, seed: int | None) -> Fir
         run_compiled()
     if per_sample * count > BUDGET_S:
         run_compiled()
+    from mcchain.compile_ahead import background_remaining, wait_background
+
+    remaining = background_remaining(now)
+    if remaining is not None and remaining < per_sample * count:
+        wait_background()
+        run_compiled()  # the kernels are in the cache now (or, if it failed, compile here)
     return FirstRun(per_sample)
 
 
