@@ -5,10 +5,12 @@ A statics sweep's kernels take about 35 s of one core to compile (about 20 s on 
 Interpreted as plain Python (:func:`mcchain.kernels.config.interpret_kernels`), the same
 kernels solve those samples in about 4-5 s, with the compiled kernels' bits: the same IEEE
 operations in the same order, libm's ``hypot`` in both (tested on every shipped scene, and
-a run's ``ensemble.nc`` is the same file either way). So on a cold cache a small statics
+a run's ``ensemble.nc`` holds the same bytes either way, but for its attribute
+``kernel_compiler``). So on a cold cache a small statics
 run is interpreted, and a detached process compiles the kernels into the cache meanwhile
 (:func:`mcchain.compile_ahead.start_background`): the next run loads them. Which way a run
-went is in ``run.json`` only (its notes, and ``kernels_interpreted`` in its session).
+went is in ``run.json`` (its notes, ``kernels_interpreted`` and ``kernel_compiler`` in its
+session) and in the ensemble's attribute ``kernel_compiler``.
 
 :func:`choose` decides, before any kernel module is imported, and only in a process that
 does nothing but this run (``mcchain run SCENE`` from the console script, never a process

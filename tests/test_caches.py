@@ -175,3 +175,86 @@ def test_suite__caches_in_a_temporary_folder_unless_told(tmp_path_factory) -> No
     home = Path(os.path.expanduser("~")) / ".cache" / "mcchain"
     assert root.resolve() != home.resolve()
     assert caches.mcchain_cache("native").parent == root
+
+
+# -- mcchain cache status | warm | clear (issue 29) -------------------------------------------
+
+COUNT_RUN = """
+import json, sys
+from numba.core import event
+from mcchain.cli import main
+from mcchain.codegen import native
+with event.install_recorder("numba:compile") as recorder:
+    code = main(["run", sys.argv[1], "--samples", "4", "--quiet", "--run-dir", sys.argv[2]])
+starts = [ev for _, ev in recorder.buffer if ev.is_start]
+print(json.dumps({"code": code, "numba": len(starts), "native": native.COUNTS}))
+"""
+
+
+@pytest.mark.slow
+def test_cache_warm__the_scenes_run_then_compiles_nothing(tmp_path: Path) -> None:
+    """``mcchain cache warm`` in one process; then the scene's run in a fresh one: numba
+    compiles nothing ("numba:compile" events counted) and every lane entry point is loaded
+    from the cache (counted), none compiled. The run records what compiled its kernels."""
+    import json
+
+    from mcchain.runs import read_record
+
+    scene = REPO / "configs" / "double-pendulum.toml"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "MCCHAIN_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("MCCHAIN_LANE_COMPILER", None)
+    warm = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "cache", "warm", str(scene)],
+        env=env, capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert warm.returncode == 0, warm.stderr[-3000:]
+    assert warm.stdout.startswith(f"{scene}: ready in ")
+    assert " compiled, 0 loaded from the cache)" in warm.stdout
+    run = subprocess.run(
+        [sys.executable, "-c", COUNT_RUN, str(scene), str(tmp_path / "run")],
+        env=env, capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    counts = json.loads(run.stdout.splitlines()[-1])
+    assert counts["code"] == 0 and counts["numba"] == 0
+    assert counts["native"]["compiled"] == 0 and counts["native"]["loaded"] >= 1
+    session = read_record(tmp_path / "run")["sessions"][-1]
+    assert session["kernel_compiler"] == "native"
+    from mcchain.codegen.layout import LMAX, target_cpu
+
+    assert session["kernel_target"]["cpu"] == target_cpu()[0]
+    assert session["kernel_target"]["lane_width"] == LMAX
+    import netCDF4
+
+    with netCDF4.Dataset(tmp_path / "run" / "ensemble.nc") as nc:
+        assert nc.getncattr("kernel_compiler") == "native"
+
+
+def test_cache_status_and_clear(tmp_path: Path, monkeypatch, mcchain) -> None:
+    """status: each folder with its files and size, the lane entries by variant, the keys;
+    clear: every cached file of mcchain's and numba's files of mcchain's kernels, nothing
+    else (a .pyc beside them stays)."""
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    native = caches.mcchain_cache("native")
+    digest = "0123456789abcdef0123"
+    (native / f"mcchain_gen_rk45_{digest}-adaptive_run-abc.bin").write_bytes(b"x" * 2000)
+    (native / f"mcchain_gen_rk45_{digest}-adaptive_run-def.bin").write_bytes(b"x" * 1000)
+    (caches.mcchain_cache("generated") / "mcchain_gen_x.py").write_text("x = 1\n")
+    numba_folder = caches.numba_index_folder()
+    assert numba_folder is not None
+    numba_folder.mkdir(parents=True)
+    for name in ("statics.equilibrium_batch-10.py311.nbi", "statics.x.nbc", "other.pyc"):
+        (numba_folder / name).write_bytes(b"y" * 100)
+    status = mcchain("cache", "status", cwd=tmp_path)
+    assert status.returncode == 0, status.stderr
+    lines = status.stdout.splitlines()
+    assert f"native: {native} (2 files, 0.0 MB)" in lines
+    assert "  rk45.adaptive_run: 2 compiled (scenes × argument types)" in lines
+    assert any(line.startswith("keyed by: native ") and "numpy " in line for line in lines)
+    assert f"numba (mcchain's kernels): {numba_folder} (2 files, 0.0 MB)" in lines
+    cleared = mcchain("cache", "clear", cwd=tmp_path)
+    assert cleared.returncode == 0, cleared.stderr
+    assert f"native: removed 2 files, 0.0 MB from {native}" in cleared.stdout.splitlines()
+    assert not any(native.iterdir()) and not any(caches.mcchain_cache("generated").iterdir())
+    assert [p.name for p in numba_folder.iterdir()] == ["other.pyc"]
