@@ -225,7 +225,9 @@ def status_lines() -> list[str]:
         if name == "native":
             entries: dict[str, int] = {}
             for path in _files(folder, (".bin",)):
-                match = re.match(r"mcchain_gen_(\w+?)_[0-9a-f]{20}-(\w+)-[0-9a-f]+\.bin$", path.name)
+                match = re.match(
+                    r"mcchain_gen_(\w+?)_[0-9a-f]{20}-(\w+)-[0-9a-f]+\.bin$", path.name
+                )
                 what = f"{match[1]}.{match[2]}" if match else "others (not lane kernels)"
                 entries[what] = entries.get(what, 0) + 1
             for what, count in sorted(entries.items()):

@@ -478,5 +478,5 @@ def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkey
     with pytest.raises(RunError, match=r"run.background_compile: expected a bool, got 'no'"):
         background_compile_off()
     path.write_text("[run]\nbackground = false\n")
-    with pytest.raises(RunError, match="run.background: unknown key"):
+    with pytest.raises(RunError, match=r"run\.background: unknown key"):
         background_compile_off()

@@ -513,8 +513,13 @@ def test_int_then_float__widened_as_numba(risks, n):
 
 
 def test_local_arrays__above_the_limit_on_the_heap_small_ones_on_the_stack():
-    from mcchain.codegen.native import STACK_ARRAY_MAX_BYTES, Array, ModuleTranslator
-    from mcchain.codegen.native import _codegen, _target_data
+    from mcchain.codegen.native import (
+        STACK_ARRAY_MAX_BYTES,
+        Array,
+        ModuleTranslator,
+        _codegen,
+        _target_data,
+    )
 
     argtypes = ("i64", Array("f64", 1, True))
     translator = ModuleTranslator(RISKS, "mcchain_test_heap", _target_data(_codegen()))
@@ -522,8 +527,8 @@ def test_local_arrays__above_the_limit_on_the_heap_small_ones_on_the_stack():
     text = str(translator.ir_module)
     assert 300000 * 8 > STACK_ARRAY_MAX_BYTES >= 8 * 8
     assert "alloca double, i64 300000" not in text and "alloca double, i64 8" in text
-    assert text.count("call i8* @\"aligned_alloc\"(") == 1
-    assert text.count("call void @\"free\"(") == 1
+    assert text.count('call i8* @"aligned_alloc"(') == 1
+    assert text.count('call void @"free"(') == 1
 
 
 def test_local_arrays__a_large_one_runs_on_a_thread_with_a_small_stack(tmp_path):

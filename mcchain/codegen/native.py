@@ -95,7 +95,7 @@ class TranslationError(Exception):
     generator, never of a scene)."""
 
 
-class _Widen(Exception):  # noqa: N818 (a signal, caught by ModuleTranslator.specialize)
+class _Widen(Exception):
     """A variable first assigned an integer (or bool) is assigned a float later: the function
     is translated again with the variable a float from its first assignment, as numba's type
     unification makes it where the two meet (a loop, a branch)."""
