@@ -20,7 +20,11 @@ it compiles, instead of after the scene check's compile.
 A small statics run on a cold cache compiles nothing itself: its kernels run interpreted
 (:mod:`mcchain.first_run`), and :func:`start_background` starts a detached process that
 compiles them all for the next runs, one such process at a time (a lock in
-``MCCHAIN_CACHE_DIR/compile``, with its log).
+``MCCHAIN_CACHE_DIR/compile``, with its log and its record ``background.json``), and once
+per cache: only in an interactive terminal outside CI and batch schedulers, unless switched
+off (:func:`why_not_background`). Its failure is shown by the next run
+(:func:`background_failure_note`); a run started while it compiles waits for it where that
+is sooner (:func:`mcchain.first_run.choose`, :func:`background_remaining`).
 """
 
 from __future__ import annotations

@@ -6,9 +6,10 @@ Interpreted as plain Python (:func:`mcchain.kernels.config.interpret_kernels`), 
 kernels solve those samples in about 4-5 s, with the compiled kernels' bits: the same IEEE
 operations in the same order, libm's ``hypot`` in both (tested on every shipped scene, and
 a run's ``ensemble.nc`` holds the same bytes either way, but for its attribute
-``kernel_compiler``). So on a cold cache a small statics
-run is interpreted, and a detached process compiles the kernels into the cache meanwhile
-(:func:`mcchain.compile_ahead.start_background`): the next run loads them. Which way a run
+``kernel_compiler``). So on a cold cache a small statics run is interpreted, and a detached
+process compiles the kernels into the cache meanwhile where it may (in an interactive
+terminal, outside CI and batch schedulers, not switched off:
+:func:`mcchain.compile_ahead.background_note`): the next run loads them. Which way a run
 went is in ``run.json`` (its notes, ``kernels_interpreted`` and ``kernel_compiler`` in its
 session) and in the ensemble's attribute ``kernel_compiler``.
 

@@ -480,3 +480,33 @@ def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkey
     path.write_text("[run]\nbackground = false\n")
     with pytest.raises(RunError, match=r"run\.background: unknown key"):
         background_compile_off()
+
+
+def test_run__no_background_compile_flag_and_user_config_reach_the_run(
+    monkeypatch, tmp_path: Path, mcchain
+) -> None:
+    from mcchain import cli
+
+    seen = []
+
+    def start_run(scene, **kwargs):
+        seen.append(kwargs["background_off"])
+        raise SceneError("stopped here")
+
+    monkeypatch.setattr(cli, "_may_interpret", True)
+    monkeypatch.setattr(first_run, "choose", lambda *a: first_run.FirstRun(None))
+    monkeypatch.setattr(execution, "start_run", start_run)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    monkeypatch.delenv("MCCHAIN_CONFIG", raising=False)
+    scene = CONFIGS / "paper-bar.toml"
+    mcchain("run", scene, cwd=tmp_path)
+    mcchain("run", scene, "--no-background-compile", cwd=tmp_path)
+    (tmp_path / "mcchain").mkdir()
+    (tmp_path / "mcchain" / "config.toml").write_text("[run]\nbackground_compile = false\n")
+    mcchain("run", scene, cwd=tmp_path)
+    config = tmp_path / "mcchain" / "config.toml"
+    assert seen == [None, "--no-background-compile", f"{config} (run.background_compile = false)"]
+    config.write_text("[run]\nbackground_compile = 0\n")
+    refused = mcchain("run", scene, cwd=tmp_path)
+    assert refused.returncode == 2 and len(refused.stderr.splitlines()) == 1
+    assert "run.background_compile: expected a bool, got 0" in refused.stderr
