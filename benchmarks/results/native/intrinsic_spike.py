@@ -73,17 +73,7 @@ def run_native(path: Path, rounds: int) -> dict:
     source, modname, entry, args = pickle.loads(path.read_bytes())
     module = NativeModule(source, modname + "_spike")
     fn = getattr(module, entry)
-    a = _fresh(args)
-    t0 = time.perf_counter()
-    fn(*a)
-    first = time.perf_counter() - t0
-    best = np.inf
-    for _ in range(rounds):
-        a = _fresh(args)
-        t0 = time.perf_counter()
-        fn(*a)
-        best = min(best, time.perf_counter() - t0)
-    return {"first": first, "warm": best, "compile": first - best, "out": _digest(a)}
+    return _timed(fn, args, rounds)
 
 
 def run_intrinsic(path: Path, rounds: int) -> dict:
@@ -150,15 +140,21 @@ def run_intrinsic(path: Path, rounds: int) -> dict:
     exec(text, namespace)
     options = {k: v for k, v in LANE_JIT.items() if k != "cache"}
     wrapper = njit(**options)(namespace["wrapper"])
+    return _timed(wrapper, args, rounds)
+
+
+def _timed(fn, args, rounds: int) -> dict:
+    """The first call (compile and run), the best of ``rounds`` warm ones, and a digest of
+    the arrays after the last."""
     a = _fresh(args)
     t0 = time.perf_counter()
-    wrapper(*a)
+    fn(*a)
     first = time.perf_counter() - t0
     best = np.inf
     for _ in range(rounds):
         a = _fresh(args)
         t0 = time.perf_counter()
-        wrapper(*a)
+        fn(*a)
         best = min(best, time.perf_counter() - t0)
     return {"first": first, "warm": best, "compile": first - best, "out": _digest(a)}
 
