@@ -207,7 +207,9 @@ def add_cache_parser(sub: Any) -> None:
         description="mcchain's compiled-code caches (MCCHAIN_CACHE_DIR, numba's cache of "
         "mcchain's kernels)",
     )
-    action = cache.add_subparsers(dest="cache_action", required=True, parser_class=_Parser)
+    action = cache.add_subparsers(
+        dest="cache_action", metavar="{status,warm,clear}", required=True, parser_class=_Parser
+    )
     action.add_parser("status", help="what is compiled, where, sizes, versions and target")
     warm = action.add_parser(
         "warm",

@@ -258,3 +258,11 @@ def test_cache_status_and_clear(tmp_path: Path, monkeypatch, mcchain) -> None:
     assert f"native: removed 2 files, 0.0 MB from {native}" in cleared.stdout.splitlines()
     assert not any(native.iterdir()) and not any(caches.mcchain_cache("generated").iterdir())
     assert [p.name for p in numba_folder.iterdir()] == ["other.pyc"]
+
+
+def test_cache_warm__a_bad_scene_is_one_line_and_compiles_nothing(tmp_path: Path, mcchain):
+    from test_cli_commands import assert_usage_error
+
+    (tmp_path / "bad.toml").write_text("[scene]\nname = 3\n")
+    assert_usage_error(mcchain("cache", "warm", "bad.toml", cwd=tmp_path), "scene.name")
+    assert_usage_error(mcchain("cache", cwd=tmp_path), "{status,warm,clear}")
