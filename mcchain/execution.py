@@ -315,7 +315,7 @@ def _complete(
         for key, value in (s.get("timings") or {}).items():
             summed[key] = summed.get(key, 0.0) + float(value)
     samples_per_s = stats.samples / stats.compute if stats.compute > 0 else None
-    steps = job.steps_per_sample
+    steps = stats.steps / stats.samples if stats.steps is not None and stats.samples else None
     busy = stats.workers * (stats.compute + merged.seconds)
     record.update(
         status=COMPLETED,
@@ -328,7 +328,9 @@ def _complete(
         throughput={
             "samples_per_s": samples_per_s,
             "steps_per_sample": steps,
-            "instance_steps_per_s": samples_per_s * steps if samples_per_s and steps else None,
+            "instance_steps_per_s": (
+                stats.steps / stats.compute if stats.steps and stats.compute > 0 else None
+            ),
             "outside_kernel_share": 1.0 - stats.kernel / busy if busy > 0 else None,
         },
         merge={
@@ -367,7 +369,10 @@ def execute(
     ``write`` (part files), ``merge``, ``total``.
 
     Throughput (this session): ``samples_per_s`` = samples computed / ``compute``;
-    ``instance_steps_per_s`` = that × integration steps per sample (``[simulate]`` only);
+    ``steps_per_sample`` = the integration steps the samples took (as the solver counted
+    them: fixed-step methods the steps to t_end, the last one shortened to land on it; rk45
+    the accepted ones), summed, / samples computed; ``instance_steps_per_s`` = those steps
+    / ``compute`` (both ``[simulate]`` only);
     ``outside_kernel_share`` = 1 − ``kernel`` / (workers × (``compute`` + ``merge``)), the
     share of the chunk loop and merge spent outside the solver (I/O, merge, Python; compile
     excluded). With Dask, ``kernel`` sums the workers' solver time and workers is their count.

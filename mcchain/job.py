@@ -40,7 +40,6 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
-        steps_per_sample: integration steps per sample (``None`` without ``[simulate]``).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
@@ -58,7 +57,6 @@ class Job:
     history_dtype: str
     compression: str
     complevel: int
-    steps_per_sample: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -87,28 +85,8 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
-    model.meta["warnings"] = initial_state_warnings(*written_state(scene)) + grid_warnings(scene)
+    model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
-
-
-def grid_warnings(scene: Any) -> list[str]:
-    """One line when the step of a fixed-step method is shortened because ``[simulate]``
-    t_end is not a whole number of output intervals (the grid is fitted to end at t_end,
-    :class:`mcchain.solvers.simulate.OutputGrid`); adaptive methods change no step: no line."""
-    sim = _section(scene, "simulate")
-    if sim is None:
-        return []
-    from mcchain.solvers.simulate import output_times
-
-    grid = output_times(sim)
-    if not grid.fitted or grid.dt == sim.dt:
-        return []
-    step = float(grid.time[1] - grid.time[0])
-    return [
-        f"simulate.t_end: {sim.t_end:g} s is not a whole number of output_dt = "
-        f"{sim.output_step:g} s; the {len(grid.time) - 1} output intervals are {step:.6g} s "
-        f"(dt {grid.dt:.6g} s) so that the last output is t_end"
-    ]
 
 
 def written_state(scene: Any) -> tuple[Model, Any]:
@@ -143,14 +121,6 @@ def resolved_settings(scene: Any, nsample: int, seed: int | None) -> dict[str, A
     if isinstance(storage, Mapping):
         data["storage"] = {k: v for k, v in storage.items() if k != "chunk_size"}
     return {"scene": data, "samples": int(nsample), "seed": seed}
-
-
-def _steps_per_sample(scene: Any) -> int | None:
-    sim = _section(scene, "simulate")
-    t_end, dt = getattr(sim, "t_end", None), getattr(sim, "dt", None)
-    if not t_end or not dt:
-        return None
-    return round(float(t_end) / float(dt))
 
 
 def _warnings(model: Model) -> list[str]:
@@ -212,7 +182,6 @@ def prepare_job(
         history_dtype=str(storage.history_dtype),
         compression=str(storage.compression),
         complevel=int(storage.complevel),
-        steps_per_sample=_steps_per_sample(scene),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
         notes=[] if kernels_note is None else [kernels_note],

@@ -364,12 +364,18 @@ def variable_attributes(name: str) -> dict[str, Any]:
 AXIS_OUTPUTS = {"time": "time", "cycle_phase": "phase"}
 """Solver outputs that are coordinate values (1-D, float64), and the dim each labels."""
 
+STEPS_TAKEN = "steps_taken"
+"""A solver output that is no ensemble variable: (sample,) int64, the integration steps each
+sample took (fixed-step methods: the steps to t_end; rk45: the accepted ones). The run
+machinery sums it into ``run.json``'s throughput (:mod:`mcchain.parallel`); it is not
+stored (:func:`coerce_outputs` leaves it out)."""
+
 
 def coerce_outputs(
     outputs: Mapping[str, Any], history_dtype: str = "float32"
 ) -> dict[str, np.ndarray]:
     """Cast a solver's arrays to their storage dtypes (the axis outputs, ``time`` and
-    ``cycle_phase``, stay float64).
+    ``cycle_phase``, stay float64; :data:`STEPS_TAKEN` is left out).
 
     Raises ``ValueError`` for an undeclared name or an array whose kind cannot be stored
     under its rule (a float for ``status``, a non-integer count).
@@ -378,6 +384,8 @@ def coerce_outputs(
         raise ValueError(f"history_dtype: must be float32 or float64, got {history_dtype!r}")
     result: dict[str, np.ndarray] = {}
     for name, value in outputs.items():
+        if name == STEPS_TAKEN:
+            continue
         arr = np.asarray(value)
         if name in AXIS_OUTPUTS:
             result[name] = np.asarray(arr, dtype=np.float64)
