@@ -13,14 +13,29 @@ from __future__ import annotations
 from mcchain.codegen.topology import Topology
 
 
-def _simd_doubles() -> int:
-    """Doubles in one SIMD register of this CPU: 8 with AVX-512, else 4 (AVX2)."""
+def target_cpu() -> tuple[str, str]:
+    """The CPU name and features numba compiles for, as its codegen chooses them:
+    ``NUMBA_CPU_NAME`` and ``NUMBA_CPU_FEATURES`` where set (no features for the name
+    ``generic``), else the host's. The generated text follows them (:data:`LMAX`), not the
+    host's own flags, so a cache built for a portable target is portable."""
+    import os
+
     from llvmlite import binding
 
-    return 8 if binding.get_host_cpu_features().get("avx512f") else 4
+    name = os.environ.get("NUMBA_CPU_NAME") or binding.get_host_cpu_name()
+    features = os.environ.get("NUMBA_CPU_FEATURES")
+    if features is None:
+        features = "" if name.lower() == "generic" else binding.get_host_cpu_features().flatten()
+    return name, features
 
 
-LMAX = _simd_doubles()
+def simd_doubles(features: str) -> int:
+    """Doubles in one SIMD register of a CPU with these features (LLVM's ``+f,-g`` list):
+    8 with AVX-512, else 4 (AVX2)."""
+    return 8 if "+avx512f" in features.split(",") else 4
+
+
+LMAX = simd_doubles(target_cpu()[1])
 """Largest lane count of a lane group, and the row length of the work array: one SIMD
 register of doubles, so W is contiguous and a lane loop touches each element once. Measured
 here (AVX2, rk4, ns per instance-step, side by side): rows of 64 doubles, 512 bytes apart,
