@@ -57,6 +57,14 @@ from mcchain.kernels.joints import (
     constraint_residual,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
+from mcchain.kernels.peaks import (
+    PEAK_CLOCK,
+    PEAK_WIDTH,
+    peak_values,
+    peaks_feed,
+    peaks_finish,
+    peaks_start,
+)
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
@@ -71,7 +79,7 @@ from mcchain.status import (
 def generalized_alpha_run(
     start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, cols, first, alpha_m, alpha_f, gam,
     beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-    out_ct, sum_ct, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
+    out_ct, sum_ct, peaks_out, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``.
 
@@ -90,7 +98,8 @@ def generalized_alpha_run(
     CONTACT_STEP_LIMIT flags CONTACT_STEP_TOO_LARGE (the impacts would be damped by the
     method, not by the law), then the switch of model auto, the located onsets and
     separations, and the re-seats. ``cols``, ``first``: the constraint pattern (re-seat
-    projection); ``out_ct``, ``sum_ct``: the contact outputs (see explicit.rk4_run).
+    projection); ``out_ct``, ``sum_ct``, ``peaks_out``: the contact outputs and the
+    continuous peaks (see explicit.rk4_run), fed with λ at every step's start.
     """
     ndof = Q0.shape[1]
     nsys = ndof + ncon
@@ -98,9 +107,12 @@ def generalized_alpha_run(
     ncj = contact_joints(km)
     bp = (1.0 - alpha_m) / (beta * h * h * (1.0 - alpha_f))
     gp = gam / (beta * h)
+    npk = peaks_out.shape[1]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            for k in range(npk):
+                peaks_out[s, k] = np.nan
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
@@ -123,6 +135,9 @@ def generalized_alpha_run(
         S = np.zeros((ncon, ncon))  # re-seat scratch
         work = np.zeros((4, ncon))
         contact_start(km, cst)
+        pk = np.zeros(PEAK_WIDTH * npk + PEAK_CLOCK)
+        peaks_start(pk)
+        values = np.zeros(npk)
         mass_diagonal(km, s, m)
         for i in range(ndof):
             minv[i] = 1.0 / m[i]
@@ -166,6 +181,8 @@ def generalized_alpha_run(
                         km, s, q, v, t, minv, cols, first, cst, row_law, tau, B, S, work[0],
                         work[1], work[2], work[3],
                     )  # fmt: skip
+            peak_values(km, lam, cst, values)
+            peaks_feed(pk, values, t)
             if n % out_every == 0:
                 it = n // out_every
                 write_outputs(
@@ -251,7 +268,8 @@ def generalized_alpha_run(
                 acc[i] -= (1.0 - alpha_f) / (1.0 - alpha_m) * qdd_old[i]
             nst += 1
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
-        finish_contact(s, st, written, cst, out_ct, sum_ct)
+        peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
+        finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
         status[s] = st
         nsteps_out[s] = nst
         nevals_out[s] = nev
