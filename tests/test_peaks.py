@@ -109,8 +109,8 @@ METHODS = {
 def test_peak_joint_force__the_bottom_of_the_swing_on_every_method(name):
     """The bar's pin force peaks at the bottom, between two stored points (every 20 ms)
     and between step ends: each method reports m g (2.5 − 1.5 cos θ0) to its accuracy."""
-    from mcchain.solvers import solve_chunk
     from mcchain.scene import compile_model, load_scene_text
+    from mcchain.solvers import solve_chunk
 
     settings, rtol = METHODS[name]
     scene = load_scene_text(_swinging_bar(name.split()[0], **settings), name="swing")

@@ -309,7 +309,7 @@ def _peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
         lines = [
             f"cnt = {at('pkt', 4)}",
             f"if cnt == 0.0 or {t} > {at('pkt', 3)}:",
-            *(f"    t{x} = {at('pkt', i)}" for i, x in enumerate("abcd")),
+            *(f"    t{x} = {at('pkt', i + 1)}" for i, x in enumerate("bcd")),
         ]
         for k in range(topo.njoint):
             r = topo.joint_row[k]
@@ -321,11 +321,11 @@ def _peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
                 value = f"abs({lam}) if {at('fm', cj[k])} == 0.0 else max({lam}, 0.0)"
             else:  # prismatic (the normal force) or a clearance joint on the link
                 value = f"abs({lam})"
-            lines.append(f"    peak_feed(W, {base(k)}, {lay.lmax}, cnt, ta, tb, tc, td, {t}, {value})")
+            lines.append(f"    peak_feed(W, {base(k)}, {lay.lmax}, cnt, tb, tc, td, {t}, {value})")
         for d in range(topo.ndriver):
             value = f"abs({at(lamrow, topo.driver_row[d])})"
             lines.append(
-                f"    peak_feed(W, {base(topo.njoint + d)}, {lay.lmax}, cnt, ta, tb, tc, td, "
+                f"    peak_feed(W, {base(topo.njoint + d)}, {lay.lmax}, cnt, tb, tc, td, "
                 f"{t}, {value})"
             )
         lines += [

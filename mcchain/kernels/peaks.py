@@ -89,16 +89,16 @@ def cubic_peak(ta, fa, tb, fb, tc, fc, td, fd, interval):
 
 
 @njit(**JIT)
-def peak_feed(W, base, stride, count, ta, tb, tc, td, t, f):
+def peak_feed(W, base, stride, count, tb, tc, td, t, f):
     """Feed the value ``f`` at time ``t`` (> ``td``) to the quantity stored at ``W[base]``,
     ``W[base + stride]``, … (:data:`PEAK_WIDTH` numbers: f_a, f_b, f_c, f_d, peak).
 
-    ``ta`` … ``td`` are the times of the last four values fed and ``count`` how many were
-    fed (at most 4 counts). The peak takes ``f``; with four earlier points, the step
-    [tc, td] is checked for an interior maximum when the data rise into it and fall out of
-    it (f_c ≥ f_b, f_d ≥ f, not both equal), and the first step [tb, tc] once, when exactly
-    three points came before. The caller shifts the times after feeding every quantity."""
-    fa = W[base]
+    ``tb``, ``tc``, ``td`` are the times of the last three values fed and ``count`` how many
+    were fed (at most 4 counts; the oldest of the four kept is dropped here). The peak takes
+    ``f``; with three earlier points, the step [tc, td] is checked for an interior maximum
+    when the data rise into it and fall out of it (f_c ≥ f_b, f_d ≥ f, not both equal), and
+    the first step [tb, tc] once, when exactly three points came before. The caller shifts
+    the times after feeding every quantity."""
     fb = W[base + stride]
     fc = W[base + 2 * stride]
     fd = W[base + 3 * stride]
@@ -171,9 +171,9 @@ def peaks_feed(pk, values, t):
     count = pk[clock + 4]
     if count > 0.0 and not (t > pk[clock + 3]):
         return
-    ta, tb, tc, td = pk[clock], pk[clock + 1], pk[clock + 2], pk[clock + 3]
+    tb, tc, td = pk[clock + 1], pk[clock + 2], pk[clock + 3]
     for k in range(npk):
-        peak_feed(pk, PEAK_WIDTH * k, 1, count, ta, tb, tc, td, t, values[k])
+        peak_feed(pk, PEAK_WIDTH * k, 1, count, tb, tc, td, t, values[k])
     pk[clock] = tb
     pk[clock + 1] = tc
     pk[clock + 2] = td
