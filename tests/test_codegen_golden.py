@@ -29,27 +29,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "13311a6d8a58800673184fb82cfed6b32a73623735eef89652bbe818f9b87c2b",
-        "rk4-projection": "a2bf4f3c56325eb9be6fcb190cf6f71a280c0cdf2ab2be1ee2101440168c6357",
-        "rk45": "8b7d12da6f95321c0bf1b26e917fc428c09c821b96891a250c84e0c08966c037",
+        "rk4": "59dfacf1752f5a04de230faa62810b7059ff93415c96c575bacc36fe4b41f5bd",
+        "rk4-projection": "d9c8c58431d70ddc11f5ba6e468884ede21ea65c41872a475a794c3e2e6f8d05",
+        "rk45": "f4cc0cceec6fd8b66cf4966b71d3453f06a2f00dcf8e57dfb5b949098396ee61",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "d4995475c1b9e6b7513fc1bfc1f4dfd6c5a262cfb3f97dd96db32d8dc597ff9f",
-        "rk4-projection": "ba7f7028505d6b076f53bb67e8d1f4a0cb4d8ac4db2b8b4f197926184ae86f7f",
-        "rk45": "cc8bf067f50d1246f68ff1c3ccc1e7867d91cba719927e77485e0f6b9dfb64de",
+        "rk4": "6ad7acb4ddd8dd771ba1f102a5d9ffc878dbc7dde9319b5063d6c9e8b115e05b",
+        "rk4-projection": "68b11146cc7a8e7d357cbcf0818f6f263eee960302d52eced7ca8ec8b05c157b",
+        "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
         "accel": "a8f3d1ac7b829ca31c17b5a259664b33a309c49eabf87d090ffdcb552ee6d961",
-        "rk4": "0d66cc72e7531da95c6ee539eade8ca480fb4f5b2d6ab4b5e5d7fa832bcc5f77",
-        "rk4-projection": "4e180ea071e172631760f93d69babdf9ac85adebb1d1f1700cccf4b89ffe7d0c",
-        "rk45": "87334ac45a45ada4214f6b4e25d1eb7cce1e6cafd20f183ed4c246728f540f43",
+        "rk4": "30fdf6a3baf9668ff32da732826755f2d1bbd5962274b65a7ba48a526533a9f2",
+        "rk4-projection": "80e33d9127ccead45999b32c59d180a39dd977a6387472e418ef0faf7ac8f472",
+        "rk45": "22604644cad98ceaa4013502c8102b4686477becd1089b3996f597a34d6525dc",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "9100b9c4cfdc688bd87075c9d30fec2dc4d2ab59e3034240064d2f2a0d1ef54b",
-        "rk4-projection": "04f1e16b475865488f6b726272813cc59f280a6362322f7866c8d17300207599",
-        "rk45": "fde6b234f17b9138be780fdacd2874b9d21ea4e61a4a93a9896f4e85bfffec17",
+        "rk4": "5f03f37df0a5e3b4846b9ab608d8e973b20e3ee561ee1cb25b5bc56348d6bb46",
+        "rk4-projection": "1760b6f836eaf811aa11ee267ad8227a424025e8bab5ffe13a764d4b59e587f6",
+        "rk45": "823837e6b1b07739c91d55f3c155213257d9c4a01cc07f7226e1bd5cba397ef2",
     },
 }
 
