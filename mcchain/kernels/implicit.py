@@ -57,14 +57,8 @@ from mcchain.kernels.joints import (
     constraint_residual,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
-from mcchain.kernels.peaks import (
-    PEAK_CLOCK,
-    PEAK_WIDTH,
-    peak_values,
-    peaks_feed,
-    peaks_finish,
-    peaks_start,
-)
+from mcchain.kernels.peaks import peak_values, peaks_feed, peaks_finish, peaks_start
+from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
