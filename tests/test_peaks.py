@@ -139,7 +139,7 @@ def _sweep_sample(method: str, **simulate: float) -> dict[str, np.ndarray]:
     from mcchain.scene import compile_model, load_scene, load_scene_text
     from mcchain.solvers import solve_chunk
 
-    clearance, restitution = compile_model(load_scene(SWEEP), nsample=3).parameters[2]
+    clearance, restitution = map(float, compile_model(load_scene(SWEEP), nsample=3).parameters[2])
     text = SWEEP.read_text().split("[sample]")[0]
     text = text.replace("clearance = 1e-4 ", f"clearance = {clearance!r} ")
     text = text.replace("restitution = 0.9\n", f"restitution = {restitution!r}\n")

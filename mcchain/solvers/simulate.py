@@ -21,7 +21,12 @@ Contract of :func:`simulate`:
    ``driver_torque`` (sample, time, driver) = −λ of the driver row (``driver_force`` for a
    slider driver: the force along its joint's axis, N); ``constraint_error``
    (sample, time) = max |Φ|; ``energy`` (sample, time) = kinetic + potential (gravity, springs,
-   constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them).
+   constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them) +
+   the elastic energy K δ^(m+1)/(m+1) of contacts under a contact law. Per sample, the
+   continuous peaks over the run (tracked at every step, located within the step: not from
+   the stored points): ``peak_joint_force`` (sample, joint) of |joint_force|,
+   ``peak_driver_torque`` (sample, driver) of |driver_torque| (``peak_driver_force`` for a
+   slider driver), and with contact-law joints ``peak_contact_force``.
 5. Status (per sample, :mod:`mcchain.status`): DIVERGED when the state is non-finite or
    max |Φ| exceeds ``constraint_tolerance`` (or an implicit/adaptive step fails), SINGULAR
    when S (or the KKT matrix) loses rank — a pivot ≤ ``SINGULAR_PIVOT`` × its diagonal —
