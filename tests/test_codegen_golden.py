@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "59dfacf1752f5a04de230faa62810b7059ff93415c96c575bacc36fe4b41f5bd",
-        "rk4-projection": "d9c8c58431d70ddc11f5ba6e468884ede21ea65c41872a475a794c3e2e6f8d05",
+        "rk4": "1377c010d32561d60de3560164b6156e5fe97150a4c2141e59e5508cf7d429ac",
+        "rk4-projection": "b2f6470fa65fa0fa43669cf68336ec8a32dd84d0c6d1b5efa48b50a252f42ce2",
         "rk45": "f4cc0cceec6fd8b66cf4966b71d3453f06a2f00dcf8e57dfb5b949098396ee61",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "6ad7acb4ddd8dd771ba1f102a5d9ffc878dbc7dde9319b5063d6c9e8b115e05b",
-        "rk4-projection": "68b11146cc7a8e7d357cbcf0818f6f263eee960302d52eced7ca8ec8b05c157b",
+        "rk4": "b26a3a2819c6dd338502355d2db6ed730bfd19e7546465c960de0656a780ec87",
+        "rk4-projection": "b0dcaf925a312242dd1cfc7bb11e1ddfe0ce307dac17cd47df3f6b4dfd88df30",
         "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
         "accel": "a8f3d1ac7b829ca31c17b5a259664b33a309c49eabf87d090ffdcb552ee6d961",
-        "rk4": "30fdf6a3baf9668ff32da732826755f2d1bbd5962274b65a7ba48a526533a9f2",
-        "rk4-projection": "80e33d9127ccead45999b32c59d180a39dd977a6387472e418ef0faf7ac8f472",
+        "rk4": "cc5aa2759b80c51a161bbc9f3bf213e12c9313aa67754a003601b0350151121e",
+        "rk4-projection": "6a3a4ccd39d45a1fad99f171a456283b68ee303d93da46a4a689c211ec578e47",
         "rk45": "22604644cad98ceaa4013502c8102b4686477becd1089b3996f597a34d6525dc",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "5f03f37df0a5e3b4846b9ab608d8e973b20e3ee561ee1cb25b5bc56348d6bb46",
-        "rk4-projection": "1760b6f836eaf811aa11ee267ad8227a424025e8bab5ffe13a764d4b59e587f6",
+        "rk4": "f5346077d019386945969b25990c7af83762ecca073a80a1bacd5d17677cdf94",
+        "rk4-projection": "f9d48306df4c9e98647fc9dfb33cb2d0bbe7ad7a9f7f0e4c6314003f1af283bd",
         "rk45": "823837e6b1b07739c91d55f3c155213257d9c4a01cc07f7226e1bd5cba397ef2",
     },
 }

@@ -50,6 +50,7 @@ EXTRAS = {
     "joint_moment": ("sample", "time", "joint"),
     "omega_cycle": ("sample", "phase", "mode"),
     "peak_driver_force": ("sample", "driver"),
+    "requirement_met": ("sample", "requirement"),
 }
 HISTORIES = {
     "q",
