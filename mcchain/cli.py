@@ -198,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
         "export",
         help="write a run's per-sample results as a table",
         description="write one row per sample: sampled parameters, status, pulsations (rad/s "
-        "and Hz), equilibria, contact summaries and the peaks of the force histories",
+        "and Hz), equilibria, contact summaries, the peaks tracked at every step (peak_*), "
+        "and the largest stored point of each force history (max_stored_*)",
         named_errors=True,
     )
     export.add_argument("run", help="run folder (or its id under runs/)")
