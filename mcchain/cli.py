@@ -278,12 +278,12 @@ def add_cache_parser(sub: Any) -> None:
 
 
 def _cmd_cache(args: argparse.Namespace) -> int:
-    from mcchain import caches
+    from mcchain import cache_report
 
     if args.cache_action == "status":
-        print("\n".join(caches.status_lines()))
+        print("\n".join(cache_report.status_lines()))
     elif args.cache_action == "clear":
-        print("\n".join(caches.clear()))
+        print("\n".join(cache_report.clear()))
     else:
         from mcchain.compile_ahead import warm
 

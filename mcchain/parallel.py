@@ -31,15 +31,30 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from mcchain.compile_ahead import CompileAhead
     from mcchain.model import Model
 
 log = logging.getLogger(__name__)
+
+
+class HelperCompile(Protocol):
+    """What the warm-up asks of a cold first run's helper compile
+    (:class:`mcchain.compile_ahead.CompileAhead`, which imports this module: named by its
+    methods here, so that the two modules form no import circle)."""
+
+    started: float
+    """``time.perf_counter()`` when the helper started (the compile notice's start)."""
+
+    def compile_beside(self, model: Model, scene: Any) -> None:
+        """Compile, in this process, what the helper leaves out."""
+
+    def wait(self) -> None:
+        """Wait until the helper has compiled (or failed)."""
+
 
 SolveFn = Callable[["Model", Any], Mapping[str, Any]]
 """``solve(model_chunk, scene) -> {variable: array}`` (see ``mcchain.solvers.solve_chunk``)."""
@@ -250,7 +265,7 @@ def run_local(
     solve: SolveFn | None = None,
     progress: Progress | None = None,
     observe: ObserverFn | None = None,
-    compile_ahead: CompileAhead | None = None,
+    compile_ahead: HelperCompile | None = None,
 ) -> ExecutionStats:
     """Solve ``chunks`` in this process, writing each on a thread apart from the compute.
 

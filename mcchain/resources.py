@@ -48,8 +48,7 @@ def _per_sample_model_bytes(scene: Any) -> int:
     """Bytes per sample of the compiled model: the parameter table, and each model array a
     sampled path makes per-sample (the whole array, for every sample)."""
     from mcchain.parameters import PARAMETERS
-    from mcchain.scene.compile import parameter_slot
-    from mcchain.scene.paths import PARAM_SHAPES, parse_path
+    from mcchain.scene.paths import PARAM_SHAPES, parameter_slot, parse_path
 
     paths = list(scene.param_paths)
     counts = {

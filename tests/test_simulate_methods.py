@@ -8,12 +8,12 @@ import pytest
 from mcchain.codegen.generate import lane_kernels
 from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.errors import SceneError
-from mcchain.kernels.sincos import sincos
 from mcchain.kernels.tableaux import DOPRI5, RK4, GeneralizedAlpha
 from mcchain.model import JointKind
 from mcchain.solvers.simulate import METHODS, simulate
 from mcchain.testing.dense import energy, equations, kkt_acceleration
 from mcchain.testing.scenes import scene_model
+from mcchain.testing.sincos import sincos
 
 COEF_TOL = 1e-15  # tableau identities hold to rounding of the fractions
 SINCOS_TOL = 2.3e-16  # the fdlibm kernels: about one ulp of a value ≤ 1

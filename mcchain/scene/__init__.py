@@ -12,7 +12,7 @@ out as the flat arrays the kernels read. This package never imports numba or the
 
 from __future__ import annotations
 
-from mcchain.scene.compile import compile_model, parameter_slot
+from mcchain.scene.compile import compile_model
 from mcchain.scene.loading import load_scene, load_scene_text, scene_from_dict
 from mcchain.scene.models import (
     GROUND_NAME,
@@ -30,7 +30,7 @@ from mcchain.scene.models import (
     Spring,
     Storage,
 )
-from mcchain.scene.paths import ParamRef, parse_path
+from mcchain.scene.paths import ParamRef, parameter_slot, parse_path
 from mcchain.scene.sampling import philox_uniform, ppf, sample_parameters, unit_design
 
 __all__ = [

@@ -19,15 +19,10 @@ from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, cons
 from mcchain.parameters import PARAMETERS, TABLE
 from mcchain.resources import check_memory
 from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
-from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parse_path, quote_key
+from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
 
 Slot = tuple[str, tuple[int, ...]]
-
-
-def parameter_slot(ref: ParamRef) -> Slot:
-    """The model array and the index (without the sample axis) a parameter path lands in."""
-    return PARAMETERS[ref.kind, ref.key].model_index(ref.index, ref.indices)
 
 
 def _check_count(name: str, value: int, low: int, high: int | None = None) -> int:

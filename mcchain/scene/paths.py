@@ -75,6 +75,11 @@ class ParamRef:
         return f"{head}.{self.key}" + "".join(f"[{i}]" for i in self.indices)
 
 
+def parameter_slot(ref: ParamRef) -> tuple[str, tuple[int, ...]]:
+    """The model array and the index (without the sample axis) a parameter path lands in."""
+    return PARAMETERS[ref.kind, ref.key].model_index(ref.index, ref.indices)
+
+
 def _names_of(scene: Scene, kind: str) -> list[str]:
     return {
         "body": scene.body_names,
