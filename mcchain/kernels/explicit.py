@@ -378,7 +378,7 @@ def rk4_run(
         lam0 = np.zeros(ncon)
         row_law = np.zeros((ncon, 3))
         cst = np.zeros((ncj, NCST))
-        contact_start(km, cst)
+        contact_start(km, s, cst)
         qdd = np.zeros(ndof)
         qs = np.zeros(ndof)  # a stage's state
         vs = np.zeros(ndof)

@@ -122,7 +122,7 @@ def generalized_alpha_run(
         row_law = np.zeros((max(ncon, 1), 3))
         S = np.zeros((ncon, ncon))  # re-seat scratch
         work = np.zeros((4, ncon))
-        contact_start(km, cst)
+        contact_start(km, s, cst)
         mass_diagonal(km, s, m)
         for i in range(ndof):
             minv[i] = 1.0 / m[i]

@@ -125,6 +125,14 @@ def compile_model(
     _contact_stiffness(scene, arrays, nsample)
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
+    written = _written_state(scene, paths)
+    placed = [  # the scene places the journal: both bodies' positions written (or ground)
+        all(b == GROUND_NAME or written["position"][index[b]] for b in j.bodies)
+        for j in scene.joint
+    ]
+    joint_written = np.array(
+        [int(joint_model[k] != LINK and placed[k]) for k in range(len(scene.joint))], dtype=np.int64
+    )
 
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
@@ -144,6 +152,7 @@ def compile_model(
         joint_row=joint_row,
         joint_model=joint_model,
         joint_contact_law=joint_law,
+        joint_written=joint_written,
         driver_body=topo([GROUND_NAME if d.slides else str(d.body) for d in scene.driver]),
         driver_joint=np.array(
             [scene.joint_names.index(str(d.joint)) if d.slides else -1 for d in scene.driver],
@@ -161,7 +170,7 @@ def compile_model(
             "seed": seed,
             "design": sample.design if sample is not None else None,
             "nsample": nsample,
-            "written": _written_state(scene, paths),
+            "written": written,
         },
         **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
     )

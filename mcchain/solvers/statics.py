@@ -220,7 +220,11 @@ def solve_modes_along(
     for j, turn in enumerate(phase):
         angles = angle0.copy()
         angles[:, driver] += turn
-        frozen = replace(model, driver_angle0=angles, joint_eccentricity=free)
+        # every clearance journal seated (joint_written 0: none kept off its wall)
+        frozen = replace(
+            model, driver_angle0=angles, joint_eccentricity=free,
+            joint_written=np.zeros_like(model.joint_written),
+        )  # fmt: skip
         status = np.zeros(nsample, dtype=STATUS_DTYPE)
         assembled = assemble(frozen, status, q, v)
         km = frozen.kernel_model()
@@ -304,8 +308,8 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     is compared with its assembled state. A body's move is the largest displacement of its
     centre and its joint points; it is reported when the scene wrote (or sampled) the body's
     position (an angle written alone is a hint that picks the branch) and the move exceeds
-    1e-6 of the mechanism's size plus twice the sum of the clearances (a journal
-    legitimately moves within its clearance). Velocities the
+    1e-12 of the mechanism's size (assembly's tolerance: whatever its size relative to the
+    clearances, a journal moved onto its wall is a move). Velocities the
     scene wrote are reported when the largest change of those points' velocities exceeds
     1e-6 of the velocity scale (written speeds, driver speeds × size). Bodies whose state
     the scene leaves out are placed and analysed silently: that is what they ask for.
@@ -321,8 +325,7 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
         default=1.0,
     )
     size = size if size > 0 else 1.0
-    clearance = model.joint_clearance[0][model.joint_kind == JointKind.CLEARANCE]
-    position_tol = 1e-6 * size + 2.0 * float(np.sum(clearance))
+    position_tol = 1e-12 * size
     speeds = [
         np.abs(v0).max(initial=0.0) * size,
         np.abs(model.driver_omega[0]).max(initial=0.0) * size,
