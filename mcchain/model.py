@@ -175,9 +175,11 @@ class Model:
             (:data:`mcchain.contact.MODEL_CODES`: 0 link, 1 contact, 2 auto; 0 for ideal
             joints). Statics and modes always use the link.
         joint_contact_law: (njoint,) int64 contact law code (:data:`mcchain.contact.LAW_CODES`).
-        joint_written: (njoint,) int64 1 for a clearance joint of model contact or auto whose
-            journal the scene places (both bodies' positions written or sampled, or ground):
-            assembly keeps it where written unless it is on the wall; 0 for the others.
+        joint_written: (njoint,) int64 where the scene writes the journal of a clearance
+            joint of model contact or auto (both bodies' positions written or sampled, or
+            ground), judged on the scene as written: 1 off its wall (free or pressed: kept
+            where written, not a constraint of the assembly), 2 on it (seated: held on the
+            wall); 0 for the others (assembly places them as the link).
         joint_start: (*, njoint) the mode each contact-law joint starts its time history in
             (:data:`mcchain.contact.START_LINK`, ``START_LAW``, ``START_SEATED``), set from
             the start state by :func:`mcchain.solvers.simulate.start_modes`; default: the

@@ -235,23 +235,16 @@ def _assembly_residual(km, s, q, target, free, psi_out, J_out):
 
 @njit(**JIT)
 def law_start_joints(km, s, q, free_out, seated_out):
-    """Which clearance joints under the contact law keep their written journal: for every
-    joint with ``km.joint_written`` (model contact or auto, both bodies placed by the scene),
-    ``seated_out[k]`` when the journal is on its wall (|δ| ≤ the seat tolerance,
-    :func:`mcchain.contact.seat_tolerance`), else ``free_out[k]`` (free or pressed: not a
-    constraint of the assembly). Returns the number of free joints."""
+    """Clearance joints under the contact law whose journal the scene writes
+    (``km.joint_written``, judged on the scene as written): ``free_out[k]`` for a journal
+    written off its wall (free or pressed: not a constraint of the assembly), ``seated_out[k]``
+    for one written on it (held on the wall in its written direction). Returns the number
+    of free joints."""
     count = 0
     for k in range(km.joint_body_a.shape[0]):
-        free_out[k] = False
-        seated_out[k] = False
-        if km.joint_written[k] == 0 or km.joint_kind[k] != JOINT_CLEARANCE:
-            continue
-        c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-        _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-        if abs(hypot(dx, dy) - c) <= SEAT_TOLERANCE * c:
-            seated_out[k] = True
-        else:
-            free_out[k] = True
+        free_out[k] = km.joint_written[k] == 1
+        seated_out[k] = km.joint_written[k] == 2
+        if free_out[k]:
             count += 1
     return count
 
@@ -420,9 +413,14 @@ def assemble_one(km, s, q, v):
     nfree = law_start_joints(km, s, q, free, seated)
     phi = np.empty(m)
     constraint_residual(km, s, q, 0.0, phi)
-    for k in range(nj):  # a journal under the law written free, pressed or seated holds
-        if free[k] or seated[k]:
+    for k in range(nj):  # a journal under the law written free or pressed holds; one
+        # written on its wall holds within the seat tolerance
+        if free[k]:
             phi[km.joint_row[k]] = 0.0
+        elif seated[k]:
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            if abs(phi[km.joint_row[k]]) <= SEAT_TOLERANCE * c:
+                phi[km.joint_row[k]] = 0.0
     ma = 2 * (nj - nfree) + km.driver_body.shape[0]
     psi = np.empty(ma)
     J = np.empty((ma, n))

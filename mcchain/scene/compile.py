@@ -13,7 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from mcchain.contact import LAW_CODES, LINK, MODEL_CODES, internal_cylinder_stiffness
+from mcchain.contact import (
+    LAW_CODES,
+    LINK,
+    MODEL_CODES,
+    internal_cylinder_stiffness,
+    seat_tolerance,
+)
 from mcchain.errors import SceneError
 from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
@@ -126,13 +132,7 @@ def compile_model(
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
     written = _written_state(scene, paths)
-    placed = [  # the scene places the journal: both bodies' positions written (or ground)
-        all(b == GROUND_NAME or written["position"][index[b]] for b in j.bodies)
-        for j in scene.joint
-    ]
-    joint_written = np.array(
-        [int(joint_model[k] != LINK and placed[k]) for k in range(len(scene.joint))], dtype=np.int64
-    )
+    joint_written = _written_journals(scene, written, joint_model, index)
 
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
@@ -192,6 +192,38 @@ def _written_state(scene: Scene, paths: list[str]) -> dict[str, tuple[bool, ...]
         )
         for key in keys
     }
+
+
+def _written_journals(
+    scene: Scene,
+    written: dict[str, tuple[bool, ...]],
+    joint_model: np.ndarray,
+    index: dict[str, int],
+) -> np.ndarray:
+    """``Model.joint_written``: per joint, where the scene writes the journal of a clearance
+    joint under a contact law (model contact or auto) — 1 off its wall (free, |d| < c, or
+    pressed, |d| > c), 2 on it (|δ| ≤ :func:`mcchain.contact.seat_tolerance`) — or 0 (not
+    such a joint, or a body of it placed by mcchain). Judged on the scene as written (its
+    nominal values, without ``[sample]``): a journal written on its wall stays seated on
+    it whatever clearance a sample draws."""
+    codes = np.zeros(len(scene.joint), dtype=np.int64)
+    nominal: dict[str, np.ndarray] | None = None
+    for k, joint in enumerate(scene.joint):
+        placed = all(b == GROUND_NAME or written["position"][index[b]] for b in joint.bodies)
+        clearance = joint.clearance
+        if joint_model[k] == LINK or not placed or not clearance > 0.0:
+            continue
+        if nominal is None:
+            nominal = _base_arrays(scene)
+            _unwritten_angles(scene, nominal, index)
+        a, b = (index[name] for name in joint.bodies)
+        q0 = nominal["q0"]
+        d = _world_point(q0, b, nominal["joint_point_b"][:, k]) - _world_point(
+            q0, a, nominal["joint_point_a"][:, k]
+        )
+        delta = float(np.hypot(d[0, 0], d[0, 1])) - clearance
+        codes[k] = 2 if abs(delta) <= seat_tolerance(clearance) else 1
+    return codes
 
 
 def _items(scene: Scene, kind: str) -> list[Any]:
