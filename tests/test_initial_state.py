@@ -179,7 +179,9 @@ def test_validate__prints_the_assembled_state_and_the_warnings(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "initial state at t = 0 (assembled):" in out
     assert re.search(
-        r"B: \|d\| 0\.0001 m at 0\.95\d+ rad \(eccentricity\), contact force 6\.5", out
+        r"B: \|d\| 0\.0001 m at 0\.95\d+ rad \(eccentricity\), \|d\| - c \S+ m; starts on "
+        r"the link \(model auto\): link force 6\.5",
+        out,
     )
     assert "contact holds" in out
     assert "warning: body.rocker: assembly moved it by 3.19 m" in out

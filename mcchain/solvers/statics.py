@@ -365,11 +365,22 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     return lines
 
 
-def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 0) -> np.ndarray:
+def start_multipliers(
+    model: Model,
+    q: np.ndarray,
+    v: np.ndarray,
+    sample: int = 0,
+    law: np.ndarray | None = None,
+) -> np.ndarray:
     """λ (ncon,) of M q̈ + Bᵀλ = F, B q̈ = γ at t = 0 for one sample's state q, v (3 nbody,):
-    a clearance joint's λ > 0 means its journal presses on the bearing (contact holds)."""
+    a clearance joint's λ > 0 means its journal presses on the bearing (contact holds).
+
+    ``law`` (njoint,) bool: the clearance joints under the contact law at t = 0. Their rows
+    leave the system; the law's force F_n = K max(δ, 0)^m (undamped: a contact present at
+    t = 0 has no onset) acts instead, −F_n n on the journal and +F_n n on the bearing, and is
+    their λ (N)."""
     from mcchain.kernels.forces import applied_forces, mass_diagonal
-    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian
+    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian, joint_vectors
 
     km = model.kernel_model()
     q = np.ascontiguousarray(q, dtype=np.float64)
@@ -380,8 +391,30 @@ def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 
     constraint_gamma(km, sample, q, v, 0.0, gamma)
     applied_forces(km, sample, q, v, 0.0, F)
     mass_diagonal(km, sample, mass)
-    kkt = np.block([[np.diag(mass), B.T], [B, np.zeros((m, m))]])
-    return np.linalg.solve(kkt, np.concatenate([F, gamma]))[n:]
+    rows = np.ones(m, bool)
+    normal = np.zeros(model.njoint)
+    for k in np.flatnonzero(law) if law is not None else ():
+        r = int(model.joint_row[k])
+        rows[r] = False
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, sample, q, int(k))
+        rho = float(np.hypot(dx, dy))
+        ix = sample % model.joint_clearance.shape[0]
+        delta = rho - float(model.joint_clearance[ix, k])
+        stiffness = model.joint_contact_stiffness[sample % model.joint_contact_stiffness.shape[0], k]
+        expo = model.joint_contact_exponent[sample % model.joint_contact_exponent.shape[0], k]
+        normal[k] = float(stiffness) * max(delta, 0.0) ** float(expo)
+        fx, fy = -normal[k] * dx / rho, -normal[k] * dy / rho  # on the journal
+        for body, sign, px, py in ((model.joint_body_b[k], 1.0, pbx, pby),
+                                   (model.joint_body_a[k], -1.0, pax, pay)):  # fmt: skip
+            if body >= 0:
+                F[3 * body : 3 * body + 3] += sign * np.array([fx, fy, px * fy - py * fx])
+    Bk = B[rows]
+    mk = int(rows.sum())
+    kkt = np.block([[np.diag(mass), Bk.T], [Bk, np.zeros((mk, mk))]])
+    lam = np.zeros(m)
+    lam[rows] = np.linalg.solve(kkt, np.concatenate([F, gamma[rows]]))[n:]
+    lam[~rows] = normal[[k for k in range(model.njoint) if law is not None and law[k]]]
+    return lam
 
 
 def constraint_rank(model: Model, q: np.ndarray, sample: int = 0) -> int:
