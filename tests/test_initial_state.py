@@ -180,7 +180,7 @@ def test_validate__prints_the_assembled_state_and_the_warnings(tmp_path, capsys)
     assert "initial state at t = 0 (assembled):" in out
     assert re.search(
         r"B: \|d\| 0\.0001 m at 0\.95\d+ rad \(eccentricity\), \|d\| - c \S+ m; starts on "
-        r"the link \(model auto\): link force 6\.5",
+        r"the link: link force 6\.5",
         out,
     )
     assert "contact holds" in out
