@@ -797,7 +797,7 @@ class Emitter:
         """Output quantities at (q, v, λ): ``jfx{k}``, ``jfy{k}``, ``cf{k}``, ``dtq{d}``,
         ``energy``, ``phimax``. Needs ``lam{r}`` in scope."""
         topo = self.topo
-        self._load_contact_state("fm")
+        self._load_contact_state("fm", "vi")
         self.bodies()
         self.joints()
         self.constraint_values(t=t, v=None)
@@ -844,13 +844,13 @@ class Emitter:
                 f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
                 f"energy += 0.5 * p_k{s} * st{s} * st{s}",
             )
-        # Contact joints: δ, the mode (0 link, 1 contact, 2 free) and the elastic energy
-        # K δ^(m+1) / (m+1) stored in the contact.
+        # Contact joints: δ, the mode (0 link, 1 contact, 2 free; seated, vi < 0, is in
+        # contact whichever the sign of δ) and the elastic energy K δ^(m+1) / (m+1).
         for k in self.contact_row:
             self.emit(
                 f"pen{k} = rho{k} - p_cl{k}",
                 f"pp{k} = max(pen{k}, 0.0)",
-                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0) * 1.0)",
+                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0 and vi{k} >= 0.0) * 1.0)",
                 f"eel{k} = p_K{k} * pp{k} ** (p_mx{k} + 1.0) / (p_mx{k} + 1.0)",
                 f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )

@@ -400,9 +400,9 @@ def start_multipliers(
         rho = float(np.hypot(dx, dy))
         ix = sample % model.joint_clearance.shape[0]
         delta = rho - float(model.joint_clearance[ix, k])
-        stiffness = model.joint_contact_stiffness[sample % model.joint_contact_stiffness.shape[0], k]
-        expo = model.joint_contact_exponent[sample % model.joint_contact_exponent.shape[0], k]
-        normal[k] = float(stiffness) * max(delta, 0.0) ** float(expo)
+        stiffness = np.broadcast_to(model.joint_contact_stiffness, (sample + 1, model.njoint))
+        expo = np.broadcast_to(model.joint_contact_exponent, (sample + 1, model.njoint))
+        normal[k] = float(stiffness[sample, k]) * max(delta, 0.0) ** float(expo[sample, k])
         fx, fy = -normal[k] * dx / rho, -normal[k] * dy / rho  # on the journal
         for body, sign, px, py in ((model.joint_body_b[k], 1.0, pbx, pby),
                                    (model.joint_body_a[k], -1.0, pax, pay)):  # fmt: skip
