@@ -458,7 +458,7 @@ class Model:
             if f.name == "parameters":
                 changes[f.name] = arr[start:stop]
             elif (
-                f.name in _PER_SAMPLE_FIELDS
+                (f.name in _PER_SAMPLE_FIELDS or f.name in _START_FIELDS)
                 and isinstance(arr, np.ndarray)
                 and arr.shape[0] == self.nsample
                 and self.nsample > 1
@@ -492,7 +492,9 @@ _TOPOLOGY_FIELDS = frozenset(
         "spring_body_b",
     }
 )
-_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS
+_START_FIELDS = frozenset({"joint_start"})
+"""Per-sample arrays set from the start state (not parameters of the scene)."""
+_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS - _START_FIELDS
 
 PER_SAMPLE_FIELDS = _PER_SAMPLE_FIELDS
 """Names of the parameter arrays that carry a leading sample axis (size 1 or nsample)."""

@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "0e074d917d16a14184587c8a202e3c621643f1bc19003cb0c37354c6774aa04c",
     },
     "fourbar-clearance-auto": {
-        "accel": "86e32d2d5657cb7fd633ef2b973c48781a8539dfe3db0e50d2dfee88ac957acb",
-        "rk4": "7cbecb13d83eefb9ea6c684c67bb8d3bc8f31da3d1d50ab60b005878b4a5ffa3",
-        "rk4-projection": "d4305e1abb4a99812ce6fa292b89ef75763ec4b524d25fca8580d3bdfc2f15d7",
-        "rk45": "d9979219662b0670fb818b96823f7159bfa93de781d2cc7dc33579f8a049c50c",
+        "accel": "73aa3a7bebcf95c12cd50e58548a8156341c9f25d7f263db80b819e045338cdc",
+        "rk4": "e0de0a9f389741e688b59ea9f1e2cc95ed688237a588ad82f1261dce40d5bcbd",
+        "rk4-projection": "62b67f480750b24e987bcd20232994776c6f53002cf10301ca3b786a2193eb81",
+        "rk45": "8d60c39817f3036fc3ca5c24b772f7c579e5a0c4ff6602e98fa7d6e598a62b8b",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

@@ -14,7 +14,9 @@ Contract of :func:`simulate`:
    ``q_start``/``v_start`` (e.g. the equilibrium with zero velocity); ``perturb`` adds to
    named coordinates, and the other coordinates are then projected back onto the position
    and velocity constraints (the perturbed ones held fixed), so "the equilibrium plus 0.1 rad
-   on the bar" is a consistent start.
+   on the bar" is a consistent start. Each contact-law joint starts in the mode its journal's
+   place says (:func:`start_modes`: the law when free or pressed, seated on the wall, or the
+   link for model auto on the wall), the same for every method.
 4. Outputs at ``time`` (ntime,): ``q``, ``v`` (sample, time, body, dof); ``joint_force``
    (sample, time, joint, xy) = force on body b by body a (−λ ideal, −λ e clearance);
    ``contact_force`` (sample, time, joint) = λ of clearance joints (NaN for ideal ones);
