@@ -407,12 +407,12 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     for j, k in enumerate(joints):
         # the mode it starts in (Model.joint_start: link, law, or law seated on the wall); a
         # contact present at t = 0 has no onset: undamped (vi 0, or < 0 while seated)
-        start = at("P", slots[f"fs{k}"])
+        first_mode = at("P", slots[f"fs{k}"])
         setup += indent(
             [
-                f"{at('fm', j)} = 1.0 if {start} != {START_LINK!r}.0 else 0.0",
+                f"{at('fm', j)} = 1.0 if {first_mode} != {START_LINK!r}.0 else 0.0",
                 f"{at('ins', j)} = {at('fm', j)}",
-                f"{at('vi', j)} = -1.0 if {start} == {START_SEATED!r}.0 else 0.0",
+                f"{at('vi', j)} = -1.0 if {first_mode} == {START_SEATED!r}.0 else 0.0",
             ]
         )
         setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
