@@ -114,6 +114,17 @@ def test_start__a_journal_dropped_from_half_the_clearance_meets_the_wall_at_t1(
 
 
 @pytest.mark.parametrize("settings", METHODS)
+def test_start__a_journal_dropped_from_its_bearing_centre_meets_the_wall_at_t1(settings):
+    """Written at the bearing centre (d = 0, where the normal is undefined and F_n = 0): it
+    stays there as written, falls by c and lands at t1 = √(2 c / g)."""
+    _, start, out = run(journal_text(0.0, t_end=0.012), **settings)
+    np.testing.assert_array_equal(start.q[0], [0.0, 0.0, 0.0])
+    assert out["status"][0] == 0 and out["impact_count"][0, 0] == 1
+    t1 = math.sqrt(2.0 * CLEARANCE / GRAVITY)
+    assert abs(out["free_flight_time"][0, 0] - t1) < ONSET_TOLERANCE
+
+
+@pytest.mark.parametrize("settings", METHODS)
 @pytest.mark.parametrize("model_name", ["contact", "auto"])
 def test_start__a_pressed_written_state_keeps_its_force(settings, model_name):
     """The journal pressed into the bottom of its bearing by δ0 = (m g / K)^(1/m), where

@@ -242,10 +242,17 @@ class Emitter:
             self._point(b, f"p_sbx{k}", f"p_sby{k}", f"pb{k}", q, tag)
             self.emit(f"dx{k} = pb{k}X - pa{k}X", f"dy{k} = pb{k}Y - pa{k}Y")
             if topo.joint_kind[k] == JOINT_CLEARANCE:
-                # One division per joint: ex, ey and γ multiply by 1/ρ.
+                # One division per joint: ex, ey and γ multiply by 1/ρ. Under a contact law
+                # the journal may sit at the bearing centre (ρ = 0, written there): no normal,
+                # and none needed (F_n = 0 there), so n = 0 rather than NaN.
+                inverse = (
+                    f"1.0 / rho{k} if rho{k} > 0.0 else 0.0"
+                    if k in self.contact_row
+                    else f"1.0 / rho{k}"
+                )
                 self.emit(
                     f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
-                    f"irho{k} = 1.0 / rho{k}",
+                    f"irho{k} = {inverse}",
                     f"ex{k} = dx{k} * irho{k}",
                     f"ey{k} = dy{k} * irho{k}",
                 )

@@ -218,7 +218,7 @@ def _written_journals(
             _unwritten_angles(scene, nominal, index)
         a, b = (index[name] for name in joint.bodies)
         q0 = nominal["q0"]
-        d = _world_point(q0, b, nominal["joint_point_b"][:, k]) - _world_point(
+        d = world_point(q0, b, nominal["joint_point_b"][:, k]) - world_point(
             q0, a, nominal["joint_point_a"][:, k]
         )
         delta = float(np.hypot(d[0, 0], d[0, 1])) - clearance
@@ -267,7 +267,7 @@ def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
         )
 
 
-def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
+def world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
     """r + A(θ) s for a body (or the point itself on ground); shapes broadcast over samples."""
     if body == GROUND:
         return point
@@ -335,7 +335,7 @@ def _derived_defaults(
             continue
         a, b = index[spring.bodies[0]], index[spring.bodies[1]]
         pa, pb = arrays["spring_point_a"][:, s], arrays["spring_point_b"][:, s]
-        wa, wb = _world_point(q0, a, pa), _world_point(q0, b, pb)
+        wa, wb = world_point(q0, a, pa), world_point(q0, b, pb)
         length = np.hypot(*(wb - wa).T)
         per_sample = (
             body_varied(a)
@@ -362,7 +362,7 @@ def _axial_displacement(
     q0 = np.broadcast_to(arrays["q0"], (rows, arrays["q0"].shape[1]))
     point_a = np.broadcast_to(arrays["joint_point_a"][:, k], (rows, 2))
     point_b = np.broadcast_to(arrays["joint_point_b"][:, k], (rows, 2))
-    d = _world_point(q0, b, point_b) - _world_point(q0, a, point_a)
+    d = world_point(q0, b, point_b) - world_point(q0, a, point_a)
     u = np.broadcast_to(arrays["joint_axis"][:, k], (rows, 2))
     u = u / np.hypot(u[:, 0], u[:, 1])[:, None]
     theta = q0[:, 3 * a + 2] if a != GROUND else np.zeros(rows)
@@ -484,7 +484,7 @@ def _place_on_joints(scene: Scene, arrays: dict[str, np.ndarray], index: dict[st
                          s * new_point[:, 0] + c * new_point[:, 1]],
                         axis=1,
                     )  # fmt: skip
-                    centre = _world_point(q0, known, known_point) - rotated
+                    centre = world_point(q0, known, known_point) - rotated
                     written = q0[:, 3 * new : 3 * new + 2]
                     q0[:, 3 * new : 3 * new + 2] = np.where(np.isnan(written), centre, written)
                     unplaced.discard(new)

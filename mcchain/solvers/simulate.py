@@ -215,18 +215,14 @@ def start_modes(model: Model, q: np.ndarray) -> np.ndarray:
 
 def _penetration(model: Model, q: np.ndarray, k: int) -> np.ndarray:
     """δ = |d| − c of joint ``k`` at the positions q (nsample, 3 nbody), (nsample,) m."""
+    from mcchain.scene.compile import world_point
+
     n = q.shape[0]
-    ends = []
-    for body, points in ((model.joint_body_b[k], model.joint_point_b),
-                         (model.joint_body_a[k], model.joint_point_a)):  # fmt: skip
-        point = np.broadcast_to(points[:, k], (n, 2))
-        if body < 0:
-            ends.append(point)
-            continue
-        x, y, th = q[:, 3 * body], q[:, 3 * body + 1], q[:, 3 * body + 2]
-        c, s = np.cos(th), np.sin(th)
-        ends.append(np.stack([x + c * point[:, 0] - s * point[:, 1],
-                              y + s * point[:, 0] + c * point[:, 1]], axis=1))  # fmt: skip
+    ends = [
+        np.broadcast_to(world_point(q, int(body), np.broadcast_to(points[:, k], (n, 2))), (n, 2))
+        for body, points in ((model.joint_body_b[k], model.joint_point_b),
+                             (model.joint_body_a[k], model.joint_point_a))
+    ]  # fmt: skip
     d = ends[0] - ends[1]
     return np.hypot(d[:, 0], d[:, 1]) - np.broadcast_to(model.joint_clearance[:, k], (n,))
 
