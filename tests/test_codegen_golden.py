@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "0e074d917d16a14184587c8a202e3c621643f1bc19003cb0c37354c6774aa04c",
     },
     "fourbar-clearance-auto": {
-        "accel": "73aa3a7bebcf95c12cd50e58548a8156341c9f25d7f263db80b819e045338cdc",
-        "rk4": "e0de0a9f389741e688b59ea9f1e2cc95ed688237a588ad82f1261dce40d5bcbd",
-        "rk4-projection": "62b67f480750b24e987bcd20232994776c6f53002cf10301ca3b786a2193eb81",
-        "rk45": "8d60c39817f3036fc3ca5c24b772f7c579e5a0c4ff6602e98fa7d6e598a62b8b",
+        "accel": "7feb19cf2958c6ba346dbebebf75312dfc64ace0aca22c82b41bd36d0e7897b0",
+        "rk4": "eade89594f32d8f6f3556b6e1e4e1c9bee958b304daae5a63b704969be09f721",
+        "rk4-projection": "105aebb6860ec0c4322b8fe1515fcbb16ac1ab6454b0fc63c09b5aae02bbd4ea",
+        "rk45": "f97e4c7b957a6c966b71a67bec10aed8aa4fc0dd1a32889833f9e6dc7aac6932",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

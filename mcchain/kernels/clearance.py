@@ -129,9 +129,9 @@ def contact_forces(km, s, q, v, cst, F_out):
         pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
         ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
         rho = hypot(dx, dy)
-        inverse = 1.0 / rho if rho > 0.0 else 0.0  # at the bearing centre: no normal
-        ex = dx * inverse
-        ey = dy * inverse
+        # at the bearing centre (written there) no normal, and none needed: F_n = 0
+        ex = dx / rho if rho > 0.0 else 0.0
+        ey = dy / rho if rho > 0.0 else 0.0
         pen = rho - c
         pdot = ex * ddx + ey * ddy
         pp = max(pen, 0.0)

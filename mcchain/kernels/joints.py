@@ -472,7 +472,8 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
             dist = hypot(dx, dy)
-            inverse = 1.0 / dist if dist > 0.0 else 0.0  # at the bearing centre: no force
-            force_out[k, 0] = -lam[row] * dx * inverse
-            force_out[k, 1] = -lam[row] * dy * inverse
+            if not dist > 0.0:  # a journal at its bearing centre (under a law): no force
+                dist = math.inf
+            force_out[k, 0] = -lam[row] * dx / dist
+            force_out[k, 1] = -lam[row] * dy / dist
             contact_out[k] = lam[row]
