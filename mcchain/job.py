@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,7 +40,6 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
-        steps_per_sample: integration steps per sample (``None`` without ``[simulate]``).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
@@ -58,10 +57,17 @@ class Job:
     history_dtype: str
     compression: str
     complevel: int
-    steps_per_sample: int | None = None
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+
+    def resized(self, nsample: int) -> Job:
+        """The same job with ``nsample`` samples (a run that ``--extend`` or ``until`` grew):
+        the model is kept (it must hold at least ``nsample`` samples), the settings follow."""
+        if nsample > self.model.nsample:
+            raise ValueError(f"nsample: the model holds {self.model.nsample}, asked {nsample}")
+        settings = {**self.settings, **resolved_settings(self.scene, nsample, self.seed)}
+        return replace(self, nsample=int(nsample), settings=settings)
 
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
         """Global attributes of ``ensemble.nc`` (and of every part file)."""
@@ -87,28 +93,12 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
-    model.meta["warnings"] = initial_state_warnings(*written_state(scene)) + grid_warnings(scene)
+    if scene.requirement:
+        from mcchain.decision.requirements import check_requirements
+
+        check_requirements(scene, model)
+    model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
-
-
-def grid_warnings(scene: Any) -> list[str]:
-    """One line when the step of a fixed-step method is shortened because ``[simulate]``
-    t_end is not a whole number of output intervals (the grid is fitted to end at t_end,
-    :class:`mcchain.solvers.simulate.OutputGrid`); adaptive methods change no step: no line."""
-    sim = _section(scene, "simulate")
-    if sim is None:
-        return []
-    from mcchain.solvers.simulate import output_times
-
-    grid = output_times(sim)
-    if not grid.fitted or grid.dt == sim.dt:
-        return []
-    step = float(grid.time[1] - grid.time[0])
-    return [
-        f"simulate.t_end: {sim.t_end:g} s is not a whole number of output_dt = "
-        f"{sim.output_step:g} s; the {len(grid.time) - 1} output intervals are {step:.6g} s "
-        f"(dt {grid.dt:.6g} s) so that the last output is t_end"
-    ]
 
 
 def written_state(scene: Any) -> tuple[Model, Any]:
@@ -143,14 +133,6 @@ def resolved_settings(scene: Any, nsample: int, seed: int | None) -> dict[str, A
     if isinstance(storage, Mapping):
         data["storage"] = {k: v for k, v in storage.items() if k != "chunk_size"}
     return {"scene": data, "samples": int(nsample), "seed": seed}
-
-
-def _steps_per_sample(scene: Any) -> int | None:
-    sim = _section(scene, "simulate")
-    t_end, dt = getattr(sim, "t_end", None), getattr(sim, "dt", None)
-    if not t_end or not dt:
-        return None
-    return round(float(t_end) / float(dt))
 
 
 def _warnings(model: Model) -> list[str]:
@@ -212,7 +194,6 @@ def prepare_job(
         history_dtype=str(storage.history_dtype),
         compression=str(storage.compression),
         complevel=int(storage.complevel),
-        steps_per_sample=_steps_per_sample(scene),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
         notes=[] if kernels_note is None else [kernels_note],

@@ -21,6 +21,7 @@ Progress (chunks done, samples/s, ETA) goes to stderr through tqdm, only on a te
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import sys
@@ -59,13 +60,25 @@ WORKER_ENV = {
 """Environment of LocalCluster worker processes: one compute thread each."""
 
 
-def plan_chunks(nsample: int, chunk_size: int) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``."""
+def plan_chunks(
+    nsample: int, chunk_size: int, restarts: Sequence[int] = ()
+) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``.
+
+    ``restarts``: sample indices where the chunking starts again (the sizes a run had before
+    ``--extend`` or an ``until`` batch added samples), so that the chunks a run computed
+    before it grew are still chunks of its plan.
+    """
     if nsample < 1:
         raise ValueError(f"nsample: must be >= 1, got {nsample}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size: must be >= 1, got {chunk_size}")
-    return [(s, min(s + chunk_size, nsample)) for s in range(0, nsample, chunk_size)]
+    bounds = sorted({0, nsample, *(b for b in restarts if 0 < b < nsample)})
+    return [
+        (s, min(s + chunk_size, stop))
+        for begin, stop in itertools.pairwise(bounds)
+        for s in range(begin, stop, chunk_size)
+    ]
 
 
 WARM_SAMPLES = 2
@@ -93,6 +106,7 @@ class ExecutionStats:
     workers: int = 1
     chunks: int = 0
     samples: int = 0
+    steps: int | None = None  # integration steps the samples took, summed (None: not counted)
     warmup: float = 0.0
     compute: float = 0.0
     kernel: float = 0.0
@@ -102,14 +116,17 @@ class ExecutionStats:
 
 def solve_coerced(
     solve: SolveFn, model: Model, scene: Any, history_dtype: str
-) -> tuple[dict[str, np.ndarray], float]:
-    """Solve one chunk and cast its arrays to storage dtypes; returns (outputs, seconds)."""
-    from mcchain.ensemble.registry import coerce_outputs
+) -> tuple[dict[str, np.ndarray], float, int | None]:
+    """Solve one chunk and cast its arrays to storage dtypes; returns (outputs, seconds,
+    the integration steps its samples took, summed: None when the solver counts none)."""
+    from mcchain.ensemble.registry import STEPS_TAKEN, coerce_outputs
 
     t0 = time.perf_counter()
     outputs = solve(model, scene)
     seconds = time.perf_counter() - t0
-    return coerce_outputs(outputs, history_dtype), seconds
+    taken = outputs.get(STEPS_TAKEN)
+    steps = None if taken is None else int(np.sum(taken, dtype=np.int64))
+    return coerce_outputs(outputs, history_dtype), seconds, steps
 
 
 # -- progress ------------------------------------------------------------------------------
@@ -263,14 +280,15 @@ def run_local(
 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcchain-writer") as writer:
-        pending: tuple[Future[float], tuple[int, int, float]] | None = None
+        pending: tuple[Future[float], tuple[int, int, float, int | None]] | None = None
         for start, stop in chunks:
-            outputs, seconds = solve_coerced(solve, model.select(start, stop), scene, history_dtype)
+            chunk = model.select(start, stop)
+            outputs, seconds, steps = solve_coerced(solve, chunk, scene, history_dtype)
             stats.kernel += seconds
             if pending is not None:  # at most one chunk waits for the writer
                 stats.write += pending[0].result()
                 _chunk_done(stats, progress, pending[1])
-            pending = (writer.submit(write, outputs, start, stop), (start, stop, seconds))
+            pending = (writer.submit(write, outputs, start, stop), (start, stop, seconds, steps))
             if observe is not None:
                 observe(outputs, start, stop)
             del outputs
@@ -282,11 +300,13 @@ def run_local(
 
 
 def _chunk_done(
-    stats: ExecutionStats, progress: Progress | None, chunk: tuple[int, int, float]
+    stats: ExecutionStats, progress: Progress | None, chunk: tuple[int, int, float, int | None]
 ) -> None:
-    start, stop, seconds = chunk
+    start, stop, seconds, steps = chunk
     stats.chunks += 1
     stats.samples += stop - start
+    if steps is not None:
+        stats.steps = (stats.steps or 0) + steps
     log.info("chunk %d:%d solved in %.3f s and written", start, stop, seconds)
     if progress is not None:
         progress.update(stop - start)
@@ -310,12 +330,12 @@ def _worker_setup(solve: SolveFn, model: Model, scene: Any) -> dict[str, Any]:
 
 def _dask_task(
     solve: SolveFn, model: Model, scene: Any, history_dtype: str, start: int, stop: int
-) -> tuple[int, int, dict[str, np.ndarray], float]:
+) -> tuple[int, int, dict[str, np.ndarray], float, int | None]:
     import numba
 
     numba.set_num_threads(1)
-    outputs, seconds = solve_coerced(solve, model, scene, history_dtype)
-    return start, stop, outputs, seconds
+    outputs, seconds, steps = solve_coerced(solve, model, scene, history_dtype)
+    return start, stop, outputs, seconds, steps
 
 
 CONNECT_TIMEOUT = 5.0
@@ -453,7 +473,7 @@ def run_dask(
         for _ in range(min(2 * stats.workers, len(queue))):
             submit()
         for future in in_flight:
-            start, stop, outputs, seconds = future.result()
+            start, stop, outputs, seconds, steps = future.result()
             future.release()
             if queue:
                 submit()
@@ -464,6 +484,6 @@ def run_dask(
             if observe is not None:
                 observe(outputs, start, stop)
             del outputs
-            _chunk_done(stats, progress, (start, stop, seconds))
+            _chunk_done(stats, progress, (start, stop, seconds, steps))
         stats.compute = time.perf_counter() - t0
     return stats

@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "9802859c81a0f903e6554212d759ae8cf5b86ad0356de422009eb4206b315599",
-        "rk4-projection": "64ab39e3b635c863b895dc04540d8403d6c81f6ad6d81fefceb8add0a36317be",
+        "rk4": "a058d893986098a6d4e9774b1f0c18e8c00f78439f062b4df0308094acd29b0a",
+        "rk4-projection": "ff806b0b6f351db088f768634b18d58b625e4dd48c605e8a75c48e7d02766f3a",
         "rk45": "504eb26c5ee36f0faacd94435ce822e3d15dd61c5887c68de71a878f2718deb9",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "40ea6f296c5c71202d2b28b55e2384ebde410a6380fb8ed534ab0080b5a62100",
-        "rk4-projection": "d77191783842bfc401ed962aecdde9192b2698e2c125f5bb71ba015cbc200071",
+        "rk4": "6df9b9e5d5f07cce7430bd72ac48662afab444e79b9123bcbc0fe5756e4bb9c6",
+        "rk4-projection": "db0d39e9ca5f9a9fb835a1e4f35da5d09ec19306fdcb8a93a631c1c26b34b4d3",
         "rk45": "0e074d917d16a14184587c8a202e3c621643f1bc19003cb0c37354c6774aa04c",
     },
     "fourbar-clearance-auto": {
         "accel": "7feb19cf2958c6ba346dbebebf75312dfc64ace0aca22c82b41bd36d0e7897b0",
-        "rk4": "eade89594f32d8f6f3556b6e1e4e1c9bee958b304daae5a63b704969be09f721",
-        "rk4-projection": "105aebb6860ec0c4322b8fe1515fcbb16ac1ab6454b0fc63c09b5aae02bbd4ea",
+        "rk4": "f4906e9e8329848d5d727957c550781aec7a8e918448611781a5931160f05553",
+        "rk4-projection": "36c9bff05f82158d3d7dca37ca4d9154e1660c3ec9d898bf24ff0c08434c5440",
         "rk45": "f97e4c7b957a6c966b71a67bec10aed8aa4fc0dd1a32889833f9e6dc7aac6932",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "84511e78193344bc0d5ffb6a688eca171deb918f8e97addac26b0da770ccc8c9",
-        "rk4-projection": "3561ca47f7e5349b528bdc2f7ad312c59e38a7d8ff4626cdfc83a0a9d9632cd4",
+        "rk4": "c72bee9e1174c7d9dcbd0c191ffbb49e7458426e1141c184837e39c01587401c",
+        "rk4-projection": "9696cf51c5d2e9377400c90c4060631222fae2debeab88b8072bd0ce209a86d0",
         "rk45": "eb8485813c495e4c4afaa25d4b1fc3c1d122fd0b4c718d03c580161243290427",
     },
 }

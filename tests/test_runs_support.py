@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from mcchain.ensemble.registry import STEPS_TAKEN
 from mcchain.model import JOINT_CLEARANCE, JOINT_IDEAL, Model, constraint_rows
 from mcchain.status import CONTACT_LOST, EQUILIBRIUM_NOT_CONVERGED
 
@@ -205,6 +206,8 @@ def fake_solve(model: Model, scene: Any) -> dict[str, np.ndarray]:
             singular_time=np.full(n, np.nan),
             contact_lost_time=np.where((status & CONTACT_LOST) != 0, t[-1] / 2, np.nan),
         )
+        # the steps each sample "took", as the real solver counts them for run.json
+        out[STEPS_TAKEN] = np.full(n, round(sim.t_end / sim.dt), dtype=np.int64)
     return out
 
 

@@ -424,15 +424,16 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             finish.append(f"    sum_ct[s0 + l, {col}] = np.nan if dead else {at(name, j)}")
     b["contact_finish"] = "\n".join(finish)
 
-    # Fixed step: at each step's start (stage 0 evaluated there), after the failure checks.
+    # Fixed step: at each step's start (stage 0 evaluated there), after the failure checks;
+    # hb is the step that ended there (the last one of a run may be shorter than h).
     body = []
     for j, k in enumerate(joints):
         d1, r1 = at("pdc", j), at("prc", j)
-        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "h", d1, r1, "v")
+        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "hb", d1, r1, "v")
     b["contact_step_c"] = "\n".join(
         [
             "if (st[l] & FAILBITS) == 0:",
-            f"    if h * h * {at('wca')} > CONTACT_LIMIT2:",
+            f"    if hb * hb * {at('wca')} > CONTACT_LIMIT2:",
             "        st[l] |= CONTACT_STEP_BIT",
             *indent(kill.splitlines(), 8),
             "    else:",
@@ -491,7 +492,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
     b["reseat_marks"] = "\n".join(marks)
     # Re-seats of model auto (whether a joint is auto is data: its md slot).
-    b["contact_reseat_erk"] = "group_reseat_SUFFIX(W, nl, t + h, A, balpha2, bbeta2, tau, False)"
+    b["contact_reseat_erk"] = "group_reseat_SUFFIX(W, nl, t, A, balpha2, bbeta2, tau, False)"
     b["contact_reseat"] = "group_reseat_SUFFIX(W, nl, 0.0, A, balpha2, bbeta2, tau, True)"
     return b
 

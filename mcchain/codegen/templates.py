@@ -97,7 +97,7 @@ _GROUP_FINISH = """
         @@contact_finish
 """
 
-_ERK_ARGS = """P, Q0, V0, t0, h, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
+_ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
             out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT,
             status, t_div, t_sing, t_cl"""
@@ -107,21 +107,28 @@ ERK_KERNEL = (
 @njit(**JIT)
 def erk_run(g_start, g_stop, {_ERK_ARGS}):
     """Fixed-step explicit Runge–Kutta (NSTAGE stages) on the lane groups g_start:g_stop
-    (``lanes`` samples each; threads run blocks of groups); see integrators.py."""
+    (``lanes`` samples each; threads run blocks of groups); see integrators.py.
+
+    ``nstep`` steps of ``h``, the last one ``h_last`` long; step n starts at
+    t_out[n // out_every] + (n % out_every) h, the last state is at t_out[-1] = t_end, and
+    outputs are written at the times t_out (mcchain.solvers.simulate.OutputGrid)."""
     nsample = Q0.shape[1]
+    nout = t_out.shape[0]
     lanes = max(1, min(lanes, LMAXV))
     for g in range(g_start, g_stop):'''
     + _GROUP_SETUP
     + """
+        t = t_out[0]
+        hb = h  # the step that ended at t (at the start: none, h)
         for n in range(nstep + 1):
-            t = t0 + n * h
+            hn = h if n + 1 < nstep else h_last
             nst = NSTAGE if n < nstep else 1
             for s in range(nst):
-                ts = t + cc[s] * h
+                ts = t + cc[s] * hn
                 # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one,
                 # and the step's increment is accumulated as the stages go.
-                ah = A[s, s - 1] * h if s > 0 else 0.0
-                bh = bw[s] * h
+                ah = A[s, s - 1] * hn if s > 0 else 0.0
+                bh = bw[s] * hn
                 keep = 0.0 if s == 0 else 1.0
                 for l in range(nl):  # lanes: schedule
                     @@load_params
@@ -152,24 +159,29 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                     @@contact_step_c
-                if n % out_every == 0:
+                if n == nstep or n % out_every == 0:
+                    it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
-                        W, 0, nl, s0, n // out_every, t, LAMCROW, out_q, out_v, out_jf, out_cf,
+                        W, 0, nl, s0, it, t, LAMCROW, out_q, out_v, out_jf, out_cf,
                         out_dtq, out_cerr, out_en@CT,
                     )
             if n == nstep:
                 break
             for l in range(nl):
                 @@combine
+            # The next step's time from its index, not accumulated: t_end at the end.
+            nx = n + 1
+            t = t_out[nout - 1] if nx == nstep else t_out[nx // out_every] + (nx % out_every) * h
+            hb = hn
             if project:
-                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)
+                group_project_SUFFIX(W, nl, t, ptol, max_newton, tau)
             @@contact_reseat_erk"""
     + _GROUP_FINISH
 )
 
 PROJECT_CALL = """
             if project:
-                group_project_SUFFIX(W, nl, t + h, ptol, max_newton, tau)"""
+                group_project_SUFFIX(W, nl, t, ptol, max_newton, tau)"""
 
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,

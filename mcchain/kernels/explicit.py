@@ -338,12 +338,14 @@ def reseat(km, s, q, v, t, minv, cols, first, cst, row_law, tau, work_B, work_S,
 
 @njit(**JIT)
 def rk4_run(
-    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, cols, first, A, bw, cc, balpha2,
-    bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct, sum_ct,
-    status, t_div, t_sing, t_cl,
+    start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, A, bw, cc,
+    balpha2, bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct,
+    sum_ct, status, t_div, t_sing, t_cl,
 ):  # fmt: skip
     """Fixed-step RK4 (tableau ``A``, ``bw``, ``cc``, strictly sub-diagonal) with Baumgarte
-    on the samples ``start:stop``; outputs every ``out_every`` steps, at t0 + n h. ``cols``,
+    on the samples ``start:stop``: ``nstep`` steps of ``h``, the last one ``h_last`` long;
+    step n starts at :func:`step_time`, and the outputs are written at the times ``t_out``
+    (every ``out_every`` steps, and t_end = t_out[-1] after the last step). ``cols``,
     ``first``: the constraint pattern (:func:`index1_acceleration`).
 
     Contact-law joints (:mod:`mcchain.kernels.clearance`), as the lanes: after each step's
@@ -393,15 +395,17 @@ def rk4_run(
         pending = False  # a later stage of the previous step lost rank
         wca = 0.0  # largest ω_c² since the last check
         written = 0
+        hb = h  # the step that ended at t (at the start: none, h)
         for n in range(nstep + 1):
-            t = t0 + n * h
+            t = step_time(n, nstep, out_every, h, t_out)
+            hn = h if n + 1 < nstep else h_last
             singular = pending
             pending = False
             err0 = 0.0
             for stage in range(nstage if n < nstep else 1):
-                ts = t + cc[stage] * h
-                ah = A[stage, stage - 1] * h if stage > 0 else 0.0
-                bh = bw[stage] * h
+                ts = t + cc[stage] * hn
+                ah = A[stage, stage - 1] * hn if stage > 0 else 0.0
+                bh = bw[stage] * hn
                 for i in range(ndof):
                     qs[i] = q[i] + ah * kq[i] if stage > 0 else q[i]
                     vs[i] = v[i] + ah * kv[i] if stage > 0 else v[i]
@@ -450,7 +454,7 @@ def rk4_run(
                                 t_cl[s] = t
                                 break
                 if ncj > 0:
-                    if h * h * wca > limit2:
+                    if hb * hb * wca > limit2:
                         st |= CONTACT_STEP_TOO_LARGE
                         break
                     kinetic = kinetic_energy(km, s, v)
@@ -458,10 +462,10 @@ def rk4_run(
                         lam_r = lam0[km.joint_row[contact_joint_index(km, j)]]
                         contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
                         d1, r1 = cst[j, PDC], cst[j, PRC]
-                        contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic)
+                        contact_step(km, s, cst, j, lam_r, t, hb, d1, r1, kinetic)
                     wca = 0.0
-                if n % out_every == 0:
-                    it = n // out_every
+                if n == nstep or n % out_every == 0:
+                    it = t_out.shape[0] - 1 if n == nstep else n // out_every
                     write_outputs(
                         km, s, it, q, v, lam0, cst, jf, cf, err0, out_q, out_v, out_jf, out_cf,
                         out_dtq, out_cerr, out_en, out_ct,
@@ -472,14 +476,25 @@ def rk4_run(
             for i in range(ndof):
                 q[i] += dq[i]
                 v[i] += dv[i]
+            hb = hn
             if any_marked(cst):
+                tn = step_time(n + 1, nstep, out_every, h, t_out)
                 reseat(
-                    km, s, q, v, t + h, minv, cols, first, cst, row_law, tau, B, S, phi, g, nu,
-                    dinv,
+                    km, s, q, v, tn, minv, cols, first, cst, row_law, tau, B, S, phi, g, nu, dinv,
                 )  # fmt: skip
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         finish_contact(s, st, written, cst, out_ct, sum_ct)
         status[s] = st
+
+
+@njit(**INLINE)
+def step_time(n, nstep, out_every, h, t_out):
+    """Time of step ``n`` of ``nstep`` (s): t_out[n // out_every] + (n % out_every) h, and
+    t_end = t_out[-1] for n = ``nstep``; from n, never accumulated (see
+    :class:`mcchain.solvers.simulate.OutputGrid`, which the lanes' loop follows too)."""
+    if n == nstep:
+        return t_out[t_out.shape[0] - 1]
+    return t_out[n // out_every] + (n % out_every) * h
 
 
 @njit(**JIT)

@@ -39,6 +39,7 @@ from mcchain.kernels.explicit import (
     finish_contact,
     nan_history,
     reseat,
+    step_time,
     write_outputs,
 )
 from mcchain.kernels.forces import (
@@ -69,11 +70,14 @@ from mcchain.status import (
 
 @njit(**JIT)
 def generalized_alpha_run(
-    start, stop, km, Q0, V0, t0, h, nstep, out_every, ncon, cols, first, alpha_m, alpha_f, gam,
-    beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
-    out_ct, sum_ct, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
+    start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, alpha_m,
+    alpha_f, gam, beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
+    out_en, out_ct, sum_ct, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
-    """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``.
+    """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``: ``nstep``
+    steps of ``h``, the last one ``h_last`` long, step n starting at
+    :func:`mcchain.kernels.explicit.step_time`; outputs at the times ``t_out`` (every
+    ``out_every`` steps, and t_end = t_out[-1] after the last step).
 
     Each step: predict q̈_{n+1} = q̈_n, λ_{n+1} = λ_n, then Newton on the residuals
     (M q̈ + Bᵀλ − F, Φ) with the iteration matrix [[β′M + γ′C + K, Bᵀ], [B, 0]] (exact K
@@ -96,8 +100,6 @@ def generalized_alpha_run(
     nsys = ndof + ncon
     nj = km.joint_body_a.shape[0]
     ncj = contact_joints(km)
-    bp = (1.0 - alpha_m) / (beta * h * h * (1.0 - alpha_f))
-    gp = gam / (beta * h)
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
@@ -129,7 +131,7 @@ def generalized_alpha_run(
         st = status[s]
         # Consistent start: q̈_0, λ_0 from the index-1 KKT system (γ from the joints).
         gamma = np.zeros(max(ncon, 1))
-        _index1(km, s, q, v, t0, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law)
+        _index1(km, s, q, v, t_out[0], m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law)
         for i in range(ndof):
             qdd[i] = rhs[i]
             acc[i] = rhs[i]
@@ -138,8 +140,9 @@ def generalized_alpha_run(
         written = 0  # output times written so far; after a failure the rest are NaN
         nst = 0
         nev = 1  # the start's index-1 solve
+        hb = h  # the step that ended at t (at the start: none, h)
         for n in range(nstep + 1):
-            t = t0 + n * h
+            t = step_time(n, nstep, out_every, h, t_out)
             constraint_residual(km, s, q, t, phi)
             law_rows(km, cst, row_law)
             err = 0.0
@@ -158,7 +161,7 @@ def generalized_alpha_run(
                     st |= CONTACT_LOST
                     t_cl[s] = t
             if ncj > 0:
-                if not _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
+                if not _contact_bookkeeping(km, s, q, v, t, hb, lam, minv, B, F, cst, row_law):
                     st |= CONTACT_STEP_TOO_LARGE
                     break
                 if any_marked(cst):
@@ -166,8 +169,8 @@ def generalized_alpha_run(
                         km, s, q, v, t, minv, cols, first, cst, row_law, tau, B, S, work[0],
                         work[1], work[2], work[3],
                     )  # fmt: skip
-            if n % out_every == 0:
-                it = n // out_every
+            if n == nstep or n % out_every == 0:
+                it = t_out.shape[0] - 1 if n == nstep else n // out_every
                 write_outputs(
                     km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
                     out_dtq, out_cerr, out_en, out_ct,
@@ -176,12 +179,16 @@ def generalized_alpha_run(
             if n == nstep:
                 break
             # Predictor.
-            tn = t + h
+            hn = h if n + 1 < nstep else h_last
+            bp = (1.0 - alpha_m) / (beta * hn * hn * (1.0 - alpha_f))
+            gp = gam / (beta * hn)
+            tn = step_time(n + 1, nstep, out_every, h, t_out)
+            hb = hn
             for i in range(ndof):
                 qdd_old[i] = qdd[i]
                 anew = (qdd[i] - alpha_m * acc[i]) / (1.0 - alpha_m)
-                q[i] += h * v[i] + h * h * ((0.5 - beta) * acc[i] + beta * anew)
-                v[i] += h * ((1.0 - gam) * acc[i] + gam * anew)
+                q[i] += hn * v[i] + hn * hn * ((0.5 - beta) * acc[i] + beta * anew)
+                v[i] += hn * ((1.0 - gam) * acc[i] + gam * anew)
                 acc[i] = anew
             converged = False
             singular = False
@@ -250,6 +257,17 @@ def generalized_alpha_run(
                 acc[i] += (1.0 - alpha_f) / (1.0 - alpha_m) * qdd[i]
                 acc[i] -= (1.0 - alpha_f) / (1.0 - alpha_m) * qdd_old[i]
             nst += 1
+            if hn != h:
+                # The last step, shortened to land on t_end: an index-3 step's multipliers
+                # carry the drift of the velocity constraints divided by the step, which a
+                # short step magnifies (0.7 % of a driver torque after a fifth of dt); the
+                # landed state's q̈ and λ come from the index-1 equations, as the start's do.
+                nev += 1
+                _index1(km, s, q, v, tn, m, F, B, gamma, Kmat, rhs, piv, ndof, ncon, cst, row_law)
+                for i in range(ndof):
+                    qdd[i] = rhs[i]
+                for r in range(ncon):
+                    lam[r] = rhs[ndof + r]
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         finish_contact(s, st, written, cst, out_ct, sum_ct)
         status[s] = st

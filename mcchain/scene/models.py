@@ -30,6 +30,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainValidator,
     PrivateAttr,
     Strict,
     field_validator,
@@ -42,6 +43,8 @@ GROUND_NAME = "ground"
 DEFAULT_GRAVITY = (0.0, -9.81)
 DEFAULT_SAMPLE_COUNT = 1000
 DEFAULT_SAMPLE_SEED = 0
+DEFAULT_MAX_COUNT = 65536
+"""``[sample] max_count`` when ``until`` is given without it."""
 MAX_SEED = 2**64 - 1
 
 DEFAULT_BAUMGARTE = (10.0, 10.0)
@@ -565,10 +568,45 @@ class Sample(_Section):
         "(``count`` identical instances).",
     )
 
+    until: Literal["decided"] | None = Field(
+        default=None,
+        description='"decided": run batches of ``count`` samples until every requirement is '
+        "decided (its sequential interval, docs/scenes.md), or ``max_count`` is reached; "
+        "default none (``count`` samples).",
+    )
+    max_count: Int | None = Field(
+        default=None,
+        ge=1,
+        description=f"with ``until``: the most samples the run may take; default "
+        f"{DEFAULT_MAX_COUNT} (at least ``count``).",
+    )
+
     @field_validator("vary", mode="before")
     @classmethod
     def _flatten(cls, v: Any) -> Any:
         return _flatten_dotted(v, _is_distribution_table)
+
+    @model_validator(mode="after")
+    def _until(self) -> Sample:
+        if self.until is None:
+            if self.max_count is not None:
+                raise ValueError('`max_count` needs `until = "decided"`')
+            return self
+        if self.design in ("lhs", "saltelli"):
+            raise ValueError(
+                f'`until` needs a design that can be continued ("random" or "sobol"), got '
+                f'"{self.design}"'
+            )
+        if self.max_count is not None and self.max_count < self.count:
+            raise ValueError(f"`max_count` ({self.max_count}) is less than `count` ({self.count})")
+        return self
+
+    @property
+    def until_max_count(self) -> int:
+        """The most samples an ``until`` run may take (``max_count`` or its default)."""
+        if self.max_count is not None:
+            return int(self.max_count)
+        return max(DEFAULT_MAX_COUNT, int(self.count))
 
 
 def saltelli_count_error(nparam: int, count: int) -> str | None:
@@ -581,6 +619,88 @@ def saltelli_count_error(nparam: int, count: int) -> str | None:
             f'"saltelli", got {count}'
         )
     return None
+
+
+# -- [[requirement]] ---------------------------------------------------------------------
+REQUIREMENT_NAME_RE = re.compile(r"^[a-z0-9_-]+$")
+DEFAULT_REQUIREMENT_TARGET = 0.01
+DEFAULT_REQUIREMENT_CONFIDENCE = 0.95
+
+
+def _check_requirement_name(value: str) -> str:
+    if not REQUIREMENT_NAME_RE.match(value):
+        raise ValueError(
+            f"invalid requirement name {value!r}: use lower-case letters, digits, '_' and '-'"
+        )
+    return value
+
+
+def _label_or_index(value: Any) -> str | int:
+    if isinstance(value, bool) or not isinstance(value, str | int):
+        raise ValueError(
+            f"expected a label (a string) or a 0-based index (an integer), got {value!r}"
+        )
+    return value
+
+
+LabelOrIndex = Annotated[str | int, PlainValidator(_label_or_index)]
+"""A ``select`` entry: a label such as ``"B"`` or an index such as ``0``."""
+
+
+class Requirement(_Section):
+    """``[[requirement]]``: a limit on a per-sample output and the largest acceptable
+    probability of breaking it.
+
+    A sample fails the requirement when its output lies outside [``min``, ``max``]; a
+    sample whose output is NaN (a failed instance) fails too, and is counted apart as
+    undefined. Every run stores ``requirement_met`` (sample, requirement); ``mcchain export
+    RUN --requirements`` gives the failure probability with its interval, the verdict, the
+    quantile at the target and the tolerance allocation (docs/scenes.md).
+    """
+
+    name: Annotated[str, Strict(), AfterValidator(_check_requirement_name)] = Field(
+        description="unique identifier, lower-case letters, digits, ``_`` and ``-``; required."
+    )
+    output: Annotated[str, Strict()] = Field(
+        description="a per-sample ensemble variable this scene produces (``peak_contact_force``, "
+        "``omega``, ``q_eq``, ...); required."
+    )
+    select: dict[str, LabelOrIndex] = Field(
+        default_factory=dict,
+        description="one entry for each of the output's dimensions besides ``sample``: a label "
+        '(``{ joint = "B" }``) or a 0-based index (``{ mode = 0 }``); default none (an output '
+        "with no other dimension).",
+    )
+    min: Num | None = Field(
+        default=None,
+        description="lower limit, in the output's units; default none (``max`` then required).",
+    )
+    max: Num | None = Field(
+        default=None,
+        description="upper limit, in the output's units; default none (``min`` then required).",
+    )
+    target: Num = Field(
+        default=DEFAULT_REQUIREMENT_TARGET,
+        gt=0,
+        lt=1,
+        description="the largest acceptable probability of failing, in (0, 1); default "
+        f"{DEFAULT_REQUIREMENT_TARGET}.",
+    )
+    confidence: Num = Field(
+        default=DEFAULT_REQUIREMENT_CONFIDENCE,
+        gt=0,
+        lt=1,
+        description="two-sided confidence of every interval (and so of every verdict) of this "
+        f"requirement, in (0, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
+    )
+
+    @model_validator(mode="after")
+    def _limits(self) -> Requirement:
+        if self.min is None and self.max is None:
+            raise ValueError("give `min`, `max` or both: the limits of the output")
+        if self.min is not None and self.max is not None and self.min >= self.max:
+            raise ValueError(f"min {self.min!r} must be below max {self.max!r}")
+        return self
 
 
 # -- analyses -----------------------------------------------------------------------------
@@ -751,6 +871,9 @@ class Scene(_Section):
         default=None, description="``[simulate]``; absent: no time history."
     )
     storage: Storage = Field(default_factory=Storage, description="``[storage]``.")
+    requirement: list[Requirement] = Field(
+        default_factory=list, description="``[[requirement]]``; default none."
+    )
 
     _text: str = PrivateAttr(default="")
     _source: str = PrivateAttr(default="<string>")

@@ -45,7 +45,8 @@ def solve_chunk(
 
     Returns:
         Arrays keyed by ensemble variable name, sample axis first, plus ``status`` (uint32,
-        every analysis' bits OR-ed) and, with ``[simulate]``, ``time``.
+        every analysis' bits OR-ed) and, with ``[simulate]``, ``time`` and the steps each
+        sample took (:data:`mcchain.ensemble.registry.STEPS_TAKEN`, not stored).
     """
     nsample = model.nsample
     out: dict[str, np.ndarray] = {"parameters": np.asarray(model.parameters, dtype=np.float64)}
@@ -82,6 +83,7 @@ def solve_chunk(
             out["omega_cycle"] = cycle.omega
             out["cycle_phase"] = cycle.phase
     if scene.simulate is not None:
+        from mcchain.ensemble.registry import STEPS_TAKEN
         from mcchain.solvers.simulate import simulate
 
         if scene.simulate.start == "equilibrium":
@@ -98,8 +100,11 @@ def solve_chunk(
             v_start=v_start,
             history_dtype=np.dtype(scene.storage.history_dtype),
             status=status,
+            diagnostics=True,
         )
         status |= history.pop("status")
+        out[STEPS_TAKEN] = history.pop("steps")
+        del history["rejected_steps"], history["evaluations"]
         out.update(history)
     out["status"] = status
     return out

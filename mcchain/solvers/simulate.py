@@ -7,9 +7,10 @@ Contract of :func:`simulate`:
    from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
    method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.
 2. Methods are the rows of :data:`METHODS`; all share the start state, the output times
-   (:func:`output_times`: uniform, the last one t_end) and the outputs below. Fixed-step
-   methods need ``output_dt`` to be a whole multiple of ``dt``; adaptive ones land exactly
-   on every output time.
+   (:func:`output_times`: k · ``output_dt``, then t_end itself as the last) and the outputs
+   below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
+   with ``dt`` as written, except a last step shortened to land on t_end; adaptive ones
+   land exactly on every output time.
 3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
    ``q_start``/``v_start`` (e.g. the equilibrium with zero velocity); ``perturb`` adds to
    named coordinates, and the other coordinates are then projected back onto the position
@@ -84,31 +85,48 @@ class Method:
 
 @dataclass(frozen=True)
 class OutputGrid:
-    """The output times of a run and the step that reaches them.
+    """The output times of a run and the fixed-step schedule that reaches them.
 
     Attributes:
-        time: (ntime,) 0, h, 2h, …, t_end: the last output is t_end itself.
-        every: steps of ``dt`` per output (fixed-step methods; adaptive ones land on every
-            output time and use it as a cap on their first step only).
-        dt: the step, s.
-        fitted: True when t_end is not a whole multiple of ``output_dt``: the output
-            interval h = t_end / n (n = ⌈t_end / output_dt⌉) and dt = h / every are then
-            shortened from the written values by less than one part in n, so that the grid
-            ends exactly at t_end ("one crank turn" covers the whole turn).
+        time: (ntime,) k · ``output_dt`` for k = 0, 1, … below t_end, then t_end itself, bit
+            for bit, as the last point (a k · ``output_dt`` within :data:`GRID_RTOL` of
+            t_end is t_end).
+        every: steps of ``dt`` per output interval (fixed-step methods; adaptive ones land
+            on every output time and use ``dt`` as their first step only).
+        dt: the step as written, s.
+        nstep: steps from 0 to t_end (fixed-step methods; 0 for adaptive ones): ``every``
+            per output interval, then those of the last interval, up to ``every``.
+        last_step: the length of the last step, s: ``dt``, or shorter so that the last
+            step lands on t_end when t_end is no whole number of steps after the last
+            k · ``output_dt`` (fixed-step methods).
+
+    Step n of a fixed-step method starts at :meth:`step_time` (n), computed from n, never
+    accumulated, so two runs that differ only in t_end take the same steps, bit for bit,
+    up to the shorter one's last whole step; the kernels compute it the same way.
     """
 
     time: np.ndarray
     every: int
     dt: float
-    fitted: bool
+    nstep: int
+    last_step: float
+
+    def step_time(self, n: int) -> float:
+        """Time of step n, s: ``time[n // every] + (n % every) · dt``, and t_end for
+        n = ``nstep``; an output time is thus the very float the kernels step from."""
+        if n == self.nstep:
+            return float(self.time[-1])
+        return float(self.time[n // self.every] + (n % self.every) * self.dt)
 
 
-GRID_RTOL = 1e-9
-"""t_end within this (relative) of a whole number of output intervals keeps the written grid."""
+GRID_RTOL = 1e-12
+"""A grid point (k · output_dt, or a whole step after the last one) within this, relative to
+t_end, below t_end is t_end: the gap is rounding (0.3 / 1e-4 = 2999.9999999999995), not an
+interval, and no step that short is taken."""
 
 
 def output_times(settings: Simulate) -> OutputGrid:
-    """The output grid of ``settings`` (see :class:`OutputGrid`)."""
+    """The output grid of ``settings`` and its fixed-step schedule (see :class:`OutputGrid`)."""
     ratio = settings.output_step / settings.dt
     every = round(ratio)
     fixed = METHODS[settings.method].fixed_step
@@ -117,22 +135,34 @@ def output_times(settings: Simulate) -> OutputGrid:
             f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
             f"{settings.method!r}, got {settings.output_step:g}"
         )
-    every = every if fixed else max(every, 1)
-    intervals = settings.t_end / settings.output_step
-    whole = round(intervals)
-    if whole >= 1 and abs(intervals - whole) <= GRID_RTOL * intervals:
-        # fixed steps: (i · every) · dt, the very float the kernels compute as that step's time
-        steps = np.arange(whole + 1) * every
-        time = steps * settings.dt if fixed else np.arange(whole + 1) * settings.output_step
-        return OutputGrid(time, every, settings.dt, False)
-    count = math.ceil(intervals)
-    step = settings.t_end / count
-    if fixed:
-        dt = step / every
-        return OutputGrid((np.arange(count + 1) * every) * dt, every, dt, True)
-    time = np.arange(count + 1) * step
-    time[-1] = settings.t_end  # the adaptive methods land on it exactly
-    return OutputGrid(time, every, min(settings.dt, step), True)
+    every = max(every, 1)
+    t_end, dt, interval = float(settings.t_end), float(settings.dt), float(settings.output_step)
+    below = t_end - GRID_RTOL * t_end  # a point at or past this is t_end
+    # count: the grid points k · output_dt (k < count) strictly below t_end
+    count = max(1, math.floor(t_end / interval) + 1)
+    while count > 1 and (count - 1) * interval >= below:
+        count -= 1
+    while count * interval < below:
+        count += 1
+    time = np.append(np.arange(count) * interval, t_end)
+    if not fixed:
+        return OutputGrid(time, every, dt, 0, dt)
+    # The last interval: whole steps from its start while below t_end, then the step that
+    # lands on t_end (dt when t_end is a whole step further, within rounding; else shorter).
+    start = float(time[-2])
+    whole = max(0, math.floor((t_end - start) / dt))
+    while whole > 0 and start + whole * dt >= below:
+        whole -= 1
+    while start + (whole + 1) * dt < below:
+        whole += 1
+    # At most ``every`` steps per interval (an output_dt that is a multiple of dt only to
+    # within 1e-9 could leave room for one more): the last one then ends at t_end.
+    last = min(whole + 1, every)
+    lands = last == whole + 1 and abs(start + last * dt - t_end) <= GRID_RTOL * t_end
+    grid = OutputGrid(time, every, dt, (count - 1) * every + last, dt)
+    if lands:
+        return grid
+    return OutputGrid(time, every, dt, grid.nstep, t_end - grid.step_time(grid.nstep - 1))
 
 
 _PERTURB = re.compile(
@@ -342,7 +372,9 @@ class _Run:
     v: np.ndarray
     time: np.ndarray
     every: int
-    dt: float  # the step of fixed-step methods (OutputGrid.dt)
+    dt: float  # the step of fixed-step methods as written (OutputGrid.dt)
+    nstep: int  # their steps to t_end and the last one's length (OutputGrid)
+    last_step: float
     out: dict[str, np.ndarray]
     status: np.ndarray
     t_div: np.ndarray
@@ -390,7 +422,7 @@ def _run_erk(run: _Run, project: bool) -> None:
     module, P, Q0, V0 = _lane_setup(run, "rk4-projection" if project else "rk4")
     s = run.settings
     alpha, beta = (0.0, 0.0) if project else s.gains
-    nstep = (len(run.time) - 1) * run.every
+    nstep = run.nstep
     # Every lane runs every step (a failed one with NaN, in lockstep): stages per step, and
     # stage 0 once more at the end for the last outputs.
     integrated = (run.status & FAILURE_BITS) == 0
@@ -398,7 +430,7 @@ def _run_erk(run: _Run, project: bool) -> None:
     run.evaluations[integrated] = RK4.nstage * nstep + 1
     over_samples(
         module.erk_project_run if project else module.erk_run, run.groups,
-        P, Q0, V0, 0.0, run.dt, nstep, run.every, RK4.A, RK4.b, RK4.c,
+        P, Q0, V0, run.time, run.dt, run.last_step, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
@@ -421,15 +453,15 @@ def _run_rk4_loop(run: _Run) -> None:
 
     s = run.settings
     alpha, beta = s.gains
-    nstep = (len(run.time) - 1) * run.every
+    nstep = run.nstep
     integrated = (run.status & FAILURE_BITS) == 0
     run.steps[integrated] = nstep
     run.evaluations[integrated] = RK4.nstage * nstep + 1
     over_samples(
         rk4_run, run.model.nsample,
         run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
-        0.0, run.dt, nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
-        RK4.A, RK4.b, RK4.c,
+        run.time, run.dt, run.last_step, nstep, run.every, run.model.ncon,
+        *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
         run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
@@ -586,12 +618,12 @@ def _run_generalized_alpha(run: _Run) -> None:
     s = run.settings
     coef = GeneralizedAlpha.from_rho(s.rho_inf)
     km = run.model.kernel_model()
-    nstep = (len(run.time) - 1) * run.every
     over_samples(
         generalized_alpha_run, run.model.nsample,
-        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), 0.0, run.dt, nstep,
-        run.every, run.model.ncon, *run.model.constraint_pattern(), coef.alpha_m, coef.alpha_f,
-        coef.gamma, coef.beta, s.constraint_tolerance, SINGULAR_PIVOT, s.max_newton,
+        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), run.time, run.dt,
+        run.last_step, run.nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
+        coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
+        SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
         run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations, min_block=1,
     )  # fmt: skip
@@ -765,8 +797,9 @@ def simulate(
             SIMD register of doubles: see ``mcchain.codegen.layout.LMAX``).
         diagnostics: also return, per sample, int64 (nsample,): ``steps`` (accepted
             steps), ``rejected_steps`` and ``evaluations`` (right-hand-side evaluations).
-            rk4, rk4-projection: ``steps`` = t_end / dt for every integrated sample (a
-            failed one is carried to the end with NaN), ``rejected_steps`` 0,
+            rk4, rk4-projection: ``steps`` = the steps to t_end (``OutputGrid.nstep``:
+            whole steps of dt and the last one, shortened to land on t_end) for every
+            integrated sample (a failed one is carried to the end with NaN), ``rejected_steps`` 0,
             ``evaluations`` 4 per step + 1 (stage 0 at t_end, for the last outputs; the
             projection's Newton iterations evaluate Φ, not accelerations, and are not
             counted). rk45: accepted and rejected attempts up to the end or the failure;
@@ -776,7 +809,8 @@ def simulate(
             by a singular evaluation reports every call up to it); ``rejected_steps`` -1,
             scipy does not count them. generalized-alpha: the steps completed (up to a
             failure), ``rejected_steps`` 0, ``evaluations`` 1 (the start's index-1 solve) +
-            one residual per Newton iteration. Samples failed on entry: all 0 (radau's
+            one residual per Newton iteration (+ 1: the index-1 solve after a last step
+            shortened to land on t_end). Samples failed on entry: all 0 (radau's
             ``rejected_steps`` -1).
 
     Returns:
@@ -808,6 +842,8 @@ def simulate(
         time=time,
         every=every,
         dt=grid.dt,
+        nstep=grid.nstep,
+        last_step=grid.last_step,
         out=out,
         status=status,
         t_div=np.full(n, np.nan),
