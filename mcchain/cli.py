@@ -6,7 +6,10 @@ Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcch
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
 written nothing; usage errors of ``show`` and ``report`` name the command
-(``mcchain show: ...``).
+(``mcchain show: ...``). A run that fails once started (a full disk, its folder removed,
+``RunFailed``) prints one such line and exits with 1, keeping its finished chunks; a run
+that completes with every sample failed prints its folder, then one such line with the
+status counts, and exits with 3.
 
 This module imports only the standard library at import time, and building the parser
 does too (``mcchain runs`` must stay fast): ``show``'s arguments, whose help lists the
@@ -24,11 +27,13 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from mcchain import __version__
-from mcchain.errors import McchainError
+from mcchain.errors import McchainError, RunFailed
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
+EXIT_ALL_FAILED = 3
+"""``mcchain run``: the run completed, but every one of its samples failed."""
 
 """Commands that parse the rest of the command line themselves."""
 NAMED_ERRORS = ("show", "report")
@@ -159,6 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--rerun-spawn", action="store_true", help="--rerun: spawn a rerun viewer instead"
     )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--no-background-compile",
+        action="store_true",
+        help="on a cold cache, start no background process compiling the kernels for the next "
+        "runs (for good: run.background_compile = false in ~/.config/mcchain/config.toml)",
+    )
 
     validate = sub.add_parser(
         "validate", help="check a scene; print bodies, joints, constraint rows and dof"
@@ -187,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
         "export",
         help="write a run's per-sample results as a table",
         description="write one row per sample: sampled parameters, status, pulsations (rad/s "
-        "and Hz), equilibria, contact summaries and the peaks of the force histories",
+        "and Hz), equilibria, contact summaries, the peaks tracked at every step (peak_*), "
+        "and the largest stored point of each force history (max_stored_*)",
         named_errors=True,
     )
     export.add_argument("run", help="run folder (or its id under runs/)")
@@ -240,7 +252,44 @@ def build_parser() -> argparse.ArgumentParser:
     rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
     rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
 
+    add_cache_parser(sub)
     return parser
+
+
+def add_cache_parser(sub: Any) -> None:
+    """``mcchain cache status | warm SCENE… | clear``: the compiled-code caches."""
+    cache = sub.add_parser(
+        "cache",
+        help="what is compiled, where; compile scenes ahead; clear the caches",
+        description="mcchain's compiled-code caches (MCCHAIN_CACHE_DIR, numba's cache of "
+        "mcchain's kernels)",
+    )
+    action = cache.add_subparsers(
+        dest="cache_action", metavar="{status,warm,clear}", required=True, parser_class=_Parser
+    )
+    action.add_parser("status", help="what is compiled, where, sizes, versions and target")
+    warm = action.add_parser(
+        "warm",
+        help="compile every kernel these scenes' runs call, now (for CI images and cluster "
+        "nodes: their runs then compile nothing)",
+    )
+    warm.add_argument("scenes", nargs="+", metavar="SCENE.toml")
+    action.add_parser("clear", help="remove all compiled code and cached designs")
+
+
+def _cmd_cache(args: argparse.Namespace) -> int:
+    from mcchain import caches
+
+    if args.cache_action == "status":
+        print("\n".join(caches.status_lines()))
+    elif args.cache_action == "clear":
+        print("\n".join(caches.clear()))
+    else:
+        from mcchain.compile_ahead import warm
+
+        for scene in args.scenes:
+            print(warm(scene))
+    return 0
 
 
 def add_show_arguments(parser: argparse.ArgumentParser) -> None:
@@ -295,6 +344,9 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
     sink.add_argument("--stdout", action="store_true", help="write the recording to stdout")
     sink.add_argument("--headless", action="store_true", help="log nowhere (for timing)")
     parser.add_argument("--url", help="viewer URL for --connect")
+    parser.add_argument(
+        "--force", action="store_true", help="--save: overwrite the file if it exists"
+    )
 
 
 # -- commands ----------------------------------------------------------------------------------
@@ -390,6 +442,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             from mcchain.first_run import choose
 
             first_run = choose(args.scene, args.samples, args.seed)
+        background_off = None
+        if first_run is not None:
+            from mcchain.user_config import background_compile_off
+
+            background_off = background_compile_off()
+            if args.no_background_compile:
+                background_off = "--no-background-compile"
         result = execution.start_run(
             args.scene,
             samples=args.samples,
@@ -403,10 +462,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
             progress=progress,
             rerun=live,
             first_run=first_run,
+            background_off=background_off,
         )
     for line in result.summary():
         print(line)
     print(result.folder)
+    if result.all_failed:
+        sys.stdout.flush()  # the folder, then the error line
+        samples = result.record["samples"]
+        return _fail(
+            f"every one of the {samples} samples failed ({result.counts_line()})", EXIT_ALL_FAILED
+        )
     return 0
 
 
@@ -636,9 +702,21 @@ def _validation_lines(scene_path: Any) -> list[str]:
 
         choice = choose_kernels(sim, model.ndof, model.nsample)
         lines.append(f'simulate: {sim.method} on kernels = "{choice.kernels}" ({choice.reason})')
+    lines.append(_disk_line(scene, model))
     warnings = model.meta.get("warnings") or []
     assert isinstance(warnings, list)
     return lines + [f"warning: {line}" for line in warnings]
+
+
+def _disk_line(scene: Any, model: Any) -> str:
+    """``validate``'s line on what a run of the scene writes (``mcchain run`` compares it
+    with the free space; the free space is not printed here, so that the output depends on
+    the scene only)."""
+    from mcchain.resources import estimate_disk
+
+    estimate = estimate_disk(scene, model, model.nsample, scene.storage.chunk_size)
+    assert estimate is not None
+    return estimate.line()
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
@@ -653,8 +731,14 @@ def _cmd_runs(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from mcchain.ensemble.queries import parse_samples
+    from mcchain.errors import RunError
     from mcchain.viz.playback import show_run
+
+    if args.save is not None and Path(args.save).exists() and not args.force:
+        raise RunError(f"--save: {args.save} already exists (add --force to overwrite it)")
 
     shown = show_run(
         args.run,
@@ -759,8 +843,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             "export": _cmd_export,
             "check": _cmd_check,
             "rare": _cmd_rare,
+            "cache": _cmd_cache,
         }[command]
         return handler(args)
+    except RunFailed as exc:
+        return _fail(str(exc).splitlines()[0], EXIT_FAILED)
     except McchainError as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except KeyboardInterrupt as exc:
