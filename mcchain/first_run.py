@@ -183,21 +183,11 @@ def run_compiled(resume: Path | None = None, reason: BaseException | None = None
         )
     args = sys.argv[1:]
     if resume is not None:
-        kept = _resume_arguments(args)
+        from mcchain.cli.parser import resume_arguments
+
+        kept = resume_arguments(args)
         args = ["run", "--resume", str(resume), *kept]
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
     env = {**os.environ, ENV_SWITCH: "0"}
     os.execve(sys.executable, [sys.executable, "-m", "mcchain.cli", *args], env)
-
-
-def _resume_arguments(args: list[str]) -> list[str]:
-    """The options of a ``mcchain run`` command line that a resume takes too."""
-    import argparse
-
-    parser = argparse.ArgumentParser(add_help=False)
-    parser.add_argument("--threads")
-    parser.add_argument("--quiet", action="store_true")
-    known, _ = parser.parse_known_args(args)
-    kept = [] if known.threads is None else ["--threads", known.threads]
-    return kept + (["--quiet"] if known.quiet else [])

@@ -485,7 +485,7 @@ def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkey
 def test_run__no_background_compile_flag_and_user_config_reach_the_run(
     monkeypatch, tmp_path: Path, mcchain
 ) -> None:
-    from mcchain import cli
+    from mcchain.cli import commands
 
     seen = []
 
@@ -493,7 +493,7 @@ def test_run__no_background_compile_flag_and_user_config_reach_the_run(
         seen.append(kwargs["background_off"])
         raise SceneError("stopped here")
 
-    monkeypatch.setattr(cli, "_may_interpret", True)
+    monkeypatch.setattr(commands, "_may_interpret", True)
     monkeypatch.setattr(first_run, "choose", lambda *a: first_run.FirstRun(None))
     monkeypatch.setattr(execution, "start_run", start_run)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))

@@ -154,3 +154,12 @@ def test_layering__kernels_import_no_codegen_cache_or_io():
     }
     assert not outside
     assert not {module: graph[module] for module in PLAIN if graph[module]}
+
+
+def test_layering__argparse_only_in_the_cli():
+    users = set()
+    for module, path in _module_files().items():
+        for node in _runtime_imports(ast.parse(path.read_text())):
+            if any(n.split(".")[0] == "argparse" for n in _imported_names(module, path, node)):
+                users.add(module)
+    assert users and all(m == "mcchain.cli" or m.startswith("mcchain.cli.") for m in users), users

@@ -139,10 +139,11 @@ def test_validate__falls_back_to_the_compiled_kernels_where_the_interpreted_chec
     code = (
         "import sys\n"
         "from mcchain import cli\n"
-        "cli._may_interpret = True  # as console_main sets it for validate\n"
+        "from mcchain.cli import commands\n"
+        "commands._may_interpret = True  # as console_main sets it for validate\n"
         "def degenerate(path):\n"
         "    raise ZeroDivisionError('float division by zero')\n"
-        "cli._validation_lines = degenerate\n"
+        "commands._validation_lines = degenerate\n"
         "sys.stdout.flush()\n"
         "sys.exit(cli.main(['validate', sys.argv[1]]))\n"
     )

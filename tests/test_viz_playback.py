@@ -19,6 +19,7 @@ import xarray as xr
 from test_viz_synthetic import make_dataset, make_model, random_params
 
 from mcchain import cli
+from mcchain.cli import parser as parser_module
 from mcchain.ensemble import queries
 from mcchain.errors import RunError
 from mcchain.viz import geometry, live, playback
@@ -270,7 +271,7 @@ def test_show_command__usage_error_is_one_line_naming_the_command(
 
 def show_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser()
-    cli.add_show_arguments(parser)
+    parser_module.add_show_arguments(parser)
     return parser
 
 

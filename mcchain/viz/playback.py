@@ -54,10 +54,10 @@ Drawing conventions:
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -624,7 +624,9 @@ def show(
     default a spawned viewer."""
     import rerun as rr
 
-    rr_args = argparse.Namespace(
+    # rr.script_setup reads its sink from the attributes of parsed arguments: these, given
+    # by name here (mcchain parses its command line in mcchain.cli only).
+    rr_args: Any = SimpleNamespace(
         headless=bool(headless),
         connect=bool(connect),
         serve=bool(serve),
