@@ -25,7 +25,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mcchain.codegen import generate
-from mcchain.codegen.native import NativeModule, TranslationError
+from mcchain.codegen.native import NativeModule
+from mcchain.codegen.native_expressions import TranslationError
 from mcchain.testing.comparisons import simulate_float64
 from mcchain.testing.scenes import model_of, scene_model
 
@@ -326,7 +327,9 @@ def test_independent_loops__said_parallel_to_llvm_same_values():
     unmarked loop's are not; the values are Python's."""
     from llvmlite import binding
 
-    from mcchain.codegen.native import Array, ModuleTranslator, _codegen, _target_data
+    from mcchain.codegen.native import _codegen, _target_data
+    from mcchain.codegen.native_expressions import Array
+    from mcchain.codegen.native_translate import ModuleTranslator
 
     argtypes = (Array("f64", 1, True), "i64", Array("f64", 1, True))
     translator = ModuleTranslator(LANES, "mcchain_test_lanes", _target_data(_codegen()))
@@ -513,13 +516,9 @@ def test_int_then_float__widened_as_numba(risks, n):
 
 
 def test_local_arrays__above_the_limit_on_the_heap_small_ones_on_the_stack():
-    from mcchain.codegen.native import (
-        STACK_ARRAY_MAX_BYTES,
-        Array,
-        ModuleTranslator,
-        _codegen,
-        _target_data,
-    )
+    from mcchain.codegen.native import _codegen, _target_data
+    from mcchain.codegen.native_expressions import STACK_ARRAY_MAX_BYTES, Array
+    from mcchain.codegen.native_translate import ModuleTranslator
 
     argtypes = ("i64", Array("f64", 1, True))
     translator = ModuleTranslator(RISKS, "mcchain_test_heap", _target_data(_codegen()))
