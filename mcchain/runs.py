@@ -5,7 +5,7 @@ A run folder ``runs/<timestamp>-<scene>/`` holds:
 * ``scene.toml`` — the scene text the run was made from (resume reads it back);
 * ``run.json`` — the experiment log: status ``RUNNING``/``COMPLETED``/``FAILED``, start
   and end, argv, versions, git commit, host, threads, wall time per phase, status counts,
-  throughput (see :func:`mcchain.execution.execute`);
+  throughput (see :func:`mcchain.chunk_execution.execute`);
 * ``run.log`` — the log (one line per chunk, warnings, the traceback of a failure);
 * ``parts/part-<start>-<stop>.nc`` — finished chunks, each written atomically; deleted once
   merged;

@@ -16,7 +16,7 @@ import pytest
 from test_cli_commands import in_process
 from test_runs_support import REPO
 
-from mcchain import compile_ahead, execution, first_run
+from mcchain import chunk_execution, compile_ahead, execution, first_run
 from mcchain.caches import kernels_cached, numba_index_folder
 from mcchain.errors import SceneError
 from mcchain.runs import read_record
@@ -261,7 +261,7 @@ def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_
             progress=False, first_run=chosen, solve=solve,
         )  # fmt: skip
     assert calls == []
-    monkeypatch.setattr(execution, "_compute", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(chunk_execution, "_compute", lambda *a, **k: 1 / 0)
     with pytest.raises(SystemExit):
         execution.start_run(
             CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "s",

@@ -53,7 +53,7 @@ def sequential_settings(attrs: Mapping[str, Any]) -> dict[str, Any] | None:
 
 @dataclass
 class Until:
-    """The ``grow`` of :func:`mcchain.execution.execute` for ``until = "decided"``."""
+    """The ``grow`` of :func:`mcchain.chunk_execution.execute` for ``until = "decided"``."""
 
     batch: int
     max_count: int

@@ -3,7 +3,7 @@
 * :class:`LiveOptions`, :func:`parse_rerun_samples`, :func:`check_live`: the ``--rerun``
   options, checked before anything is written;
 * :class:`LiveRun`: the stream of one run session, fed each solved chunk by
-  :func:`mcchain.execution.execute`; it records what it streamed in ``run.json``;
+  :func:`mcchain.chunk_execution.execute`; it records what it streamed in ``run.json``;
 * :class:`LiveStream`: the rerun side, logging the chosen samples of each chunk as
   ``mcchain show`` logs them (:mod:`mcchain.viz.playback`).
 
