@@ -162,7 +162,7 @@ def test_requirement_met__stored_per_sample_chunk_independent(
 
 
 def _requirement(**kw: object) -> object:
-    from mcchain.scene.models import Requirement
+    from mcchain.scene.study import Requirement
 
     return Requirement.model_validate({"name": "r", "output": "omega", **kw})
 

@@ -1,7 +1,7 @@
 """Requirements on an ensemble: which outputs they read, which samples meet them, and the
 tolerance allocation.
 
-A ``[[requirement]]`` (:class:`mcchain.scene.models.Requirement`) names a per-sample ensemble
+A ``[[requirement]]`` (:class:`mcchain.scene.study.Requirement`) names a per-sample ensemble
 variable (``output``) and one entry of each of its other dimensions (``select``); a sample
 meets it when that value lies in [min, max]. A NaN value (a failed instance) fails it.
 
@@ -32,7 +32,8 @@ if TYPE_CHECKING:
     import xarray as xr
 
     from mcchain.model import Model
-    from mcchain.scene.models import Requirement, Scene
+    from mcchain.scene.models import Scene
+    from mcchain.scene.study import Requirement
 
 VARIABLE = "requirement_met"
 """The ensemble variable (sample, requirement): 1 met, 0 failed."""
@@ -271,7 +272,7 @@ def variable_attributes(requirements: Sequence[Requirement]) -> dict[str, Any]:
 def stored_requirements(ds: xr.Dataset) -> list[Requirement]:
     """The requirements of a stored ensemble: from ``requirement_met``'s attributes, else
     from the scene in its settings (a run made before the variable existed); [] for none."""
-    from mcchain.scene.models import Requirement
+    from mcchain.scene.study import Requirement
 
     if VARIABLE in ds.data_vars and "requirements" in ds[VARIABLE].attrs:
         data = json.loads(str(ds[VARIABLE].attrs["requirements"]))

@@ -49,7 +49,7 @@ from mcchain.decision.until import sequential_settings
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.scene.models import Requirement
+    from mcchain.scene.study import Requirement
 
 REQUIREMENT_COLUMNS = (
     "requirement",

@@ -13,25 +13,13 @@ out as the flat arrays the kernels read. This package never imports numba or the
 from __future__ import annotations
 
 from mcchain.scene.compile import compile_model
+from mcchain.scene.fields import GROUND_NAME
 from mcchain.scene.loading import load_scene, load_scene_text, scene_from_dict
-from mcchain.scene.models import (
-    GROUND_NAME,
-    Body,
-    Distribution,
-    Driver,
-    Equilibrium,
-    Force,
-    Joint,
-    Modes,
-    Sample,
-    Scene,
-    SceneSection,
-    Simulate,
-    Spring,
-    Storage,
-)
+from mcchain.scene.mechanism import Body, Driver, Force, Joint, SceneSection, Spring
+from mcchain.scene.models import Equilibrium, Modes, Scene, Simulate, Storage
 from mcchain.scene.paths import ParamRef, parameter_slot, parse_path
 from mcchain.scene.sampling import philox_uniform, ppf, sample_parameters, unit_design
+from mcchain.scene.study import Distribution, Sample
 
 __all__ = [
     "GROUND_NAME",

@@ -13,17 +13,9 @@ import math
 
 from mcchain.errors import SceneError
 from mcchain.parameters import PARAMETERS
-from mcchain.scene.models import (
-    FIXED_STEP_METHODS,
-    GROUND_NAME,
-    LOOP_METHODS,
-    Distribution,
-    Driver,
-    Force,
-    Joint,
-    Scene,
-    saltelli_count_error,
-)
+from mcchain.scene.fields import GROUND_NAME
+from mcchain.scene.mechanism import Driver, Force, Joint
+from mcchain.scene.models import FIXED_STEP_METHODS, LOOP_METHODS, Scene
 from mcchain.scene.paths import (
     PARAM_SHAPES,
     PERTURB_KEYS,
@@ -31,6 +23,7 @@ from mcchain.scene.paths import (
     parse_path,
     quote_key,
 )
+from mcchain.scene.study import Distribution, saltelli_count_error
 
 
 def _item(scene: Scene, kind: str, index: int) -> str:

@@ -24,9 +24,11 @@ from mcchain.errors import SceneError
 from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
 from mcchain.resources import check_memory
-from mcchain.scene.models import GROUND_NAME, MAX_SEED, Scene, saltelli_count_error
+from mcchain.scene.fields import GROUND_NAME
+from mcchain.scene.models import Scene
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
+from mcchain.scene.study import MAX_SEED, saltelli_count_error
 
 Slot = tuple[str, tuple[int, ...]]
 

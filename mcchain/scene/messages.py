@@ -14,8 +14,9 @@ from typing import Annotated, Any, Union, get_args, get_origin
 from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 
-from mcchain.scene.models import Distribution, Scene
+from mcchain.scene.models import Scene
 from mcchain.scene.paths import KINDS, item_path, quote_key
+from mcchain.scene.study import Distribution
 
 
 def format_validation_error(exc: ValidationError, data: Any, section: str | None = None) -> str:

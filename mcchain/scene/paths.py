@@ -14,7 +14,9 @@ from dataclasses import dataclass
 from pydantic import BaseModel
 
 from mcchain.parameters import PARAMETERS, rows_of
-from mcchain.scene.models import NAME_RE, Body, Driver, Force, Joint, Scene, SceneSection, Spring
+from mcchain.scene.fields import NAME_RE
+from mcchain.scene.mechanism import Body, Driver, Force, Joint, SceneSection, Spring
+from mcchain.scene.models import Scene
 
 KINDS = ("body", "joint", "driver", "force", "spring")
 

@@ -19,7 +19,7 @@ mapped through its distribution's inverse CDF (:func:`ppf`). Designs:
   A_g (its first d values) and B_g (its last d); rows come in groups of d + 2 per base point:
   A_g, AB_g1 .. AB_gd (AB_gj is A_g with column j taken from B_g), B_g. Row i belongs to group
   i // (d + 2) whatever the count, which must be a multiple of d + 2
-  (:func:`~mcchain.scene.models.saltelli_count_error`). The rows are SALib's own for
+  (:func:`~mcchain.scene.study.saltelli_count_error`). The rows are SALib's own for
   ``seed=numpy.random.default_rng(seed)``, moved to their cell centres (+2⁻³¹), and
   ``SALib.analyze.sobol.analyze(problem, Y, calc_second_order=False)`` accepts the outputs
   of all the rows in order.
@@ -34,7 +34,7 @@ import warnings
 
 import numpy as np
 
-from mcchain.scene.models import Distribution, Sample, saltelli_count_error
+from mcchain.scene.study import Distribution, Sample, saltelli_count_error
 
 DESIGNS = ("random", "sobol", "lhs", "saltelli")
 

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from mcchain.decision.summary import AllocationRow
-    from mcchain.scene.models import Requirement
+    from mcchain.scene.study import Requirement
 
 CURVE_POINTS = 400
 """Points of an exceedance curve (at sample quantiles: the curve's shape, not every sample)."""
