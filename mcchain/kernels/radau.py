@@ -15,7 +15,9 @@ The driver (:mod:`mcchain.solvers.radau`) calls :func:`radau_start` at the start
 segment between events, then :func:`radau_step` once per accepted step, and locates events
 and writes outputs on the step's dense output :func:`radau_dense`.
 
-The stepper's scalars live in ``state`` (:data:`NSTATE`,), indexed by the constants below.
+Both leave the accelerations' outputs (q̈, λ and the contact state in ``acc``) at the
+state they end at, for the driver's step hook. The stepper's scalars live in ``state``
+(:data:`NSTATE`,), indexed by the constants below.
 """
 
 from __future__ import annotations
@@ -253,6 +255,7 @@ def radau_start(km, s, t0, t_bound, y, f, J, rtol, atol, state, work_y, work_f, 
     if not radau_jacobian(km, s, t0, y, f, J, work_y, work_f, balpha2, bbeta2, tau, acc):
         state[T_FAIL] = t0
         return SINGULAR_EVALUATION
+    _rhs(km, s, t0, y, work_f, balpha2, bbeta2, tau, acc)  # q̈, λ at (t0, y) (not counted)
     return ACCEPTED
 
 
@@ -385,6 +388,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
         if not radau_jacobian(km, s, t_new, y, f, J, F[0], work_f, balpha2, bbeta2, tau, acc):
             state[T_FAIL] = t_new
             return SINGULAR_EVALUATION
+        _rhs(km, s, t_new, y, work_f, balpha2, bbeta2, tau, acc)  # q̈, λ at the step's end
         current_jac = True
     else:
         current_jac = False

@@ -186,13 +186,14 @@ class _Sample:
         )  # fmt: skip
 
     def on_step(self, t: float, y: np.ndarray) -> float:
-        """solve_ivp's call once per accepted step (an event that never fires): the step
-        count, the peaks, and the re-seat dwell of model auto."""
+        """The hook at every accepted step's end (and a segment's start), the first of the
+        events, evaluated before the others (it never fires): the step count, the peaks, and
+        the re-seat dwell of model auto, from the accelerations the stepper evaluated last,
+        at (t, y)."""
         from mcchain.kernels.forces import kinetic_energy
 
         cl, cst = self.cl, self.cst
-        self.run.steps[self.i] += 1
-        self.accelerations(t, y)
+        self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
         h, self.t_prev = t - self.t_prev, t
         kinetic = kinetic_energy(self.km, self.i, np.ascontiguousarray(y[self.ndof :]))
         for j, k in enumerate(self.joints):
