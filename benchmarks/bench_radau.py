@@ -88,7 +88,9 @@ def main() -> int:
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench-radau-"))
     trees = {"before": extract(args.before, work), "after": REPO}
-    caches = {name: work / f"cache-{name}" for name in trees}
+    # one cache for both trees (numba's is keyed by source path, the native one by text)
+    cache = Path(os.environ.get("MCCHAIN_CACHE_DIR", work / "cache"))
+    caches = {name: cache for name in trees}
     rows: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
     for r in range(args.repeats):
         for name, tree in trees.items():

@@ -549,7 +549,12 @@ METHODS: dict[str, Method] = {
             False,
             "Dormand–Prince 5(4) with per-sample step control on the index-1 form (Baumgarte)",
         ),
-        Method("radau", _run_radau, False, "scipy Radau, one sample at a time (reference)"),
+        Method(
+            "radau",
+            _run_radau,
+            False,
+            "Radau IIA(5), scipy's algorithm compiled, one sample at a time (reference)",
+        ),
     )
 }
 """Every integration method by its ``[simulate] method`` name."""
@@ -649,10 +654,10 @@ def simulate(
             projection's Newton iterations evaluate Φ, not accelerations, and are not
             counted). rk45: accepted and rejected attempts up to the end or the failure;
             ``evaluations`` 1 (the first stage) + 6 per attempt (7 stages, the last one is
-            the next step's first: FSAL). radau: scipy's accepted steps and its ``nfev``
-            (its finite-difference Jacobian's evaluations not included; a sample stopped
-            by a singular evaluation reports every call up to it); ``rejected_steps`` -1,
-            scipy does not count them. generalized-alpha: the steps completed (up to a
+            the next step's first: FSAL). radau: the accepted steps and the right-hand-side
+            evaluations over all segments (scipy's ``nfev``; the finite-difference
+            Jacobian's not included; a sample stopped by a singular evaluation reports
+            every call up to it); ``rejected_steps`` -1, not counted. generalized-alpha: the steps completed (up to a
             failure), ``rejected_steps`` 0, ``evaluations`` 1 (the start's index-1 solve) +
             one residual per Newton iteration (+ 1: the index-1 solve after a last step
             shortened to land on t_end). Samples failed on entry: all 0 (radau's
