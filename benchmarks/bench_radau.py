@@ -73,9 +73,11 @@ def timed(tree: Path, t_end: float, cache: Path) -> dict[str, float]:
     """One run of the child script on ``tree``; its JSON line."""
     env = dict(os.environ, PYTHONPATH=str(tree), MCCHAIN_CACHE_DIR=str(cache))
     code = CHILD.format(warm=flores_pin_text(t_end=5e-4), text=flores_pin_text(t_end=t_end))
-    done = subprocess.run(
-        [sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True
-    )
+    code += f"\nimport mcchain; assert mcchain.__file__.startswith({str(tree)!r})\n"
+    done = subprocess.run(  # run in the tree: `python -c` imports from its folder first
+        [sys.executable, "-c", code], env=env, cwd=tree, check=True, capture_output=True,
+        text=True,
+    )  # fmt: skip
     return dict(json.loads(done.stdout.strip().splitlines()[-1]))
 
 

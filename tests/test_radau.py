@@ -5,7 +5,7 @@ Flores slider-crank with an impacting piston pin, against rk45 at a tighter tole
 times and re-seats twice. Up to the first re-seat both integrators are held to 1e-9 m. A
 re-seat happens at the end of the accepted step that completes its dwell (model auto), so
 its time moves with the step sequence: from there on two correct runs differ by more (radau
-at rtol 1e-11 against 1e-12 differs by 6e-8 m), and the whole history is held to 1e-7 m.
+at rtol 1e-11 against 1e-12 differs by 6e-8 m), and the whole history is held to 1e-6 m.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from mcchain.testing.scenes import flores_pin_text
 pytestmark = pytest.mark.slow  # 30 ms at rtol 1e-11: about 10-40 s on 2 shared cores
 
 BEFORE_RESEAT_TOL = 1e-9  # m: the issue's agreement, up to the first re-seat
-WHOLE_TOL = 1e-7  # m: after a re-seat, whose time depends on the steps (see above)
+WHOLE_TOL = 1e-6  # m, 1 % of the clearance: after a re-seat, whose time depends on the steps
+# (measured 5.5e-9 to 7.4e-8 m as the LU's rounding changed; radau 1e-11 vs 1e-12: 6e-8 m)
 PEAK_RTOL = 1e-4  # peak contact force, relative: impact peaks are the most step-sensitive
 
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from mcchain.kernels.config import INLINE, JIT, njit
 from mcchain.kernels.explicit import index1_acceleration
+from mcchain.kernels.linalg import lu_factor, lu_solve
 
 _S6 = 6.0**0.5
 C = np.array([(4.0 - _S6) / 10.0, (4.0 + _S6) / 10.0, 1.0])
@@ -128,48 +129,6 @@ def radau_jacobian(km, s, t, y, f, J_out, work_y, work_f, balpha2, bbeta2, tau, 
             J_out[k, j] = (work_f[k] - f[k]) / step
         work_y[j] = y[j]
     return True
-
-
-@njit(**INLINE)
-def _lu_factor(A, piv):
-    """LU with partial pivoting of A (n, n) in place (real or complex)."""
-    n = A.shape[0]
-    for k in range(n):
-        p = k
-        big = abs(A[k, k])
-        for i in range(k + 1, n):
-            if abs(A[i, k]) > big:
-                big = abs(A[i, k])
-                p = i
-        piv[k] = p
-        if p != k:
-            for j in range(n):
-                tmp = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = tmp
-        for i in range(k + 1, n):
-            A[i, k] = A[i, k] / A[k, k]
-            for j in range(k + 1, n):
-                A[i, j] -= A[i, k] * A[k, j]
-
-
-@njit(**INLINE)
-def _lu_solve(LU, piv, b):
-    """Solve (LU) x = b in place of b."""
-    n = LU.shape[0]
-    for k in range(n):
-        p = piv[k]
-        if p != k:
-            tmp = b[k]
-            b[k] = b[p]
-            b[p] = tmp
-    for i in range(n):
-        for j in range(i):
-            b[i] -= LU[i, j] * b[j]
-    for i in range(n - 1, -1, -1):
-        for j in range(i + 1, n):
-            b[i] -= LU[i, j] * b[j]
-        b[i] = b[i] / LU[i, i]
 
 
 @njit(**INLINE)
@@ -285,6 +244,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
     lu_ok = state[LU_OK] != 0.0
     newton_tol = max(10.0 * EPS / rtol, min(0.03, rtol**0.5))
     rejected = False
+    factored = lu_ok
     n_iter = 0
     rate = math.nan
     error_norm = 0.0
@@ -311,8 +271,8 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
                         LUc[a, b] = -J[a, b]
                     LUr[a, a] += MU_REAL / h
                     LUc[a, a] += MU_COMPLEX / h
-                _lu_factor(LUr, piv_r)
-                _lu_factor(LUc, piv_c)
+                # an exactly zero pivot (scipy's LU would give inf): Newton fails
+                factored = lu_factor(LUr, n, piv_r, 0.0) and lu_factor(LUc, n, piv_c, 0.0)
                 lu_ok = True
             # Z0: the last step's dense output extrapolated to the nodes (0 at a start)
             for i in range(3):
@@ -323,10 +283,12 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
                 else:
                     for k in range(n):
                         Z[i, k] = 0.0
-            code, n_iter, rate = _collocation(
-                km, s, t, y, h, Z, W, F, scale, newton_tol, LUr, piv_r, LUc, piv_c, state,
-                work_f, work_c, balpha2, bbeta2, tau, acc,
-            )  # fmt: skip
+            code, n_iter, rate = 0, 1, math.nan
+            if factored:
+                code, n_iter, rate = _collocation(
+                    km, s, t, y, h, Z, W, F, scale, newton_tol, LUr, piv_r, LUc, piv_c, state,
+                    work_f, work_c, balpha2, bbeta2, tau, acc,
+                )  # fmt: skip
             if code < 0:
                 return SINGULAR_EVALUATION
             converged = code > 0
@@ -347,7 +309,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
         for k in range(n):
             work_f[k] = f[k] + (Z[0, k] * E[0] + Z[1, k] * E[1] + Z[2, k] * E[2]) / h
             F[1, k] = work_f[k] - f[k]  # ZE, kept for a second estimate
-        _lu_solve(LUr, piv_r, work_f)
+        lu_solve(LUr, n, piv_r, work_f)
         for k in range(n):
             scale[k] = atol + max(abs(y[k]), abs(y[k] + Z[2, k])) * rtol
         error_norm = _rms(work_f, scale)
@@ -361,7 +323,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
                 return SINGULAR_EVALUATION
             for k in range(n):
                 work_f[k] = F[2, k] + F[1, k]
-            _lu_solve(LUr, piv_r, work_f)
+            lu_solve(LUr, n, piv_r, work_f)
             error_norm = _rms(work_f, scale)
         if error_norm > 1.0:
             factor = _predict_factor(h_abs, h_abs_old, error_norm, error_old)
@@ -445,8 +407,8 @@ def _collocation(km, s, t, y, h, Z, W, F, scale, tol, LUr, piv_r, LUc, piv_c, st
                 + F[2, k] * TI_COMPLEX[2]
                 - m_complex * (W[1, k] + 1j * W[2, k])
             )
-        _lu_solve(LUr, piv_r, work_f)
-        _lu_solve(LUc, piv_c, work_c)
+        lu_solve(LUr, n, piv_r, work_f)
+        lu_solve(LUc, n, piv_c, work_c)
         acc2 = 0.0
         for k in range(n):
             acc2 += (work_f[k] / scale[k]) ** 2
