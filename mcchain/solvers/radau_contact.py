@@ -18,8 +18,8 @@ right-hand side is smooth. A segment ends at the first of these events:
   (:func:`mcchain.kernels.clearance.reseat_ready`, checked at every accepted step), then the
   projection onto the link (:func:`mcchain.kernels.explicit.reseat`).
 
-Peaks are kept at every accepted step and output time, impacts and free-flight time at the
-events.
+Peaks of the forces are located on each segment's dense output (:mod:`mcchain.solvers.peaks`),
+the peak penetration kept at every accepted step, impacts and free-flight time at the events.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ class RadauRun(Protocol):
     evaluations: np.ndarray
     contact_history: np.ndarray | None
     contact_summary: np.ndarray | None
+    peaks: np.ndarray | None
 
 
 def run_radau(run: RadauRun, flat: tuple[np.ndarray, ...], singular_pivot: float) -> None:
@@ -169,6 +170,7 @@ class _Sample:
         )  # fmt: skip
         self.state = np.zeros(kr.NSTATE)
         self.work = (np.zeros(n), np.zeros(n), np.zeros(n, complex))
+        self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
 
     # -- the right-hand side and the step hook ---------------------------------------------
     def accelerations(self, t: float, y: np.ndarray) -> float:
@@ -185,11 +187,20 @@ class _Sample:
             )
         )  # fmt: skip
 
+    def quantities(self, t: float, y: np.ndarray) -> np.ndarray:
+        """|joint force| per joint and |λ| per driver at (t, y) with the present modes."""
+        from mcchain.kernels.peaks import peak_values
+
+        self.accelerations(t, y)
+        values = np.zeros(len(self.peaks))
+        peak_values(self.km, self.lam, self.cst, values)
+        return values
+
     def on_step(self, t: float, y: np.ndarray) -> float:
         """The hook at every accepted step's end (and a segment's start), the first of the
-        events, evaluated before the others (it never fires): the step count, the peaks, and
-        the re-seat dwell of model auto, from the accelerations the stepper evaluated last,
-        at (t, y)."""
+        events, evaluated before the others (it never fires): the step count, the peak
+        penetration, and the re-seat dwell of model auto, from the accelerations the stepper
+        evaluated last, at (t, y)."""
         from mcchain.kernels.forces import kinetic_energy
 
         cl, cst = self.cl, self.cst
@@ -199,7 +210,6 @@ class _Sample:
         for j, k in enumerate(self.joints):
             r = self.rows[j]
             lam_r = self.lam[r]
-            cst[j, cl.PKF] = max(cst[j, cl.PKF], lam_r)
             if cst[j, cl.FM] != 1.0:
                 continue
             d1, r1 = cst[j, cl.PEN], cst[j, cl.PDOT]
@@ -327,7 +337,9 @@ class _Sample:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
         nan_history(i, written, *self.flat)
-        finish_contact(i, int(run.status[i]), written, cst, *self.contact)
+        assert run.peaks is not None
+        run.peaks[i] = np.nan if fail_bit else self.peaks
+        finish_contact(self.km, i, int(run.status[i]), written, cst, *self.contact, run.peaks)
 
     def segment(self, t: float, y: np.ndarray, written: int) -> _Segment:
         """Integrate from (t, y) to the first event or t_end, writing the output times from
@@ -335,6 +347,7 @@ class _Sample:
         from scipy.optimize import brentq
 
         from mcchain.kernels import radau as kr
+        from mcchain.solvers.peaks import dense_peaks
 
         run, i, st = self.run, self.i, self.stepper
         rtol, atol = float(run.settings.rtol), float(run.settings.atol)
@@ -385,8 +398,11 @@ class _Sample:
             g = g_new
             if found is not None:
                 dense.clip(stop)
+                dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
                 y_stop = _Dense.piece(stop, step)
                 return _Segment(written, 0, math.nan, kinds[found[1] - 1], stop, y_stop)
+        if dense.pieces:  # the segment's peaks, in its modes
+            dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
         return _Segment(written, 0, math.nan)
 
     def write(self, it: int, t: float, y: np.ndarray) -> float:
@@ -397,8 +413,6 @@ class _Sample:
         run, model, cl = self.run, self.model, self.cl
         err = abs(self.accelerations(t, y))
         cl.record_stage0(self.km, self.cst, self.row_law)
-        for j in range(len(self.joints)):
-            self.cst[j, cl.PKF] = max(self.cst[j, cl.PKF], self.lam[self.rows[j]])
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
         write_outputs(
             self.km, self.i, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,
