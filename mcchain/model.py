@@ -25,6 +25,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from mcchain.contact import CONTACT
+
 GROUND = -1
 """Body index of the fixed ground body (r = 0, θ = 0)."""
 
@@ -94,6 +96,7 @@ class KernelModel(NamedTuple):
     joint_row: np.ndarray
     joint_model: np.ndarray
     joint_contact_law: np.ndarray
+    joint_written: np.ndarray
     driver_body: np.ndarray
     driver_row: np.ndarray
     driver_law: np.ndarray
@@ -122,6 +125,7 @@ class KernelModel(NamedTuple):
     joint_contact_restitution: np.ndarray
     joint_contact_friction: np.ndarray
     joint_contact_radius: np.ndarray
+    joint_start: np.ndarray
     driver_angle0: np.ndarray
     driver_omega: np.ndarray
     driver_amplitude: np.ndarray
@@ -171,6 +175,15 @@ class Model:
             (:data:`mcchain.contact.MODEL_CODES`: 0 link, 1 contact, 2 auto; 0 for ideal
             joints). Statics and modes always use the link.
         joint_contact_law: (njoint,) int64 contact law code (:data:`mcchain.contact.LAW_CODES`).
+        joint_written: (njoint,) int64 where the scene writes the journal of a clearance
+            joint of model contact or auto (both bodies' positions written or sampled, or
+            ground), judged on the scene as written: 1 off its wall (free or pressed: kept
+            where written, not a constraint of the assembly), 2 on it (seated: held on the
+            wall); 0 for the others (assembly places them as the link).
+        joint_start: (*, njoint) the mode each contact-law joint starts its time history in
+            (:data:`mcchain.contact.START_LINK`, ``START_LAW``, ``START_SEATED``), set from
+            the start state by :func:`mcchain.solvers.simulate.start_modes`; default: the
+            law for model contact, the link for the others.
         driver_body: (ndriver,) int64 driven body.
         driver_row: (ndriver,) int64 constraint row of each driver.
         force_body: (nforce,) int64 loaded body.
@@ -263,6 +276,8 @@ class Model:
     joint_contact_restitution: np.ndarray = None  # type: ignore[assignment]
     joint_contact_friction: np.ndarray = None  # type: ignore[assignment]
     joint_contact_radius: np.ndarray = None  # type: ignore[assignment]
+    joint_written: np.ndarray = None  # type: ignore[assignment]
+    joint_start: np.ndarray = None  # type: ignore[assignment]
     # Prismatic joints (optional: None gives no axis, as for revolute joints).
     joint_axis: np.ndarray = None  # type: ignore[assignment]
     joint_relative_angle: np.ndarray = None  # type: ignore[assignment]
@@ -315,10 +330,14 @@ class Model:
             "joint_contact_restitution": np.ones((1, njoint)),
             "joint_contact_friction": np.zeros((1, njoint)),
             "joint_contact_radius": np.zeros((1, njoint)),
+            "joint_written": np.zeros(njoint, dtype=np.int64),
         }
         for name, value in defaults.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
+        if self.joint_start is None:  # the law from t = 0 for model contact, else the link
+            start = (np.asarray(self.joint_model).reshape(-1) == CONTACT).astype(np.float64)
+            object.__setattr__(self, "joint_start", start[np.newaxis, :njoint].copy())
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -446,7 +465,7 @@ class Model:
             if f.name == "parameters":
                 changes[f.name] = arr[index]
             elif (
-                f.name in _PER_SAMPLE_FIELDS
+                (f.name in _PER_SAMPLE_FIELDS or f.name in _START_FIELDS)
                 and isinstance(arr, np.ndarray)
                 and arr.shape[0] == self.nsample
                 and self.nsample > 1
@@ -463,6 +482,7 @@ _TOPOLOGY_FIELDS = frozenset(
         "joint_row",
         "joint_model",
         "joint_contact_law",
+        "joint_written",
         "driver_body",
         "driver_row",
         "driver_law",
@@ -479,7 +499,9 @@ _TOPOLOGY_FIELDS = frozenset(
         "spring_body_b",
     }
 )
-_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS
+_START_FIELDS = frozenset({"joint_start"})
+"""Per-sample arrays set from the start state (not parameters of the scene)."""
+_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS - _START_FIELDS
 
 PER_SAMPLE_FIELDS = _PER_SAMPLE_FIELDS
 """Names of the parameter arrays that carry a leading sample axis (size 1 or nsample)."""

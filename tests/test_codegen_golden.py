@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
-        "accel": "a8f3d1ac7b829ca31c17b5a259664b33a309c49eabf87d090ffdcb552ee6d961",
-        "rk4": "cc5aa2759b80c51a161bbc9f3bf213e12c9313aa67754a003601b0350151121e",
-        "rk4-projection": "6a3a4ccd39d45a1fad99f171a456283b68ee303d93da46a4a689c211ec578e47",
-        "rk45": "22604644cad98ceaa4013502c8102b4686477becd1089b3996f597a34d6525dc",
+        "accel": "495ddb56126c4b544e4d7730a2ad83907da6b166dcead56bff5ca0b5ce2449cb",
+        "rk4": "fb84c5cd0bf37158f58ce99bda79fb7aebc043723df63521013e84307f8957c5",
+        "rk4-projection": "8c7bab655b5c28f8b4b3d90e71f6718522fe88f75e3a078de7bfa095e5943502",
+        "rk45": "1ec4172cabfdc7f820e9aa62bc161e389355b9917ac83e19ec5651657695e13f",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
