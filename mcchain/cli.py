@@ -187,6 +187,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     export.add_argument("run", help="run folder (or its id under runs/)")
     export.add_argument("--csv", action="store_true", help="as CSV (the format)")
+    export.add_argument(
+        "--requirements",
+        action="store_true",
+        help="the [[requirement]] answer: RUN/export/requirements.csv, allocation.csv and "
+        "requirements.txt",
+    )
     export.add_argument("--out", metavar="FILE", help="the file (default RUN/export/samples.csv)")
 
     return parser
@@ -217,10 +223,15 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
         + ")",
     )
     parser.add_argument(
+        "--failed",
+        metavar="NAME",
+        help="samples failing requirement NAME, farthest beyond its limit first (--limit)",
+    )
+    parser.add_argument(
         "--limit",
         type=int,
         default=DEFAULT_LIMIT,
-        help=f"most samples --status alone picks (default {DEFAULT_LIMIT})",
+        help=f"most samples --status or --failed picks (default {DEFAULT_LIMIT})",
     )
     parser.add_argument(
         "--magnify",
@@ -556,6 +567,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         worst=args.worst,
         status=args.status,
         limit=args.limit,
+        failed=args.failed,
         save=args.save,
         serve=args.serve,
         connect=args.connect,
@@ -585,8 +597,17 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from mcchain.ensemble.export import export_run
 
+    if args.requirements:
+        from mcchain.decision.summary import export_requirements
+
+        if args.out is not None:
+            return _fail("--out: not with --requirements (the files go to RUN/export/)")
+        for path in export_requirements(args.run):
+            print(path)
+        if not args.csv:
+            return 0
     if not args.csv:
-        return _fail("export: give the format: --csv")
+        return _fail("export: give the format: --csv or --requirements")
     print(export_run(args.run, args.out))
     return 0
 

@@ -96,6 +96,7 @@ class RunResult:
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))
+        lines += r.get("requirements") or []
         return lines
 
 
@@ -184,6 +185,7 @@ def _compute(
 ) -> ExecutionStats:
     """Solve the chunks that have no part file yet, writing each as a part file (and
     streaming the ``--rerun`` samples they hold to ``live``)."""
+    from mcchain.decision.requirements import job_requirements
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
     from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
@@ -206,10 +208,19 @@ def _compute(
     if not missing:
         return ExecutionStats(scheduler="none (all chunks present)")
 
+    requirements = job_requirements(job)
+
     def sink(outputs: dict[str, Any], start: int, stop: int) -> None:
         chunk = job.model.select(start, stop)
+        if requirements is not None:
+            outputs = requirements.add_to(outputs)
         variables = chunk_variables(
-            outputs, chunk, start=start, history_dtype=job.history_dtype, attrs=attrs
+            outputs,
+            chunk,
+            start=start,
+            history_dtype=job.history_dtype,
+            attrs=attrs,
+            **(requirements.chunk_keywords() if requirements is not None else {}),
         )
         write_part(variables, parts_dir, start, stop)
 
@@ -309,6 +320,19 @@ def _complete(
     )
     if stats.worker_info:
         record["workers"] = stats.worker_info
+
+
+def _requirement_lines(folder: Path) -> list[str]:
+    """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
+    from the merged ensemble; ``mcchain export --requirements`` writes it with the CSVs."""
+    from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
+    from mcchain.ensemble.io import open_ensemble
+
+    ds = open_ensemble(folder / ENSEMBLE)
+    try:
+        return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+    finally:
+        ds.close()
 
 
 def execute(
@@ -415,6 +439,12 @@ def execute(
             write_record(folder, record)
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
+        if getattr(job.scene, "requirement", None):
+            try:
+                record["requirements"] = _requirement_lines(folder)
+            except Exception as exc:  # the ensemble is complete: this must not fail the run
+                log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
+                record["requirements"] = [f"requirements: the summary failed ({exc}); see run.log"]
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
         write_record(folder, record)

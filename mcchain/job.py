@@ -85,6 +85,10 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
+    if scene.requirement:
+        from mcchain.decision.requirements import check_requirements
+
+        check_requirements(scene, model)
     model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
 

@@ -247,6 +247,7 @@ def test_cli_show__parses_and_calls_show_run(
         "worst": "energy:1",
         "status": None,
         "limit": 16,
+        "failed": None,
         "save": "x.rrd",
         "serve": False,
         "connect": False,

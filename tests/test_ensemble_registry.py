@@ -46,6 +46,7 @@ EXTRAS = {
     "joint_moment_eq": ("sample", "joint"),
     "joint_moment": ("sample", "time", "joint"),
     "omega_cycle": ("sample", "phase", "mode"),
+    "requirement_met": ("sample", "requirement"),
 }
 HISTORIES = {
     "q",

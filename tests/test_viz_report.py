@@ -134,6 +134,7 @@ def test_report__skips_what_the_run_lacks_and_says_why(tmp_path: Path) -> None:
         "reaction_envelopes.png",
         "contact_loss.png",
         "sobol.png",
+        "requirements.png",
     }
     assert "[simulate]" in result.skipped["reaction_envelopes.png"]
     assert result.skipped["sobol.png"] == (

@@ -36,8 +36,9 @@ if TYPE_CHECKING:
 DOF_NAMES = ("x", "y", "theta")
 XY_NAMES = ("x", "y")
 
-ANALYSES = ("sample", "equilibrium", "modes", "simulate", "always")
-"""Who produces a variable: the sampler, an analysis section of the scene, or every run."""
+ANALYSES = ("sample", "equilibrium", "modes", "simulate", "requirement", "always")
+"""Who produces a variable: the sampler, an analysis section of the scene, the
+``[[requirement]]`` tables, or every run."""
 
 DTYPE_RULES = ("float64", "history", "uint32", "int32", "int8", "bool")
 
@@ -313,6 +314,17 @@ VARIABLES: dict[str, VariableSpec] = {
             "float64",
             "simulate",
         ),
+        _v(
+            "requirement_met",
+            ("sample", "requirement"),
+            "1",
+            "1 where the sample meets the requirement, 0 where it fails it (a NaN output "
+            "fails); limits, target and confidence of each requirement in the attributes",
+            "int8",
+            "requirement",
+            flag_values=np.array([0, 1], dtype=np.int8),
+            flag_meanings="failed met",
+        ),
     )
 }
 """Every ensemble variable, in the order they are written."""
@@ -329,6 +341,7 @@ COORDINATES: dict[str, dict[str, str]] = {
     "driver": {"long_name": "name of the driven body"},
     "time": {"long_name": "time", "units": "s", "standard_name": "time", "axis": "T"},
     "phase": {"long_name": "angle of the [modes] along driver from its angle0", "units": "rad"},
+    "requirement": {"long_name": "requirement name ([[requirement]] name)"},
 }
 """Attributes of the coordinate variables."""
 
@@ -470,11 +483,19 @@ def build_dataset(
     start: int = 0,
     history_dtype: str = "float32",
     attrs: Mapping[str, Any] | None = None,
+    labels: Mapping[str, Sequence[str]] | None = None,
+    variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> xr.Dataset:
     """The Dataset of one chunk of samples from a solver's output dict: the variables of
     :func:`chunk_variables` (same arguments, same errors) as an :class:`xarray.Dataset`."""
     return chunk_variables(
-        outputs, model, start=start, history_dtype=history_dtype, attrs=attrs
+        outputs,
+        model,
+        start=start,
+        history_dtype=history_dtype,
+        attrs=attrs,
+        labels=labels,
+        variable_attrs=variable_attrs,
     ).to_dataset()
 
 
@@ -485,6 +506,8 @@ def chunk_variables(
     start: int = 0,
     history_dtype: str = "float32",
     attrs: Mapping[str, Any] | None = None,
+    labels: Mapping[str, Sequence[str]] | None = None,
+    variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> ChunkVariables:
     """The variables of one chunk of samples from a solver's output dict.
 
@@ -496,6 +519,10 @@ def chunk_variables(
         start: global index of the chunk's first sample (the ``sample`` coordinate).
         history_dtype: storage dtype of time histories.
         attrs: global attributes.
+        labels: name coordinates of dims the model does not know (``requirement``: the
+            requirements' names).
+        variable_attrs: attributes added to a variable's registry ones, by name (the
+            requirements' limits on ``requirement_met``).
 
     Raises:
         ValueError: an undeclared name, a wrong rank, shape or dtype kind, or no ``status``.
@@ -509,6 +536,8 @@ def chunk_variables(
         raise ValueError("status: missing from the solver output")
     arrays = coerce_outputs(outputs, history_dtype)
     names = model_coordinates(model)
+    for dim, given in (labels or {}).items():
+        names[dim] = np.array(list(given), dtype=object)
     sizes: dict[str, int] = {"sample": model.nsample}
     sizes.update({dim: len(values) for dim, values in names.items()})
     for output, dim in AXIS_OUTPUTS.items():
@@ -532,7 +561,8 @@ def chunk_variables(
             if n != expected:
                 raise ValueError(f"{name}: dim {dim} has size {n}, expected {expected}")
         used.update(spec.dims)
-        data_vars[name] = (spec.dims, arr, variable_attributes(name))
+        extra = dict((variable_attrs or {}).get(name, {}))
+        data_vars[name] = (spec.dims, arr, variable_attributes(name) | extra)
 
     coords: dict[str, Variable] = {
         "sample": (
@@ -541,7 +571,8 @@ def chunk_variables(
             dict(COORDINATES["sample"]),
         )
     }
-    for dim in ("body", "dof", "joint", "xy", "mode", "param", "driver", "time", "phase"):
+    dims = ("body", "dof", "joint", "xy", "mode", "param", "driver", "time", "phase", "requirement")
+    for dim in dims:
         if dim not in used:
             continue
         if dim == "mode":

@@ -136,6 +136,14 @@ def check_scene(scene: Scene) -> None:
         if force.body not in known:
             raise SceneError(f"{where}.body: unknown body {force.body!r} (known: {listing})")
     unique("force", scene.force_names)
+    seen_requirement: dict[str, int] = {}
+    for i, requirement in enumerate(scene.requirement):
+        if requirement.name in seen_requirement:
+            raise SceneError(
+                f"requirement[{i}].name: duplicate requirement name {requirement.name!r} "
+                f"(also requirement[{seen_requirement[requirement.name]}])"
+            )
+        seen_requirement[requirement.name] = i
 
     if scene.sample is not None:
         targets: dict[str, str] = {}

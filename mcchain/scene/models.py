@@ -30,6 +30,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainValidator,
     PrivateAttr,
     Strict,
     field_validator,
@@ -583,6 +584,88 @@ def saltelli_count_error(nparam: int, count: int) -> str | None:
     return None
 
 
+# -- [[requirement]] ---------------------------------------------------------------------
+REQUIREMENT_NAME_RE = re.compile(r"^[a-z0-9_-]+$")
+DEFAULT_REQUIREMENT_TARGET = 0.01
+DEFAULT_REQUIREMENT_CONFIDENCE = 0.95
+
+
+def _check_requirement_name(value: str) -> str:
+    if not REQUIREMENT_NAME_RE.match(value):
+        raise ValueError(
+            f"invalid requirement name {value!r}: use lower-case letters, digits, '_' and '-'"
+        )
+    return value
+
+
+def _label_or_index(value: Any) -> str | int:
+    if isinstance(value, bool) or not isinstance(value, str | int):
+        raise ValueError(
+            f"expected a label (a string) or a 0-based index (an integer), got {value!r}"
+        )
+    return value
+
+
+LabelOrIndex = Annotated[str | int, PlainValidator(_label_or_index)]
+"""A ``select`` entry: a label such as ``"B"`` or an index such as ``0``."""
+
+
+class Requirement(_Section):
+    """``[[requirement]]``: a limit on a per-sample output and the largest acceptable
+    probability of breaking it.
+
+    A sample fails the requirement when its output lies outside [``min``, ``max``]; a
+    sample whose output is NaN (a failed instance) fails too, and is counted apart as
+    undefined. Every run stores ``requirement_met`` (sample, requirement); ``mcchain export
+    RUN --requirements`` gives the failure probability with its interval, the verdict, the
+    quantile at the target and the tolerance allocation (docs/scenes.md).
+    """
+
+    name: Annotated[str, Strict(), AfterValidator(_check_requirement_name)] = Field(
+        description="unique identifier, lower-case letters, digits, ``_`` and ``-``; required."
+    )
+    output: Annotated[str, Strict()] = Field(
+        description="a per-sample ensemble variable this scene produces (``peak_contact_force``, "
+        "``omega``, ``q_eq``, ...); required."
+    )
+    select: dict[str, LabelOrIndex] = Field(
+        default_factory=dict,
+        description="one entry for each of the output's dimensions besides ``sample``: a label "
+        '(``{ joint = "B" }``) or a 0-based index (``{ mode = 0 }``); default none (an output '
+        "with no other dimension).",
+    )
+    min: Num | None = Field(
+        default=None,
+        description="lower limit, in the output's units; default none (``max`` then required).",
+    )
+    max: Num | None = Field(
+        default=None,
+        description="upper limit, in the output's units; default none (``min`` then required).",
+    )
+    target: Num = Field(
+        default=DEFAULT_REQUIREMENT_TARGET,
+        gt=0,
+        lt=1,
+        description="the largest acceptable probability of failing, in (0, 1); default "
+        f"{DEFAULT_REQUIREMENT_TARGET}.",
+    )
+    confidence: Num = Field(
+        default=DEFAULT_REQUIREMENT_CONFIDENCE,
+        gt=0,
+        lt=1,
+        description="two-sided confidence of every interval (and so of every verdict) of this "
+        f"requirement, in (0, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
+    )
+
+    @model_validator(mode="after")
+    def _limits(self) -> Requirement:
+        if self.min is None and self.max is None:
+            raise ValueError("give `min`, `max` or both: the limits of the output")
+        if self.min is not None and self.max is not None and self.min >= self.max:
+            raise ValueError(f"min {self.min!r} must be below max {self.max!r}")
+        return self
+
+
 # -- analyses -----------------------------------------------------------------------------
 class Equilibrium(_Section):
     """``[equilibrium]``: compute the static equilibrium (Newton on Φ = 0, Bᵀλ = F)."""
@@ -751,6 +834,9 @@ class Scene(_Section):
         default=None, description="``[simulate]``; absent: no time history."
     )
     storage: Storage = Field(default_factory=Storage, description="``[storage]``.")
+    requirement: list[Requirement] = Field(
+        default_factory=list, description="``[[requirement]]``; default none."
+    )
 
     _text: str = PrivateAttr(default="")
     _source: str = PrivateAttr(default="<string>")

@@ -5,6 +5,9 @@
   equilibrium angle under a horizontal tip load.
 * The parallelogram four-bar: one crank angle, integrated from its energy.
 * The undamped stability limit of an explicit Runge–Kutta tableau on the imaginary axis.
+* A bar pinned at a distance a from its centre of mass with its inertia J uniform on
+  [J_low, J_high]: the exact probability that p exceeds a limit, the quantiles of p, and the
+  exact tolerance allocation of J (the requirement tests).
 
 Every function is vectorised over numpy arrays where its arguments allow.
 """
@@ -95,3 +98,36 @@ def imaginary_axis_limit(A: np.ndarray, b: np.ndarray) -> float:
         return math.inf
     i = int(np.argmax(grows))
     return float(brentq(lambda y: amplification(y) - 1.0 - 1e-12, ys[max(i - 1, 0)], ys[i]))
+
+
+# -- the pinned bar with a uniform inertia (requirements) -----------------------------------
+def pinned_bar_inertia_at(p, m: float, a: float, g: float = G):
+    """The inertia J at which the bar pinned at distance a from its centre of mass has the
+    pulsation p: J = m g a / p² − m a² (p² = m g a / (J + m a²) inverted), kg m²."""
+    return m * g * a / np.asarray(p, dtype=float) ** 2 - m * a * a
+
+
+def pinned_bar_exceedance(limit, m: float, a: float, J_low: float, J_high: float, g: float = G):
+    """P(p > limit) for J ~ U[J_low, J_high]: p decreases with J, so p > limit exactly when
+    J < J* = J(limit); the probability is (J* − J_low)/(J_high − J_low) clipped to [0, 1]."""
+    J_star = pinned_bar_inertia_at(limit, m, a, g)
+    return np.clip((J_star - J_low) / (J_high - J_low), 0.0, 1.0)
+
+
+def pinned_bar_quantile(level, m: float, a: float, J_low: float, J_high: float, g: float = G):
+    """The ``level`` quantile of p for J ~ U[J_low, J_high]: p at the inertia quantile
+    J_low + (1 − level)(J_high − J_low) (p falls as J rises), rad/s."""
+    J = J_low + (1.0 - np.asarray(level, dtype=float)) * (J_high - J_low)
+    return bar_pulsation(m, J, a, g)
+
+
+def pinned_bar_allocation(
+    limit: float, target: float, m: float, a: float, J_low: float, J_high: float, g: float = G
+) -> float:
+    """The exact tolerance allocation of J for the requirement p <= limit: the smallest b
+    with P(p > limit | J >= b) <= target, J ~ U[J_low, J_high]. Failures are the J < J*;
+    keeping J >= b (b < J*) leaves P = (J* − b)/(J_high − b), equal to the target at
+    b = (J* − target J_high)/(1 − target) (J_low when the whole range already meets it)."""
+    J_star = float(pinned_bar_inertia_at(limit, m, a, g))
+    b = (J_star - target * J_high) / (1.0 - target)
+    return max(b, J_low)

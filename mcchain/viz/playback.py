@@ -4,6 +4,7 @@
 sample of a run (:func:`show_run`). Samples may also be picked by a criterion
 (:func:`mcchain.ensemble.queries.select_samples`): ``--worst VARIABLE:N`` takes the N
 samples with the largest peak ``|VARIABLE|`` (e.g. ``--worst contact_force:3``) and
+``--failed NAME`` those failing requirement NAME (farthest beyond its limit first), and
 ``--status contact_lost`` those whose status carries a flag (names of
 :attr:`mcchain.status.Status.meaning`, plus ``ok``; with both, the worst N of the samples
 with that status). What each sample looks like comes from the ensemble itself (its stored
@@ -641,6 +642,36 @@ def show(
     rr.script_teardown(rr_args)
 
 
+def failed_samples(ds: Any, name: str, limit: int) -> list[int]:
+    """``--failed NAME``: the samples that fail requirement ``name``, farthest beyond its
+    limit first (failed instances, whose output is NaN, after them), at most ``limit``.
+
+    Raises:
+        RunError: no such requirement in the run, or no sample fails it.
+    """
+    from mcchain.decision.requirements import requirement_values, stored_requirements
+    from mcchain.decision.summary import met_of
+
+    requirements = {r.name: r for r in stored_requirements(ds)}
+    if name not in requirements:
+        known = ", ".join(requirements) or "none"
+        raise RunError(f"--failed: no requirement {name!r} in the run (requirements: {known})")
+    requirement = requirements[name]
+    values = requirement_values(ds, requirement)
+    where = np.flatnonzero(met_of(ds, requirement, values) == 0)
+    if where.size == 0:
+        raise RunError(f"--failed: no sample fails requirement {name!r}")
+    beyond = np.zeros(where.size)
+    x = values[where]
+    if requirement.max is not None:
+        beyond = np.maximum(beyond, x - requirement.max)
+    if requirement.min is not None:
+        beyond = np.maximum(beyond, requirement.min - x)
+    order = np.argsort(np.where(np.isnan(beyond), -np.inf, -beyond), kind="stable")
+    ids = np.asarray(ds["sample"].values)
+    return [int(ids[i]) for i in where[order][:limit]]
+
+
 def show_run(
     run: str | Path,
     samples: Sequence[int] = (),
@@ -648,12 +679,16 @@ def show_run(
     worst: str | None = None,
     status: str | None = None,
     limit: int | None = None,
+    failed: str | None = None,
     **options: Any,
 ) -> list[int]:
-    """``mcchain show``: pick samples of a run (:func:`~mcchain.ensemble.queries.select_samples`)
-    and :func:`show` them; ``options`` are :func:`show`'s sink and drawing options. Returns
-    the samples shown."""
+    """``mcchain show``: pick samples of a run (:func:`~mcchain.ensemble.queries.select_samples`;
+    ``failed``: those failing that requirement, :func:`failed_samples`) and :func:`show`
+    them; ``options`` are :func:`show`'s sink and drawing options. Returns the samples
+    shown."""
     ds, model = open_inputs(run)
+    if failed is not None:
+        samples = [*samples, *failed_samples(ds, failed, limit or DEFAULT_LIMIT)]
     chosen = select_samples(ds, samples, worst=worst, status=status, limit=limit or DEFAULT_LIMIT)
     show(ds, model, chosen, **options)
     return chosen

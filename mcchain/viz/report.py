@@ -32,6 +32,14 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
                                 (``contact_lost_time``): the fraction lost by time t, and
                                 the time of loss against each sampled parameter
 ``status_counts.png``           how many samples carry each status flag
+``requirements.png``           per ``[[requirement]]``: the output's exceedance curve with
+                                its band, limit and target; P(fail) against each sampled
+                                parameter with the allocated bound
+                                (:mod:`mcchain.viz.report_requirements`)
+``index.html``                  one plain page of the run: scene, sampled parameters, status
+                                counts, each requirement's answer, the numerical check and
+                                every figure (:mod:`mcchain.viz.report_page`; ``mcchain
+                                report RUN`` only)
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
                                 contact force (an output constant over the samples is named
                                 with its value instead of zero bars), for a ``design =
@@ -527,6 +535,10 @@ def make_report(
         "sobol.png",
         sobol_figure(ds, design, out / "sobol.png", out / "sobol.csv", report.skipped),
     )
+    from mcchain.viz.report_requirements import requirements_figure
+
+    found_requirements = requirements_figure(ds)
+    record("requirements.png", save_or_reason(found_requirements, out / "requirements.png"))
     return report
 
 
@@ -546,4 +558,8 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     except McchainError as err:  # an ensemble without a usable scene: draw what needs none
         log.info("report: the run's model cannot be rebuilt (%s)", err)
         model = None
-    return make_report(ds, target, design=run_design(folder, ds), model=model)
+    report = make_report(ds, target, design=run_design(folder, ds), model=model)
+    from mcchain.viz.report_page import write_index
+
+    report.written.append(write_index(folder, ds, target, report))
+    return report

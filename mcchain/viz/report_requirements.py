@@ -1,0 +1,167 @@
+"""``requirements.png``: what an ensemble says about each ``[[requirement]]``.
+
+One row per requirement:
+
+* first panel: the exceedance curve of the output on a log scale — P(output > x) for a
+  ``max`` (P(output < x) for a ``min``), the share of samples beyond x — with its pointwise
+  Clopper–Pearson band, the limit (vertical) and the target (horizontal). The curve crosses
+  the limit at the failure probability; it crosses the target at the quantile of
+  ``requirements.csv``.
+* one panel per sampled parameter: P(fail) in equal-count bins of the parameter, each with
+  its Clopper–Pearson interval, the target, and the allocated bound of ``allocation.csv``
+  (the kept side unshaded).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mcchain.decision.requirements import requirement_values, stored_requirements
+from mcchain.decision.stats import clopper_pearson_arrays
+from mcchain.decision.summary import allocations, met_of, output_label, quantile_side
+from mcchain.viz.figures import figure, panel_title, suptitle
+from mcchain.viz.scatter import param_axis
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from mcchain.decision.summary import AllocationRow
+    from mcchain.scene.models import Requirement
+
+CURVE_POINTS = 400
+"""Points of an exceedance curve (at sample quantiles: the curve's shape, not every sample)."""
+MAX_BINS = 12
+"""Bins of P(fail) against a parameter, at most (fewer when samples are few: >= 20 each)."""
+MIN_PER_BIN = 20
+
+
+def exceedance(
+    values: np.ndarray, side: str, confidence: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(x, share beyond x, band low, band high) of the failing tail: beyond = above x for
+    ``max``, below x for ``min``; NaN values count as beyond every x."""
+    v = np.asarray(values, dtype=np.float64)
+    n = v.size
+    finite = np.sort(v[~np.isnan(v)])
+    if finite.size == 0:
+        empty = np.array([])
+        return empty, empty, empty, empty
+    grid = np.unique(np.quantile(finite, np.linspace(0.0, 1.0, CURVE_POINTS)))
+    undefined = n - finite.size
+    if side == "max":
+        beyond = finite.size - np.searchsorted(finite, grid, side="right") + undefined
+    else:
+        beyond = np.searchsorted(finite, grid, side="left") + undefined
+    lo, hi = clopper_pearson_arrays(beyond, np.full(beyond.shape, n), confidence)
+    return grid, beyond / n, lo, hi
+
+
+def _exceedance_panel(ax: Axes, requirement: Requirement, values: np.ndarray) -> None:
+    side = quantile_side(requirement, values)
+    x, share, lo, hi = exceedance(values, side, requirement.confidence)
+    floor = 0.5 / max(values.size, 1)  # zero cannot be drawn on a log axis
+    label = "P(output > x)" if side == "max" else "P(output < x)"
+    ax.fill_between(x, np.maximum(lo, floor), hi, color="C0", alpha=0.25, linewidth=0)
+    ax.step(x, np.maximum(share, floor), where="post", color="C0", label=label)
+    limit = requirement.max if side == "max" else requirement.min
+    for value in (requirement.min, requirement.max):
+        if value is not None:
+            ax.axvline(value, color="C3", linestyle="--", linewidth=1.0)
+    ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
+    ax.set_yscale("log")
+    ax.set_ylim(floor, 1.05)
+    ax.set_xlabel(output_label(requirement))
+    ax.set_ylabel(label)
+    panel_title(
+        ax,
+        f"{requirement.name}: exceedance, {100 * requirement.confidence:g} % band; limit "
+        f"{limit:g} (dashed), target {requirement.target:g} (dotted)",
+    )
+
+
+def binned_failure(
+    x: np.ndarray, failed: np.ndarray, confidence: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(bin centres, P(fail), interval low, high, bin edges) in equal-count bins of ``x``."""
+    n = x.size
+    nbins = int(max(1, min(MAX_BINS, n // MIN_PER_BIN)))
+    edges = np.unique(np.quantile(x, np.linspace(0.0, 1.0, nbins + 1)))
+    which = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, max(edges.size - 2, 0))
+    count = np.bincount(which, minlength=max(edges.size - 1, 1))
+    fails = np.bincount(which, weights=failed.astype(float), minlength=count.size)
+    keep = count > 0
+    lo, hi = clopper_pearson_arrays(fails[keep], count[keep], confidence)
+    centres = 0.5 * (edges[:-1] + edges[1:]) if edges.size > 1 else edges
+    return centres[keep], fails[keep] / count[keep], lo, hi, edges
+
+
+def _parameter_panel(
+    ax: Axes,
+    requirement: Requirement,
+    path: str,
+    x: np.ndarray,
+    failed: np.ndarray,
+    allocation: AllocationRow | None,
+) -> None:
+    label, scale = param_axis(path, x)
+    centres, p, lo, hi, edges = binned_failure(x, failed, requirement.confidence)
+    ax.errorbar(
+        scale * centres,
+        p,
+        yerr=[p - lo, hi - p],
+        fmt="o",
+        color="C0",
+        markersize=3,
+        capsize=2,
+    )
+    ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
+    title = f"P(fail) by {label.split(' [')[0]}, {100 * requirement.confidence:g} % intervals"
+    if allocation is not None and np.isfinite(allocation.bound):
+        b = scale * allocation.bound
+        ax.axvline(b, color="C2", linewidth=1.5)
+        low, high = scale * edges[0], scale * edges[-1]
+        if allocation.side == "upper":
+            ax.axvspan(b, high, color="0.85", zorder=0)
+        else:
+            ax.axvspan(low, b, color="0.85", zorder=0)
+        op = "<=" if allocation.side == "upper" else ">="
+        title += f"; allocated {op} {b:.4g} (green)"
+    elif allocation is not None:
+        title += "; no one-sided range meets the target"
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel(label)
+    ax.set_ylabel("P(fail)")
+    panel_title(ax, title)
+
+
+def requirements_figure(ds: xr.Dataset) -> Figure | str:
+    """The figure (see the module docstring), or why there is none."""
+    requirements = stored_requirements(ds)
+    if not requirements:
+        return "the run has no [[requirement]]"
+    has_params = "parameters" in ds.data_vars and "param" in ds.dims
+    paths = [str(p) for p in ds["param"].values] if has_params else []
+    params = (
+        np.asarray(ds["parameters"].transpose("sample", "param").values, dtype=np.float64)
+        if has_params
+        else np.empty((0, 0))
+    )
+    rows = {(r.requirement, r.parameter): r for r in allocations(ds)}
+    fig, axes = figure(len(requirements), 1 + len(paths), w=4.0, h=3.2)
+    for i, requirement in enumerate(requirements):
+        values = requirement_values(ds, requirement)
+        failed = met_of(ds, requirement, values) == 0
+        _exceedance_panel(axes[i, 0], requirement, values)
+        for j, path in enumerate(paths):
+            allocation = rows.get((requirement.name, path))
+            _parameter_panel(axes[i, 1 + j], requirement, path, params[:, j], failed, allocation)
+    suptitle(
+        fig,
+        "Requirements: exceedance of each output with its limit and target; P(fail) against "
+        "each sampled parameter with the allocated bound (kept side unshaded)",
+    )
+    return fig
