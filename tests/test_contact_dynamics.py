@@ -122,7 +122,14 @@ def test_contact__hertz_conserves_energy_through_50_impacts():
 
 @pytest.mark.parametrize(
     ("law", "e"),
-    [("hertz", None), ("lankarani-nikravesh", 0.7), ("flores", 0.9), ("hunt-crossley", 0.8)],
+    [
+        ("hertz", None),
+        ("lankarani-nikravesh", 0.7),
+        ("flores", 0.9),
+        ("hunt-crossley", 0.8),
+        ("gonthier", 0.6),
+        ("hu-guo", 0.6),
+    ],
 )
 def test_contact__matches_the_scipy_reference_over_the_first_impacts(law, e):
     t_end = 0.04
@@ -165,7 +172,9 @@ def dropped_restitution(law: str, e: float) -> tuple[float, float]:
     return separation / approach, history.impacts[0].restitution
 
 
-@pytest.mark.parametrize("law", ["lankarani-nikravesh", "flores", "hunt-crossley"])
+@pytest.mark.parametrize(
+    "law", ["lankarani-nikravesh", "flores", "hunt-crossley", "gonthier", "hu-guo"]
+)
 def test_contact__restitution_of_a_dropped_journal_matches_the_reference(law):
     """The table of the note: each law's measured restitution over e ∈ [0.3, 0.99]."""
     rows = []

@@ -12,6 +12,8 @@ where ``D`` is fixed at the contact's onset (δ crossing 0 upwards, approach spe
     lankarani-nikravesh   D = 3 (1 − e²) / (4 δ̇⁻)
     flores                D = 8 (1 − e) / (5 e δ̇⁻)
     hunt-crossley         D = 3 (1 − e) / (2 δ̇⁻)
+    gonthier              D = (1 − e²) / (e δ̇⁻)
+    hu-guo                D = 3 (1 − e) / (2 e δ̇⁻)
 
 The journal body receives −F_n n at its point, the bearing body +F_n n. The law codes and
 the friction defaults live in :mod:`mcchain.contact` (no numba), so the scene loader can name
@@ -27,7 +29,9 @@ from mcchain.contact import (
     FLORES,
     FRICTION_V0,
     FRICTION_V1,
+    GONTHIER,
     HERTZ,
+    HU_GUO,
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
 )
@@ -38,8 +42,10 @@ __all__ = [
     "FRICTION_RAMP",
     "FRICTION_V0",
     "FRICTION_V1",
+    "GONTHIER",
     "HERTZ",
     "HUNT_CROSSLEY",
+    "HU_GUO",
     "LANKARANI_NIKRAVESH",
     "contact_crossing",
     "contact_law",
@@ -66,6 +72,10 @@ def restitution_factor(law, e):
         return 1.6 * (1.0 - e) / e
     if law == HUNT_CROSSLEY:
         return 1.5 * (1.0 - e)
+    if law == GONTHIER:
+        return (1.0 - e * e) / e
+    if law == HU_GUO:
+        return 1.5 * (1.0 - e) / e
     return 0.0
 
 

@@ -37,6 +37,8 @@ from pydantic import (
     model_validator,
 )
 
+from mcchain.contact import LAW_CODES, LawName
+
 GROUND_NAME = "ground"
 """The name of the fixed body in ``bodies``/``body`` keys."""
 
@@ -134,10 +136,11 @@ class Contact(_Section):
     flight; D is fixed at each contact's onset from the restitution and the approach speed.
     """
 
-    law: Literal["hertz", "lankarani-nikravesh", "flores", "hunt-crossley"] = Field(
+    law: LawName = Field(
         default="lankarani-nikravesh",
-        description='"hertz" (elastic), "lankarani-nikravesh" (default), "flores" or '
-        '"hunt-crossley": the hysteresis damping D of the law.',
+        description=", ".join(f'"{name}"' for name in LAW_CODES)
+        + ": the hysteresis damping D of the law "
+        '("hertz": none; default "lankarani-nikravesh").',
     )
     stiffness: Num | None = Field(
         default=None,
