@@ -135,6 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--resume", metavar="RUN", help="complete an interrupted run folder")
     run.add_argument(
+        "--extend",
+        metavar="RUN",
+        help="add --samples N samples to a completed run (the same design continued)",
+    )
+    run.add_argument(
         "--remerge",
         action="store_true",
         help="with --resume: rebuild the run's ensemble.nc (a damaged one is kept as "
@@ -194,6 +199,46 @@ def build_parser() -> argparse.ArgumentParser:
         "requirements.txt",
     )
     export.add_argument("--out", metavar="FILE", help="the file (default RUN/export/samples.csv)")
+
+    check = sub.add_parser(
+        "check",
+        help="re-solve a subset of a run with a tighter integration and count flipped verdicts",
+        description="re-solve a subset of a run's samples with rtol/atol (or dt) TIGHTEN times "
+        "tighter; per requirement, how many verdicts flip and how far the outputs move "
+        "(RUN/export/check.csv); the run's ensemble is not touched",
+        named_errors=True,
+    )
+    check.add_argument("run", help="run folder (or its id under runs/)")
+    check.add_argument(
+        "--tighten", type=float, required=True, metavar="F", help="tightening factor (e.g. 10)"
+    )
+    check.add_argument(
+        "--samples",
+        type=_positive,
+        default=64,
+        metavar="M",
+        help="samples re-solved, spread evenly over the run (default 64)",
+    )
+
+    rare = sub.add_parser(
+        "rare",
+        help="estimate a rare failure probability by subset simulation",
+        description="estimate P(fail) of one requirement by subset simulation (Au & Beck "
+        "2001) on the scene's kernels; writes a run folder with export/subset.csv",
+        named_errors=True,
+    )
+    rare.add_argument("scene", metavar="SCENE.toml", help="scene file with [[requirement]]")
+    rare.add_argument("--requirement", required=True, metavar="NAME", help="the requirement")
+    rare.add_argument(
+        "--per-level",
+        type=_positive,
+        default=1000,
+        metavar="N",
+        help="samples per level, a multiple of 10 (default 1000)",
+    )
+    rare.add_argument("--seed", type=_seed, metavar="S", help="override [sample] seed")
+    rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
+    rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
 
     return parser
 
@@ -282,7 +327,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
     progress = False if args.quiet else None
     live = _live_options(args)
     argv = ["mcchain", *sys.argv[1:]]
-    if args.resume is not None:
+    if args.extend is not None:
+        conflicting = [
+            flag
+            for flag, value in (
+                ("SCENE", args.scene),
+                ("--seed", args.seed),
+                ("--chunk-size", args.chunk_size),
+                ("--out", args.out),
+                ("--run-dir", args.run_dir),
+                ("--resume", args.resume),
+                ("--remerge", args.remerge or None),
+            )
+            if value is not None
+        ]
+        if conflicting:
+            return _fail(f"--extend: cannot be combined with {', '.join(conflicting)}")
+        if args.samples is None:
+            return _fail("--extend: give the number of samples to add: --samples N")
+        result = execution.extend_run(
+            args.extend,
+            args.samples,
+            dask=args.dask,
+            threads=args.threads,
+            argv=argv,
+            progress=progress,
+            rerun=live,
+        )
+    elif args.resume is not None:
         conflicting = [
             flag
             for flag, value in (
@@ -612,6 +684,36 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_check(args: argparse.Namespace) -> int:
+    from mcchain.decision.check import check_run
+
+    result = check_run(args.run, args.tighten, args.samples)
+    for line in result.lines():
+        print(line)
+    print(result.csv)
+    return 0
+
+
+def _cmd_rare(args: argparse.Namespace) -> int:
+    from mcchain.decision.rare import rare_run
+
+    if args.out is not None and args.run_dir is not None:
+        return _fail("--run-dir: cannot be combined with --out")
+    result = rare_run(
+        args.scene,
+        args.requirement,
+        per_level=args.per_level,
+        seed=args.seed,
+        out=args.out or "runs",
+        run_dir=args.run_dir,
+        argv=["mcchain", *sys.argv[1:]],
+    )
+    for line in result.lines():
+        print(line)
+    print(result.folder)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -632,6 +734,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "show": _cmd_show,
             "report": _cmd_report,
             "export": _cmd_export,
+            "check": _cmd_check,
+            "rare": _cmd_rare,
         }[command]
         return handler(args)
     except McchainError as exc:

@@ -24,7 +24,7 @@ import re
 import sys
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -93,6 +93,10 @@ class RunResult:
                 else ""
             ),
         ]
+        until = r.get("until")
+        if until and until.get("stopped"):
+            looks = len(until.get("looks", []))
+            lines.append(f"until decided: {until['stopped']} ({looks} looks, {until['method']})")
         live = r["sessions"][-1].get("rerun") if r.get("sessions") else None
         if live:
             lines.append(live_summary(live))
@@ -175,7 +179,9 @@ def _compute(
     job: Job,
     parts_dir: Path,
     attrs: Mapping[str, Any],
+    chunks: Sequence[tuple[int, int]],
     *,
+    base: int = 0,
     dask: str | None,
     threads: int | None,
     solve: SolveFn | None,
@@ -183,22 +189,23 @@ def _compute(
     live: LiveRun | None = None,
     compile_ahead: CompileAhead | None = None,
 ) -> ExecutionStats:
-    """Solve the chunks that have no part file yet, writing each as a part file (and
-    streaming the ``--rerun`` samples they hold to ``live``)."""
+    """Solve the ``chunks`` that have no part file yet and do not lie in the first ``base``
+    samples (those ``ensemble.nc`` holds before ``--extend`` adds to it), writing each as a
+    part file (and streaming the ``--rerun`` samples they hold to ``live``)."""
     from mcchain.decision.requirements import job_requirements
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
-    from mcchain.parallel import ExecutionStats, Progress, plan_chunks, run_dask, run_local
+    from mcchain.parallel import ExecutionStats, Progress, run_dask, run_local
 
-    chunks = plan_chunks(job.nsample, job.chunk_size)
     done = {(p.start, p.stop) for p in list_parts(parts_dir)}
     if done - set(chunks):
         raise RunError(f"{parts_dir}: part files do not match chunk size {job.chunk_size}")
+    done |= {c for c in chunks if c[1] <= base}
     missing = [c for c in chunks if c not in done]
     log.info(
         "scene %s: %d samples, %d chunks of %d, %d to compute",
         job.scene_name,
-        job.nsample,
+        chunks[-1][1],
         len(chunks),
         job.chunk_size,
         len(missing),
@@ -326,11 +333,13 @@ def _requirement_lines(folder: Path) -> list[str]:
     """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
     from the merged ensemble; ``mcchain export --requirements`` writes it with the CSVs."""
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
+    from mcchain.decision.until import sequential_settings
     from mcchain.ensemble.io import open_ensemble
 
     ds = open_ensemble(folder / ENSEMBLE)
     try:
-        return summary_lines(summarize(ds), allocations(ds), design_of(ds))
+        sequential = sequential_settings(ds.attrs)
+        return summary_lines(summarize(ds), allocations(ds), design_of(ds), sequential)
     finally:
         ds.close()
 
@@ -349,8 +358,15 @@ def execute(
     prepare_seconds: float = 0.0,
     rerun: LiveOptions | None = None,
     compile_ahead: CompileAhead | None = None,
+    grow: GrowFn | None = None,
 ) -> RunResult:
     """Compute the missing chunks of a run folder, merge them, and complete ``run.json``.
+
+    The run has ``run.json["samples"]`` samples, chunked by :func:`run_chunks`. While an
+    ``--extend`` is unfinished, ``ensemble.nc`` holds the samples the run had before it
+    (:func:`extension_base`): they are merged with the new parts, never computed again.
+    ``grow(folder, record, nsample)`` (``[sample] until``) is asked after the chunks are computed
+    whether the run needs more samples: it returns the new count, or None to stop.
 
     Phases timed in ``run.json["timings"]`` (seconds, summed over sessions): ``prepare``
     (load, compile, check), ``warmup`` (kernel compile/cache load, cluster start),
@@ -373,9 +389,11 @@ def execute(
     A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
     with a note naming the folder to resume.
     """
-    from mcchain.ensemble.io import list_parts, merge_parts, remove_temporaries
+    from mcchain.ensemble.io import Part, list_parts, merge_parts, remove_temporaries
 
     t_start = time.perf_counter()
+    base = extension_base(folder, record)
+    nsample = int(record["samples"])
     session: dict[str, Any] = {"argv": list(argv), "start": _now(), "end": None, "pid": os.getpid()}
     record.update(status=RUNNING, end=None, error=None, pid=os.getpid())
     record["sessions"].append(session)
@@ -402,6 +420,8 @@ def execute(
                     job,
                     parts_dir,
                     job.attributes(versions),
+                    run_chunks(record, job.chunk_size),
+                    base=base,
                     dask=dask,
                     threads=threads,
                     solve=solve,
@@ -412,12 +432,36 @@ def execute(
             finally:
                 if live is not None:
                     live.close()
+            while grow is not None:
+                more = grow(folder, record, nsample)
+                if more is None:
+                    break
+                record["restarts"] = sorted({*record.get("restarts", []), nsample})
+                nsample = record["samples"] = int(more)
+                record["chunks"] = len(run_chunks(record, job.chunk_size))
+                write_record(folder, record)
+                added = _compute(
+                    job,
+                    parts_dir,
+                    job.attributes(versions),
+                    run_chunks(record, job.chunk_size),
+                    dask=dask,
+                    threads=threads,
+                    solve=solve,
+                    progress=progress,
+                )
+                stats = _add_stats(stats, added)
+            parts = list_parts(parts_dir)
+            if base:
+                parts = [Part(0, base, folder / ENSEMBLE), *parts]
+            grown = base > 0 or bool(record.get("restarts")) or nsample != job.nsample
             merged = merge_parts(
-                list_parts(parts_dir),
+                parts,
                 folder / ENSEMBLE,
                 compression=job.compression,
                 complevel=job.complevel,
-                nsample=job.nsample,
+                nsample=nsample,
+                attrs=job.resized(nsample).attributes(versions) if grown else None,
             )
             log.info(
                 "merged %d parts into %s: %.1f MB -> %.1f MB in %.2f s (%.0f MB/s)",
@@ -447,6 +491,8 @@ def execute(
                 record["requirements"] = [f"requirements: the summary failed ({exc}); see run.log"]
         total = time.perf_counter() - t_start + prepare_seconds
         _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
+        if record.get("extensions"):
+            record["extensions"][-1].setdefault("end", session["end"])
         write_record(folder, record)
         log.info("run completed: %s", json.dumps(counts))
         if not keep_parts:
@@ -506,7 +552,12 @@ def start_run(
         job = prepare_job(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
-        check_live(rerun, job.nsample)
+        from mcchain.decision.until import sequential_job
+
+        job, grow = sequential_job(
+            job, Path(scene_path), seed=seed, chunk_size=chunk_size, loader=loader
+        )
+        check_live(rerun, job.model.nsample)
         if interpreted:
             from mcchain.compile_ahead import start_background
 
@@ -523,6 +574,8 @@ def start_run(
             f.write(job.scene_text)
         argv = list(sys.argv if argv is None else argv)
         record = _new_record(job, folder, argv, Path(scene_path))
+        if grow is not None:
+            record["until"] = grow.describe()
         return execute(
             job,
             folder,
@@ -536,6 +589,7 @@ def start_run(
             prepare_seconds=prepare_seconds,
             rerun=rerun,
             compile_ahead=ahead,
+            grow=grow,
         )
     except Exception as exc:
         if not interpreted or isinstance(exc, (McchainError, OSError)):
@@ -588,17 +642,29 @@ def resume_run(
             raise RunError(f"{run}: already completed, but {exc}") from None
         raise RunError(f"{run}: already completed")
     _check_threads(threads, dask)
-    job = prepare_job(
-        folder / SCENE_COPY,
-        samples=int(record["samples"]),
-        seed=record.get("seed"),
-        chunk_size=int(record["chunk_size"]),
-        loader=loader,
-    )
+    job = recorded_job(folder, record, loader=loader)
     if job.nsample != record["samples"]:
         raise RunError(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
+    grow = None
+    if record.get("until") and record.get("extensions"):  # an until run extended since
+        from mcchain.decision.until import keep_sequential
+
+        job = keep_sequential(job, record)
+    elif record.get("until"):
+        from mcchain.decision.until import sequential_job
+
+        job, grow = sequential_job(
+            job,
+            folder / SCENE_COPY,
+            seed=record.get("seed"),
+            chunk_size=int(record["chunk_size"]),
+            loader=loader,
+            batch=int(record["until"]["batch"]),
+            nsample=job.nsample,
+        )
+    job = keep_kernels(job, record.get("kernels"))
     check_live(rerun, job.nsample)
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
@@ -615,6 +681,47 @@ def resume_run(
         keep_parts=keep_parts,
         prepare_seconds=time.perf_counter() - t0,
         rerun=rerun,
+        grow=grow,
+    )
+
+
+GrowFn = Callable[[Path, dict[str, Any], int], "int | None"]
+"""``grow(folder, record, nsample) -> new count or None``: whether a run whose first
+``nsample`` samples are computed (as part files in ``folder``) needs more (``[sample]
+until``); it may note what it saw in ``record`` (``run.json``), written next."""
+
+
+def run_chunks(record: Mapping[str, Any], chunk_size: int) -> list[tuple[int, int]]:
+    """The chunks of a run: ``run.json["samples"]`` in chunks of ``chunk_size``, the chunking
+    starting again at every count the run had before it grew (``run.json["restarts"]``)."""
+    from mcchain.parallel import plan_chunks
+
+    return plan_chunks(int(record["samples"]), chunk_size, record.get("restarts", ()))
+
+
+def extension_base(folder: Path, record: Mapping[str, Any]) -> int:
+    """How many samples an unfinished ``--extend`` keeps from ``ensemble.nc`` (0 if none:
+    no extension under way, or ``--remerge`` moved the file aside)."""
+    extensions = record.get("extensions") or []
+    if not extensions or "end" in extensions[-1] or not (Path(folder) / ENSEMBLE).exists():
+        return 0
+    return int(extensions[-1]["from"])
+
+
+def _add_stats(a: ExecutionStats, b: ExecutionStats) -> ExecutionStats:
+    """The figures of two executions of one session (``until`` batches), summed."""
+    from dataclasses import replace
+
+    last = b if b.chunks else a
+    return replace(
+        last,
+        chunks=a.chunks + b.chunks,
+        samples=a.samples + b.samples,
+        warmup=a.warmup + b.warmup,
+        compute=a.compute + b.compute,
+        kernel=a.kernel + b.kernel,
+        write=a.write + b.write,
+        worker_info=a.worker_info + b.worker_info,
     )
 
 
@@ -640,3 +747,121 @@ def _check_threads(threads: int | None, dask: str | None) -> None:
         limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
         if threads > limit:
             raise RunError(f"--threads: at most {limit} on this machine, got {threads}")
+
+
+CONTINUABLE_DESIGNS = ("random", "sobol")
+"""Designs whose sample i does not depend on the count, so a run can be continued."""
+
+
+def extend_run(
+    run: str | Path,
+    samples: int,
+    *,
+    dask: str | None = None,
+    threads: int | None = None,
+    argv: Sequence[str] | None = None,
+    loader: Loader | None = None,
+    solve: SolveFn | None = None,
+    progress: bool | None = None,
+    keep_parts: bool = False,
+    rerun: LiveOptions | None = None,
+) -> RunResult:
+    """Add ``samples`` samples to a completed run (``mcchain run --extend RUN --samples N``).
+
+    The design is continued: samples ``n .. n + samples - 1`` are the ones a run of
+    ``n + samples`` would have drawn (``random``: the same Philox stream; ``sobol``: the
+    same scrambled sequence, continued), computed as new part files (chunked from ``n``)
+    and merged with ``ensemble.nc`` into a new ``ensemble.nc``. The result is, variable by
+    variable, the ensemble of one run with the total count. A design whose points depend on
+    the count (``lhs``, ``saltelli``) is refused, as is a scene without ``[sample]``.
+
+    The run keeps its kernels (``run.json["kernels"]``), so every sample of it is computed
+    on one path. The old ``ensemble.nc`` stays in place until the merged one replaces it:
+    an interrupted extension is completed by ``mcchain run --resume RUN``.
+    """
+    from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
+
+    t0 = time.perf_counter()
+    check_positive("--samples", samples)
+    folder = resolve_run(run)
+    record = read_record(folder)
+    if is_locked(folder):
+        raise RunError(f"{run}: the run is being executed by another process")
+    ensemble = folder / ENSEMBLE
+    if record.get("status") != COMPLETED or not ensemble.exists():
+        raise RunError(
+            f"--extend: {run} is not completed (complete it first: mcchain run --resume {run})"
+        )
+    try:
+        open_ensemble(ensemble).close()
+    except DamagedEnsemble as exc:
+        raise RunError(f"--extend: {exc}") from None
+    _check_threads(threads, dask)
+    old = int(record["samples"])
+    total = old + samples
+    job = recorded_job(folder, record, samples=total, loader=loader)
+    sample = getattr(job.scene, "sample", None)
+    if sample is None:
+        raise RunError("--extend: the scene has no [sample] section (one instance, no design)")
+    design = getattr(sample, "design", "random")
+    if design not in CONTINUABLE_DESIGNS:
+        raise RunError(
+            f'--extend: design "{design}" cannot be continued (its points depend on the '
+            f"count); run the scene again with --samples {total}"
+        )
+    job = keep_kernels(job, record.get("kernels"))
+    from mcchain.decision.until import keep_sequential
+
+    job = keep_sequential(job, record)
+    check_live(rerun, total)
+    record.setdefault("extensions", []).append({"from": old, "to": total, "start": _now()})
+    record["restarts"] = sorted({*record.get("restarts", []), old})
+    record["samples"] = total
+    record["chunks"] = len(run_chunks(record, job.chunk_size))
+    argv = list(sys.argv if argv is None else argv)
+    return execute(
+        job,
+        folder,
+        record,
+        argv=argv,
+        dask=dask,
+        threads=threads,
+        solve=solve,
+        progress=progress,
+        keep_parts=keep_parts,
+        prepare_seconds=time.perf_counter() - t0,
+        rerun=rerun,
+    )
+
+
+def recorded_job(
+    folder: Path,
+    record: Mapping[str, Any],
+    *,
+    samples: int | None = None,
+    loader: Loader | None = None,
+) -> Job:
+    """The job of an existing run: its ``scene.toml`` with the recorded seed and chunk size,
+    and ``samples`` samples (default the recorded count)."""
+    return prepare_job(
+        Path(folder) / SCENE_COPY,
+        samples=int(record["samples"]) if samples is None else samples,
+        seed=record.get("seed"),
+        chunk_size=int(record["chunk_size"]),
+        loader=loader,
+    )
+
+
+def keep_kernels(job: Job, kernels: str | None) -> Job:
+    """``job`` integrating on ``kernels`` (the path a run took, ``run.json["kernels"]``):
+    ``[simulate] kernels = "auto"`` chooses by the sample count, and a run that grew must not
+    change path halfway."""
+    sim = getattr(job.scene, "simulate", None)
+    if kernels is None or sim is None or getattr(sim, "kernels", None) in (None, kernels):
+        return job
+    from dataclasses import replace
+
+    from mcchain.job import resolved_settings
+
+    scene = job.scene.model_copy(update={"simulate": sim.model_copy(update={"kernels": kernels})})
+    return replace(job, scene=scene, settings=resolved_settings(scene, job.nsample, job.seed))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -60,6 +60,14 @@ class Job:
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+
+    def resized(self, nsample: int) -> Job:
+        """The same job with ``nsample`` samples (a run that ``--extend`` or ``until`` grew):
+        the model is kept (it must hold at least ``nsample`` samples), the settings follow."""
+        if nsample > self.model.nsample:
+            raise ValueError(f"nsample: the model holds {self.model.nsample}, asked {nsample}")
+        settings = {**self.settings, **resolved_settings(self.scene, nsample, self.seed)}
+        return replace(self, nsample=int(nsample), settings=settings)
 
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
         """Global attributes of ``ensemble.nc`` (and of every part file)."""

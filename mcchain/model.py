@@ -433,18 +433,25 @@ class Model:
 
     def select(self, start: int, stop: int) -> Model:
         """The sub-model of samples ``start:stop`` (per-sample arrays sliced, others kept)."""
-        changes: dict[str, object] = {"nsample": stop - start}
+        return self.take(slice(start, stop))
+
+    def take(self, index: slice | np.ndarray) -> Model:
+        """The sub-model of the samples ``index`` picks (a slice, or an integer array in any
+        order: ``mcchain check`` re-solves a spread subset); per-sample arrays are indexed,
+        the others kept."""
+        picked = np.arange(self.nsample)[index]
+        changes: dict[str, object] = {"nsample": int(picked.size)}
         for f in fields(self):
             arr = getattr(self, f.name)
             if f.name == "parameters":
-                changes[f.name] = arr[start:stop]
+                changes[f.name] = arr[index]
             elif (
                 f.name in _PER_SAMPLE_FIELDS
                 and isinstance(arr, np.ndarray)
                 and arr.shape[0] == self.nsample
                 and self.nsample > 1
             ):
-                changes[f.name] = arr[start:stop]
+                changes[f.name] = arr[index]
         return replace(self, **changes)  # type: ignore[arg-type]
 
 

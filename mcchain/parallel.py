@@ -21,6 +21,7 @@ Progress (chunks done, samples/s, ETA) goes to stderr through tqdm, only on a te
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import sys
@@ -59,13 +60,25 @@ WORKER_ENV = {
 """Environment of LocalCluster worker processes: one compute thread each."""
 
 
-def plan_chunks(nsample: int, chunk_size: int) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``."""
+def plan_chunks(
+    nsample: int, chunk_size: int, restarts: Sequence[int] = ()
+) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``.
+
+    ``restarts``: sample indices where the chunking starts again (the sizes a run had before
+    ``--extend`` or an ``until`` batch added samples), so that the chunks a run computed
+    before it grew are still chunks of its plan.
+    """
     if nsample < 1:
         raise ValueError(f"nsample: must be >= 1, got {nsample}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size: must be >= 1, got {chunk_size}")
-    return [(s, min(s + chunk_size, nsample)) for s in range(0, nsample, chunk_size)]
+    bounds = sorted({0, nsample, *(b for b in restarts if 0 < b < nsample)})
+    return [
+        (s, min(s + chunk_size, stop))
+        for begin, stop in itertools.pairwise(bounds)
+        for s in range(begin, stop, chunk_size)
+    ]
 
 
 WARM_SAMPLES = 2

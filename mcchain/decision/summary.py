@@ -21,7 +21,8 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -34,6 +35,7 @@ from mcchain.decision.requirements import (
     requirement_values,
     stored_requirements,
 )
+from mcchain.decision.sequential import sequential_bounds
 from mcchain.decision.stats import (
     UNDECIDED,
     clopper_pearson,
@@ -42,6 +44,7 @@ from mcchain.decision.stats import (
     success_run_samples,
     verdict,
 )
+from mcchain.decision.until import sequential_settings
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -232,14 +235,27 @@ def summarize_requirement(
 
 
 def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
-    """Every requirement of a stored ensemble, summarized ([] without requirements)."""
+    """Every requirement of a stored ensemble, summarized ([] without requirements).
+
+    A run that added samples until decided (``[sample] until``) reports the interval that
+    kept its confidence over its looks (:func:`mcchain.decision.sequential.sequential_bounds`)
+    and the verdict from it; the counts and the quantile are the same as for a fixed count.
+    """
     design = design_of(ds)
+    sequential = sequential_settings(ds.attrs)
     out = []
     for requirement in stored_requirements(ds):
         values = requirement_values(ds, requirement)
-        out.append(
-            summarize_requirement(requirement, values, met_of(ds, requirement, values), design)
-        )
+        met = met_of(ds, requirement, values)
+        summary = summarize_requirement(requirement, values, met, design)
+        if sequential is not None:
+            lo, hi = sequential_bounds(
+                met == 0, int(sequential["batch"]), requirement.confidence, requirement.target
+            )
+            summary = replace(
+                summary, p_lower=lo, p_upper=hi, decision=verdict(lo, hi, requirement.target)
+            )
+        out.append(summary)
     return out
 
 
@@ -341,7 +357,10 @@ def allocation_lines(rows: list[AllocationRow], requirement: str) -> list[str]:
 
 
 def summary_lines(
-    summaries: list[RequirementSummary], rows: list[AllocationRow], design: str | None
+    summaries: list[RequirementSummary],
+    rows: list[AllocationRow],
+    design: str | None,
+    sequential: Mapping[str, Any] | None = None,
 ) -> list[str]:
     """``requirements.txt`` (and the end of ``mcchain run``): every requirement in words,
     its allocation, and the interval's validity for the design."""
@@ -352,7 +371,14 @@ def summary_lines(
         if alloc:
             lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
             lines += alloc
-    if summaries:
+    if summaries and sequential is not None:
+        lines.append(
+            f"intervals: sequential ({sequential['method']}), samples added {sequential['batch']} "
+            "at a time until decided: valid whenever the run stopped; each verdict is wrong with "
+            "probability at most 1 - confidence"
+            + ("" if design in EXACT_DESIGNS else f", APPROXIMATE for design {design!r}")
+        )
+    elif summaries:
         if design in EXACT_DESIGNS:
             lines.append(
                 "intervals: exact Clopper-Pearson (independent random draws); each verdict "
@@ -376,7 +402,8 @@ def _csv_value(value: Any) -> Any:
     return value
 
 
-def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+def write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+    """A CSV of ``rows`` under ``columns``, written atomically (floats exactly, NaN as NaN)."""
     import io
 
     from mcchain.ensemble.io import write_text_atomic
@@ -397,9 +424,13 @@ def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
     rows = allocations(ds)
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / "requirements.csv", folder / "allocation.csv", folder / "requirements.txt"]
-    _write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
-    _write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
-    write_text_atomic(paths[2], "\n".join(summary_lines(summaries, rows, design_of(ds))) + "\n")
+    write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
+    write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
+    write_text_atomic(
+        paths[2],
+        "\n".join(summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs)))
+        + "\n",
+    )
     return paths
 
 

@@ -277,8 +277,9 @@ class _PartCache:
     """Open part files, at most :data:`MAX_OPEN_PARTS` at a time (least recently used
     closed), each checked against the first part when first opened."""
 
-    def __init__(self, parts: Sequence[Part]) -> None:
+    def __init__(self, parts: Sequence[Part], attrs: Mapping[str, Any] | None = None) -> None:
         self._parts = parts
+        self._given = None if attrs is None else dict(attrs)
         self._open: OrderedDict[int, netCDF4.Dataset] = OrderedDict()
         self._checked: set[int] = {0}
         self._layout: dict[str, Any] = {}
@@ -302,7 +303,9 @@ class _PartCache:
                     for name, var in nc.variables.items()
                     if "sample" not in var.dimensions
                 }
-                self.attrs = _attrs(nc)
+                self.attrs = _attrs(nc) if self._given is None else dict(self._given)
+                if self._given is not None:
+                    self._check_attrs(nc, self._parts[index].path.name)
             elif index not in self._checked:
                 self._check(nc, self._parts[index].path.name)
                 self._checked.add(index)
@@ -315,9 +318,14 @@ class _PartCache:
         for name, value in self._fixed.items():
             if not _same(nc[name][:], value):
                 raise MergeError(f"{name_of}: {name} differs from the first part")
-        attrs = _attrs(nc)
-        if set(attrs) != set(self.attrs) or not all(
-            _same(value, self.attrs[key]) for key, value in attrs.items()
+        self._check_attrs(nc, name_of)
+
+    def _check_attrs(self, nc: netCDF4.Dataset, name_of: str) -> None:
+        attrs, expected = _attrs(nc), self.attrs
+        if self._given is not None:  # the run grew since the part was written
+            attrs, expected = study_attributes(attrs), study_attributes(expected)
+        if set(attrs) != set(expected) or not all(
+            _same(value, expected[key]) for key, value in attrs.items()
         ):
             raise MergeError(f"{name_of}: global attributes differ")
 
@@ -343,6 +351,21 @@ def check_tiling(parts: Sequence[Part], nsample: int | None = None) -> int:
     if nsample is not None and position != nsample:
         raise MergeError(f"parts cover samples 0:{position}, expected 0:{nsample}")
     return position
+
+
+def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
+    """Global attributes without the sample count (``sample_count``, ``settings``'
+    ``samples``): what the parts of one study share however far it was extended."""
+    import json
+
+    out = {key: value for key, value in attrs.items() if key != "sample_count"}
+    if isinstance(out.get("settings"), str):
+        with suppress(ValueError):
+            settings = json.loads(out["settings"])
+            if isinstance(settings, dict):
+                settings.pop("samples", None)
+                out["settings"] = json.dumps(settings, sort_keys=True)
+    return out
 
 
 def _attrs(obj: Any) -> dict[str, Any]:
@@ -443,6 +466,7 @@ def merge_parts(
     compression: str | None = None,
     complevel: int | None = None,
     nsample: int | None = None,
+    attrs: Mapping[str, Any] | None = None,
 ) -> MergeStats:
     """Stream part files into one compressed netCDF file ``out``, atomically.
 
@@ -453,6 +477,9 @@ def merge_parts(
             default the ``[storage]`` default (``Storage().compression``).
         complevel: codec level; default ``Storage().complevel``.
         nsample: expected sample count (checked), or ``None``.
+        attrs: the merged file's global attributes, for a run that grew (``--extend``,
+            ``until``) since some parts were written: a part may then differ from them in
+            its sample count only (:func:`study_attributes`). Default: the first part's.
 
     The layout (dims, variables, attributes) comes from the first part; every other part
     must agree, and variables without a ``sample`` dim (names, ``time``) must be equal in
@@ -478,7 +505,7 @@ def merge_parts(
     out = Path(out)
     tmp = temporary_name(out)
     starts = np.array([p.start for p in parts], dtype=np.int64)
-    cache = _PartCache(parts)
+    cache = _PartCache(parts, attrs)
     bytes_in = 0
     try:
         with _no_chunk_cache():

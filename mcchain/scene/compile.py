@@ -40,7 +40,11 @@ def _check_count(name: str, value: int, low: int, high: int | None = None) -> in
 
 
 def compile_model(
-    scene: Scene, nsample: int | None = None, seed: int | None = None, count_name: str = "nsample"
+    scene: Scene,
+    nsample: int | None = None,
+    seed: int | None = None,
+    count_name: str = "nsample",
+    parameters: np.ndarray | None = None,
 ) -> Model:
     """Lay a scene out as a :class:`Model` of ``nsample`` instances.
 
@@ -50,6 +54,8 @@ def compile_model(
             (then every instance is the same and there are no parameters).
         seed: sampling seed; default ``[sample] seed`` (0 without ``[sample]``).
         count_name: how a message names ``nsample`` (``--samples`` from the command line).
+        parameters: (nsample, nparam) values of the ``[sample.vary]`` paths to use instead of
+            the design's draws (``mcchain rare`` moves its samples itself); default drawn.
 
     Returns:
         The model; ``parameters`` (nsample, nparam) holds the sampled values in the order of
@@ -79,7 +85,14 @@ def compile_model(
     varied: set[Slot] = set()
     paths = scene.param_paths
     if sample is not None and paths:
-        values = sample_parameters(sample, count=nsample, seed=seed)
+        if parameters is None:
+            values = sample_parameters(sample, count=nsample, seed=seed)
+        else:
+            values = np.asarray(parameters, dtype=np.float64)
+            if values.shape != (nsample, len(paths)):
+                raise ValueError(
+                    f"parameters: shape {values.shape}, expected {(nsample, len(paths))}"
+                )
         for j, path in enumerate(paths):
             ref = parse_path(scene, path, PARAM_SHAPES)
             column = values[:, j]

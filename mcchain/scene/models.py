@@ -45,6 +45,8 @@ GROUND_NAME = "ground"
 DEFAULT_GRAVITY = (0.0, -9.81)
 DEFAULT_SAMPLE_COUNT = 1000
 DEFAULT_SAMPLE_SEED = 0
+DEFAULT_MAX_COUNT = 65536
+"""``[sample] max_count`` when ``until`` is given without it."""
 MAX_SEED = 2**64 - 1
 
 DEFAULT_BAUMGARTE = (10.0, 10.0)
@@ -569,10 +571,45 @@ class Sample(_Section):
         "(``count`` identical instances).",
     )
 
+    until: Literal["decided"] | None = Field(
+        default=None,
+        description='"decided": run batches of ``count`` samples until every requirement is '
+        "decided (its sequential interval, docs/scenes.md), or ``max_count`` is reached; "
+        "default none (``count`` samples).",
+    )
+    max_count: Int | None = Field(
+        default=None,
+        ge=1,
+        description=f"with ``until``: the most samples the run may take; default "
+        f"{DEFAULT_MAX_COUNT} (at least ``count``).",
+    )
+
     @field_validator("vary", mode="before")
     @classmethod
     def _flatten(cls, v: Any) -> Any:
         return _flatten_dotted(v, _is_distribution_table)
+
+    @model_validator(mode="after")
+    def _until(self) -> Sample:
+        if self.until is None:
+            if self.max_count is not None:
+                raise ValueError('`max_count` needs `until = "decided"`')
+            return self
+        if self.design in ("lhs", "saltelli"):
+            raise ValueError(
+                f'`until` needs a design that can be continued ("random" or "sobol"), got '
+                f'"{self.design}"'
+            )
+        if self.max_count is not None and self.max_count < self.count:
+            raise ValueError(f"`max_count` ({self.max_count}) is less than `count` ({self.count})")
+        return self
+
+    @property
+    def until_max_count(self) -> int:
+        """The most samples an ``until`` run may take (``max_count`` or its default)."""
+        if self.max_count is not None:
+            return int(self.max_count)
+        return max(DEFAULT_MAX_COUNT, int(self.count))
 
 
 def saltelli_count_error(nparam: int, count: int) -> str | None:

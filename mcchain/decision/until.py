@@ -1,0 +1,164 @@
+"""``[sample] until = "decided"``: a run that adds batches of samples until it can decide.
+
+A run with ``until`` computes ``count`` samples (the batch: ``[sample] count`` or
+``--samples``), looks at its requirements (``requirement_met`` of the part files written so
+far), and adds another batch while any requirement with a target is undecided by its
+sequential interval (:mod:`mcchain.decision.sequential`), up to ``max_count`` samples. The
+samples are those of one run of the final count (the design continued batch after batch,
+as ``--extend`` does), so the ensemble is that run's; its settings carry ``sequential``
+(method, batch, max_count), from which ``mcchain export`` knows to report the sequential
+interval instead of the fixed-sample one.
+
+Every look is noted in ``run.json["until"]["looks"]``: the sample count and, per
+requirement, failures, interval and verdict.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mcchain.errors import RunError, SceneError
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+    from mcchain.job import Job, Loader
+
+log = logging.getLogger("mcchain")
+
+METHOD = "confidence sequence (beta-binomial mixture, prior mean = target)"
+"""How the sequential interval is named in the settings, ``run.json`` and the CSV."""
+
+SETTINGS_KEY = "sequential"
+"""The key of the resolved settings (``ensemble.nc`` attribute ``settings``) that marks a
+run whose samples were added until decided: ``{"method", "batch", "max_count"}``."""
+
+
+def sequential_settings(attrs: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The ``sequential`` entry of an ensemble's ``settings`` attribute, or None (a run of a
+    fixed count)."""
+    import json
+
+    try:
+        settings = json.loads(str(attrs.get("settings", "{}")))
+    except ValueError:
+        return None
+    entry = settings.get(SETTINGS_KEY) if isinstance(settings, dict) else None
+    return dict(entry) if isinstance(entry, dict) else None
+
+
+@dataclass
+class Until:
+    """The ``grow`` of :func:`mcchain.execution.execute` for ``until = "decided"``."""
+
+    batch: int
+    max_count: int
+
+    def __call__(self, folder: Path, record: dict[str, Any], nsample: int) -> int | None:
+        from mcchain.ensemble.io import list_parts, open_parts
+        from mcchain.runs import PARTS
+
+        with open_parts(list_parts(Path(folder) / PARTS)) as ds:
+            look = look_at(ds, nsample, self.batch)
+        entry = record.setdefault("until", self.describe())
+        looks = [item for item in entry.setdefault("looks", []) if item["samples"] != nsample]
+        entry["looks"] = [*looks, look]
+        undecided = [name for name, r in look["requirements"].items() if r["verdict"] == UNDECIDED]
+        if not undecided:
+            entry["stopped"] = f"decided after {nsample} samples"
+            log.info("until: every requirement decided after %d samples", nsample)
+            return None
+        if nsample >= self.max_count:
+            entry["stopped"] = f"max_count {self.max_count} reached; undecided: " + ", ".join(
+                undecided
+            )
+            log.info("until: max_count %d reached, undecided: %s", nsample, undecided)
+            return None
+        log.info("until: undecided after %d samples (%s): one more batch", nsample, undecided)
+        return min(nsample + self.batch, self.max_count)
+
+    def describe(self) -> dict[str, Any]:
+        """The ``sequential`` settings entry (and the start of ``run.json["until"]``)."""
+        return {"method": METHOD, "batch": self.batch, "max_count": self.max_count}
+
+
+UNDECIDED = "undecided"
+
+
+def look_at(ds: xr.Dataset, nsample: int, batch: int) -> dict[str, Any]:
+    """The verdicts of the first ``nsample`` samples of ``ds`` by the sequential interval."""
+    import numpy as np
+
+    from mcchain.decision.sequential import sequential_bounds
+    from mcchain.decision.stats import verdict
+
+    if "requirement_met" not in ds.data_vars:
+        raise RunError("until: the run stores no requirement_met (no [[requirement]])")
+    met = ds["requirement_met"]
+    values = np.asarray(met.isel(sample=slice(0, nsample)).values)
+    names = [str(n) for n in ds["requirement"].values]
+    targets = np.asarray(met.attrs["target"], dtype=np.float64).reshape(-1)
+    confidences = np.asarray(met.attrs["confidence"], dtype=np.float64).reshape(-1)
+    out: dict[str, Any] = {}
+    for j, name in enumerate(names):
+        failed = values[:, j] == 0
+        lower, upper = sequential_bounds(failed, batch, float(confidences[j]), float(targets[j]))
+        out[name] = {
+            "failures": int(failed.sum()),
+            "p_lower": lower,
+            "p_upper": upper,
+            "verdict": verdict(lower, upper, float(targets[j])),
+        }
+    return {"samples": int(nsample), "requirements": out}
+
+
+def keep_sequential(job: Job, record: Mapping[str, Any]) -> Job:
+    """``job`` (an ``--extend`` of a run made with ``until``) with the run's ``sequential``
+    settings entry: the confidence sequence holds at every count, so the extended run still
+    reports it (its looks: every batch, then the total)."""
+    until = record.get("until")
+    if until:
+        job.settings[SETTINGS_KEY] = {k: until[k] for k in ("method", "batch", "max_count")}
+    return job
+
+
+def sequential_job(
+    job: Job,
+    scene_path: Path,
+    *,
+    seed: int | None,
+    chunk_size: int | None,
+    loader: Loader | None,
+    batch: int | None = None,
+    nsample: int | None = None,
+) -> tuple[Job, Until | None]:
+    """The job of an ``until`` run and its ``grow``; ``(job, None)`` for other scenes.
+
+    ``job`` was prepared for its batch (``[sample] count`` or ``--samples``; a resume gives
+    ``batch`` from ``run.json``); the job
+    returned holds the model of ``max_count`` samples (so that every batch is a slice of
+    it) and starts at ``nsample`` samples (default: one batch; a resume gives the count it
+    reached). Its settings carry the ``sequential`` entry.
+    """
+    sample = getattr(job.scene, "sample", None)
+    if getattr(sample, "until", None) is None:
+        return job, None
+    assert sample is not None
+    if not getattr(job.scene, "requirement", None):
+        raise SceneError('sample.until: "decided" needs at least one [[requirement]] to decide')
+    batch = int(job.nsample if batch is None else batch)
+    max_count = int(sample.until_max_count)
+    if batch > max_count:
+        raise RunError(f"--samples: {batch} is more than sample.max_count ({max_count})")
+    from mcchain.job import prepare_job
+
+    until = Until(batch, max_count)
+    full = prepare_job(
+        scene_path, samples=max_count, seed=seed, chunk_size=chunk_size, loader=loader
+    )
+    full.settings[SETTINGS_KEY] = until.describe()
+    return full.resized(batch if nsample is None else nsample), until
