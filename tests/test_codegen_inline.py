@@ -16,7 +16,7 @@ from mcchain.kernels import contact as kc
 def _run(function, arguments: dict[str, float], suffix: str = "7") -> list[float]:
     """Evaluate the inlined text of ``function`` with the named arguments bound."""
     names = list(arguments)
-    statements, results = inline(function, names, suffix)
+    statements, results = inline(function.__module__, function.__name__, names, suffix)
     scope: dict[str, float] = dict(arguments)
     for line in statements:
         exec(line, {"math": math}, scope)
@@ -62,19 +62,14 @@ def test_inline__friction_and_slip_text_equal_the_kernels_bit_for_bit():
 
 
 def test_inline__renames_locals_with_the_suffix_and_writes_constants_as_floats():
-    statements, results = inline(kc.contact_law, [f"x{i}" for i in range(8)], "_3")
+    statements, results = inline(kc.__name__, "contact_law", [f"x{i}" for i in range(8)], "_3")
     assert statements[0] == "rate_3 = x2 * x3 + (1.0 - x2) * x1"
     assert f"x6 == {float(kc.FLORES)!r}" in statements[1]  # the law code as a float literal
     assert results == ["fn_3", "delta_slope_3", "rate_slope_3"]
 
 
-def _loop(n):
-    total = 0.0
-    for i in range(n):
-        total += i
-    return total
-
-
 def test_inline__refuses_code_outside_the_straight_line_subset():
-    with pytest.raises(TypeError, match="not straight-line"):
-        inline(_loop, ["n"], "0")
+    with pytest.raises(TypeError, match="unpack only|not straight-line"):
+        inline(kc.__name__, "contact_crossing", ["a", "b", "c", "d", "h"], "0")
+    with pytest.raises(TypeError, match="no such function"):
+        inline(kc.__name__, "no_such_law", [], "0")

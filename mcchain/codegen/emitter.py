@@ -19,9 +19,11 @@ import numpy as np
 
 from mcchain.codegen.inline import inline
 from mcchain.codegen.topology import Topology
-from mcchain.kernels.contact import contact_law, contact_slip, elastic_energy, friction_force
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 from mcchain.scene.compile import spline_value
+
+CONTACT_KERNELS = "mcchain.kernels.contact"
+"""The module whose functions define the contact law for the loop kernels and the lanes."""
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -691,11 +693,11 @@ class Emitter:
         self.schur_solve("rhs", "lam")
         self.apply_wt("lam", "qdd", a0)
 
-    def inline(self, function: Callable[..., object], arguments: list[str], k: int) -> list[str]:
-        """Emit the text of the kernel function ``function(*arguments)`` for joint ``k``
+    def inline(self, function: str, arguments: list[str], k: int) -> list[str]:
+        """Emit the text of ``mcchain.kernels.contact.<function>(*arguments)`` for joint ``k``
         (:func:`mcchain.codegen.inline.inline`: the kernels' own definition, its locals
         suffixed with ``k``) and return the expressions of its results."""
-        statements, results = inline(function, arguments, str(k))
+        statements, results = inline(CONTACT_KERNELS, function, arguments, str(k))
         self.emit(*statements)
         return results
 
@@ -708,7 +710,7 @@ class Emitter:
         r = self.contact_row[k]
         self.emit(f"pen{k} = rho{k} - p_cl{k}", f"pdot{k} = phid{r}")
         fn, delta_slope, _rate_slope = self.inline(
-            contact_law,
+            "contact_law",
             [f"{x}{k}" for x in ("pen", "pdot", "ins", "vi", "p_K", "p_mx", "p_lw", "p_er")],
             k,
         )
@@ -730,12 +732,12 @@ class Emitter:
         wa = f"v{3 * a + 2}" if a != GROUND else "0.0"
         wb = f"v{3 * b + 2}" if b != GROUND else "0.0"
         (slip,) = self.inline(
-            contact_slip,
+            "contact_slip",
             [f"ex{k}", f"ey{k}", f"ddx{k}", f"ddy{k}", f"p_R{k}", f"p_cl{k}", wa, wb],
             k,
         )
         self.emit(f"slip{k} = {slip}")
-        (ftn,) = self.inline(friction_force, [f"fn{k}", f"slip{k}", f"p_mu{k}"], k)
+        (ftn,) = self.inline("friction_force", [f"fn{k}", f"slip{k}", f"p_mu{k}"], k)
         self.emit(
             f"tx{k} = -ey{k}",
             f"ty{k} = ex{k}",
@@ -841,7 +843,7 @@ class Emitter:
         # Contact joints: δ, the mode (0 link, 1 contact, 2 free) and the elastic energy
         # K δ^(m+1) / (m+1) stored in the contact.
         for k in self.contact_row:
-            (eel,) = self.inline(elastic_energy, [f"pen{k}", f"p_K{k}", f"p_mx{k}"], k)
+            (eel,) = self.inline("elastic_energy", [f"pen{k}", f"p_K{k}", f"p_mx{k}"], k)
             self.emit(
                 f"pen{k} = rho{k} - p_cl{k}",
                 f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0) * 1.0)",

@@ -3,10 +3,11 @@
 A law of :mod:`mcchain.kernels` (say :func:`mcchain.kernels.contact.contact_law`) is the
 only place its formulas are written. The loop kernels call it; the lane generator asks
 :func:`inline` for its text, specialised to one joint: the function's syntax tree is read
-from its source, its parameters replaced by the lane's expressions, its locals renamed with
-the joint's suffix, module constants written as literals, and calls of other kernel
-functions inlined in turn. The text is the function's arithmetic operation for operation,
-so the lanes and the loop kernels round alike.
+from its module's source file (parsed, not imported: the generator never imports numba),
+its parameters replaced by the lane's expressions, its locals renamed with the joint's
+suffix, module constants written as literals, and calls of the module's other functions
+inlined in turn. The text is the function's arithmetic operation for operation, so the
+lanes and the loop kernels round alike.
 
 The functions it takes are the straight-line subset both targets share: a docstring,
 assignments to plain names (one name or a tuple of names from an inlined call), and a
@@ -19,49 +20,72 @@ from __future__ import annotations
 
 import ast
 import functools
-import inspect
-import textwrap
-from collections.abc import Callable, Sequence
-from typing import Any
+import importlib
+import importlib.util
+from collections.abc import Sequence
+from pathlib import Path
 
 _BUILTINS = frozenset({"abs", "max", "min"})
 """Calls kept as written: the lane text's own functions (mcchain.codegen.native)."""
 
 
-def _python_function(function: Any) -> Callable[..., Any]:
-    """The Python function behind a numba dispatcher (or the function itself)."""
-    return getattr(function, "py_func", function)
-
-
 @functools.cache
-def _definition(function: Callable[..., Any]) -> ast.FunctionDef:
-    source = textwrap.dedent(inspect.getsource(function))
-    tree = ast.parse(source).body[0]
-    if not isinstance(tree, ast.FunctionDef):
-        raise TypeError(f"{function.__name__}: not a function definition")
-    return tree
+def _module(name: str) -> tuple[dict[str, ast.FunctionDef], dict[str, ast.expr], dict[str, str]]:
+    """The top level of module ``name``'s source, parsed without importing it: its functions,
+    its constant assignments and the module each ``from … import`` name comes from."""
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.origin is None:
+        raise TypeError(f"{name}: no source")
+    tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    functions: dict[str, ast.FunctionDef] = {}
+    constants: dict[str, ast.expr] = {}
+    imported: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef):
+            functions[node.name] = node
+        elif isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target = node.targets[0]
+            if isinstance(target, ast.Name):
+                constants[target.id] = node.value
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            for alias in node.names:
+                imported[alias.asname or alias.name] = node.module
+    return functions, constants, imported
 
 
-def _literal(value: Any, where: str) -> ast.expr:
-    """A module constant as a float literal (the lane text holds every parameter, law codes
-    included, as float64)."""
+def _constant(module: str, name: str, where: str) -> float:
+    """The value of module constant ``name``: a numeric assignment of the module (evaluated
+    over its other constants) or a number imported from a module free of numba."""
+    _functions, constants, imported = _module(module)
+    if name in constants:
+        node = constants[name]
+        names = {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
+        scope = {n: _constant(module, n, where) for n in names}
+        value = eval(compile(ast.Expression(node), module, "eval"), {"__builtins__": {}}, scope)
+    elif name in imported:
+        value = getattr(importlib.import_module(imported[name]), name)
+    else:
+        raise TypeError(f"{where}: unknown name {name}")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise TypeError(f"{where}: only numeric module constants can be inlined")
-    return ast.Constant(float(value))
+    return float(value)
 
 
 class _Inliner:
     """Inlines one call: ``names`` maps each parameter and renamed local to its expression."""
 
-    def __init__(self, function: Callable[..., Any], suffix: str, out: list[str]) -> None:
-        self.py = _python_function(function)
-        self.tree = _definition(self.py)
+    def __init__(self, module: str, function: str, suffix: str, out: list[str]) -> None:
+        self.module = module
+        functions, _constants, _imported = _module(module)
+        if function not in functions:
+            raise TypeError(f"{module}.{function}: no such function")
+        self.tree = functions[function]
         self.suffix = suffix
         self.out = out
         self.names: dict[str, ast.expr] = {}
 
     def where(self, node: ast.AST) -> str:
-        return f"{self.py.__module__}.{self.py.__name__} line {getattr(node, 'lineno', '?')}"
+        return f"{self.module}.{self.tree.name} line {getattr(node, 'lineno', '?')}"
 
     def run(self, arguments: Sequence[str]) -> list[ast.expr]:
         params = [a.arg for a in self.tree.args.args]
@@ -140,19 +164,18 @@ class _Inliner:
             return [ast.Call(func, [self.expr(a) for a in node.args], [])]
         if isinstance(func, ast.Attribute) and ast.unparse(func) == "math.sqrt":
             return [ast.Call(func, [self.expr(a) for a in node.args], [])]
-        if not isinstance(func, ast.Name) or func.id not in self.py.__globals__:
+        if not isinstance(func, ast.Name) or func.id not in _module(self.module)[0]:
             raise TypeError(f"{self.where(node)}: cannot inline {ast.unparse(func)}")
-        callee = self.py.__globals__[func.id]
         arguments = [ast.unparse(self.expr(a)) for a in node.args]
-        return _Inliner(callee, self.suffix, self.out).run(arguments)
+        return _Inliner(self.module, func.id, self.suffix, self.out).run(arguments)
 
     def expr(self, node: ast.expr) -> ast.expr:
         if isinstance(node, ast.Name):
             if node.id in self.names:
                 return self.names[node.id]
-            if node.id in self.py.__globals__:
-                return _literal(self.py.__globals__[node.id], self.where(node))
-            raise TypeError(f"{self.where(node)}: unknown name {node.id}")
+            # a module constant (a law code, a friction speed) as a float literal: the lane
+            # text holds every parameter, law codes included, as float64
+            return ast.Constant(_constant(self.module, node.id, self.where(node)))
         if isinstance(node, ast.Constant):
             return ast.Constant(float(node.value)) if type(node.value) is int else node
         if isinstance(node, ast.Attribute):
@@ -181,13 +204,13 @@ class _Inliner:
 
 
 def inline(
-    function: Callable[..., Any], arguments: Sequence[str], suffix: str
+    module: str, function: str, arguments: Sequence[str], suffix: str
 ) -> tuple[list[str], list[str]]:
-    """Lane text of the call ``function(*arguments)``.
+    """Lane text of the call ``module.function(*arguments)``.
 
     Args:
-        function: a kernel function (numba dispatcher or plain function) of the subset the
-            module docstring names.
+        module: the kernel module's dotted name (its source is parsed, not imported).
+        function: a function of that module, of the subset the module docstring names.
         arguments: the lane expression of each positional parameter (text); parameters
             left out take their default.
         suffix: appended to each local's name (e.g. the joint index), so the text of two
@@ -198,7 +221,7 @@ def inline(
         returned value.
     """
     out: list[str] = []
-    results = _Inliner(function, suffix, out).run(arguments)
+    results = _Inliner(module, function, suffix, out).run(arguments)
     return out, [ast.unparse(r) for r in results]
 
 
