@@ -33,6 +33,11 @@ GONTHIER = 4
 HU_GUO = 5
 """D = 3 (1 − e) / (2 e δ̇⁻) (Hu & Guo 2015, Multibody Syst. Dyn. 35, 131–151)."""
 
+HERTZ_EXPONENT = 1.5
+"""The exponent m of Hertz's law for the contact of curved surfaces: the default exponent of
+``[joint.contact]`` (:data:`mcchain.parameters.TABLE`) and the one
+:func:`internal_cylinder_stiffness` gives K for."""
+
 LawName = Literal["hertz", "lankarani-nikravesh", "flores", "hunt-crossley", "gonthier", "hu-guo"]
 """``[joint.contact] law`` as a scene spells it, in the order of the codes above (the scene
 schema takes this type; χ(e) of each is :func:`mcchain.kernels.contact.restitution_factor`)."""

@@ -37,7 +37,8 @@ from pydantic import (
     model_validator,
 )
 
-from mcchain.contact import LAW_CODES, LawName
+from mcchain.contact import HERTZ_EXPONENT, LAW_CODES, LawName
+from mcchain.parameters import unset_value
 
 GROUND_NAME = "ground"
 """The name of the fixed body in ``bodies``/``body`` keys."""
@@ -148,9 +149,14 @@ class Contact(_Section):
         default=None,
         gt=0,
         description="K, N/m^exponent; required unless ``radius``, ``youngs_modulus`` and "
-        "``poisson_ratio`` are given (then K of internal cylindrical contact, exponent 1.5).",
+        "``poisson_ratio`` are given (then K of internal cylindrical contact, exponent "
+        f"{HERTZ_EXPONENT}).",
     )
-    exponent: Num = Field(default=1.5, gt=0, description="m; default 1.5 (Hertz).")
+    exponent: Num = Field(
+        default=unset_value("joint", "contact.exponent"),
+        gt=0,
+        description=f"m; default {unset_value('joint', 'contact.exponent')} (Hertz).",
+    )
     restitution: Num | None = Field(
         default=None,
         gt=0,
@@ -188,8 +194,10 @@ class Contact(_Section):
             raise ValueError(
                 "needs `stiffness`, or all of `radius`, `youngs_modulus` and `poisson_ratio`"
             )
-        if self.stiffness is None and self.exponent != 1.5:
-            raise ValueError("K from `radius` and the materials is for `exponent = 1.5`")
+        if self.stiffness is None and self.exponent != HERTZ_EXPONENT:
+            raise ValueError(
+                f"K from `radius` and the materials is for `exponent = {HERTZ_EXPONENT}`"
+            )
         if self.law != "hertz" and self.restitution is None:
             raise ValueError(f"law {self.law!r} needs `restitution` (e in (0, 1])")
         return self
