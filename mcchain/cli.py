@@ -6,7 +6,10 @@ Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcch
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
 written nothing; usage errors of ``show`` and ``report`` name the command
-(``mcchain show: ...``).
+(``mcchain show: ...``). A run that fails once started (a full disk, its folder removed,
+``RunFailed``) prints one such line and exits with 1, keeping its finished chunks; a run
+that completes with every sample failed prints its folder, then one such line with the
+status counts, and exits with 3.
 
 This module imports only the standard library at import time, and building the parser
 does too (``mcchain runs`` must stay fast): ``show``'s arguments, whose help lists the
@@ -24,11 +27,13 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from mcchain import __version__
-from mcchain.errors import McchainError
+from mcchain.errors import McchainError, RunFailed
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
+EXIT_ALL_FAILED = 3
+"""``mcchain run``: the run completed, but every one of its samples failed."""
 
 """Commands that parse the rest of the command line themselves."""
 NAMED_ERRORS = ("show", "report")
@@ -295,6 +300,9 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
     sink.add_argument("--stdout", action="store_true", help="write the recording to stdout")
     sink.add_argument("--headless", action="store_true", help="log nowhere (for timing)")
     parser.add_argument("--url", help="viewer URL for --connect")
+    parser.add_argument(
+        "--force", action="store_true", help="--save: overwrite the file if it exists"
+    )
 
 
 # -- commands ----------------------------------------------------------------------------------
@@ -407,6 +415,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for line in result.summary():
         print(line)
     print(result.folder)
+    if result.all_failed:
+        sys.stdout.flush()  # the folder, then the error line
+        samples = result.record["samples"]
+        return _fail(
+            f"every one of the {samples} samples failed ({result.counts_line()})", EXIT_ALL_FAILED
+        )
     return 0
 
 
@@ -613,9 +627,21 @@ def _validation_lines(scene_path: Any) -> list[str]:
 
         choice = choose_kernels(sim, model.ndof, model.nsample)
         lines.append(f'simulate: {sim.method} on kernels = "{choice.kernels}" ({choice.reason})')
+    lines.append(_disk_line(scene, model))
     warnings = model.meta.get("warnings") or []
     assert isinstance(warnings, list)
     return lines + [f"warning: {line}" for line in warnings]
+
+
+def _disk_line(scene: Any, model: Any) -> str:
+    """``validate``'s line on what a run of the scene writes (``mcchain run`` compares it
+    with the free space; the free space is not printed here, so that the output depends on
+    the scene only)."""
+    from mcchain.resources import estimate_disk
+
+    estimate = estimate_disk(scene, model, model.nsample, scene.storage.chunk_size)
+    assert estimate is not None
+    return estimate.line()
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
@@ -630,8 +656,14 @@ def _cmd_runs(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from mcchain.ensemble.queries import parse_samples
+    from mcchain.errors import RunError
     from mcchain.viz.playback import show_run
+
+    if args.save is not None and Path(args.save).exists() and not args.force:
+        raise RunError(f"--save: {args.save} already exists (add --force to overwrite it)")
 
     shown = show_run(
         args.run,
@@ -738,6 +770,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "rare": _cmd_rare,
         }[command]
         return handler(args)
+    except RunFailed as exc:
+        return _fail(str(exc).splitlines()[0], EXIT_FAILED)
     except McchainError as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     except KeyboardInterrupt as exc:

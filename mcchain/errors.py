@@ -15,3 +15,9 @@ class SceneError(McchainError, ValueError):
 
 class RunError(McchainError):
     """A run folder or CLI argument that cannot be used (exists, not found, bad flag)."""
+
+
+class RunFailed(RunError):
+    """A run that failed once started, for a reason outside the scene: its file system
+    filled up, its folder was removed or made unwritable. The finished chunks are kept
+    where the folder is; the CLI prints the one line and exits with 1."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import errno
 import json
 import logging
 import os
@@ -29,9 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcchain.errors import McchainError, RunError
+from mcchain.errors import McchainError, RunError, RunFailed
 from mcchain.job import Job, Loader, check_positive, prepare_job
 from mcchain.provenance import git_state, host_info, software_versions
+from mcchain.resources import check_disk
 from mcchain.runs import (
     COMPLETED,
     DEFAULT_OUT,
@@ -71,6 +73,20 @@ class RunResult:
 
     folder: Path
     record: dict[str, Any]
+    failed: int = 0
+    """Samples carrying a failure flag (:data:`mcchain.status.FAILURE_BITS`)."""
+
+    @property
+    def all_failed(self) -> bool:
+        """Whether every sample of the run failed (the CLI then exits with 3)."""
+        return self.failed > 0 and self.failed == int(self.record["samples"])
+
+    def counts_line(self) -> str:
+        """``ok 0, diverged 10, ...``: the status counts that are not 0, ``ok`` always."""
+        counts = self.record.get("status_counts") or {}
+        return ", ".join(
+            f"{k} {v}" for k, v in counts.items() if k != "samples" and (v or k == "ok")
+        )
 
     def summary(self) -> list[str]:
         """Human lines for the CLI (the folder is printed after them)."""
@@ -104,14 +120,16 @@ class RunResult:
         return lines
 
 
-def _status_counts(path: Path) -> dict[str, int]:
-    """Status counts of a merged ensemble, read block by block."""
+def _status_counts(path: Path) -> tuple[dict[str, int], int]:
+    """Status counts of a merged ensemble, read block by block, and how many samples carry
+    a failure flag."""
     import netCDF4
     import numpy as np
 
-    from mcchain.status import counts
+    from mcchain.status import FAILURE_BITS, counts
 
     total: dict[str, int] = {}
+    failed = 0
     with netCDF4.Dataset(path) as nc:
         var = nc["status"]
         n = var.shape[0]
@@ -119,8 +137,9 @@ def _status_counts(path: Path) -> dict[str, int]:
             block = np.asarray(var[b0 : min(b0 + (1 << 20), n)])
             for key, value in counts(block).items():
                 total[key] = total.get(key, 0) + value
+            failed += int(np.count_nonzero(block & FAILURE_BITS))
         total["samples"] = int(n)
-    return total
+    return total, failed
 
 
 def _interpreted() -> bool:
@@ -387,7 +406,9 @@ def execute(
     session's ``rerun`` entry). The stream is closed before the merge.
 
     A failure or Ctrl-C marks the run ``FAILED`` (finished part files stay) and re-raises
-    with a note naming the folder to resume.
+    with a note naming the folder to resume; a failure from outside (a full disk, the
+    folder removed or made unwritable: :func:`_outside_failure`) raises :class:`RunFailed`
+    instead, one line that says so, and ``run.json`` is left as it is if it cannot be written.
     """
     from mcchain.ensemble.io import Part, list_parts, merge_parts, remove_temporaries
 
@@ -472,28 +493,37 @@ def execute(
                 merged.seconds,
                 merged.throughput,
             )
-            counts = _status_counts(folder / ENSEMBLE)
+            counts, failed = _status_counts(folder / ENSEMBLE)
+            if getattr(job.scene, "requirement", None):
+                try:
+                    record["requirements"] = _requirement_lines(folder)
+                except Exception as error:  # the ensemble is complete: this must not fail the run
+                    log.error("requirement summary failed: %s\n%s", error, traceback.format_exc())
+                    record["requirements"] = [
+                        f"requirements: the summary failed ({error}); see run.log"
+                    ]
+            total = time.perf_counter() - t_start + prepare_seconds
+            _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
+            if record.get("extensions"):
+                record["extensions"][-1].setdefault("end", session["end"])
+            write_record(folder, record)
         except BaseException as exc:
             session["end"] = record["end"] = _now()
             record["status"] = session["status"] = FAILED
             message = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).strip()
-            record["error"] = message or type(exc).__name__
+            outside = _outside_failure(job, folder, record, exc)
+            record["error"] = str(outside) if outside else message or type(exc).__name__
             session["timings"] = {"total": time.perf_counter() - t_start + prepare_seconds}
             log.error("run failed: %s\n%s", record["error"], traceback.format_exc())
-            write_record(folder, record)
+            try:
+                write_record(folder, record)
+            except OSError:
+                if outside is None:
+                    raise
+            if outside is not None:
+                raise outside from exc
             exc.add_note(f"run folder: {folder} (complete it with: mcchain run --resume {folder})")
             raise
-        if getattr(job.scene, "requirement", None):
-            try:
-                record["requirements"] = _requirement_lines(folder)
-            except Exception as exc:  # the ensemble is complete: this must not fail the run
-                log.error("requirement summary failed: %s\n%s", exc, traceback.format_exc())
-                record["requirements"] = [f"requirements: the summary failed ({exc}); see run.log"]
-        total = time.perf_counter() - t_start + prepare_seconds
-        _complete(job, record, session, stats, merged, counts, total, prepare_seconds)
-        if record.get("extensions"):
-            record["extensions"][-1].setdefault("end", session["end"])
-        write_record(folder, record)
         log.info("run completed: %s", json.dumps(counts))
         if not keep_parts:
             for part in list_parts(parts_dir):
@@ -501,7 +531,7 @@ def execute(
             with contextlib.suppress(OSError):
                 parts_dir.rmdir()
         drop_lock(folder)  # still held: a completed run keeps no lock file
-    return RunResult(folder, record)
+    return RunResult(folder, record, failed)
 
 
 def start_run(
@@ -524,9 +554,10 @@ def start_run(
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
-    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices) happens
-    before the folder is created: a bad input raises ``SceneError``/``RunError`` and writes
-    nothing. ``rerun`` streams samples to rerun while the run goes (:class:`LiveOptions`).
+    Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices, the disk
+    space: :func:`mcchain.resources.check_disk`) happens before the folder is created: a
+    bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams
+    samples to rerun while the run goes (:class:`LiveOptions`).
 
     ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
     the console script only): a background process compiles them for the next runs, and
@@ -558,6 +589,7 @@ def start_run(
             job, Path(scene_path), seed=seed, chunk_size=chunk_size, loader=loader
         )
         check_live(rerun, job.model.nsample)
+        check_disk(job.disk, out if run_dir is None else run_dir)
         if interpreted:
             from mcchain.compile_ahead import start_background
 
@@ -626,6 +658,9 @@ def resume_run(
     ``ensemble.damaged.nc``): the chunks whose part files are gone (a completed run keeps
     none) are computed again, and runs are deterministic, so the file is the one the run
     wrote first.
+
+    A resume whose missing part files and merge would not fit in the free space is refused
+    before anything changes (:func:`mcchain.resources.check_disk`).
     """
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
 
@@ -666,6 +701,7 @@ def resume_run(
         )
     job = keep_kernels(job, record.get("kernels"))
     check_live(rerun, job.nsample)
+    check_disk(job.disk, folder, _missing_samples(folder, record), retry="resume")
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
     argv = list(sys.argv if argv is None else argv)
@@ -723,6 +759,61 @@ def _add_stats(a: ExecutionStats, b: ExecutionStats) -> ExecutionStats:
         write=a.write + b.write,
         worker_info=a.worker_info + b.worker_info,
     )
+
+
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+"""``OSError`` numbers of a file system with no room left (full, or over the user's quota)."""
+
+
+def _outside_failure(
+    job: Job, folder: Path, record: Mapping[str, Any], exc: BaseException
+) -> RunFailed | None:
+    """The one-line :class:`RunFailed` of a run that failed for a reason outside the scene
+    and the code, with the finished chunks kept: its folder removed or made unwritable, or
+    its file system full (``ENOSPC``, or netCDF's "HDF error" while less space is free
+    than the run still writes); None for any other failure (which is re-raised as is)."""
+    if not isinstance(exc, Exception):  # Ctrl-C: "interrupted", exit 130
+        return None
+    resume = f"mcchain run --resume {folder}"
+    if not folder.is_dir():
+        return RunFailed(
+            f"{folder}: the run folder was removed while the run went; its results are lost "
+            "with it (run the scene again)"
+        )
+    parts_dir = folder / PARTS
+    for place in (folder, parts_dir):
+        if place.is_dir() and not os.access(place, os.W_OK | os.X_OK):
+            return RunFailed(
+                f"{place}: the run folder was made unwritable while the run went; the "
+                f"finished chunks are kept: make it writable and complete it with: {resume}"
+            )
+    if not isinstance(exc, (OSError, RuntimeError)):
+        return None
+    from mcchain.ensemble.io import list_parts
+    from mcchain.resources import free_space, size_text
+
+    free, _ = free_space(folder)
+    missing = _missing_samples(folder, record)
+    need = None if job.disk is None else job.disk.peak(missing)
+    full = isinstance(exc, OSError) and exc.errno in DISK_FULL_ERRNOS
+    if not full and not ("HDF error" in str(exc) and need is not None and need > free):
+        return None
+    needed = "" if need is None else f"the run still needs up to {size_text(need)} and "
+    done = len(list_parts(parts_dir)) if parts_dir.is_dir() else 0
+    kept = f"{done} finished chunk{'' if done == 1 else 's'} kept"
+    return RunFailed(
+        f"{folder}: the disk is full: {needed}its file system has {size_text(free)} free; "
+        f"{kept}: free space and complete it with: {resume}"
+    )
+
+
+def _missing_samples(folder: Path, record: Mapping[str, Any]) -> int:
+    """Samples of a run (``run.json["samples"]``) that neither a finished part file nor,
+    during an ``--extend``, the ``ensemble.nc`` it extends holds."""
+    from mcchain.ensemble.io import list_parts
+
+    held = sum(p.stop - p.start for p in list_parts(folder / PARTS))
+    return int(record["samples"]) - extension_base(folder, record) - held
 
 
 DAMAGED_ENSEMBLE = "ensemble.damaged.nc"
@@ -814,6 +905,7 @@ def extend_run(
 
     job = keep_sequential(job, record)
     check_live(rerun, total)
+    check_disk(job.disk, folder, samples, retry="extend")
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": _now()})
     record["restarts"] = sorted({*record.get("restarts", []), old})
     record["samples"] = total

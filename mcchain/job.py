@@ -22,6 +22,7 @@ from mcchain.errors import RunError
 
 if TYPE_CHECKING:
     from mcchain.model import Model
+    from mcchain.resources import DiskEstimate
 
 Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
 """``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
@@ -40,6 +41,8 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
+        disk: what the run writes (:class:`mcchain.resources.DiskEstimate`; ``None`` for a
+            scene that is not a real one, the tests' fakes).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
@@ -57,6 +60,7 @@ class Job:
     history_dtype: str
     compression: str
     complevel: int
+    disk: DiskEstimate | None = None
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -183,6 +187,8 @@ def prepare_job(
         text = path.read_text(encoding="utf-8")
     name = getattr(_section(scene, "scene"), "name", None) or path.stem
     nsample = int(model.nsample)
+    from mcchain.resources import estimate_disk
+
     return Job(
         scene=scene,
         model=model,
@@ -194,6 +200,7 @@ def prepare_job(
         history_dtype=str(storage.history_dtype),
         compression=str(storage.compression),
         complevel=int(storage.complevel),
+        disk=estimate_disk(scene, model, nsample, int(chunk)),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
         notes=[] if kernels_note is None else [kernels_note],

@@ -176,10 +176,24 @@ def file_locked(path: Path) -> bool:
     return False
 
 
+class _RunLogHandler(logging.FileHandler):
+    """``run.log``'s handler: a line that cannot be written (a full disk) is dropped in
+    silence, where logging would print a traceback per line; the run's own error says
+    what happened."""
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        pass
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):  # the last flush, on a full disk
+            super().close()
+
+
 @contextlib.contextmanager
 def run_log(folder: Path) -> Iterator[None]:
-    """Copy the ``mcchain`` log (INFO and up) to the folder's ``run.log`` meanwhile."""
-    handler = logging.FileHandler(Path(folder) / LOG_FILE, encoding="utf-8")
+    """Copy the ``mcchain`` log (INFO and up) to the folder's ``run.log`` meanwhile (lines
+    that cannot be written, on a full disk, are dropped)."""
+    handler = _RunLogHandler(Path(folder) / LOG_FILE, encoding="utf-8")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     handler.setLevel(logging.INFO)
     previous = log.level

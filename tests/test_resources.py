@@ -43,3 +43,38 @@ def test_huge_samples_flag__names_the_flag(tmp_path, monkeypatch, capsys):
 def test_available_memory__is_known_here() -> None:
     available = resources.available_memory()
     assert available is not None and available > 2**20
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        "clearance-sweep",  # equilibrium, modes and shapes
+        "fourbar-damper",  # modes along a crank turn
+        "slider-crank-flores",  # time histories, a prismatic joint, a contact law
+    ],
+)
+def test_disk_estimate__is_what_the_part_files_hold(tmp_path, config):
+    """The estimate's bytes per sample are exactly the part files' data per sample, each
+    file's metadata stays within the overhead counted, and the merged (compressed) file
+    within its uncompressed bound."""
+    import netCDF4
+
+    from mcchain.execution import start_run
+    from mcchain.job import prepare_job
+
+    path = REPO / "configs" / f"{config}.toml"
+    result = start_run(path, samples=6, chunk_size=4, out=tmp_path, progress=False, keep_parts=True)
+    estimate = prepare_job(path, samples=6, chunk_size=4).disk
+    assert estimate is not None
+    parts = sorted((result.folder / "parts").glob("part-*.nc"))
+    assert len(parts) == 2
+    for part in parts:
+        with netCDF4.Dataset(part) as nc:
+            n = nc.dimensions["sample"].size
+            data = sum(
+                v.size * v.dtype.itemsize for v in nc.variables.values() if "sample" in v.dimensions
+            )
+        assert data == n * estimate.sample_bytes
+        assert data < part.stat().st_size <= data + estimate.file_bytes
+    assert sum(p.stat().st_size for p in parts) <= estimate.parts()
+    assert (result.folder / "ensemble.nc").stat().st_size <= estimate.merged

@@ -133,7 +133,8 @@ def test_compile_model__sampled_path_lands_in_its_slot(path: str) -> None:
     doc["spring"][0]["rest_length"] = 0.3  # a default rest length would follow positions
     doc["driver"][0]["angle0"] = -1.5  # a default angle0 would follow the body's angle
     base = compile_model(load_scene_text(toml_text(doc)))
-    doc["sample"] = {"count": 16, "seed": 4, "vary": {path: {"uniform": [0.5, 0.75]}}}
+    low, high = (5e-4, 7.5e-4) if path.endswith("clearance") else (0.5, 0.75)  # m for clearance
+    doc["sample"] = {"count": 16, "seed": 4, "vary": {path: {"uniform": [low, high]}}}
     model = compile_model(load_scene_text(toml_text(doc)))
     name, idx = PATHS[path]
     arr = getattr(model, name)

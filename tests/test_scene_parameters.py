@@ -69,7 +69,8 @@ def test_topology_slots__are_the_tables(name: str) -> None:
 
 
 def test_pack_parameters__rows_hold_the_model_values() -> None:
-    vary = {"body.b1.mass": U, "joint.J2.clearance": U, "spring.S0.damping": U}
+    clearance = {"uniform": [1e-4, 1e-3]}  # m: U would be a clearance as large as the bars
+    vary = {"body.b1.mass": U, "joint.J2.clearance": clearance, "spring.S0.damping": U}
     d = chain_scene_dict(3, (0, 2), seed=2, springs=1, forces=1, driver=True, sample=5, vary=vary)
     model = compile_model(scene_from_dict(d))
     topo = Topology.from_model(model)

@@ -2,13 +2,14 @@
 
 Duplicate or reserved names, references to unknown bodies, sampled and perturbation paths,
 distribution supports against the parameter's domain, counts against the design, ``output_dt``
-against ``dt``. Each failure is one :class:`~mcchain.errors.SceneError` line
-``key.path: reason``.
+against ``dt``, clearances against the size of the mechanism (a clearance written in mm).
+Each failure is one :class:`~mcchain.errors.SceneError` line ``key.path: reason``.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 
 from mcchain.errors import SceneError
 from mcchain.parameters import PARAMETERS
@@ -16,6 +17,7 @@ from mcchain.scene.models import (
     FIXED_STEP_METHODS,
     GROUND_NAME,
     LOOP_METHODS,
+    Distribution,
     Driver,
     Force,
     Joint,
@@ -46,8 +48,9 @@ def check_scene(scene: Scene) -> None:
     Duplicate or reserved names, references to unknown bodies, bodies joined to themselves,
     bodies not connected to the ground, drivers/forces on ground, duplicate drivers, sampled
     and perturbation paths, the distributions' supports against the parameter's domain, a
-    ``"saltelli"`` count against the number of varied paths, ``output_dt`` against ``dt``.
-    Kinematics are not checked.
+    ``"saltelli"`` count against the number of varied paths, ``output_dt`` against ``dt``,
+    each clearance (written or sampled) against :data:`CLEARANCE_SHARE` of the joint's
+    neighbouring dimension (:func:`_check_clearance_scale`). Kinematics are not checked.
     """
     bodies = scene.body_names
     known = {GROUND_NAME, *bodies}
@@ -145,8 +148,8 @@ def check_scene(scene: Scene) -> None:
             )
         seen_requirement[requirement.name] = i
 
+    targets: dict[str, str] = {}  # canonical sampled path -> the path as written
     if scene.sample is not None:
-        targets: dict[str, str] = {}
         for path, dist in scene.sample.vary.items():
             where = f"sample.vary.{quote_key(path)}"
             try:
@@ -189,6 +192,10 @@ def check_scene(scene: Scene) -> None:
                 "(its clearance is 0 and not sampled)"
             )
         _check_contact(scene, where, joint, clearance_joint, sampled)
+        path = f"joint.{joint.name}.clearance"
+        written = targets.get(path)
+        sampled_as = scene.sample.vary[written] if written and scene.sample else None
+        _check_clearance_scale(scene, i, where, sampled_as, written)
 
     along = scene.modes.along if scene.modes is not None else None
     if along is not None and along.driver not in {d.body for d in scene.driver if not d.slides}:
@@ -462,4 +469,82 @@ def _check_contact(
             raise SceneError(
                 f"sample.vary.{quote_key(path)}: the stiffness of joint {joint.name!r} comes "
                 "from its radius and materials; give `stiffness` in [joint.contact] to sample it"
+            )
+
+
+CLEARANCE_SHARE = 0.05
+"""Largest clearance accepted, as a share of the joint's shortest neighbouring dimension
+(:func:`neighbouring_dimension`). Real clearances are thousandths of that dimension; a value
+past this share is a clearance written in millimetres (``clearance = 0.5`` on a 1 m bar),
+whose every sample would diverge or carry absurd contact forces."""
+
+UPPER_SIGMAS = 4.0
+"""A normal or lognormal clearance is checked at its mean + 4 standard deviations (of its
+log, for lognormal): the 0.99997 quantile, past which one draw in 31,600 falls."""
+
+
+def upper_value(dist: Distribution) -> tuple[float, str]:
+    """The largest value a sampled clearance is checked at, and what it is: the upper bound
+    (uniform, truncnormal, choice), or the mean + :data:`UPPER_SIGMAS` standard deviations
+    (normal; of the log for lognormal)."""
+    bounds = dist.bounds()
+    if bounds is not None:
+        return bounds[1], "its upper bound"
+    centre, spread = dist.args
+    top = centre + UPPER_SIGMAS * spread
+    what = f"its mean + {UPPER_SIGMAS:g} standard deviations"
+    if dist.kind == "lognormal":
+        return math.exp(top), f"exp(mu + {UPPER_SIGMAS:g} sigma)"
+    return top, what
+
+
+def neighbouring_dimension(scene: Scene, index: int) -> tuple[float, str] | None:
+    """The shortest distance (m) from joint ``index``'s point on either of its bodies to
+    another joint's point on that body or to the body's centre of mass (the ground has
+    none), and what it reaches; None when every such distance is 0 (a lone joint at the
+    centre of mass)."""
+    joint = scene.joint[index]
+    best: tuple[float, str] | None = None
+    for side, body in enumerate(joint.bodies):
+        here = joint.points[side]
+        others: list[tuple[list[float], str]] = []
+        if body != GROUND_NAME:
+            others.append(([0.0, 0.0], f"the centre of mass of body {body!r}"))
+        for k, other in enumerate(scene.joint):
+            if k == index:
+                continue
+            for other_side, other_body in enumerate(other.bodies):
+                if other_body == body:
+                    others.append((other.points[other_side], f"joint {other.name!r} on {body!r}"))
+        for point, what in others:
+            distance = math.hypot(point[0] - here[0], point[1] - here[1])
+            if distance > 0 and (best is None or distance < best[0]):
+                best = (distance, what)
+    return best
+
+
+def _check_clearance_scale(
+    scene: Scene, index: int, where: str, dist: Distribution | None, path: str | None
+) -> None:
+    """Refuse a clearance (or a sampled clearance's :func:`upper_value`) larger than
+    :data:`CLEARANCE_SHARE` of the joint's :func:`neighbouring_dimension`."""
+    joint = scene.joint[index]
+    if joint.type != "revolute":
+        return
+    nearest = neighbouring_dimension(scene, index)
+    if nearest is None:
+        return
+    size, what = nearest
+    limit = CLEARANCE_SHARE * size
+    hint = (
+        f"more than {CLEARANCE_SHARE:.0%} of the joint's shortest neighbouring dimension "
+        f"({size:.6g} m, to {what}): clearances are in metres (at most {limit:.3g} m here)"
+    )
+    if joint.clearance > limit:
+        raise SceneError(f"{where}.clearance: {joint.clearance!r} m is {hint}")
+    if dist is not None and path is not None:
+        top, which = upper_value(dist)
+        if top > limit:
+            raise SceneError(
+                f"sample.vary.{quote_key(path)}.{dist.kind}: {which} {top:.6g} m is {hint}"
             )
