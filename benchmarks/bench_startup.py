@@ -18,6 +18,9 @@ row reuses the caches the rows above it filled, as a user's session would:
    clearance joint under the contact law (rk45), a 32-bar chain (rk4);
 4. ``mcchain validate`` of the Quick start's scene, warm.
 
+Every command runs with its stdin and stderr on a pseudo-terminal, as at a user's terminal
+(where alone a cold first run starts its background compile).
+
 The two commits run row by row (one right after the other), each with its own caches, so
 that both see the same machine load. ``--quick`` leaves out the 32-bar chain. Writes
 ``benchmarks/results/startup/startup.md`` and ``startup.png`` (ratios are measured in one
@@ -107,13 +110,48 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
         if "fourbar" in args[1]:
             cmd += ["--samples", "4"]  # the compile is the point, not the 1000 samples
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True)
+    code, out, err = _in_terminal(cmd, work, env)
     seconds = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(args)} failed in {tree}:\n{proc.stderr[-2000:]}")
+    if code != 0:
+        raise SystemExit(f"{' '.join(args)} failed in {tree}:\n{err[-2000:]}")
     wait = "from mcchain.compile_ahead import wait_background as w; w()"  # older: no such
     subprocess.run([sys.executable, "-c", wait], env=env, capture_output=True)
-    return seconds, time.perf_counter() - t0, proc.stdout + proc.stderr
+    return seconds, time.perf_counter() - t0, out + err
+
+
+def _in_terminal(cmd: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, str, str]:
+    """Run ``cmd`` with its stdin and stderr on a pseudo-terminal, as a user at a terminal
+    runs it (a cold first run starts its background compile only there:
+    ``mcchain.compile_ahead.why_not_background``); its exit code, stdout and stderr."""
+    import pty
+    import threading
+
+    env = {k: v for k, v in env.items() if k not in ("CI", "SLURM_JOB_ID", "PBS_JOBID")}
+    master, slave = pty.openpty()
+    chunks: list[bytes] = []
+
+    def drain() -> None:
+        while True:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # the terminal's other end closed
+                return
+            if not data:
+                return
+            chunks.append(data)
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+    try:
+        proc = subprocess.run(
+            cmd, cwd=cwd, env=env, stdin=slave, stdout=subprocess.PIPE, stderr=slave, text=True
+        )
+    finally:
+        os.close(slave)
+        reader.join(timeout=5)
+        os.close(master)
+    err = b"".join(chunks).decode(errors="replace").replace("\r\n", "\n")
+    return proc.returncode, proc.stdout, err
 
 
 def measure(trees: dict[str, Path], parent: Path, quick: bool) -> dict[str, dict[str, float]]:

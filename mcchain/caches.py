@@ -7,12 +7,16 @@ Three caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources
 quasi-random sample designs drawn before (:func:`mcchain.scene.sampling.unit_design`). A
 cache that cannot be written (a read-only home or installation) never stops a run: the cache
 moves to the temporary folder, with one warning line on stderr, and kernels then compile once
-per machine boot instead of once per installation.
+per machine boot instead of once per installation. That folder has a predictable name
+(``<tmp>/mcchain-<name>-<uid>``): it is used only if it is private to the user
+(:func:`not_private`), since another user who made it first could plant machine code in it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -31,11 +35,51 @@ def writable(folder: Path) -> bool:
 
 
 def temporary_cache(name: str) -> Path:
-    """``<tmp>/mcchain-<name>-<uid>``, made if needed."""
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    folder = Path(tempfile.gettempdir()) / f"mcchain-{name}-{uid}"
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+    """``<tmp>/mcchain-<name>-<uid>``, made private (mode 0700) if new, or checked: a folder
+    another user could write (made before by someone else, or with a wider mode) is never
+    loaded from, since a cache file is machine code unpickled as it is read. Such a folder is
+    replaced, for this process, by a fresh private one (``mkdtemp``), with one warning line."""
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    folder = Path(tempfile.gettempdir()) / f"mcchain-{name}-{uid or 0}"
+    fresh = _fresh.get(folder)
+    if fresh is not None:
+        return fresh
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir(mode=0o700)
+    problem = None if uid is None else not_private(folder, uid)
+    if problem is None:
+        return folder
+    fresh = Path(tempfile.mkdtemp(prefix=f"mcchain-{name}-{uid}-"))
+    _fresh[folder] = fresh
+    print(
+        f"mcchain: warning: {folder} is not private ({problem}): it is not used, compiled "
+        f"kernels are cached in {fresh} for this process only",
+        file=sys.stderr,
+        flush=True,
+    )
+    return fresh
+
+
+_fresh: dict[Path, Path] = {}
+"""The private folders made instead of temporary caches that failed :func:`not_private`."""
+
+
+def not_private(folder: Path, uid: int) -> str | None:
+    """Why ``folder`` is not a private folder of user ``uid`` (a folder, not a link, owned by
+    ``uid``, that no one else may write or read), or None if it is."""
+    try:
+        info = os.lstat(folder)
+    except OSError as exc:
+        return f"cannot be read: {exc.strerror}"
+    if stat.S_ISLNK(info.st_mode):
+        return "a symbolic link"
+    if not stat.S_ISDIR(info.st_mode):
+        return "not a folder"
+    if info.st_uid != uid:
+        return f"owned by uid {info.st_uid}"
+    if info.st_mode & 0o077:
+        return f"mode {stat.S_IMODE(info.st_mode):04o}, not 0700"
+    return None
 
 
 def warn_fallback(what: str, folder: Path | str, fallback: Path) -> None:
@@ -141,3 +185,99 @@ def kernels_cached(kernels: list[str]) -> bool | None:
         return None
     suffix = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
     return all(any(folder.glob(f"{name}-*{suffix}")) for name in kernels)
+
+
+MCCHAIN_FOLDERS = ("native", "generated", "compile", "designs")
+"""The folders of mcchain's cache (:func:`mcchain_cache`): the lane kernels' machine code
+(:mod:`mcchain.codegen.native`) and text (where numba compiles it), the background
+compile's lock, record and log (:mod:`mcchain.compile_ahead`), the sample designs."""
+
+NUMBA_SUFFIXES = (".nbi", ".nbc")
+"""numba's index and machine-code files (of mcchain's kernels in :func:`numba_index_folder`;
+those of the generated modules in the ``generated`` folder's ``__pycache__``)."""
+
+
+def _files(folder: Path, suffixes: tuple[str, ...] | None = None) -> list[Path]:
+    if not folder.is_dir():
+        return []
+    found = [p for p in folder.rglob("*") if p.is_file()]
+    return [p for p in found if suffixes is None or p.suffix in suffixes]
+
+
+def _size(files: list[Path]) -> str:
+    total = 0
+    for path in files:
+        with contextlib.suppress(OSError):
+            total += path.stat().st_size
+    return f"{len(files)} files, {total / 1e6:.1f} MB"
+
+
+def status_lines() -> list[str]:
+    """What ``mcchain cache status`` prints: each cache folder with its files and size, the
+    lane kernels compiled by variant and entry point, the versions and target CPU their
+    machine code is keyed by, and the background compile's state."""
+    import re
+
+    lines = []
+    for name in MCCHAIN_FOLDERS:
+        folder = mcchain_cache(name)
+        lines.append(f"{name}: {folder} ({_size(_files(folder))})")
+        if name == "native":
+            entries: dict[str, int] = {}
+            for path in _files(folder, (".bin",)):
+                match = re.match(
+                    r"mcchain_gen_(\w+?)_[0-9a-f]{20}-(\w+)-[0-9a-f]+\.bin$", path.name
+                )
+                what = f"{match[1]}.{match[2]}" if match else "others (not lane kernels)"
+                entries[what] = entries.get(what, 0) + 1
+            for what, count in sorted(entries.items()):
+                lines.append(f"  {what}: {count} compiled (scenes × argument types)")
+    numba_folder = numba_index_folder()
+    if numba_folder is not None:
+        lines.append(
+            f"numba (mcchain's kernels): {numba_folder} "
+            f"({_size(_files(numba_folder, NUMBA_SUFFIXES))})"
+        )
+    from mcchain.codegen.layout import LMAX, target_cpu
+    from mcchain.codegen.native import key_versions, lane_compiler
+
+    cpu, _features = target_cpu()
+    lines.append(f"lane kernels: compiled by {lane_compiler()}, for CPU {cpu}, {LMAX} lanes")
+    lines.append("keyed by: " + ", ".join(key_versions()))
+    from mcchain.compile_ahead import read_background
+
+    record = read_background()
+    if record is not None:
+        state = record.get("state")
+        detail = record.get("error") if state in ("failed", "ended") else record.get("scene")
+        lines.append(f"background compile: {state} ({detail})")
+    return lines
+
+
+def clear() -> list[str]:
+    """Remove all of mcchain's cached files (``mcchain cache clear``): its folders
+    (:data:`MCCHAIN_FOLDERS`) and numba's files of mcchain's kernels. Returns one line per
+    folder, saying what it removed."""
+    import shutil
+
+    lines = []
+    for name in MCCHAIN_FOLDERS:
+        folder = mcchain_cache(name)
+        files = _files(folder)
+        removed = _size(files)
+        for child in list(folder.iterdir()):
+            with contextlib.suppress(OSError):
+                if child.is_dir() and not child.is_symlink():
+                    shutil.rmtree(child)
+                else:
+                    child.unlink()
+        lines.append(f"{name}: removed {removed} from {folder}")
+    numba_folder = numba_index_folder()
+    if numba_folder is not None:
+        files = _files(numba_folder, NUMBA_SUFFIXES)
+        removed = _size(files)
+        for path in files:
+            with contextlib.suppress(OSError):
+                path.unlink()
+        lines.append(f"numba (mcchain's kernels): removed {removed} from {numba_folder}")
+    return lines

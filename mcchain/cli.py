@@ -164,6 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--rerun-spawn", action="store_true", help="--rerun: spawn a rerun viewer instead"
     )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--no-background-compile",
+        action="store_true",
+        help="on a cold cache, start no background process compiling the kernels for the next "
+        "runs (for good: run.background_compile = false in ~/.config/mcchain/config.toml)",
+    )
 
     validate = sub.add_parser(
         "validate", help="check a scene; print bodies, joints, constraint rows and dof"
@@ -192,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
         "export",
         help="write a run's per-sample results as a table",
         description="write one row per sample: sampled parameters, status, pulsations (rad/s "
-        "and Hz), equilibria, contact summaries and the peaks of the force histories",
+        "and Hz), equilibria, contact summaries, the peaks tracked at every step (peak_*), "
+        "and the largest stored point of each force history (max_stored_*)",
         named_errors=True,
     )
     export.add_argument("run", help="run folder (or its id under runs/)")
@@ -245,7 +252,44 @@ def build_parser() -> argparse.ArgumentParser:
     rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
     rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
 
+    add_cache_parser(sub)
     return parser
+
+
+def add_cache_parser(sub: Any) -> None:
+    """``mcchain cache status | warm SCENE… | clear``: the compiled-code caches."""
+    cache = sub.add_parser(
+        "cache",
+        help="what is compiled, where; compile scenes ahead; clear the caches",
+        description="mcchain's compiled-code caches (MCCHAIN_CACHE_DIR, numba's cache of "
+        "mcchain's kernels)",
+    )
+    action = cache.add_subparsers(
+        dest="cache_action", metavar="{status,warm,clear}", required=True, parser_class=_Parser
+    )
+    action.add_parser("status", help="what is compiled, where, sizes, versions and target")
+    warm = action.add_parser(
+        "warm",
+        help="compile every kernel these scenes' runs call, now (for CI images and cluster "
+        "nodes: their runs then compile nothing)",
+    )
+    warm.add_argument("scenes", nargs="+", metavar="SCENE.toml")
+    action.add_parser("clear", help="remove all compiled code and cached designs")
+
+
+def _cmd_cache(args: argparse.Namespace) -> int:
+    from mcchain import caches
+
+    if args.cache_action == "status":
+        print("\n".join(caches.status_lines()))
+    elif args.cache_action == "clear":
+        print("\n".join(caches.clear()))
+    else:
+        from mcchain.compile_ahead import warm
+
+        for scene in args.scenes:
+            print(warm(scene))
+    return 0
 
 
 def add_show_arguments(parser: argparse.ArgumentParser) -> None:
@@ -398,6 +442,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             from mcchain.first_run import choose
 
             first_run = choose(args.scene, args.samples, args.seed)
+        background_off = None
+        if first_run is not None:
+            from mcchain.user_config import background_compile_off
+
+            background_off = background_compile_off()
+            if args.no_background_compile:
+                background_off = "--no-background-compile"
         result = execution.start_run(
             args.scene,
             samples=args.samples,
@@ -411,6 +462,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             progress=progress,
             rerun=live,
             first_run=first_run,
+            background_off=background_off,
         )
     for line in result.summary():
         print(line)
@@ -768,6 +820,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "export": _cmd_export,
             "check": _cmd_check,
             "rare": _cmd_rare,
+            "cache": _cmd_cache,
         }[command]
         return handler(args)
     except RunFailed as exc:

@@ -149,6 +149,39 @@ def _interpreted() -> bool:
     return config.INTERPRETED
 
 
+def kernel_compiler(job: Job) -> str:
+    """What compiled the kernels this process runs, as ``run.json``'s sessions and the
+    ensemble's attributes record it: ``"interpreted"`` (:mod:`mcchain.first_run`: plain
+    Python, no compile), ``"native"`` (the generated lane kernels of a ``[simulate]`` on
+    ``kernels = "lanes"`` through :mod:`mcchain.codegen.native`) or ``"numba"`` (the
+    hand-written kernels, and the lane kernels with ``MCCHAIN_LANE_COMPILER=numba`` or
+    where this NumPy's layout sends them to numba: their last bits may differ)."""
+    if _interpreted():
+        return "interpreted"
+    kernels = _kernels(job)
+    if kernels is None or kernels == "loop":
+        return "numba"
+    from mcchain.codegen.native import lane_compiler
+
+    return lane_compiler()
+
+
+def _kernel_target(job: Job) -> dict[str, Any] | None:
+    """The CPU the generated lane kernels were generated and compiled for (their text
+    depends on its SIMD width: :func:`mcchain.codegen.layout.target_cpu`), or None where
+    the run uses none."""
+    kernels = _kernels(job)
+    if _interpreted() or kernels is None or kernels == "loop":
+        return None
+    import hashlib
+
+    from mcchain.codegen.layout import LMAX, target_cpu
+
+    name, features = target_cpu()
+    digest = hashlib.sha256(features.encode()).hexdigest()[:16]
+    return {"cpu": name, "features_sha256": digest, "lane_width": LMAX}
+
+
 def _kernels(job: Job) -> str | None:
     """The path that integrates the run's time histories (``[simulate] kernels``), or None."""
     sim = getattr(job.scene, "simulate", None)
@@ -310,6 +343,8 @@ def _complete(
         scheduler=stats.scheduler,
         threads=stats.threads,
         kernels_interpreted=_interpreted(),
+        kernel_compiler=kernel_compiler(job),
+        kernel_target=_kernel_target(job),
         timings=timings,
     )
     summed: dict[str, float] = {}
@@ -440,7 +475,7 @@ def execute(
                 stats = _compute(
                     job,
                     parts_dir,
-                    job.attributes(versions),
+                    {**job.attributes(versions), "kernel_compiler": kernel_compiler(job)},
                     run_chunks(record, job.chunk_size),
                     base=base,
                     dask=dask,
@@ -551,6 +586,7 @@ def start_run(
     keep_parts: bool = False,
     rerun: LiveOptions | None = None,
     first_run: FirstRun | None = None,
+    background_off: str | None = None,
 ) -> RunResult:
     """Run a scene into a new run folder (``mcchain run``).
 
@@ -562,7 +598,9 @@ def start_run(
     ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
     the console script only): a background process compiles them for the next runs, and
     should the interpreted kernels raise, the process becomes the compiled run (or its
-    resume, once the folder exists).
+    resume, once the folder exists). ``background_off``: what switched that background
+    compile off (``--no-background-compile``, the user's config file), or None
+    (:func:`mcchain.compile_ahead.why_not_background` has the other reasons).
     """
     t0 = time.perf_counter()
     if run_dir is not None:
@@ -590,10 +628,16 @@ def start_run(
         )
         check_live(rerun, job.model.nsample)
         check_disk(job.disk, out if run_dir is None else run_dir)
-        if interpreted:
-            from mcchain.compile_ahead import start_background
+        if real:
+            from mcchain.compile_ahead import background_failure_note
 
-            background = start_background(Path(scene_path), seed, samples)
+            failed = background_failure_note()
+            if failed is not None:
+                job.warnings.append(failed)
+        if interpreted:
+            from mcchain.compile_ahead import background_note
+
+            background = background_note(Path(scene_path), seed, samples, background_off)
             assert first_run is not None
             job.notes.append(first_run.note(job.nsample, background))
         for line in job.warnings:

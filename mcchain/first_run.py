@@ -5,10 +5,13 @@ A statics sweep's kernels take about 35 s of one core to compile (about 20 s on 
 Interpreted as plain Python (:func:`mcchain.kernels.config.interpret_kernels`), the same
 kernels solve those samples in about 4-5 s, with the compiled kernels' bits: the same IEEE
 operations in the same order, libm's ``hypot`` in both (tested on every shipped scene, and
-a run's ``ensemble.nc`` is the same file either way). So on a cold cache a small statics
-run is interpreted, and a detached process compiles the kernels into the cache meanwhile
-(:func:`mcchain.compile_ahead.start_background`): the next run loads them. Which way a run
-went is in ``run.json`` only (its notes, and ``kernels_interpreted`` in its session).
+a run's ``ensemble.nc`` holds the same bytes either way, but for its attribute
+``kernel_compiler``). So on a cold cache a small statics run is interpreted, and a detached
+process compiles the kernels into the cache meanwhile where it may (in an interactive
+terminal, outside CI and batch schedulers, not switched off:
+:func:`mcchain.compile_ahead.background_note`): the next run loads them. Which way a run
+went is in ``run.json`` (its notes, ``kernels_interpreted`` and ``kernel_compiler`` in its
+session) and in the ensemble's attribute ``kernel_compiler``.
 
 :func:`choose` decides, before any kernel module is imported, and only in a process that
 does nothing but this run (``mcchain run SCENE`` from the console script, never a process
@@ -38,6 +41,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
@@ -83,11 +87,19 @@ class FirstRun:
         )
 
 
-def choose(scene_path: str | Path, samples: int | None, seed: int | None) -> FirstRun | None:
+def choose(
+    scene_path: str | Path,
+    samples: int | None,
+    seed: int | None,
+    now: Callable[[], float] = time.time,
+) -> FirstRun | None:
     """Whether this run goes interpreted (see the module's docstring): a :class:`FirstRun`
-    if so, None to go on compiled as usual. Where the probe says no, the process is
-    replaced by the same command with compiled kernels (:func:`run_compiled`), and this
-    does not return."""
+    if so, None to go on compiled as usual. Where the probe says no, or where a background
+    compile already running should end sooner than the run interpreted would (from when it
+    started and the length of the last one: :func:`mcchain.compile_ahead.
+    background_remaining`, on the clock ``now``), the process is replaced by the same
+    command with compiled kernels (:func:`run_compiled`, after waiting for that compile),
+    and this does not return."""
     switch = os.environ.get(ENV_SWITCH)
     if switch == "0":
         return None
@@ -121,6 +133,12 @@ def choose(scene_path: str | Path, samples: int | None, seed: int | None) -> Fir
         run_compiled()
     if per_sample * count > BUDGET_S:
         run_compiled()
+    from mcchain.compile_ahead import background_remaining, wait_background
+
+    remaining = background_remaining(now)
+    if remaining is not None and remaining < per_sample * count:
+        wait_background()
+        run_compiled()  # the kernels are in the cache now (or, if it failed, compile here)
     return FirstRun(per_sample)
 
 

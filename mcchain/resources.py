@@ -156,11 +156,11 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
             spec.name
             for spec in VARIABLES.values()
             if spec.analysis == "simulate"
-            and spec.name not in ("joint_moment", "driver_force")
+            and spec.name not in ("joint_moment", "driver_force", "peak_driver_force")
             and (model.has_contact or spec.name not in _CONTACT_OUTPUTS)
         }
         stored |= {"joint_moment"} if model.has_prismatic else set()
-        stored |= {"driver_force"} if model.has_slider_drivers else set()
+        stored |= {"driver_force", "peak_driver_force"} if model.has_slider_drivers else set()
     total = 8  # the int64 sample coordinate
     for name in stored:
         spec = VARIABLES[name]

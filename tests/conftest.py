@@ -3,6 +3,10 @@
 Processes the tests start never run their kernels interpreted on a cold cache
 (``MCCHAIN_INTERPRET_COLD=0``), unless a test asks for it.
 
+mcchain's cache (``MCCHAIN_CACHE_DIR``: native machine code, generated text, designs) is a
+temporary folder of the session unless the environment names one (``.ci/run`` does, to keep
+it between CI runs): a test never writes to the developer's ``~/.cache/mcchain``.
+
 Hypothesis: under CI (``CI`` set, as ``.ci/run`` does) every property test is derandomized,
 so a CI run cannot fail on a draw that a developer's run never made; the example database is
 off there too. Developers' runs keep random draws (and the database) to find new failures.
@@ -24,6 +28,18 @@ settings.load_profile("ci" if os.environ.get("CI") else "dev")
 # A ``mcchain run`` the tests start as a process keeps the compiled kernels, whatever the
 # cache holds: the interpreted first run (mcchain.first_run) has tests of its own.
 os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _temporary_mcchain_cache(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """``MCCHAIN_CACHE_DIR`` in a temporary folder where the environment sets none (the
+    module's docstring); the processes the tests start inherit it."""
+    if os.environ.get("MCCHAIN_CACHE_DIR"):
+        yield
+        return
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path_factory.mktemp("mcchain-cache")))
+        yield
 
 
 @pytest.fixture

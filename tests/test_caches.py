@@ -118,3 +118,151 @@ def test_designs__a_rerun_reads_the_same_points_without_importing_scipy_stats(
     blocked_first, unwritable = draw(tmp_path / "a-file" / "cache", "blocked")
     assert blocked_first == "True"
     np.testing.assert_array_equal(unwritable, drawn)
+
+
+@pytest.fixture
+def own_tmp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A temporary folder of this test's own (``tempfile.gettempdir()``), empty."""
+    import tempfile
+
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    monkeypatch.setattr(caches, "_fresh", {})
+    return folder
+
+
+def test_temporary_cache__made_private(own_tmp: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = caches.temporary_cache("native")
+    assert folder == own_tmp / f"mcchain-native-{os.getuid()}"
+    assert folder.stat().st_mode & 0o777 == 0o700
+    assert caches.temporary_cache("native") == folder and capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("other", ["mode", "owner", "link"])
+def test_temporary_cache__a_folder_made_before_by_another_user_is_not_used(
+    own_tmp: Path, other: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The predictable folder exists already, writable by all (any user can test that), owned
+    by another user (root can), or a link to another folder: a planted cache file in it is
+    never read; a fresh private folder takes its place for this process, with one warning."""
+    planted = own_tmp / f"mcchain-native-{os.getuid()}"
+    if other == "link":
+        (own_tmp / "elsewhere").mkdir(mode=0o700)
+        planted.symlink_to(own_tmp / "elsewhere")
+    else:
+        planted.mkdir()
+        planted.chmod(0o777 if other == "mode" else 0o700)
+    if other == "owner":
+        if os.getuid() != 0:
+            pytest.skip("only root can give a folder to another user")  # "mode" covers it
+        os.chown(planted, 65534, 65534)
+    (planted / "mcchain_gen-accel-0.bin").write_bytes(b"planted")
+    folder = caches.temporary_cache("native")
+    assert folder != planted and folder.parent == own_tmp
+    assert folder.name.startswith(f"mcchain-native-{os.getuid()}-")
+    assert folder.stat().st_mode & 0o777 == 0o700 and not any(folder.iterdir())
+    assert caches.temporary_cache("native") == folder  # the same one for the process
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and str(planted) in err[0] and "is not private" in err[0]
+    reason = {"mode": "mode 0777", "owner": "owned by uid 65534", "link": "symbolic link"}
+    assert reason[other] in err[0]
+
+
+def test_suite__caches_in_a_temporary_folder_unless_told(tmp_path_factory) -> None:
+    """tests/conftest.py: no test writes to the developer's ~/.cache/mcchain."""
+    root = Path(os.environ["MCCHAIN_CACHE_DIR"])
+    home = Path(os.path.expanduser("~")) / ".cache" / "mcchain"
+    assert root.resolve() != home.resolve()
+    assert caches.mcchain_cache("native").parent == root
+
+
+# -- mcchain cache status | warm | clear (issue 29) -------------------------------------------
+
+COUNT_RUN = """
+import json, sys
+from numba.core import event
+from mcchain.cli import main
+from mcchain.codegen import native
+with event.install_recorder("numba:compile") as recorder:
+    code = main(["run", sys.argv[1], "--samples", "4", "--quiet", "--run-dir", sys.argv[2]])
+starts = [ev for _, ev in recorder.buffer if ev.is_start]
+print(json.dumps({"code": code, "numba": len(starts), "native": native.COUNTS}))
+"""
+
+
+@pytest.mark.slow
+def test_cache_warm__the_scenes_run_then_compiles_nothing(tmp_path: Path) -> None:
+    """``mcchain cache warm`` in one process; then the scene's run in a fresh one: numba
+    compiles nothing ("numba:compile" events counted) and every lane entry point is loaded
+    from the cache (counted), none compiled. The run records what compiled its kernels."""
+    import json
+
+    from mcchain.runs import read_record
+
+    scene = REPO / "configs" / "double-pendulum.toml"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "MCCHAIN_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("MCCHAIN_LANE_COMPILER", None)
+    warm = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "cache", "warm", str(scene)],
+        env=env, capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert warm.returncode == 0, warm.stderr[-3000:]
+    assert warm.stdout.startswith(f"{scene}: ready in ")
+    assert " compiled, 0 loaded from the cache)" in warm.stdout
+    run = subprocess.run(
+        [sys.executable, "-c", COUNT_RUN, str(scene), str(tmp_path / "run")],
+        env=env, capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    counts = json.loads(run.stdout.splitlines()[-1])
+    assert counts["code"] == 0 and counts["numba"] == 0
+    assert counts["native"]["compiled"] == 0 and counts["native"]["loaded"] >= 1
+    session = read_record(tmp_path / "run")["sessions"][-1]
+    assert session["kernel_compiler"] == "native"
+    from mcchain.codegen.layout import LMAX, target_cpu
+
+    assert session["kernel_target"]["cpu"] == target_cpu()[0]
+    assert session["kernel_target"]["lane_width"] == LMAX
+    import netCDF4
+
+    with netCDF4.Dataset(tmp_path / "run" / "ensemble.nc") as nc:
+        assert nc.getncattr("kernel_compiler") == "native"
+
+
+def test_cache_status_and_clear(tmp_path: Path, monkeypatch, mcchain) -> None:
+    """status: each folder with its files and size, the lane entries by variant, the keys;
+    clear: every cached file of mcchain's and numba's files of mcchain's kernels, nothing
+    else (a .pyc beside them stays)."""
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    native = caches.mcchain_cache("native")
+    digest = "0123456789abcdef0123"
+    (native / f"mcchain_gen_rk45_{digest}-adaptive_run-abc.bin").write_bytes(b"x" * 2000)
+    (native / f"mcchain_gen_rk45_{digest}-adaptive_run-def.bin").write_bytes(b"x" * 1000)
+    (caches.mcchain_cache("generated") / "mcchain_gen_x.py").write_text("x = 1\n")
+    numba_folder = caches.numba_index_folder()
+    assert numba_folder is not None
+    numba_folder.mkdir(parents=True)
+    for name in ("statics.equilibrium_batch-10.py311.nbi", "statics.x.nbc", "other.pyc"):
+        (numba_folder / name).write_bytes(b"y" * 100)
+    status = mcchain("cache", "status", cwd=tmp_path)
+    assert status.returncode == 0, status.stderr
+    lines = status.stdout.splitlines()
+    assert f"native: {native} (2 files, 0.0 MB)" in lines
+    assert "  rk45.adaptive_run: 2 compiled (scenes × argument types)" in lines
+    assert any(line.startswith("keyed by: native ") and "numpy " in line for line in lines)
+    assert f"numba (mcchain's kernels): {numba_folder} (2 files, 0.0 MB)" in lines
+    cleared = mcchain("cache", "clear", cwd=tmp_path)
+    assert cleared.returncode == 0, cleared.stderr
+    assert f"native: removed 2 files, 0.0 MB from {native}" in cleared.stdout.splitlines()
+    assert not any(native.iterdir()) and not any(caches.mcchain_cache("generated").iterdir())
+    assert [p.name for p in numba_folder.iterdir()] == ["other.pyc"]
+
+
+def test_cache_warm__a_bad_scene_is_one_line_and_compiles_nothing(tmp_path: Path, mcchain):
+    from test_cli_commands import assert_usage_error
+
+    (tmp_path / "bad.toml").write_text("[scene]\nname = 3\n")
+    assert_usage_error(mcchain("cache", "warm", "bad.toml", cwd=tmp_path), "scene.name")
+    assert_usage_error(mcchain("cache", cwd=tmp_path), "{status,warm,clear}")

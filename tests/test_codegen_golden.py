@@ -29,27 +29,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "a058d893986098a6d4e9774b1f0c18e8c00f78439f062b4df0308094acd29b0a",
-        "rk4-projection": "ff806b0b6f351db088f768634b18d58b625e4dd48c605e8a75c48e7d02766f3a",
-        "rk45": "504eb26c5ee36f0faacd94435ce822e3d15dd61c5887c68de71a878f2718deb9",
+        "rk4": "1377c010d32561d60de3560164b6156e5fe97150a4c2141e59e5508cf7d429ac",
+        "rk4-projection": "b2f6470fa65fa0fa43669cf68336ec8a32dd84d0c6d1b5efa48b50a252f42ce2",
+        "rk45": "f4cc0cceec6fd8b66cf4966b71d3453f06a2f00dcf8e57dfb5b949098396ee61",
     },
     "fourbar-clearance": {
         "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "6df9b9e5d5f07cce7430bd72ac48662afab444e79b9123bcbc0fe5756e4bb9c6",
-        "rk4-projection": "db0d39e9ca5f9a9fb835a1e4f35da5d09ec19306fdcb8a93a631c1c26b34b4d3",
-        "rk45": "0e074d917d16a14184587c8a202e3c621643f1bc19003cb0c37354c6774aa04c",
+        "rk4": "b26a3a2819c6dd338502355d2db6ed730bfd19e7546465c960de0656a780ec87",
+        "rk4-projection": "b0dcaf925a312242dd1cfc7bb11e1ddfe0ce307dac17cd47df3f6b4dfd88df30",
+        "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
-        "accel": "dc018914fd8d8011f89027f6b908dcfbe353c7063075d0bbe07e006842592e29",
-        "rk4": "98959a77a5c1ec6d7295563a1b89003fc4e12e9826fdb051e515df867fa412e8",
-        "rk4-projection": "c954988bb05bee58b8fe10390132ceed7f3fc334166f3610547ff158aad416e2",
-        "rk45": "9ea080838591f8c0f5dd0907cf4e184013792004b9e7b70b5bfd09ecb7920854",
+        "accel": "853d5af98baa25820c21228a158f63589547c6ec6d7851d2f24ece521d1c5dfb",
+        "rk4": "aaeac0067e15dfea65d0f41342f249e266d6c665116404f12aff6629c116c89f",
+        "rk4-projection": "16f4117cf6d053d811b3d0239293aa70c083b258f2203cb0a197ada99de2aa5e",
+        "rk45": "df9057224b11a40a0d85cc271b2a1dcc74ccace0aca0443665c218daf243c3ee",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",
-        "rk4": "c72bee9e1174c7d9dcbd0c191ffbb49e7458426e1141c184837e39c01587401c",
-        "rk4-projection": "9696cf51c5d2e9377400c90c4060631222fae2debeab88b8072bd0ce209a86d0",
-        "rk45": "eb8485813c495e4c4afaa25d4b1fc3c1d122fd0b4c718d03c580161243290427",
+        "rk4": "f5346077d019386945969b25990c7af83762ecca073a80a1bacd5d17677cdf94",
+        "rk4-projection": "f9d48306df4c9e98647fc9dfb33cb2d0bbe7ad7a9f7f0e4c6314003f1af283bd",
+        "rk45": "823837e6b1b07739c91d55f3c155213257d9c4a01cc07f7226e1bd5cba397ef2",
     },
 }
 
@@ -79,15 +79,23 @@ def test_generate_source__every_variant_is_pinned():
     assert all(set(hashes) == set(VARIANTS) for hashes in GOLDEN.values())
 
 
+PEAK_FUNCTIONS = ("cubic_peak", "peak_feed", "peak_last")  # mcchain.kernels.peaks, copied
 FUNCTIONS = {
     "accel": {"accel", "outputs"},
-    "rk4": {"erk_run", "group_outputs_erk"},
+    "rk4": {"erk_run", "group_outputs_erk", *PEAK_FUNCTIONS},
     "rk4-projection": {
         "erk_project_run",
         "group_outputs_erkp",
         "group_project_erkp",
+        *PEAK_FUNCTIONS,
     },
-    "rk45": {"adaptive_run", "group_outputs_dp", "group_first_stage_dp", "group_stage_dp"},
+    "rk45": {
+        "adaptive_run",
+        "group_outputs_dp",
+        "group_first_stage_dp",
+        "group_stage_dp",
+        *PEAK_FUNCTIONS,
+    },
 }
 
 

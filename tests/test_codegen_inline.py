@@ -69,7 +69,7 @@ def test_inline__renames_locals_with_the_suffix_and_writes_constants_as_floats()
 
 
 def test_inline__refuses_code_outside_the_straight_line_subset():
-    with pytest.raises(TypeError, match="unpack only|not straight-line"):
+    with pytest.raises(TypeError, match=r"unpack only|not straight-line"):
         inline(kc.__name__, "contact_crossing", ["a", "b", "c", "d", "h"], "0")
     with pytest.raises(TypeError, match="no such function"):
         inline(kc.__name__, "no_such_law", [], "0")

@@ -34,6 +34,9 @@ DESIGN_VARIABLES = {
     "free_flight_time": ("sample", "joint"),
     "first_separation_time": ("sample", "joint"),
     "status": ("sample",),
+    # Continuous peaks (issue 26: "What you write is what runs").
+    "peak_joint_force": ("sample", "joint"),
+    "peak_driver_torque": ("sample", "driver"),
 }
 EXTRAS = {
     "iterations": ("sample",),
@@ -46,6 +49,7 @@ EXTRAS = {
     "joint_moment_eq": ("sample", "joint"),
     "joint_moment": ("sample", "time", "joint"),
     "omega_cycle": ("sample", "phase", "mode"),
+    "peak_driver_force": ("sample", "driver"),
     "requirement_met": ("sample", "requirement"),
 }
 HISTORIES = {

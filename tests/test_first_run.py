@@ -9,7 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
+import numpy as np
 import pytest
 from test_cli_commands import in_process
 from test_runs_support import REPO
@@ -48,7 +50,8 @@ def test_cold_run__interpreted_writes_the_compiled_runs_ensemble_byte_for_byte(
     config: str, samples: str | None, tmp_path: Path, monkeypatch, capsys
 ) -> None:
     """Interpreted in a fresh process, without numba; then compiled in this one: the same
-    bytes (a sweep, a four-bar with a clearance joint, a scene without [sample])."""
+    bytes in every variable (a sweep, a four-bar with a clearance joint, a scene without
+    [sample]); the files differ in the attribute that says so, ``kernel_compiler``."""
     count = [] if samples is None else ["--samples", samples]
     cold = _cold_run(CONFIGS / f"{config}.toml", tmp_path, *count, "--run-dir", "cold")
     assert cold.returncode == 0, cold.stderr[-3000:]
@@ -59,10 +62,37 @@ def test_cold_run__interpreted_writes_the_compiled_runs_ensemble_byte_for_byte(
     scene = CONFIGS / f"{config}.toml"
     warm = run("run", scene, *count, "--quiet", "--run-dir", "warm", cwd=tmp_path)
     assert warm.returncode == 0, warm.stderr
-    cold_nc = (tmp_path / "cold" / "ensemble.nc").read_bytes()
-    assert cold_nc == (tmp_path / "warm" / "ensemble.nc").read_bytes()
+    # the same file, but for the attribute that says what ran the kernels
+    cold_nc, warm_nc = (tmp_path / name / "ensemble.nc" for name in ("cold", "warm"))
+    assert _contents(cold_nc) == _contents(warm_nc, kernel_compiler="interpreted")
     sessions = [read_record(tmp_path / name)["sessions"] for name in ("cold", "warm")]
     assert [s[-1]["kernels_interpreted"] for s in sessions] == [True, False]
+    assert [s[-1]["kernel_compiler"] for s in sessions] == ["interpreted", "numba"]
+
+
+def _contents(path: Path, **replaced: str) -> tuple[Any, ...]:
+    """Every global attribute (``replaced`` given other values), dimension, and variable
+    (dtype, dimensions, attributes and raw bytes) of a netCDF file."""
+    import netCDF4
+
+    with netCDF4.Dataset(path) as nc:
+        nc.set_auto_mask(False)
+        attrs = {k: nc.getncattr(k) for k in nc.ncattrs()}
+        assert all(k in attrs for k in replaced)
+        attrs.update(replaced)
+        dims = {name: len(dim) for name, dim in nc.dimensions.items()}
+        variables = {
+            name: (
+                str(var.dtype), var.dimensions, {k: str(var.getncattr(k)) for k in var.ncattrs()},
+                _raw(np.asarray(var[...])),
+            )
+            for name, var in nc.variables.items()
+        }  # fmt: skip
+    return tuple(sorted((k, str(v)) for k, v in attrs.items())), dims, variables
+
+
+def _raw(values: np.ndarray) -> Any:
+    return values.tolist() if values.dtype == object else values.tobytes()
 
 
 @pytest.fixture(autouse=True)
@@ -304,3 +334,179 @@ def test_probe__times_one_sample_then_a_block(monkeypatch) -> None:
     sizes.clear()
     assert first_run._probe(load_scene(CONFIGS / "paper-bar.toml"), None) == pytest.approx(1e-3)
     assert sizes == [(1, None)]
+
+
+# -- when the background compile starts, and what a run does beside it (issue 29) --------------
+
+
+@pytest.fixture
+def own_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Path:
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def _write_record(**record) -> None:
+    import json
+
+    compile_ahead.background_record_path().write_text(json.dumps(record))
+
+
+def test_background__only_interactive_outside_ci_and_schedulers_unless_switched_off(
+    own_cache: Path,
+) -> None:
+    why = compile_ahead.why_not_background
+    assert why(environ={}, interactive=True) is None
+    assert why(environ={}, interactive=False) == "not started outside an interactive terminal"
+    for name in ("CI", "SLURM_JOB_ID", "PBS_JOBID", "LSB_JOBID", "JOB_ID", "FLUX_JOB_ID"):
+        assert why(environ={name: "17"}, interactive=True) == f"not started under {name}"
+    assert why(environ={name: ""}, interactive=True) is None  # set but empty: not a job
+    off = why(opted_out="--no-background-compile", environ={}, interactive=True)
+    assert off == "switched off by --no-background-compile"
+    switch = {compile_ahead.ENV_SWITCH: "0"}
+    assert why(environ=switch, interactive=True) == f"{compile_ahead.ENV_SWITCH}=0"
+    # once per cache: one that finished, failed or was killed is not started again
+    for state in ("done", "failed"):
+        _write_record(state=state, scene="s.toml", started=0.0)
+        reason = why(environ={}, interactive=True)
+        assert reason is not None and reason.startswith(f"one ran already in this cache ({state}")
+
+
+def test_background__a_lock_that_fails_means_not_started(own_cache: Path, monkeypatch) -> None:
+    """NFS or Lustre without locks (ENOLCK): the run goes on; before, the run failed."""
+    import errno
+    import fcntl
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.delenv(compile_ahead.ENV_SWITCH, raising=False)
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    popen = []
+    monkeypatch.setattr(compile_ahead.subprocess, "Popen", lambda *a, **k: popen.append(a))
+    lock = compile_ahead.background_files()[0]
+    note = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    assert note == f"nothing compiles them meanwhile (its lock {lock}: No locks available)"
+    assert popen == [] and not compile_ahead.background_running()
+
+
+def test_background__its_failure_is_recorded_and_shown_once_by_the_next_run(
+    own_cache: Path, monkeypatch, capsys
+) -> None:
+    def broken(*args, **kwargs):
+        raise MemoryError("out of memory")
+
+    monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
+    monkeypatch.setattr(compile_ahead, "compile_for", broken)
+    lock = compile_ahead.background_files()[0]
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT)
+    import fcntl
+
+    fcntl.flock(fd, fcntl.LOCK_EX)  # as the background process holds it
+    try:
+        with pytest.raises(MemoryError):
+            compile_ahead.compile_in_background(CONFIGS / "clearance-bar.toml", None, None)
+    finally:
+        os.close(fd)
+    record = compile_ahead.read_background()
+    assert record is not None and record["state"] == "failed"
+    assert record["error"] == "MemoryError: out of memory"
+    note = compile_ahead.background_failure_note()
+    assert note is not None and note.startswith("the background compile of ")
+    assert "failed (MemoryError: out of memory; log: " in note
+    assert compile_ahead.background_failure_note() is None  # shown once
+    # one killed before it finished (its lock is free, its record says running)
+    _write_record(state="running", scene="s.toml", started=0.0)
+    note = compile_ahead.background_failure_note()
+    assert note is not None and "it ended before it finished (killed?)" in note
+
+
+def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, monkeypatch):
+    """On a fake clock: a compile started at t = 1000 s, 30 s expected (the last one's
+    length); a run at t = 1025 s whose interpreted kernels would take 8 s waits (5 s
+    left), then runs compiled; one of 3 s runs interpreted beside it."""
+    import fcntl
+
+    import mcchain.caches
+    import mcchain.kernels.config
+
+    monkeypatch.setattr(mcchain.caches, "kernels_cached", lambda names: False)
+    monkeypatch.setattr(mcchain.kernels.config, "interpret_kernels", lambda: True)
+    calls = []
+    monkeypatch.setattr(compile_ahead, "wait_background", lambda: calls.append("wait"))
+
+    class Exec(Exception):
+        pass
+
+    def run_compiled(resume=None, reason=None):
+        calls.append("exec")
+        raise Exec
+
+    monkeypatch.setattr(first_run, "run_compiled", run_compiled)
+    _write_record(state="running", scene="s.toml", started=1000.0, expected=30.0)
+    fd = os.open(compile_ahead.background_files()[0], os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        assert compile_ahead.background_remaining(lambda: 1025.0) == 5.0
+        scene = CONFIGS / "clearance-sweep.toml"  # 10,000 samples
+        monkeypatch.setattr(first_run, "_probe", lambda scene, seed: 8.0 / 10_000)
+        with pytest.raises(Exec):
+            first_run.choose(scene, None, None, now=lambda: 1025.0)
+        assert calls == ["wait", "exec"]
+        calls.clear()
+        monkeypatch.setattr(first_run, "_probe", lambda scene, seed: 3.0 / 10_000)
+        chosen = first_run.choose(scene, None, None, now=lambda: 1025.0)
+        assert chosen == first_run.FirstRun(3.0 / 10_000) and calls == []
+    finally:
+        os.close(fd)
+    assert compile_ahead.background_remaining(lambda: 1020.0) is None  # none runs now
+
+
+def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkeypatch) -> None:
+    from mcchain.errors import RunError
+    from mcchain.user_config import background_compile_off, config_path
+
+    monkeypatch.delenv("MCCHAIN_CONFIG", raising=False)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    path = tmp_path / "mcchain" / "config.toml"
+    assert config_path() == path and background_compile_off() is None
+    path.parent.mkdir()
+    path.write_text("[run]\nbackground_compile = false\n")
+    assert background_compile_off() == f"{path} (run.background_compile = false)"
+    path.write_text("[run]\nbackground_compile = true\n")
+    assert background_compile_off() is None
+    path.write_text('[run]\nbackground_compile = "no"\n')
+    with pytest.raises(RunError, match=r"run.background_compile: expected a bool, got 'no'"):
+        background_compile_off()
+    path.write_text("[run]\nbackground = false\n")
+    with pytest.raises(RunError, match=r"run\.background: unknown key"):
+        background_compile_off()
+
+
+def test_run__no_background_compile_flag_and_user_config_reach_the_run(
+    monkeypatch, tmp_path: Path, mcchain
+) -> None:
+    from mcchain import cli
+
+    seen = []
+
+    def start_run(scene, **kwargs):
+        seen.append(kwargs["background_off"])
+        raise SceneError("stopped here")
+
+    monkeypatch.setattr(cli, "_may_interpret", True)
+    monkeypatch.setattr(first_run, "choose", lambda *a: first_run.FirstRun(None))
+    monkeypatch.setattr(execution, "start_run", start_run)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    monkeypatch.delenv("MCCHAIN_CONFIG", raising=False)
+    scene = CONFIGS / "paper-bar.toml"
+    mcchain("run", scene, cwd=tmp_path)
+    mcchain("run", scene, "--no-background-compile", cwd=tmp_path)
+    (tmp_path / "mcchain").mkdir()
+    (tmp_path / "mcchain" / "config.toml").write_text("[run]\nbackground_compile = false\n")
+    mcchain("run", scene, cwd=tmp_path)
+    config = tmp_path / "mcchain" / "config.toml"
+    assert seen == [None, "--no-background-compile", f"{config} (run.background_compile = false)"]
+    config.write_text("[run]\nbackground_compile = 0\n")
+    refused = mcchain("run", scene, cwd=tmp_path)
+    assert refused.returncode == 2 and len(refused.stderr.splitlines()) == 1
+    assert "run.background_compile: expected a bool, got 0" in refused.stderr

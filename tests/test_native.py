@@ -15,12 +15,13 @@ set by numba and clear here.
 from __future__ import annotations
 
 import math
+import os
 import pickle
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mcchain.codegen import generate
@@ -30,6 +31,7 @@ from mcchain.testing.scenes import model_of, scene_model
 
 SOURCE = """
 import math
+import os
 
 import numpy as np
 
@@ -199,18 +201,26 @@ def test_arrays__strided_views_locals_tuples_tables_float32(native):
 
 
 def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, monkeypatch):
+    """Counted: the second module loads the file (no compile), the third compiles again."""
+    from mcchain.codegen import native as native_module
+
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    counts = {"compiled": 0, "loaded": 0}
+    monkeypatch.setattr(native_module, "COUNTS", counts)
     out = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, out)
+    assert counts == {"compiled": 1, "loaded": 0}
     files = list((tmp_path / "native").iterdir())
     assert len(files) == 1
     state = pickle.loads(files[0].read_bytes())
     assert state[1] == "object"  # machine code, not IR: nothing to optimise on load
     again = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, again)  # loaded
+    assert counts == {"compiled": 1, "loaded": 1}
     files[0].write_bytes(b"not a library")
     third = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, third)  # compiled again
+    assert counts == {"compiled": 2, "loaded": 1}
     assert out.tolist() == again.tolist() == third.tolist()
     assert out[:2].tolist() == [2, 1]
     assert pickle.loads(files[0].read_bytes())[1] == "object"
@@ -395,3 +405,349 @@ def test_lanes__bit_identical_to_numba(scene, settings, monkeypatch):
     native = _histories(model, settings, "native", monkeypatch)
     numba = _histories(model, settings, "numba", monkeypatch)
     _assert_bit_identical(native, numba)
+
+
+# -- the translator's risks (issue 29): each as numba and Python have it ------------------------
+
+RISKS = """
+import numpy as np
+
+
+def touch(out, k):
+    out[k] += 1.0
+    return True
+
+
+def short_circuit(a, t, out):
+    if a > 0 and touch(out, 0):
+        out[2] += 1.0
+    if a > 0 or touch(out, 1):
+        out[3] += 1.0
+    n = t.shape[0]
+    while 0 <= a < n and t[a] > 0.0:
+        a += 1
+    out[4] = a
+    out[5] = 1.0 if a < 0 or a >= n or not t[a] < 0.0 else -1.0
+    flag = a > 0 and touch(out, 6) and a < 0
+    out[7] = flag
+
+
+def widened(n, out):
+    x = 0
+    for i in range(n):
+        x = x + 0.5
+    out[0] = x
+    y = 1
+    if n > 2:
+        y = 2.5
+    out[1] = y
+    z = True
+    z = z + 1.25
+    out[2] = z
+
+
+def big_local(n, out):
+    work = np.zeros(300000)
+    small = np.zeros(8)
+    for i in range(work.shape[0]):
+        work[i] = i * 0.5
+    for i in range(8):
+        small[i] = work[n + i]
+    out[0] = small[0] + small[7]
+
+
+def fill(out, value):
+    out[0] = value
+
+
+def reads(x, out):
+    out[0] = x[0] * 2.0
+
+
+def writes_through(x, out):
+    out[0] = x[1]
+    fill(x, 3.0)
+"""
+
+
+@pytest.fixture(scope="module")
+def risks() -> NativeModule:
+    return NativeModule(RISKS, "mcchain_test_risks", contract=False)
+
+
+def _numba(source: str, name: str) -> Any:
+    from numba import njit
+
+    from mcchain.kernels.config import LANE_JIT
+
+    namespace: dict[str, Any] = {}
+    exec(source, namespace)
+    options = {k: v for k, v in LANE_JIT.items() if k != "cache"}
+    for fn in [k for k, v in namespace.items() if callable(v) and hasattr(v, "__code__")]:
+        namespace[fn] = njit(**options)(namespace[fn])  # the callees too, by name
+    return namespace[name]
+
+
+@pytest.mark.parametrize("a", [-1, 0, 1, 3])
+def test_and_or__short_circuit_as_python(risks, a):
+    """The right operand runs only where the left does not decide: ``touch`` counts its
+    calls, and ``t[a]`` is never read past the end (before: both sides, always)."""
+    t = np.array([1.0, 2.0, -1.0])
+    mine, ref = np.zeros(8), np.zeros(8)
+    risks.short_circuit(a, t, mine)
+    namespace: dict[str, Any] = {}
+    exec(RISKS, namespace)
+    namespace["short_circuit"](a, t, ref)
+    _assert_same_bits(mine, ref)
+
+
+@pytest.mark.parametrize("n", [0, 2, 5])
+def test_int_then_float__widened_as_numba(risks, n):
+    """A variable first an int (or bool), then a float: numba unifies it to float64; the
+    translator did refuse it (TranslationError) at the user's first run."""
+    mine, ref = np.zeros(3), np.zeros(3)
+    risks.widened(n, mine)
+    _numba(RISKS, "widened")(n, ref)
+    _assert_same_bits(mine, ref)
+    assert mine.tolist() == [0.5 * n, 2.5 if n > 2 else 1.0, 2.25]
+
+
+def test_local_arrays__above_the_limit_on_the_heap_small_ones_on_the_stack():
+    from mcchain.codegen.native import (
+        STACK_ARRAY_MAX_BYTES,
+        Array,
+        ModuleTranslator,
+        _codegen,
+        _target_data,
+    )
+
+    argtypes = ("i64", Array("f64", 1, True))
+    translator = ModuleTranslator(RISKS, "mcchain_test_heap", _target_data(_codegen()))
+    translator.entry("big_local", argtypes, "mcchain_test_heap_entry")
+    text = str(translator.ir_module)
+    assert 300000 * 8 > STACK_ARRAY_MAX_BYTES >= 8 * 8
+    assert "alloca double, i64 300000" not in text and "alloca double, i64 8" in text
+    assert text.count('call i8* @"aligned_alloc"(') == 1
+    assert text.count('call void @"free"(') == 1
+
+
+def test_local_arrays__a_large_one_runs_on_a_thread_with_a_small_stack(tmp_path):
+    """2.4 MB of work array on a thread with a 256 KiB stack: on the stack it crashed the
+    process (SIGSEGV); on the heap it runs. In a process of its own, for that crash."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = f"""
+import threading
+import numpy as np
+from mcchain.codegen.native import NativeModule
+module = NativeModule({RISKS!r}, "mcchain_test_small_stack", contract=False)
+out = np.zeros(1)
+threading.stack_size(256 << 10)
+thread = threading.Thread(target=module.big_local, args=(5, out))
+thread.start()
+thread.join()
+print(out[0])
+"""
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(repo), "MCCHAIN_CACHE_DIR": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
+    assert float(done.stdout) == 5 * 0.5 + 12 * 0.5
+
+
+def test_read_only_arrays__refused_where_written_read_where_only_read(risks):
+    """numba refuses a read-only array where the function writes it (here through a callee);
+    the entry did write it."""
+    frozen = np.arange(3.0)
+    frozen.flags.writeable = False
+    out = np.zeros(1)
+    with pytest.raises(ValueError, match="writes_through: argument 0 is a read-only array"):
+        risks.writes_through(frozen, out)
+    assert frozen.tolist() == [0.0, 1.0, 2.0] and out[0] == 0.0
+    risks.reads(frozen, out)
+    assert out[0] == 0.0 * 2.0
+    risks.writes_through(frozen.copy(), out)
+    assert out[0] == 1.0
+
+
+def test_machine_code__keyed_by_every_version_that_changes_it(tmp_path, monkeypatch):
+    """Another numba, llvmlite, LLVM, Python or NumPy version (here: a patched numba) is
+    another file: the old machine code is not loaded. A load counts as one, not a compile."""
+    import numba
+
+    from mcchain.codegen import native
+
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    versions = native.key_versions()
+    assert {v.split()[0] for v in versions} >= {"numba", "llvmlite", "llvm", "python", "numpy"}
+    out = np.zeros(10, np.int64)
+    before = dict(native.COUNTS)
+    NativeModule(SOURCE, "mcchain_test_versions").integers(7, 3, out)
+    NativeModule(SOURCE, "mcchain_test_versions").integers(7, 3, out)
+    assert native.COUNTS["compiled"] - before["compiled"] == 1
+    assert native.COUNTS["loaded"] - before["loaded"] == 1
+    monkeypatch.setattr(numba, "__version__", numba.__version__ + ".post1")
+    native.key_versions.cache_clear()
+    try:
+        NativeModule(SOURCE, "mcchain_test_versions").integers(7, 3, out)
+        assert native.COUNTS["compiled"] - before["compiled"] == 2
+    finally:
+        native.key_versions.cache_clear()
+    assert len(list((tmp_path / "native").glob("*.bin"))) == 2
+
+
+def test_machine_code__the_folder_keeps_the_most_recently_used_within_its_bound(tmp_path):
+    from mcchain.codegen.native import evict_oldest
+
+    for k, when in enumerate([30, 10, 40, 20]):
+        path = tmp_path / f"f{k}.bin"
+        path.write_bytes(b"x" * 100)
+        os.utime(path, (when, when))
+    (tmp_path / "other.txt").write_bytes(b"y" * 1000)
+    removed = evict_oldest(tmp_path, 250, keep=tmp_path / "f1.bin")
+    assert sorted(p.name for p in removed) == ["f0.bin", "f3.bin"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f1.bin", "f2.bin", "other.txt"]
+
+
+def test_target__numbas_cpu_settings_not_the_hosts_flags(monkeypatch):
+    """The lane width (in the generated text) follows the CPU numba compiles for:
+    NUMBA_CPU_FEATURES, or none for NUMBA_CPU_NAME=generic; the host's only otherwise."""
+    from mcchain.codegen import layout
+
+    monkeypatch.setenv("NUMBA_CPU_NAME", "generic")
+    monkeypatch.delenv("NUMBA_CPU_FEATURES", raising=False)
+    assert layout.target_cpu() == ("generic", "")
+    monkeypatch.setenv("NUMBA_CPU_NAME", "skylake-avx512")
+    monkeypatch.setenv("NUMBA_CPU_FEATURES", "+avx2,+avx512f,+fma")
+    assert layout.target_cpu() == ("skylake-avx512", "+avx2,+avx512f,+fma")
+    assert layout.simd_doubles(layout.target_cpu()[1]) == 8
+    assert layout.simd_doubles("+avx2,-avx512f,+fma") == 4
+
+
+# -- random programs of the generator's subset, against numba ---------------------------------
+
+NFLOAT, NINT, NOUT = 3, 3, 6
+
+
+@st.composite
+def _float_expr(draw: Any, depth: int = 0) -> str:
+    leaves = [
+        *(f"f{k}" for k in range(NFLOAT)),
+        *(f"x[{k}]" for k in range(4)),
+        *(f"i{k}" for k in range(NINT)),
+        "m",
+        "0.5", "-1.25", "3.0", "1e-3",
+    ]  # fmt: skip
+    if depth >= 3 or draw(st.booleans()):
+        return draw(st.sampled_from(leaves))
+    kind = draw(st.sampled_from(["bin", "bin", "call", "neg", "ifexp"]))
+    a = draw(_float_expr(depth + 1))
+    if kind == "neg":
+        return f"(-{a})"
+    if kind == "call":
+        fn = draw(st.sampled_from(["max", "min", "abs", "sqrt"]))
+        if fn == "abs":
+            return f"abs({a})"
+        if fn == "sqrt":
+            return f"math.sqrt(abs({a}))"
+        return f"{fn}({a}, {draw(_float_expr(depth + 1))})"
+    b = draw(_float_expr(depth + 1))
+    if kind == "ifexp":
+        return f"({a} if {draw(_condition(depth + 1))} else {b})"
+    return f"({a} {draw(st.sampled_from(['+', '-', '*', '/']))} {b})"
+
+
+@st.composite
+def _int_expr(draw: Any, depth: int = 0) -> str:
+    leaves = [*(f"i{k}" for k in range(NINT)), *(f"k[{j}]" for j in range(4)), "0", "3", "-7"]
+    if depth >= 3 or draw(st.booleans()):
+        return draw(st.sampled_from(leaves))
+    a, b = draw(_int_expr(depth + 1)), draw(_int_expr(depth + 1))
+    op = draw(st.sampled_from(["+", "-", "*", "//", "%", "max", "min"]))
+    if op in ("//", "%"):
+        return f"({a} {op} (abs({b}) + 1))"
+    if op in ("max", "min"):
+        return f"{op}({a}, {b})"
+    return f"({a} {op} {b})"
+
+
+@st.composite
+def _condition(draw: Any, depth: int = 0) -> str:
+    kind = draw(st.sampled_from(["cmp", "cmp", "int", "and", "or", "not", "guard"]))
+    if depth >= 2:
+        kind = "cmp"
+    op = draw(st.sampled_from(["<", "<=", ">", ">=", "==", "!="]))
+    if kind == "cmp":
+        return f"{draw(_float_expr(2))} {op} {draw(_float_expr(2))}"
+    if kind == "int":
+        return f"{draw(_int_expr(2))} {op} {draw(_int_expr(2))}"
+    if kind == "not":
+        return f"not ({draw(_condition(depth + 1))})"
+    if kind == "guard":  # the read is valid only where the index check holds
+        i = draw(st.sampled_from([f"i{k}" for k in range(NINT)]))
+        return f"0 <= {i} < 4 and x[{i}] {op} {draw(_float_expr(2))}"
+    word = "and" if kind == "and" else "or"
+    return f"({draw(_condition(depth + 1))}) {word} ({draw(_condition(depth + 1))})"
+
+
+@st.composite
+def _statements(draw: Any, indent: str, depth: int = 0) -> list[str]:
+    lines: list[str] = []
+    for _ in range(draw(st.integers(1, 4))):
+        kind = draw(st.sampled_from(["float", "int", "out", "mix", "if", "for"]))
+        if depth >= 2 and kind in ("if", "for"):
+            kind = "out"
+        if kind == "float":
+            lines.append(f"{indent}f{draw(st.integers(0, NFLOAT - 1))} = {draw(_float_expr())}")
+        elif kind == "int":
+            lines.append(f"{indent}i{draw(st.integers(0, NINT - 1))} = {draw(_int_expr())}")
+        elif kind == "out":
+            lines.append(f"{indent}out[{draw(st.integers(0, NOUT - 1))}] += {draw(_float_expr())}")
+        elif kind == "mix":  # m is an int until this runs: numba's promotion to float64
+            lines.append(f"{indent}m = m + {draw(_float_expr())}")
+        elif kind == "if":
+            lines.append(f"{indent}if {draw(_condition())}:")
+            lines += draw(_statements(indent + "    ", depth + 1))
+            if draw(st.booleans()):
+                lines.append(f"{indent}else:")
+                lines += draw(_statements(indent + "    ", depth + 1))
+        else:
+            lines.append(f"{indent}for j in range(min(abs({draw(_int_expr(1))}), 4)):")
+            lines += draw(_statements(indent + "    ", depth + 1))
+    return lines
+
+
+@st.composite
+def programs(draw: Any) -> str:
+    """A function ``prog(x, k, out)`` of the translated subset: float and int variables,
+    arithmetic of both, numba's promotion of an int to float64 (``m``), comparisons, short-
+    circuit ``and``/``or``/``not`` guarding array reads, ``… if … else …``, ``if``/``else``,
+    counted loops, ``max``/``min``/``abs``/``math.sqrt``."""
+    head = [f"    f{j} = x[{j}]" for j in range(NFLOAT)]
+    head += [f"    i{j} = k[{j}]" for j in range(NINT)]
+    head.append("    m = 0")
+    body = draw(_statements("    "))
+    tail = [f"    out[{NOUT - 1}] += m"]
+    return "import math\n\n\ndef prog(x, k, out):\n" + "\n".join(head + body + tail) + "\n"
+
+
+finite = st.floats(-1e3, 1e3, allow_nan=False)
+
+
+@pytest.mark.slow
+@settings(max_examples=15, deadline=None)  # a numba compile each (1-3 s)
+@given(
+    source=programs(),
+    x=st.lists(finite | st.sampled_from([0.0, -0.0, math.inf, math.nan]), min_size=4, max_size=4),
+    k=st.lists(st.integers(-5, 6), min_size=4, max_size=4),
+)
+def test_random_programs__the_bits_of_numba(source, x, k):
+    """The translator against numba's compile of the same text (the lane kernels' options,
+    ``contract`` included), bit for bit (a NaN only at the same place: module docstring)."""
+    xs, ks = np.array(x), np.array(k, dtype=np.int64)
+    mine, ref = np.zeros(NOUT), np.zeros(NOUT)
+    NativeModule(source, "mcchain_test_random").prog(xs, ks, mine)
+    _numba(source, "prog")(xs, ks, ref)
+    _assert_same_bits(mine, ref)

@@ -42,7 +42,7 @@ def test_loop__agrees_with_the_lanes(name):
     lanes, loop = out["lanes"], out["loop"]
     np.testing.assert_array_equal(lanes["status"], loop["status"])
     np.testing.assert_array_equal(lanes["time"], loop["time"])
-    for var in HISTORIES:
+    for var in (*HISTORIES, "peak_joint_force", "peak_driver_torque"):
         a, b = lanes[var], loop[var]
         np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=var)
         if np.isfinite(a).any():
@@ -81,7 +81,7 @@ largest value: the impact forces (1e2–1e3 × the link's) carry the rounding of
 penetration (K δ^1.5 with δ ~ 1e-6 m)."""
 CONTACT_OUTPUTS = (
     "penetration", "peak_contact_force", "max_penetration", "free_flight_time",
-    "first_separation_time",
+    "first_separation_time", "peak_joint_force",
 )  # fmt: skip
 
 

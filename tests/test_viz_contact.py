@@ -171,15 +171,19 @@ def test_joint_models__from_the_model_or_the_data(contact_run: Any) -> None:
     assert contact.joint_models(link_only) == ["link", None]
 
 
-def test_peak_contact_forces__law_variable_or_max_abs_lambda(contact_run: Any) -> None:
+def test_peak_contact_forces__law_variable_or_tracked_peak_of_lambda(contact_run: Any) -> None:
     ds, _, params = contact_run
     labels, peaks, joints = report_contact.peak_contact_forces(ds, ["auto", None])
     assert (labels, joints) == (["peak F_n O"], [0])
     np.testing.assert_array_equal(peaks[:, 0], 300.0 * np.sqrt(params[:, 0] / 1e-4))
     link_only = make_dataset(make_contact_params(4))
     labels, peaks, _ = report_contact.peak_contact_forces(link_only, ["link", None])
-    assert labels == ["peak |λ O|"]
-    expected = np.abs(link_only["contact_force"].values[:, :, 0]).max(axis=1)
+    assert labels == ["peak |λ O|"]  # the link's peak |λ|, tracked at every step
+    np.testing.assert_array_equal(peaks[:, 0], link_only["peak_joint_force"].values[:, 0])
+    older = link_only.drop_vars("peak_joint_force")  # a run from before the tracked peaks
+    labels, peaks, _ = report_contact.peak_contact_forces(older, ["link", None])
+    assert labels == ["peak |λ O| (stored points)"]
+    expected = np.abs(older["contact_force"].values[:, :, 0]).max(axis=1)
     np.testing.assert_allclose(peaks[:, 0], expected, rtol=0, atol=0)
 
 

@@ -187,6 +187,13 @@ def make_dataset(
                 ("sample", "time"), (G * (2 + m[:, None]) * (1 + 0.01 * t)).astype(h), "J", "energy"
             ),
             "contact_lost_time": var(("sample",), contact_lost_time, "s", "first contact loss"),
+            # a prescribed motion has nothing between its points: its peak is theirs
+            "peak_joint_force": var(
+                ("sample", "joint"),
+                np.hypot(joint_force[..., 0], joint_force[..., 1]).max(axis=1),
+                "N",
+                "continuous peak of |joint_force|",
+            ),
         }
     coords = {
         "sample": np.arange(n),

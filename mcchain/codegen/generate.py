@@ -38,7 +38,16 @@ from mcchain.contact import (
     RESEAT_TOLERANCE,
     SWITCH_OVERSHOOT,
 )
-from mcchain.kernels.tableaux import DOPRI5, MAX_FACTOR, MIN_FACTOR, RK4, SAFETY, Tableau
+from mcchain.kernels.tableaux import (
+    DOPRI5,
+    MAX_FACTOR,
+    MIN_FACTOR,
+    PEAK_WIDTH,
+    RK4,
+    SAFETY,
+    Tableau,
+)
+from mcchain.model import JOINT_IDEAL
 from mcchain.status import (
     CONTACT_LOST,
     CONTACT_STEP_TOO_LARGE,
@@ -280,7 +289,71 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         ]
     )
     b.update(_contact_blocks(topo, lay, b["kill_lane"]))
+    b.update(_peak_blocks(topo, lay))
     return b
+
+
+def _peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
+    """The continuous peaks of |joint force| and |driver torque| (mcchain.kernels.peaks):
+    each value fed at every accepted state (fixed step: each step's start, λ of the first
+    stage; adaptive: each accepted state, λ of the last stage, a rejected step's repeated
+    state skipped), and the peaks written at the end (NaN for a failed lane)."""
+    at = lay.at
+    cj = {k: j for j, k in enumerate(topo.contact_joints)}
+    npk = topo.njoint + topo.ndriver
+
+    def base(i: int) -> str:
+        return f"{(lay.rows['pk'] + PEAK_WIDTH * i) * lay.lmax} + l"
+
+    def feed(lamrow: str, t: str) -> str:
+        lines = [
+            f"cnt = {at('pkt', 4)}",
+            f"if cnt == 0.0 or {t} > {at('pkt', 3)}:",
+            *(f"    t{x} = {at('pkt', i + 1)}" for i, x in enumerate("bcd")),
+        ]
+        for k in range(topo.njoint):
+            r = topo.joint_row[k]
+            lam = at(lamrow, r)
+            if topo.joint_kind[k] == JOINT_IDEAL:
+                lam2 = at(lamrow, r + 1)
+                value = f"math.sqrt({lam} * {lam} + {lam2} * {lam2})"
+            elif k in cj:  # the link's |λ|, or F_n ≥ 0 under the law
+                value = f"abs({lam}) if {at('fm', cj[k])} == 0.0 else max({lam}, 0.0)"
+            else:  # prismatic (the normal force) or a clearance joint on the link
+                value = f"abs({lam})"
+            lines.append(f"    peak_feed(W, {base(k)}, {lay.lmax}, cnt, tb, tc, td, {t}, {value})")
+        for d in range(topo.ndriver):
+            value = f"abs({at(lamrow, topo.driver_row[d])})"
+            lines.append(
+                f"    peak_feed(W, {base(topo.njoint + d)}, {lay.lmax}, cnt, tb, tc, td, "
+                f"{t}, {value})"
+            )
+        lines += [
+            f"    {at('pkt', 0)} = tb",
+            f"    {at('pkt', 1)} = tc",
+            f"    {at('pkt', 2)} = td",
+            f"    {at('pkt', 3)} = {t}",
+            f"    {at('pkt', 4)} = min(cnt + 1.0, 4.0)",
+        ]
+        return "\n".join(lines)
+
+    finish = [
+        "for l in range(nl):",
+        "    dead = (st[l] & FAILBITS) != 0",
+        f"    cnt = {at('pkt', 4)}",
+        *(f"    t{x} = {at('pkt', i)}" for i, x in enumerate("abcd")),
+    ]
+    for i in range(npk):
+        peak = f"W[{base(i)} + {(PEAK_WIDTH - 1) * lay.lmax}]"
+        finish += [
+            f"    {peak} = peak_last(W, {base(i)}, {lay.lmax}, cnt, ta, tb, tc, td)",
+            f"    out_pk[s0 + l, {i}] = np.nan if dead or cnt == 0.0 else {peak}",
+        ]
+    return {
+        "peaks_c": feed("lamc", "ts"),
+        "peaks": feed("lam", at("tl")),
+        "peaks_finish": "\n".join(finish),
+    }
 
 
 _CONTACT_BLOCKS = (
@@ -359,8 +432,8 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
 
     def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
         """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
-        (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peaks."""
-        r = topo.joint_row[k]
+        (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peak
+        penetration (the peak force is tracked with the joint forces: _peak_blocks)."""
         d0, r0 = at("pd", j), at("pr", j)
         return [
             f"if {at('fm', j)} == 1.0:",
@@ -379,7 +452,6 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
             f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
             *indent(reseat(j, k, lamrow, h, d1, r1, vrow)),
-            f"{at('pkf', j)} = max({at('pkf', j)}, {at(lamrow, r)})",
             f"{d0} = {d1}",
             f"{r0} = {r1}",
         ]
@@ -392,10 +464,12 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
     b["contact_setup"] = "\n".join(setup)
     finish = ["for l in range(nl):", "    dead = (st[l] & FAILBITS) != 0"]
-    for j in range(len(joints)):
+    for j, k in enumerate(joints):
         for m, name in enumerate(CONTACT_SUMMARY):
             col = len(CONTACT_SUMMARY) * j + m
-            finish.append(f"    sum_ct[s0 + l, {col}] = np.nan if dead else {at(name, j)}")
+            # the peak contact force: the joint's continuous peak (pk rows, _peak_blocks)
+            value = at("pk", PEAK_WIDTH * k + PEAK_WIDTH - 1) if name == "pkf" else at(name, j)
+            finish.append(f"    sum_ct[s0 + l, {col}] = np.nan if dead else {value}")
     b["contact_finish"] = "\n".join(finish)
 
     # Fixed step: at each step's start (stage 0 evaluated there), after the failure checks;
@@ -547,6 +621,8 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions())
+    if tableau is not None:
+        parts.append(_peak_functions())
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:
@@ -579,6 +655,21 @@ def _contact_functions() -> str:
 
     parts = []
     for kernel in (contact._hermite, contact.contact_crossing):
+        source = inspect.getsource(kernel.py_func)
+        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
+    return "\n\n".join(parts)
+
+
+def _peak_functions() -> str:
+    """The source of :mod:`mcchain.kernels.peaks`' ``cubic_peak``, ``peak_feed`` and
+    ``peak_last``, copied into the generated module (for the reason of
+    :func:`_contact_functions`)."""
+    import inspect
+
+    from mcchain.kernels import peaks
+
+    parts = []
+    for kernel in (peaks.cubic_peak, peaks.peak_feed, peaks.peak_last):
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)

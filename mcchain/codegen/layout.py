@@ -11,16 +11,32 @@ run-time value, so the loop is vectorised rather than unrolled.
 from __future__ import annotations
 
 from mcchain.codegen.topology import Topology
+from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 
 
-def _simd_doubles() -> int:
-    """Doubles in one SIMD register of this CPU: 8 with AVX-512, else 4 (AVX2)."""
+def target_cpu() -> tuple[str, str]:
+    """The CPU name and features numba compiles for, as its codegen chooses them:
+    ``NUMBA_CPU_NAME`` and ``NUMBA_CPU_FEATURES`` where set (no features for the name
+    ``generic``), else the host's. The generated text follows them (:data:`LMAX`), not the
+    host's own flags, so a cache built for a portable target is portable."""
+    import os
+
     from llvmlite import binding
 
-    return 8 if binding.get_host_cpu_features().get("avx512f") else 4
+    name = os.environ.get("NUMBA_CPU_NAME") or binding.get_host_cpu_name()
+    features = os.environ.get("NUMBA_CPU_FEATURES")
+    if features is None:
+        features = "" if name.lower() == "generic" else binding.get_host_cpu_features().flatten()
+    return name, features
 
 
-LMAX = _simd_doubles()
+def simd_doubles(features: str) -> int:
+    """Doubles in one SIMD register of a CPU with these features (LLVM's ``+f,-g`` list):
+    8 with AVX-512, else 4 (AVX2)."""
+    return 8 if "+avx512f" in features.split(",") else 4
+
+
+LMAX = simd_doubles(target_cpu()[1])
 """Largest lane count of a lane group, and the row length of the work array: one SIMD
 register of doubles, so W is contiguous and a lane loop touches each element once. Measured
 here (AVX2, rk4, ns per instance-step, side by side): rows of 64 doubles, 512 bytes apart,
@@ -38,13 +54,14 @@ ROW_MEANINGS = """\
 # proposed state of an adaptive step; lam, lamc multipliers (accepted, current stage); chk,
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
-# tl the lane's time.
+# tl the lane's time; pk five rows per |joint force| then per |driver torque|: its last four
+# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count.
 """
 """Legend of the row map written into the header of a generated module."""
 
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
-    "nim", "pkf", "pkd", "tff", "tse",
+    "nim", "pkd", "tff", "tse",
 )  # fmt: skip
 """Rows of W per contact-law joint (one row per such joint each), after the others."""
 
@@ -53,9 +70,10 @@ CONTACT_ROW_MEANINGS = """\
 # step's start; vi approach speed of the contact in progress; pd, pr penetration and its rate
 # at the accepted state; pdc, prc the same at the current stage; wjc the contact's pulsation^2
 # at the current stage; dwl time pressed quasi-statically (model auto: re-seat); nim impacts;
-# pkf peak contact force; pkd peak penetration; tff free-flight time; tse first separation
-# time; wca largest (contact pulsation)^2 since the last check; wcc the largest at the
-# current stage; rsw lane to re-seat; e0 its energy before the re-seat.
+# pkd peak penetration (the peak contact force is its joint's pk peak); tff free-flight
+# time; tse first separation time; wca largest (contact pulsation)^2 since the last check;
+# wcc the largest at the current stage; rsw lane to re-seat; e0 its energy before the
+# re-seat.
 """
 """Legend of the contact rows, written only into modules that have them."""
 
@@ -85,6 +103,8 @@ class Layout:
         self.add("lamc", ncon1)
         for name in ("chk", "sg", "chkc", "sgc", "sga", "act", "pmax", "hs", "tl"):
             self.add(name, 1)
+        self.add("pk", PEAK_WIDTH * (topo.njoint + topo.ndriver))
+        self.add("pkt", PEAK_CLOCK)
         ncj = len(topo.contact_joints)
         if ncj:
             for name in CONTACT_ROWS:

@@ -14,7 +14,9 @@ The entry points are called from Python through ``ctypes`` (which releases the G
 thread blocks of :mod:`mcchain.solvers.threads` run side by side): an array is passed as its
 ``PyArrayObject *``, whose data pointer, shape and strides the entry reads, a float as a
 double, an integer as an int64; the arguments' types are keyed as numba's dispatcher keys
-them. Machine code is cached on disk per (text, entry, argument types, CPU, this file).
+them. Machine code is cached on disk per (text, entry, argument types, target CPU and its
+features, and the versions that can change it: :func:`key_versions`), in a folder of bounded
+size (:data:`CACHE_MAX_BYTES`).
 
 Semantics follow numba's: Python's integer floor division and modulo, ``max``/``min`` as
 ``select(b > a, b, a)``, bool and integer operands promoted to float64 or int64, an array
@@ -24,6 +26,7 @@ index without wrap-around (the generated text never indexes from the end).
 from __future__ import annotations
 
 import ast
+import contextlib
 import ctypes
 import functools
 import hashlib
@@ -92,6 +95,17 @@ class TranslationError(Exception):
     generator, never of a scene)."""
 
 
+class _Widen(Exception):
+    """A variable first assigned an integer (or bool) is assigned a float later: the function
+    is translated again with the variable a float from its first assignment, as numba's type
+    unification makes it where the two meet (a loop, a branch)."""
+
+    def __init__(self, name: str, ty: str) -> None:
+        super().__init__(name, ty)
+        self.name = name
+        self.ty = ty
+
+
 def type_of_value(value: Any) -> Type:
     """The translated type of an argument passed from Python."""
     if isinstance(value, np.ndarray):
@@ -139,9 +153,13 @@ class _FunctionTranslator:
         argtypes: tuple[Type, ...],
         name: str,
         return_type: Returned,
+        widened: dict[str, str] | None = None,
     ) -> None:
         self.module = module
         self.fn = fn
+        self.widened = widened or {}  # variables that are float64 from their first assignment
+        self.written: set[str] = set()  # array arguments stored into, here or by a callee
+        self.heap: list[ir.Value] = []  # local arrays allocated with aligned_alloc
         self.argtypes = argtypes
         self.return_type = return_type
         self.returned: list[Type] = []
@@ -184,6 +202,8 @@ class _FunctionTranslator:
             self.builder.branch(self.exit)
         self.alloca_builder.branch(self.function.blocks[1])
         b = ir.IRBuilder(self.exit)
+        for raw in self.heap:  # every return goes through this block
+            b.call(self.module.libc("free"), [raw])
         if self.ret_slot is None:
             b.ret_void()
         else:
@@ -199,11 +219,13 @@ class _FunctionTranslator:
             raise TranslationError(f"{self.fn.name}: {name} changes kind")
         slot = self.vars.get(name)
         if slot is None:
-            slot = (self._alloca(_VALUE_TYPE[ty]), ty)
+            slot_ty = self.widened.get(name, ty)
+            slot = (self._alloca(_VALUE_TYPE[slot_ty]), slot_ty)
             self.vars[name] = slot
-        elif slot[1] != ty:
-            if _unify(slot[1], ty) != slot[1]:
-                raise TranslationError(f"{self.fn.name}: {name} is {slot[1]}, then {ty}")
+        if slot[1] != ty:
+            wider = _unify(slot[1], ty)
+            if wider != slot[1]:
+                raise _Widen(name, wider)
             value = self._cast(value, ty, slot[1])
         self.builder.store(value, slot[0])
 
@@ -235,7 +257,7 @@ class _FunctionTranslator:
         elif isinstance(stmt, ast.While):
             self._while(stmt)
         elif isinstance(stmt, ast.If):
-            cond = self._truth(*self._scalar(stmt.test))
+            cond = self._condition(stmt.test)
             then = self.function.append_basic_block()
             orelse = self.function.append_basic_block() if stmt.orelse else None
             after = self.function.append_basic_block()
@@ -295,6 +317,8 @@ class _FunctionTranslator:
                 self._store_var(elt.id, self.builder.extract_value(value, k), ty.items[k])
         elif isinstance(target, ast.Subscript):
             arr = self._array(target.value)
+            if isinstance(target.value, ast.Name):
+                self.written.add(target.value.id)
             value, ty = self._scalar(value_node)
             indices = _index_nodes(target.slice)
             if any(isinstance(i, ast.Slice) for i in indices):
@@ -328,8 +352,17 @@ class _FunctionTranslator:
         else:
             fill = self._scalar(call.args[1])
             dtype = fill[1] if isinstance(fill[1], str) else F64
-        data = self._alloca(_MEMORY_TYPE[dtype], size)
-        data.align = LOCAL_ARRAY_ALIGN
+        itemsize = _MEMORY_TYPE[dtype].get_abi_size(self.module.target_data)
+        if size * itemsize <= STACK_ARRAY_MAX_BYTES:
+            data = self._alloca(_MEMORY_TYPE[dtype], size)
+            data.align = LOCAL_ARRAY_ALIGN
+        else:  # on the heap: a thread's stack may be small (512 KiB on macOS, 128 KiB musl)
+            nbytes = -(-size * itemsize // LOCAL_ARRAY_ALIGN) * LOCAL_ARRAY_ALIGN
+            align = ir.Constant(_I64, LOCAL_ARRAY_ALIGN)
+            size_arg = ir.Constant(_I64, nbytes)
+            raw = self.alloca_builder.call(self.module.libc("aligned_alloc"), [align, size_arg])
+            self.heap.append(raw)
+            data = self.alloca_builder.bitcast(raw, _MEMORY_TYPE[dtype].as_pointer())
         arr = _ArrayValue(
             Array(dtype, 1, True),
             data,
@@ -460,7 +493,7 @@ class _FunctionTranslator:
         after = self.function.append_basic_block()
         b.branch(head)
         b.position_at_end(head)
-        b.cbranch(self._truth(*self._scalar(stmt.test)), loop, after)
+        b.cbranch(self._condition(stmt.test), loop, after)
         b.position_at_end(loop)
         self.loops.append(_Loop(head, after))
         self._statements(stmt.body)
@@ -499,9 +532,9 @@ class _FunctionTranslator:
         if isinstance(node, ast.BinOp):
             return self._binop(node.op, self._scalar(node.left), self._scalar(node.right))
         if isinstance(node, ast.UnaryOp):
-            value, ty = self._scalar(node.operand)
             if isinstance(node.op, ast.Not):
-                return b.not_(self._truth(value, ty)), BOOL
+                return b.not_(self._condition(node.operand)), BOOL
+            value, ty = self._scalar(node.operand)
             if isinstance(node.op, ast.UAdd):
                 return value, ty
             if isinstance(node.op, ast.USub):
@@ -519,12 +552,7 @@ class _FunctionTranslator:
                 left = right
             return result, BOOL
         if isinstance(node, ast.BoolOp):
-            # Operands without side effects: both evaluated (numba branches; same value).
-            values = [self._truth(*self._scalar(v)) for v in node.values]
-            result = values[0]
-            for v in values[1:]:
-                result = b.and_(result, v) if isinstance(node.op, ast.And) else b.or_(result, v)
-            return result, BOOL
+            return self._short_circuit(node, truth_only=False), BOOL
         if isinstance(node, ast.IfExp):
             return self._ifexp(node)
         if isinstance(node, ast.Tuple):
@@ -543,6 +571,44 @@ class _FunctionTranslator:
             return self._subscript(node)
         raise TranslationError(f"expression {ast.unparse(node)}")
 
+    def _condition(self, node: ast.expr) -> ir.Value:
+        """The truth (i1) of a test: of ``if``, ``while``, ``… if … else …``, ``not``."""
+        if isinstance(node, ast.BoolOp):
+            return self._short_circuit(node, truth_only=True)
+        return self._truth(*self._scalar(node))
+
+    def _short_circuit(self, node: ast.BoolOp, truth_only: bool) -> ir.Value:
+        """``a and b`` / ``a or b`` as Python and numba evaluate them: an operand only where
+        the ones before do not decide (``i < n and t[i] > 0`` reads ``t[i]`` only if
+        ``i < n``), with branches and a phi. As a value (``truth_only`` False) the operands
+        must be bools: Python's ``x and y`` is then ``x`` or ``y``, any other type would be
+        one of theirs (refused, never met in the generated text)."""
+        b = self.builder
+        decides = 0 if isinstance(node.op, ast.And) else 1  # the operand truth that ends it
+        after = self.function.append_basic_block()
+        incoming: list[tuple[ir.Value, ir.Block]] = []
+        for k, operand in enumerate(node.values):
+            if isinstance(operand, ast.BoolOp):
+                truth = self._short_circuit(operand, truth_only)
+            else:
+                value, ty = self._scalar(operand)
+                if not truth_only and ty != BOOL:
+                    raise TranslationError(f"{ast.unparse(node)}: a value of non-bool operands")
+                truth = self._truth(value, ty)
+            if k == len(node.values) - 1:
+                incoming.append((truth, b.block))
+                b.branch(after)
+                break
+            incoming.append((ir.Constant(_I1, decides), b.block))
+            rest = self.function.append_basic_block()
+            b.cbranch(truth, after, rest) if decides else b.cbranch(truth, rest, after)
+            b.position_at_end(rest)
+        b.position_at_end(after)
+        phi = b.phi(_I1)
+        for value, block in incoming:
+            phi.add_incoming(value, block)
+        return phi
+
     def _scalar(self, node: ast.expr) -> tuple[ir.Value, str]:
         value, ty = self._expr(node)
         if not isinstance(ty, str):
@@ -553,7 +619,7 @@ class _FunctionTranslator:
         """``a if c else b`` with branches (an array read in the branch not taken may be
         out of bounds); LLVM makes it a select where it can."""
         b = self.builder
-        cond = self._truth(*self._scalar(node.test))
+        cond = self._condition(node.test)
         then = self.function.append_basic_block()
         orelse = self.function.append_basic_block()
         after = self.function.append_basic_block()
@@ -676,6 +742,10 @@ class _FunctionTranslator:
                     values.append(value)
                     types.append(ty)
             callee, ret = self.module.specialize(name, tuple(types))
+            for k in self.module.written.get((name, tuple(types)), ()):
+                arg = node.args[k]
+                if isinstance(arg, ast.Name):
+                    self.written.add(arg.id)
             result = b.call(callee, values)
             return None if ret is None else (result, ret)
         raise TranslationError(f"call of {name}")
@@ -822,6 +892,8 @@ class ModuleTranslator:
         self._tables: dict[str, _ArrayValue] = {}
         self._specialised: dict[tuple[str, tuple[Type, ...]], tuple[ir.Function, Returned]] = {}
         self._intrinsics: dict[str, ir.Function] = {}
+        self.written: dict[tuple[str, tuple[Type, ...]], set[int]] = {}
+        """By function and argument types: the array arguments it stores into."""
         for node in self.tree.body:
             if isinstance(node, ast.FunctionDef):
                 self.functions[node.name] = node
@@ -846,6 +918,20 @@ class ModuleTranslator:
         if not isinstance(value, int):
             raise TranslationError(f"{text} is not an integer constant")
         return value
+
+    def libc(self, name: str) -> ir.Function:
+        """C's ``aligned_alloc`` or ``free``, declared in the module (the JIT finds them in
+        the process)."""
+        fn = self._intrinsics.get(name)
+        if fn is None:
+            ptr = _I8.as_pointer()
+            if name == "aligned_alloc":
+                fn = ir.Function(self.ir_module, ir.FunctionType(ptr, [_I64, _I64]), name)
+                fn.return_value.add_attribute("noalias")
+            else:
+                fn = ir.Function(self.ir_module, ir.FunctionType(ir.VoidType(), [ptr]), name)
+            self._intrinsics[name] = fn
+        return fn
 
     def intrinsic(self, name: str, ty: ir.Type, nargs: int) -> ir.Function:
         fn = self._intrinsics.get(name)
@@ -884,6 +970,7 @@ class ModuleTranslator:
         fn = self.functions[name]
         symbol = f"{self.prefix}.{name}.{len(self._specialised)}"
         ret: Returned = None
+        widened: dict[str, str] = {}
         if any(isinstance(n, ast.Return) and n.value is not None for n in ast.walk(fn)):
             # Its return type, from a first translation into a scratch module.
             scratch = ModuleTranslator.__new__(ModuleTranslator)
@@ -892,8 +979,7 @@ class ModuleTranslator:
             scratch._specialised = dict(self._specialised)
             scratch._intrinsics = {}
             scratch._tables = {}
-            probe = _FunctionTranslator(scratch, fn, argtypes, symbol, None)
-            probe.translate()
+            probe = scratch.translate(fn, argtypes, symbol, None, widened)
             first = probe.returned[0]
             if isinstance(first, Array):
                 raise TranslationError(f"{name} returns an array")
@@ -904,16 +990,41 @@ class ModuleTranslator:
                         ret = _unify(ret, other)
                     else:
                         raise TranslationError(f"{name} returns {ret} and {other}")
-        translator = _FunctionTranslator(self, fn, argtypes, symbol, ret)
-        self._specialised[key] = (translator.function, ret)
-        translator.translate()
+        translator = self.translate(fn, argtypes, symbol, ret, widened)
+        params = [arg.arg for arg in fn.args.args]
+        self.written[key] = {k for k, arg in enumerate(params) if arg in translator.written}
         return translator.function, ret
 
+    def translate(
+        self,
+        fn: ast.FunctionDef,
+        argtypes: tuple[Type, ...],
+        symbol: str,
+        ret: Returned,
+        widened: dict[str, str],
+    ) -> _FunctionTranslator:
+        """The function ``fn`` translated into this module as ``symbol``; again with a
+        variable widened to float64 each time one is found assigned an integer, then a
+        float (:class:`_Widen`; ``widened`` collects them)."""
+        key = (fn.name, argtypes)
+        while True:
+            translator = _FunctionTranslator(self, fn, argtypes, symbol, ret, widened)
+            self._specialised[key] = (translator.function, ret)  # a recursive call finds it
+            try:
+                translator.translate()
+            except _Widen as wider:
+                widened[wider.name] = wider.ty
+                del self.ir_module.globals[translator.function.name]
+                symbol = f"{symbol}.w"  # the name stays registered in the module's scope
+                continue
+            return translator
+
     def entry(self, name: str, argtypes: tuple[Type, ...], symbol: str) -> None:
-        """An external ``void <symbol>(...)`` called through ``ctypes``
+        """An external ``int32 <symbol>(...)`` called through ``ctypes``
         (:func:`ctypes_argument`): an array comes as its ``PyArrayObject *``, whose data,
         shape and strides it reads (:data:`ARRAY_FIELDS`); a float as a double, an integer
-        or bool as an int64."""
+        or bool as an int64. It returns 0, or ``k + 1`` without running where argument
+        ``k`` is a read-only array that the function writes (as numba refuses to)."""
         callee, ret = self.specialize(name, argtypes)
         if ret is not None:
             raise TranslationError(f"entry point {name} returns a value")
@@ -922,8 +1033,20 @@ class ModuleTranslator:
             if isinstance(ty, Tuple):
                 raise TranslationError(f"entry point {name} takes a tuple")
             params.append(_I8.as_pointer() if isinstance(ty, Array) else _ENTRY_TYPE[ty])
-        fn = ir.Function(self.ir_module, ir.FunctionType(ir.VoidType(), params), symbol)
+        fn = ir.Function(self.ir_module, ir.FunctionType(_I32, params), symbol)
         b = ir.IRBuilder(fn.append_basic_block())
+        for k in sorted(self.written[(name, argtypes)]):
+            flags = b.load(b.bitcast(
+                b.gep(fn.args[k], [ir.Constant(_I64, ARRAY_FIELDS["flags"])], inbounds=True),
+                _I32.as_pointer(),
+            ))  # fmt: skip
+            writeable = b.and_(flags, ir.Constant(_I32, NPY_ARRAY_WRITEABLE))
+            read_only = b.icmp_unsigned("==", writeable, ir.Constant(_I32, 0))
+            refuse, go_on = fn.append_basic_block(), fn.append_basic_block()
+            b.cbranch(read_only, refuse, go_on)
+            b.position_at_end(refuse)
+            b.ret(ir.Constant(_I32, k + 1))
+            b.position_at_end(go_on)
 
         def field(obj: ir.Value, offset: int, ty: ir.Type) -> ir.Value:
             at = b.gep(obj, [ir.Constant(_I64, offset)], inbounds=True)
@@ -943,8 +1066,15 @@ class ModuleTranslator:
             else:
                 values.append(arg)
         b.call(callee, values)
-        b.ret_void()
+        b.ret(ir.Constant(_I32, 0))
 
+
+STACK_ARRAY_MAX_BYTES = 64 << 10
+"""Largest local array (``np.zeros``/``np.full`` in the text) kept on the stack; larger ones
+(the work array ``W`` of a long chain: 625 KiB for a 128-bar rk45 lane group) are allocated
+on the heap at the function's entry and freed at its exit, since a thread's stack may hold
+less (512 KiB on macOS, 128 KiB with musl). Small mechanisms' work arrays stay on the
+stack."""
 
 LOCAL_ARRAY_ALIGN = 64
 """Bytes a local array is aligned to (a cache line): the lane kernels' work rows are one SIMD
@@ -954,10 +1084,13 @@ to 32 bytes)."""
 _ENTRY_TYPE = {F64: _DOUBLE, I64: _I64, U32: _I64, BOOL: _I64}
 """How an entry point receives a scalar (``ctypes``' double and int64)."""
 
-ARRAY_FIELDS = {"data": 16, "nd": 24, "shape": 32, "strides": 40}
+ARRAY_FIELDS = {"data": 16, "nd": 24, "shape": 32, "strides": 40, "flags": 64}
 """Byte offsets in NumPy's ``PyArrayObject`` (its ABI, NumPy 1 and 2, CPython without free
-threading) of the data pointer and the pointers to the shape and the strides (bytes);
-checked against NumPy before the first call (:func:`array_layout_ok`)."""
+threading) of the data pointer, the pointers to the shape and the strides (bytes), and the
+flags (int32); checked against NumPy before the first call (:func:`array_layout_ok`)."""
+
+NPY_ARRAY_WRITEABLE = 0x0400
+"""The flag of a writeable array in ``PyArrayObject.flags`` (NumPy's C API)."""
 
 
 def ctypes_argument(ty: Type) -> Any:
@@ -987,10 +1120,85 @@ def array_layout_ok() -> bool:
         return False
     shape = tuple(read(read(base + ARRAY_FIELDS["shape"]) + 8 * k) for k in (0, 1))
     strides = tuple(read(read(base + ARRAY_FIELDS["strides"]) + 8 * k) for k in (0, 1))
-    return (shape, strides) == (probe.shape, probe.strides)
+    if (shape, strides) != (probe.shape, probe.strides):
+        return False
+    frozen = probe.view()
+    frozen.flags.writeable = False
+    writeable = [
+        read(id(a) + ARRAY_FIELDS["flags"], ctypes.c_int32) & NPY_ARRAY_WRITEABLE
+        for a in (probe, frozen)
+    ]
+    return bool(writeable[0]) and not writeable[1]
+
+
+def lane_compiler() -> str:
+    """What compiles the generated lane kernels in this process
+    (:func:`mcchain.codegen.generate.lane_kernels`): ``"native"`` (this module), or
+    ``"numba"`` with ``MCCHAIN_LANE_COMPILER=numba`` or where this NumPy's array layout is
+    not the one the entries read."""
+    if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba" or not array_layout_ok():
+        return "numba"
+    return "native"
 
 
 _BACKEND_HASH = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+
+COUNTS = {"compiled": 0, "loaded": 0}
+"""Entry points compiled, and loaded from the disk cache, by this process (for tests and
+``mcchain cache warm``)."""
+
+CACHE_MAX_BYTES = 256 << 20
+"""Bound of the ``native`` cache folder: beyond it, the files used least recently are removed
+when one is written (an entry's machine code is 0.1-1 MB: hundreds of scenes' kernels)."""
+
+
+@functools.cache
+def key_versions() -> tuple[str, ...]:
+    """Everything besides the text, the entry, its argument types, the contract flag and the
+    target CPU (numba's ``magic_tuple``) that can change the machine code of an entry: this
+    file, the generator's sources, and the versions of numba, llvmlite, LLVM, Python and
+    NumPy (a patch release of any of them may change the code or the ABI it assumes)."""
+    import sys
+
+    import llvmlite
+    import numba
+    from llvmlite import binding
+
+    from mcchain.codegen.cache import generator_hash
+
+    llvm = ".".join(map(str, binding.llvm_version_info))
+    return (
+        f"native {_BACKEND_HASH}",
+        f"generator {generator_hash()}",
+        f"numba {numba.__version__}",
+        f"llvmlite {llvmlite.__version__}",
+        f"llvm {llvm}",
+        f"python {sys.version.split()[0]} {sys.implementation.cache_tag}",
+        f"numpy {np.__version__}",
+    )
+
+
+def evict_oldest(folder: Path, max_bytes: int, keep: Path | None = None) -> list[Path]:
+    """Remove the machine-code files of ``folder`` used least recently (modification time,
+    touched at every load) until they hold at most ``max_bytes``; never ``keep`` (the file
+    just written). Returns the files removed."""
+    files = []
+    for path in folder.glob("*.bin"):
+        with contextlib.suppress(OSError):
+            info = path.stat()
+            files.append((info.st_mtime, info.st_size, path))
+    total = sum(size for _, size, _ in files)
+    removed = []
+    for _, size, path in sorted(files):
+        if total <= max_bytes:
+            break
+        if path == keep:
+            continue
+        with contextlib.suppress(OSError):
+            path.unlink()
+            removed.append(path)
+            total -= size
+    return removed
 
 
 def _fingerprint_function() -> Callable[[Any], Any]:
@@ -1041,7 +1249,11 @@ class NativeModule:
             entry = entries.get(key)
             if entry is None:
                 entry = self._entry(name, key, args)
-            entry[0](*args)
+            refused = entry[0](*args)
+            if refused:
+                raise ValueError(
+                    f"{name}: argument {refused - 1} is a read-only array, which it writes"
+                )
 
         call.__name__ = name
         self.__dict__[name] = call  # later lookups skip __getattr__ (radau calls per step)
@@ -1057,7 +1269,7 @@ class NativeModule:
                 if not array_layout_ok():
                     raise RuntimeError("this NumPy's array layout is not the one entries read")
                 library, address = self._load_or_compile(name, argtypes)
-                proto = ctypes.CFUNCTYPE(None, *map(ctypes_argument, argtypes))
+                proto = ctypes.CFUNCTYPE(ctypes.c_int32, *map(ctypes_argument, argtypes))
                 entry = (proto(address), library)  # the library keeps the code alive
                 self._entries[name][key] = entry
         return entry
@@ -1067,7 +1279,7 @@ class NativeModule:
         cache or compiled now, and the address of its entry function."""
         codegen = _codegen()
         key = repr(
-            (self._digest, name, argtypes, self.contract, _BACKEND_HASH, codegen.magic_tuple())
+            (self._digest, name, argtypes, self.contract, codegen.magic_tuple(), *key_versions())
         )
         digest = hashlib.sha256(key.encode()).hexdigest()[:24]
         path = mcchain_cache("native") / f"{self.name}-{name}-{digest}.bin"
@@ -1076,9 +1288,13 @@ class NativeModule:
         if path.exists():
             try:
                 library = codegen.unserialize_library(pickle.loads(path.read_bytes()))
+                with contextlib.suppress(OSError):
+                    os.utime(path)  # recently used: the last to be evicted
+                COUNTS["loaded"] += 1
             except Exception:
                 library = None  # a stale or partial file: compile again
         if library is None:
+            COUNTS["compiled"] += 1
             # Symbols unique in the process's JIT engine, which holds every library.
             translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
             translator.entry(name, argtypes, symbol)
@@ -1090,6 +1306,7 @@ class NativeModule:
             library.finalize()
             library.get_pointer_to_function(symbol)
             _write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
+            evict_oldest(path.parent, CACHE_MAX_BYTES, keep=path)
         address = library.get_pointer_to_function(symbol)
         if not address:
             raise RuntimeError(f"{symbol} missing from its compiled library")

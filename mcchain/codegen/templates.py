@@ -94,12 +94,13 @@ _GROUP_FINISH = """
             t_div[s0 + l] = tdv[l]
             t_sing[s0 + l] = tsg[l]
             t_cl[s0 + l] = tcl[l]
+        @@peaks_finish
         @@contact_finish
 """
 
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
-            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT,
+            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
             status, t_div, t_sing, t_cl"""
 
 ERK_KERNEL = (
@@ -159,6 +160,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                     @@contact_step_c
+                    @@peaks_c
                 if n == nstep or n % out_every == 0:
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
@@ -185,7 +187,7 @@ PROJECT_CALL = """
 
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
-                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT,
+                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
                  status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
 ADAPTIVE_KERNEL = (
@@ -244,6 +246,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                     ts = @[tl]
                     @@contact_check
                 @@contact_switch
+                @@peaks
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
                     group_outputs_SUFFIX(
                         W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,

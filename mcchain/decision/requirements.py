@@ -78,6 +78,8 @@ def produced_outputs(scene: Scene, model: Model) -> dict[str, tuple[str, ...]]:
         skip.add("omega_cycle")
     if not model.has_contact:
         skip.update(CONTACT_LAW_OUTPUTS)
+    if not model.has_slider_drivers:
+        skip.add("peak_driver_force")  # stored only with a slider driver
     out: dict[str, tuple[str, ...]] = {}
     for name, spec in VARIABLES.items():
         if name in skip or spec.dims[0] != "sample" or "time" in spec.dims:

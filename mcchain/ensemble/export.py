@@ -4,13 +4,18 @@ Columns, each ``name [units]`` (units as stored, CF notation):
 
 * ``sample``, then every sampled parameter by its path;
 * ``status``: the flags set, ``|``-separated (``ok`` for none);
-* every per-sample variable: a scalar keeps its name (``stable``, ``iterations``,
-  ``contact_lost_time``), one with a second axis gets a column per entry (``omega_0``,
-  ``impact_count_B``, ``joint_force_eq_B_x``, ``q_eq_rocker_theta``), and each ``omega``
-  column a ``frequency`` twin in Hz;
-* each force-like time history reduced to its peak over time: ``peak_joint_force_B`` (the
-  magnitude of the vector), ``peak_contact_force_B``, ``peak_driver_torque_crank``,
-  ``peak_joint_moment_P``, ``max_constraint_error``.
+* every per-sample variable of the ensemble, under its own name: a scalar keeps it
+  (``stable``, ``iterations``, ``contact_lost_time``), one with a second axis gets a column
+  per entry (``omega_0``, ``impact_count_B``, ``joint_force_eq_B_x``, ``q_eq_rocker_theta``),
+  and each ``omega`` column a ``frequency`` twin in Hz. A column named after a variable holds
+  exactly that variable's values: ``peak_joint_force_B``, ``peak_contact_force_B`` and
+  ``peak_driver_torque_crank`` are the continuous peaks the integrator tracked at every step;
+* each force-like time history reduced to its largest |value| among the STORED points (every
+  ``output_dt``, so a peak between them is missed): ``max_stored_joint_force_B`` (the
+  magnitude of the vector), ``max_stored_contact_force_B``, ``max_stored_driver_torque_crank``,
+  ``max_stored_joint_moment_P``, ``max_stored_constraint_error``.
+
+No column is written twice (:func:`sample_table` refuses a name already taken).
 
 Positions, velocities, mode shapes and the modes along a cycle stay in the ensemble (they
 are not one number per sample).
@@ -31,7 +36,9 @@ if TYPE_CHECKING:
     import xarray as xr
 
 PEAK_HISTORIES = ("joint_force", "contact_force", "driver_torque", "driver_force", "joint_moment")
-"""Time histories exported as their peak |value| over time (vectors: the magnitude)."""
+"""Time histories exported as their largest stored |value| (vectors: the magnitude)."""
+STORED_PREFIX = "max_stored_"
+"""Prefix of the columns reduced from stored points (never the name of a variable)."""
 BLOCK = 4096
 """Samples read at a time from a time history."""
 
@@ -44,7 +51,8 @@ def sample_table(ds: xr.Dataset) -> pd.DataFrame:
     """The per-sample table of ``ds`` (see the module docstring), in sample order."""
     import pandas as pd
 
-    columns: dict[str, np.ndarray] = {"sample": np.asarray(ds["sample"].values)}
+    columns = _Columns()
+    columns["sample"] = np.asarray(ds["sample"].values)
     if "parameters" in ds.data_vars and "param" in ds.dims:
         values = np.asarray(ds["parameters"].transpose("sample", "param").values, float)
         paths = dim_names(ds, "param")
@@ -85,10 +93,23 @@ def sample_table(ds: xr.Dataset) -> pd.DataFrame:
             column = peak[:, k]
             if np.isnan(column).all():
                 continue  # e.g. the contact force of an ideal joint
-            columns[_header(f"peak_{name}_{label}", units)] = column
+            columns[_header(f"{STORED_PREFIX}{name}_{label}", units)] = column
     if "constraint_error" in ds.data_vars:
-        columns["max_constraint_error"] = peak_abs_over_time(ds, "constraint_error", BLOCK)
-    return pd.DataFrame(columns)
+        units = ds["constraint_error"].attrs.get("units")
+        columns[_header(f"{STORED_PREFIX}constraint_error", units)] = peak_abs_over_time(
+            ds, "constraint_error", BLOCK
+        )
+    return pd.DataFrame(dict(columns))
+
+
+class _Columns(dict[str, np.ndarray]):
+    """The table's columns by header; a header is written once (a second write would put
+    one quantity's values under another's name)."""
+
+    def __setitem__(self, key: str, value: np.ndarray) -> None:
+        if key in self:
+            raise ValueError(f"export: column {key!r} would be written twice")
+        super().__setitem__(key, value)
 
 
 def _unit_of(units: str | None, label: str) -> str | None:

@@ -249,12 +249,49 @@ VARIABLES: dict[str, VariableSpec] = {
             "history",
             "simulate",
         ),
-        _v("energy", _ST, "J", "kinetic + potential energy", "history", "simulate"),
+        _v(
+            "energy",
+            _ST,
+            "J",
+            "mechanical energy: kinetic + potential (gravity, springs, constant loads) + the "
+            "elastic energy K delta^(m+1)/(m+1) stored in contacts under a contact law",
+            "history",
+            "simulate",
+        ),
+        _v(
+            "peak_joint_force",
+            ("sample", "joint"),
+            "N",
+            "continuous peak over the run of |joint_force| (prismatic joints: the force normal "
+            "to the axis, without the couple), located within each step, not from stored points",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "peak_driver_torque",
+            ("sample", "driver"),
+            "N m",
+            "continuous peak over the run of |driver_torque|, located within each step, not "
+            "from stored points (NaN for slider drivers)",
+            "float64",
+            "simulate",
+        ),
+        _v(
+            "peak_driver_force",
+            ("sample", "driver"),
+            "N",
+            "continuous peak over the run of |driver_force| of slider drivers, located within "
+            "each step, not from stored points (NaN for drivers of an angle)",
+            "float64",
+            "simulate",
+        ),
         _v(
             "peak_contact_force",
             ("sample", "joint"),
             "N",
-            "largest contact force over the history (joints with a contact law; NaN others)",
+            "continuous peak over the run of the contact force (the link's |lambda|, then F_n), "
+            "located within each step, not from stored points (joints with a contact law; NaN "
+            "others)",
             "float64",
             "simulate",
         ),

@@ -43,7 +43,7 @@ KC = 12  # FM · ∂F_n/∂δ, N/m (the step-size check)
 # ... and the summaries (mcchain.contact.CONTACT_SUMMARY, in that order).
 DFR = 13  # FM · ∂F_n/∂δ̇, N s/m (Newton iterations of implicit steps)
 NIM = 14  # impacts
-PKF = 15  # peak contact force, N
+PKF = 15  # peak contact force, N (the continuous one, mcchain.kernels.peaks, at the end)
 PKD = 16  # peak penetration, m
 TFF = 17  # free-flight time, s
 TSE = 18  # first separation time, s
@@ -218,7 +218,7 @@ def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
 def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
     """Bookkeeping of the step of length ``h`` that ended at time ``t`` with δ1, δ̇1 and
     the kinetic energy ``kinetic`` (J): onset (δ crosses 0 upwards: located on the cubic
-    Hermite interpolant, its rate is δ̇⁻), separation, free flight, peaks, and the re-seat
+    Hermite interpolant, its rate is δ̇⁻), separation, free flight, peak penetration, and the re-seat
     criterion of model auto (:func:`reseat_ready`). Returns True when the joint is marked
     for re-seating."""
     k = contact_joint_index(km, j)
@@ -249,7 +249,6 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
                 marked = True
         else:
             cst[j, DWL] = 0.0
-    cst[j, PKF] = max(cst[j, PKF], lam_r)
     cst[j, PD] = d1
     cst[j, PR] = r1
     return marked

@@ -25,6 +25,7 @@ from mcchain.kernels.clearance import (
     FM,
     NCST,
     PDC,
+    PKF,
     PRC,
     SUMMARY_COLUMNS,
     contact_forces,
@@ -47,6 +48,14 @@ from mcchain.kernels.joints import (
     constraint_velocity_rhs,
     joint_forces,
     joint_vectors,
+)
+from mcchain.kernels.peaks import (
+    PEAK_CLOCK,
+    PEAK_WIDTH,
+    peak_values,
+    peaks_feed,
+    peaks_finish,
+    peaks_start,
 )
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
@@ -72,12 +81,14 @@ def nan_history(s, first, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_e
 
 
 @njit(**JIT)
-def finish_contact(s, st, written, cst, out_ct, sum_ct):
+def finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out):
     """A sample's contact outputs after its run: δ and the mode NaN from history index
-    ``written`` on; the summaries per joint, NaN after a failure."""
+    ``written`` on; the summaries per joint, NaN after a failure. The peak contact force is
+    the joint's continuous peak of |joint force| (``peaks_out[s]``, filled before)."""
     for it in range(written, out_ct.shape[1]):
         out_ct[s, it, :] = np.nan
     for j in range(cst.shape[0]):
+        cst[j, PKF] = peaks_out[s, contact_joint_index(km, j)]
         for c in range(len(SUMMARY_COLUMNS)):
             value = cst[j, SUMMARY_COLUMNS[c]]
             sum_ct[s, len(SUMMARY_COLUMNS) * j + c] = np.nan if st & FAILURE_BITS else value
@@ -340,7 +351,7 @@ def reseat(km, s, q, v, t, minv, cols, first, cst, row_law, tau, work_B, work_S,
 def rk4_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, A, bw, cc,
     balpha2, bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct,
-    sum_ct, status, t_div, t_sing, t_cl,
+    sum_ct, peaks_out, status, t_div, t_sing, t_cl,
 ):  # fmt: skip
     """Fixed-step RK4 (tableau ``A``, ``bw``, ``cc``, strictly sub-diagonal) with Baumgarte
     on the samples ``start:stop``: ``nstep`` steps of ``h``, the last one ``h_last`` long;
@@ -353,16 +364,21 @@ def rk4_run(
     the switch of model auto at λ ≤ 0 and the bookkeeping of the step that ended there;
     after the step, the re-seats. ``out_ct`` (nsample, ntime, 2 ncj): δ and the mode
     (0 link, 1 contact, 2 free) per output time; ``sum_ct`` (nsample, 5 ncj): the summaries
-    (mcchain.contact.CONTACT_SUMMARY) per joint.
+    (mcchain.contact.CONTACT_SUMMARY) per joint, their peak contact force the continuous one.
+    ``peaks_out`` (nsample, njoint + ndriver): the continuous peaks of |joint force| and
+    |driver torque| (:mod:`mcchain.kernels.peaks`), fed at every step's start.
     """
     ndof = Q0.shape[1]
     nj = km.joint_body_a.shape[0]
     nstage = bw.shape[0]
     ncj = contact_joints(km)
     limit2 = CONTACT_STEP_LIMIT * CONTACT_STEP_LIMIT
+    npk = peaks_out.shape[1]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            for k in range(npk):
+                peaks_out[s, k] = np.nan
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
@@ -382,6 +398,9 @@ def rk4_run(
         row_law = np.zeros((ncon, 3))
         cst = np.zeros((ncj, NCST))
         contact_start(km, cst)
+        pk = np.zeros(PEAK_WIDTH * npk + PEAK_CLOCK)
+        peaks_start(pk)
+        values = np.zeros(npk)
         qdd = np.zeros(ndof)
         qs = np.zeros(ndof)  # a stage's state
         vs = np.zeros(ndof)
@@ -464,6 +483,8 @@ def rk4_run(
                         d1, r1 = cst[j, PDC], cst[j, PRC]
                         contact_step(km, s, cst, j, lam_r, t, hb, d1, r1, kinetic)
                     wca = 0.0
+                peak_values(km, lam0, cst, values)
+                peaks_feed(pk, values, t)
                 if n == nstep or n % out_every == 0:
                     it = t_out.shape[0] - 1 if n == nstep else n // out_every
                     write_outputs(
@@ -483,7 +504,8 @@ def rk4_run(
                     km, s, q, v, tn, minv, cols, first, cst, row_law, tau, B, S, phi, g, nu, dinv,
                 )  # fmt: skip
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
-        finish_contact(s, st, written, cst, out_ct, sum_ct)
+        peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
+        finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
         status[s] = st
 
 

@@ -58,6 +58,8 @@ from mcchain.kernels.joints import (
     constraint_residual,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
+from mcchain.kernels.peaks import peak_values, peaks_feed, peaks_finish, peaks_start
+from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
@@ -72,7 +74,7 @@ from mcchain.status import (
 def generalized_alpha_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, alpha_m,
     alpha_f, gam, beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
-    out_en, out_ct, sum_ct, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
+    out_en, out_ct, sum_ct, peaks_out, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``: ``nstep``
     steps of ``h``, the last one ``h_last`` long, step n starting at
@@ -94,15 +96,19 @@ def generalized_alpha_run(
     CONTACT_STEP_LIMIT flags CONTACT_STEP_TOO_LARGE (the impacts would be damped by the
     method, not by the law), then the switch of model auto, the located onsets and
     separations, and the re-seats. ``cols``, ``first``: the constraint pattern (re-seat
-    projection); ``out_ct``, ``sum_ct``: the contact outputs (see explicit.rk4_run).
+    projection); ``out_ct``, ``sum_ct``, ``peaks_out``: the contact outputs and the
+    continuous peaks (see explicit.rk4_run), fed with λ at every step's start.
     """
     ndof = Q0.shape[1]
     nsys = ndof + ncon
     nj = km.joint_body_a.shape[0]
     ncj = contact_joints(km)
+    npk = peaks_out.shape[1]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            for k in range(npk):
+                peaks_out[s, k] = np.nan
             continue
         q = Q0[s].copy()
         v = V0[s].copy()
@@ -125,6 +131,9 @@ def generalized_alpha_run(
         S = np.zeros((ncon, ncon))  # re-seat scratch
         work = np.zeros((4, ncon))
         contact_start(km, cst)
+        pk = np.zeros(PEAK_WIDTH * npk + PEAK_CLOCK)
+        peaks_start(pk)
+        values = np.zeros(npk)
         mass_diagonal(km, s, m)
         for i in range(ndof):
             minv[i] = 1.0 / m[i]
@@ -169,6 +178,8 @@ def generalized_alpha_run(
                         km, s, q, v, t, minv, cols, first, cst, row_law, tau, B, S, work[0],
                         work[1], work[2], work[3],
                     )  # fmt: skip
+            peak_values(km, lam, cst, values)
+            peaks_feed(pk, values, t)
             if n == nstep or n % out_every == 0:
                 it = t_out.shape[0] - 1 if n == nstep else n // out_every
                 write_outputs(
@@ -269,7 +280,8 @@ def generalized_alpha_run(
                 for r in range(ncon):
                     lam[r] = rhs[ndof + r]
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
-        finish_contact(s, st, written, cst, out_ct, sum_ct)
+        peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
+        finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
         status[s] = st
         nsteps_out[s] = nst
         nevals_out[s] = nev

@@ -97,3 +97,11 @@ class GeneralizedAlpha:
         gamma = 0.5 + af - am
         beta = 0.25 * (gamma + 0.5) ** 2
         return cls(rho_inf, am, af, gamma, beta)
+
+
+PEAK_WIDTH = 5
+"""Numbers the continuous peak tracking (:mod:`mcchain.kernels.peaks`) keeps per quantity:
+its last four values at accepted states and its running peak. Here, with no numba, so that
+the code generator lays out its rows without importing the kernels."""
+PEAK_CLOCK = 5
+"""... and per sample, shared by its quantities: the last four times and the count fed."""

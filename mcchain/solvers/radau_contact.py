@@ -14,8 +14,8 @@ its dense output:
   (:func:`mcchain.kernels.clearance.reseat_ready`, checked at every accepted step), then the
   projection onto the link (:func:`mcchain.kernels.explicit.reseat`).
 
-Peaks are kept at every accepted step and output time, impacts and free-flight time at the
-events.
+Peaks of the forces are located on each segment's dense output (:mod:`mcchain.solvers.peaks`),
+the peak penetration kept at every accepted step, impacts and free-flight time at the events.
 """
 
 from __future__ import annotations
@@ -85,6 +85,7 @@ class _Sample:
         self.due = math.inf  # when a re-seat's dwell was completed (an accepted step's end)
         self.t_prev = 0.0  # the last accepted step's end
         self.free_since = [math.nan] * len(self.joints)
+        self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
 
     # -- the right-hand side and the step hook ---------------------------------------------
     def accelerations(self, t: float, y: np.ndarray) -> float:
@@ -101,6 +102,15 @@ class _Sample:
             )
         )  # fmt: skip
 
+    def quantities(self, t: float, y: np.ndarray) -> np.ndarray:
+        """|joint force| per joint and |λ| per driver at (t, y) with the present modes."""
+        from mcchain.kernels.peaks import peak_values
+
+        self.accelerations(t, y)
+        values = np.zeros(len(self.peaks))
+        peak_values(self.km, self.lam, self.cst, values)
+        return values
+
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         self.run.evaluations[self.i] += 1
         if self.accelerations(t, y) < 0.0:
@@ -109,7 +119,7 @@ class _Sample:
 
     def on_step(self, t: float, y: np.ndarray) -> float:
         """solve_ivp's call once per accepted step (an event that never fires): the step
-        count, the peaks, and the re-seat dwell of model auto."""
+        count, the peak penetration, and the re-seat dwell of model auto."""
         from mcchain.kernels.forces import kinetic_energy
 
         cl, cst = self.cl, self.cst
@@ -120,7 +130,6 @@ class _Sample:
         for j, k in enumerate(self.joints):
             r = self.rows[j]
             lam_r = self.lam[r]
-            cst[j, cl.PKF] = max(cst[j, cl.PKF], lam_r)
             if cst[j, cl.FM] != 1.0:
                 continue
             d1, r1 = cst[j, cl.PEN], cst[j, cl.PDOT]
@@ -221,6 +230,7 @@ class _Sample:
         from scipy.integrate import solve_ivp
 
         from mcchain.kernels.explicit import finish_contact, nan_history
+        from mcchain.solvers.peaks import dense_peaks
 
         run, i, cl, cst = self.run, self.i, self.cl, self.cst
         t_end = float(run.time[-1])
@@ -235,7 +245,10 @@ class _Sample:
                 sol = solve_ivp(
                     self.rhs, (t, t_end), y, method="Radau", t_eval=run.time[written:],
                     rtol=run.settings.rtol, atol=run.settings.atol, events=events,
+                    dense_output=True,
                 )  # fmt: skip
+                if sol.sol is not None:  # the segment's peaks, in its modes
+                    dense_peaks(sol.sol, sol.sol.ts, self.quantities, self.peaks)
             except _Singular as exc:
                 fail_bit, fail_time = SINGULAR, float(exc.args[0])
                 break
@@ -265,8 +278,9 @@ class _Sample:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
         nan_history(i, written, *self.flat)
-        finish_contact(i, int(run.status[i]), written, cst, run.contact_history,
-                       run.contact_summary)  # fmt: skip
+        run.peaks[i] = np.nan if fail_bit else self.peaks
+        finish_contact(self.km, i, int(run.status[i]), written, cst, run.contact_history,
+                       run.contact_summary, run.peaks)  # fmt: skip
 
     def write(self, it: int, t: float, y: np.ndarray) -> float:
         """The outputs at history index ``it`` (as the kernels write them) and the contact
@@ -276,8 +290,6 @@ class _Sample:
         run, model, cl = self.run, self.model, self.cl
         err = abs(self.accelerations(t, y))
         cl.record_stage0(self.km, self.cst, self.row_law)
-        for j in range(len(self.joints)):
-            self.cst[j, cl.PKF] = max(self.cst[j, cl.PKF], self.lam[self.rows[j]])
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
         write_outputs(
             self.km, self.i, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,

@@ -22,7 +22,12 @@ Contract of :func:`simulate`:
    ``driver_torque`` (sample, time, driver) = −λ of the driver row (``driver_force`` for a
    slider driver: the force along its joint's axis, N); ``constraint_error``
    (sample, time) = max |Φ|; ``energy`` (sample, time) = kinetic + potential (gravity, springs,
-   constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them).
+   constant forces −f·r, couples −τθ; drivers do work, so it is not conserved with them) +
+   the elastic energy K δ^(m+1)/(m+1) of contacts under a contact law. Per sample, the
+   continuous peaks over the run (tracked at every step, located within the step: not from
+   the stored points): ``peak_joint_force`` (sample, joint) of |joint_force|,
+   ``peak_driver_torque`` (sample, driver) of |driver_torque| (``peak_driver_force`` for a
+   slider driver), and with contact-law joints ``peak_contact_force``.
 5. Status (per sample, :mod:`mcchain.status`): DIVERGED when the state is non-finite or
    max |Φ| exceeds ``constraint_tolerance`` (or an implicit/adaptive step fails), SINGULAR
    when S (or the KKT matrix) loses rank — a pivot ≤ ``SINGULAR_PIVOT`` × its diagonal —
@@ -338,6 +343,9 @@ class _Run:
     # mcchain.codegen.generate.CONTACT_SUMMARY. Empty without such joints.
     contact_history: np.ndarray | None = None
     contact_summary: np.ndarray | None = None
+    # Continuous peaks per sample (sample, njoint + ndriver): |joint force| of each joint, then
+    # |λ| of each driver (mcchain.kernels.peaks), every method; NaN for a failed sample.
+    peaks: np.ndarray | None = None
 
     @property
     def groups(self) -> int:
@@ -383,7 +391,7 @@ def _run_erk(run: _Run, project: bool) -> None:
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
-        run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
 
 
@@ -413,7 +421,7 @@ def _run_rk4_loop(run: _Run) -> None:
         *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
-        run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
 
 
@@ -442,7 +450,7 @@ def _run_rk45(run: _Run) -> None:
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        *run.contact_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
+        *run.contact_args(), run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
         run.rejected_steps, run.evaluations, min_block=1,
     )  # fmt: skip
 
@@ -461,10 +469,17 @@ def _run_radau(run: _Run) -> None:
         return
     from scipy.integrate import solve_ivp
 
+    from mcchain.kernels.clearance import NCST
+    from mcchain.kernels.peaks import peak_values
+    from mcchain.solvers.peaks import dense_peaks
+
     module, P_all, _, _ = _lane_setup(run, "accel")
     s = run.settings
     alpha, beta = s.gains
     model = run.model
+    km = model.kernel_model()
+    no_contact = np.zeros((0, NCST))
+    assert run.peaks is not None
     ndof, ncon, n = model.ndof, max(model.ncon, 1), model.nsample
     flat = _flat_outputs(run.out, n, len(run.time))
     qdd = np.zeros((ndof, 1))
@@ -494,15 +509,27 @@ def _run_radau(run: _Run) -> None:
                 raise _Singular(t)
             return np.concatenate([y[ndof:], qdd[:, 0]])
 
+        def quantities(t: float, y: np.ndarray, P: np.ndarray = P) -> np.ndarray:
+            """|joint force| per joint and |λ| per driver at (t, y) (mcchain.kernels.peaks)."""
+            Q = np.ascontiguousarray(y[:ndof, None])
+            V = np.ascontiguousarray(y[ndof:, None])
+            module.accel(P, Q, V, t, 2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
+            values = np.zeros(model.njoint + model.ndriver)
+            peak_values(km, np.ascontiguousarray(lam[:, 0]), no_contact, values)
+            return values
+
         y0 = np.concatenate([run.q[i], run.v[i]])
         try:
             sol = solve_ivp(
                 rhs, (0.0, float(run.time[-1])), y0, method="Radau", t_eval=run.time,
-                rtol=s.rtol, atol=s.atol, events=count_step,
+                rtol=s.rtol, atol=s.atol, events=count_step, dense_output=True,
             )  # fmt: skip
             run.evaluations[i] = sol.nfev
             ys, ok = sol.y, sol.status == 0
             fail_bit, fail_time = DIVERGED, (sol.t[-1] if len(sol.t) else 0.0)
+            if ok:
+                run.peaks[i] = 0.0
+                dense_peaks(sol.sol, sol.sol.ts, quantities, run.peaks[i])
         except _Singular as exc:
             ys, ok = np.zeros((2 * ndof, 0)), False
             fail_bit, fail_time = SINGULAR, float(exc.args[0])
@@ -540,6 +567,7 @@ def _run_radau(run: _Run) -> None:
             nt = first
         if not ok:
             nt = min(nt, int(np.searchsorted(run.time, fail_time, side="left")))
+            run.peaks[i] = np.nan
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
         flat[0][i, :nt] = Q[:, :nt].T
@@ -574,7 +602,8 @@ def _run_generalized_alpha(run: _Run) -> None:
         coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
         SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
-        run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations, min_block=1,
+        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations,
+        min_block=1,
     )  # fmt: skip
 
 
@@ -597,6 +626,17 @@ def _slider_forces(model: Model, driver_torque: np.ndarray) -> dict[str, np.ndar
     force[..., slider] = driver_torque[..., slider]
     driver_torque[..., slider] = np.nan
     return {"driver_force": force}
+
+
+def _peak_outputs(model: Model, peaks: np.ndarray) -> dict[str, np.ndarray]:
+    """``peak_joint_force`` (sample, joint) and ``peak_driver_torque`` (sample, driver), the
+    continuous peaks of |joint_force| and |driver_torque| the kernels tracked at every step
+    (a slider driver's force is moved to ``peak_driver_force`` afterwards)."""
+    nj = model.njoint
+    return {
+        "peak_joint_force": np.ascontiguousarray(peaks[:, :nj]),
+        "peak_driver_torque": np.ascontiguousarray(peaks[:, nj:]),
+    }
 
 
 def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
@@ -804,13 +844,17 @@ def simulate(
     if ncj:
         run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
         run.contact_summary = np.full((n, len(CONTACT_SUMMARY) * ncj), np.nan)
+    run.peaks = np.full((n, model.njoint + model.ndriver), np.nan)
     if n:
         METHODS[settings.method].run(run)
-    result = {"time": time, **out}
+    result = {"time": time, **out, **_peak_outputs(model, run.peaks)}
     if model.has_prismatic:
         result.update(_prismatic_moments(model, result["contact_force"]))
     if model.has_slider_drivers:
         result.update(_slider_forces(model, result["driver_torque"]))
+        result["peak_driver_force"] = _slider_forces(model, result["peak_driver_torque"])[
+            "driver_force"
+        ]
     if ncj:
         result.update(_contact_outputs(run, history_dtype))
     result["status"] = run.status

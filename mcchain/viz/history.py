@@ -1,7 +1,11 @@
 """Report figures of the time histories: reaction envelopes and contact loss.
 
 ``reaction_envelopes.png``: per joint |f| over time (and the normal contact force of clearance
-joints, driver torques), median and 5–95 % band over the samples, each titled with the model
+joints, driver torques), median and 5–95 % band over the samples AT THE STORED TIMES (every
+``output_dt``: a peak between them is not in the bands, which the title says), with the true
+per-sample peaks tracked at every step (``peak_joint_force``, ``peak_contact_force``,
+``peak_driver_torque``) marked as dashed lines (their median and 95 % quantile over the
+samples), each titled with the model
 that produced it (link, or contact law and its model); samples flagged ``contact_lost`` are
 left out after their ``contact_lost_time`` and those times shaded; the state of each joint
 with a contact law (link, contact, free, ...) as shares of the samples over time.
@@ -114,24 +118,29 @@ def reaction_envelopes_figure(
     idx, lost = _shown_times(ds), _lost_times(ds)
     time = np.asarray(ds["time"].values, float)[idx]
     masked = (time[:, None] >= lost[None, :]).mean(axis=1)
-    panels: list[tuple[str, np.ndarray, str]] = []
+    panels: list[tuple[str, np.ndarray, str, np.ndarray | None]] = []
     q = _envelope(ds, "joint_force", lambda a: np.hypot(a[..., 0], a[..., 1]), idx, lost)
     for k, j in enumerate(joints):
-        panels.append((f"|f {j}|{model_tag(models[k])}", q[..., k], "N"))
+        peaks = _peaks(ds, "peak_joint_force", k)
+        panels.append((f"|f {j}|{model_tag(models[k])}", q[..., k], "N", peaks))
     if "contact_force" in ds.data_vars:
         q = _envelope(ds, "contact_force", lambda a: a, idx, lost)
         for k, j in enumerate(joints):
             if not np.isfinite(q[..., k]).any():
                 continue
             what = {"link": "λ", "contact": "F_n"}.get(str(models[k]), "λ (link) / F_n (law)")
-            panels.append((f"{what} {j}{model_tag(models[k])}", q[..., k], "N"))
+            peaks = _peaks(ds, "peak_contact_force", k)
+            if peaks is None or not np.isfinite(peaks).any():  # the link: its peak |λ|
+                peaks = _peaks(ds, "peak_joint_force", k)
+            panels.append((f"{what} {j}{model_tag(models[k])}", q[..., k], "N", peaks))
     for name, what, units in (("driver_torque", "torque", "N m"), ("driver_force", "force", "N")):
         if name not in ds.data_vars or not ds.sizes.get("driver", 0):
             continue
         q = _envelope(ds, name, lambda a: a, idx, lost)
         for k, d in enumerate(dim_names(ds, "driver")):
             if np.isfinite(q[..., k]).any():  # a slider driver has a force, not a torque
-                panels.append((f"driver {what} {d}", q[..., k], units))
+                peaks = _peaks(ds, f"peak_{name}", k)
+                panels.append((f"driver {what} {d}", q[..., k], units, peaks))
     shares = []
     if "contact_mode" in ds.data_vars:
         law = [k for k, m in enumerate(models) if m not in (None, "link")]
@@ -139,9 +148,15 @@ def reaction_envelopes_figure(
     nrow, ncol = grid(len(panels) + len(shares), 2)
     fig, axes = figure(nrow, ncol, w=4.5, h=2.6)
     nlost = int(np.isfinite(lost).sum())
-    for ax, (title, quant, units) in zip(axes.flat, panels, strict=False):
+    marked = False
+    for ax, (title, quant, units, peaks) in zip(axes.flat, panels, strict=False):
         ax.fill_between(time, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
         ax.plot(time, quant[1], color="C0", lw=1.2, label="median")
+        if peaks is not None and np.isfinite(peaks).any():
+            median, high = np.nanquantile(peaks, [0.5, 0.95])
+            ax.axhline(median, color="C3", lw=1.0, ls="--", label="per-sample peak: median")
+            ax.axhline(high, color="C3", lw=0.8, ls=":", label="per-sample peak: 95 %")
+            marked = True
         if nlost:
             ax.fill_between(
                 time, 0, 1, where=masked > 0, transform=ax.get_xaxis_transform(),
@@ -163,7 +178,12 @@ def reaction_envelopes_figure(
         ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     for ax in list(axes.flat)[len(panels) + len(shares) :]:
         ax.set_visible(False)
-    title = f"reactions over time, {ds.sizes['sample']} samples"
+    title = (
+        f"reactions over time, {ds.sizes['sample']} samples: bands from the stored points "
+        f"(every {_stored_step(ds)}), which miss peaks between them"
+    )
+    if marked:
+        title += ";\nred: the true per-sample peaks, tracked at every step (median, 95 %)"
     if nlost:
         title += (
             f"\n{nlost} samples lost contact under the link model (λ ≤ 0 needed): left out "
@@ -171,6 +191,24 @@ def reaction_envelopes_figure(
         )
     suptitle(fig, title)
     return fig
+
+
+def _peaks(ds: xr.Dataset, name: str, k: int) -> np.ndarray | None:
+    """(nsample,) the per-sample peak variable ``name`` at entry ``k`` of its second axis
+    (joint or driver); None where the run has none (an older run)."""
+    if name not in ds.data_vars:
+        return None
+    da = ds[name]
+    return np.asarray(da.isel({da.dims[1]: k}).transpose("sample").values, np.float64)
+
+
+def _stored_step(ds: xr.Dataset) -> str:
+    """The stored times' spacing as a title states it (``1 ms``)."""
+    time = np.asarray(ds["time"].values, float)
+    if len(time) < 2:
+        return "stored time"
+    step = float(np.median(np.diff(time)))
+    return f"{step * 1e3:.3g} ms" if step < 1.0 else f"{step:.3g} s"
 
 
 def contact_loss(ds: xr.Dataset, path: Path) -> Path | str:

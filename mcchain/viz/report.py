@@ -25,7 +25,10 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
                                 :mod:`mcchain.viz.report_contact`)
 ``reaction_envelopes.png``      per joint |f| over time (and the normal force of clearance
                                 joints, driver torques): median and 5–95 % band over the
-                                samples, titled with each joint's model; ``contact_lost``
+                                samples at the stored times (the title says so: peaks
+                                between them are missed), the per-sample peaks tracked at
+                                every step marked (median, 95 %), titled with each joint's
+                                model; ``contact_lost``
                                 samples left out after their ``contact_lost_time``
                                 (:mod:`mcchain.viz.history`)
 ``contact_loss.png``            which samples lost contact, and when

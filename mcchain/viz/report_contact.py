@@ -5,7 +5,10 @@ parameters, and the journal orbit of the worst samples.
 ``scatter_peak_contact_force``  peak normal force of each clearance joint against each
 ``.png``                        sampled parameter: ``peak_contact_force`` (F_n, and λ while
                                 an ``"auto"`` joint is the link) for joints with a contact
-                                law, max |λ| over time for link joints; a binned median and
+                                law, ``peak_joint_force`` (peak |λ|) for link joints: the
+                                continuous peaks tracked at every step (a run stored before
+                                them: max |λ| at the stored points, which the label says);
+                                a binned median and
                                 Spearman's ρ, no straight line (the relations are not linear)
 ``scatter_impact_count.png``    ``impact_count`` of each joint with a contact law against
                                 each sampled parameter, drawn the same way
@@ -62,7 +65,8 @@ def peak_contact_forces(
         return [], np.empty((ds.sizes.get("sample", 0), 0)), []
     n = ds.sizes["sample"]
     peaks = np.full((n, len(joints)), np.nan)
-    if "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
+    stored = "peak_joint_force" not in ds.data_vars  # a run from before the tracked peaks
+    if stored and "contact_force" in ds.data_vars and "time" in ds["contact_force"].dims:
         every = peak_abs_over_time(ds, "contact_force", block(ds, "contact_force", "sample"))
         peaks[:] = every.reshape(n, -1)[:, joints]
     labels = []
@@ -72,7 +76,10 @@ def peak_contact_forces(
             peaks[:, i] = np.asarray(
                 ds["peak_contact_force"].isel(joint=k).values, dtype=np.float64
             )
-        labels.append(f"peak F_n {names[k]}" if law else f"peak |λ {names[k]}|")
+        elif not stored:  # the link's peak |λ|, tracked at every step
+            peaks[:, i] = np.asarray(ds["peak_joint_force"].isel(joint=k).values, np.float64)
+        label = f"peak F_n {names[k]}" if law else f"peak |λ {names[k]}|"
+        labels.append(label + (" (stored points)" if stored and not law else ""))
     return labels, peaks, joints
 
 
@@ -194,6 +201,6 @@ def orbit_figure(
     suptitle(
         fig,
         "journal orbit d / c in the clearance circle (d = journal − bearing centre), "
-        f"the {ncol} samples with the largest peak force",
+        f"the {ncol} samples with the largest peak force (orbits drawn from the stored points)",
     )
     return fig
