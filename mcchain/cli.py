@@ -581,11 +581,14 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
 
 def describe_initial_state(model: Any, assembled: Any) -> list[str]:
     """The lines ``mcchain validate`` prints about the assembled state at t = 0 (sample 0 of
-    ``model``): each body's pose and velocity, each clearance joint's d and contact force."""
+    ``model``): each body's pose and velocity; each clearance joint's d, |d| − c, the model
+    it starts its time history in and the force that model gives at t = 0."""
     import numpy as np
 
+    from mcchain.contact import START_LINK, START_SEATED
     from mcchain.kernels.joints import joint_vectors
     from mcchain.model import JointKind
+    from mcchain.solvers.simulate import start_modes
     from mcchain.solvers.statics import start_multipliers
 
     if int(assembled.status[0]) != 0:
@@ -601,16 +604,36 @@ def describe_initial_state(model: Any, assembled: Any) -> list[str]:
         )
     clearance = np.flatnonzero(model.joint_kind == JointKind.CLEARANCE)
     if clearance.size:
-        lam = start_multipliers(model, q, v)
+        modes = start_modes(model, q[np.newaxis])[0]
+        lam = start_multipliers(model, q, v)  # every clearance joint on the link
+        law = (np.asarray(model.joint_model) != 0) & (modes != START_LINK)
+        # model auto on the wall starts on the link only where the link pushes
+        law |= (np.asarray(model.joint_model) != 0) & (lam[model.joint_row] <= 0.0)
+        if law.any():
+            lam = start_multipliers(model, q, v, law=law)
         km = model.kernel_model()
         for k in clearance:
             dx, dy = joint_vectors(km, 0, q, int(k))[4:]
+            gap = float(np.hypot(dx, dy) - model.joint_clearance[0, k])
             force = float(lam[int(model.joint_row[k])])
-            state = "holds" if force > 0 else "lost at the start: the journal is pulled off"
+            if not law[k]:
+                start = "the link" + (" (model auto)" if model.joint_model[k] != 0 else "")
+                state = "holds" if force > 0 else "lost at the start: the journal is pulled off"
+                text = f"link force {_fmt(force)} N: contact {state}"
+            else:
+                where = (
+                    "seated on the wall"
+                    if modes[k] in (START_SEATED, START_LINK)
+                    else "pressed in"
+                    if gap > 0
+                    else "free"
+                )
+                start = f"the contact law, {where}"
+                text = f"contact force {_fmt(force)} N (K max(|d| - c, 0)^m, undamped)"
             lines.append(
                 f"  {model.joint_names[k]}: |d| {_fmt(float(np.hypot(dx, dy)))} m at "
-                f"{_fmt(float(np.arctan2(dy, dx)))} rad (eccentricity), contact force "
-                f"{_fmt(force)} N: contact {state}"
+                f"{_fmt(float(np.arctan2(dy, dx)))} rad (eccentricity), |d| - c {_fmt(gap)} m; "
+                f"starts on {start}: {text}"
             )
     return lines
 

@@ -64,6 +64,30 @@ MODEL_CODES: dict[str, int] = {"link": LINK, "contact": CONTACT, "auto": AUTO}
 MODEL_NAMES: dict[int, str] = {code: name for name, code in MODEL_CODES.items()}
 """Integer code → scene spelling."""
 
+START_LINK = 0
+"""``Model.joint_start``: the joint starts on the link (model auto, the journal on the wall;
+the kernels switch it to the law at once where the link's λ ≤ 0)."""
+START_LAW = 1
+"""``Model.joint_start``: the joint starts under the law, the journal off the wall (free,
+δ < −tolerance, or pressed, δ > tolerance; a pressed start is a contact without onset:
+undamped until it first separates)."""
+START_SEATED = 2
+"""``Model.joint_start``: the joint starts under the law with the journal on the wall
+(|δ| ≤ :func:`seat_tolerance`): in contact from t = 0 whichever side of 0 rounding puts δ,
+undamped and without an onset, until the journal is more than the tolerance off the wall."""
+
+SEAT_TOLERANCE = 1e-9
+"""Relative to the clearance: a journal with |δ| ≤ SEAT_TOLERANCE · c is on the wall
+(seated). Above the rounding of δ (≈ 1e-16 of the mechanism's size, i.e. ≲ 1e-13 c for
+c ≥ 1e-4 of it) and of an assembled journal (1e-14 of the size), far below any contact's
+penetration (≳ 1e-8 m)."""
+
+
+def seat_tolerance(clearance: float) -> float:
+    """|δ| (m) at or under which a journal of clearance ``clearance`` (m) is seated."""
+    return SEAT_TOLERANCE * clearance
+
+
 MODE_LINK = 0
 """``contact_mode`` output: the joint is the link (constraint row active)."""
 MODE_CONTACT = 1

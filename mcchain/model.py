@@ -39,6 +39,7 @@ from mcchain.codes import (
     LOAD_TABLE,
     JointKind,
 )
+from mcchain.contact import CONTACT
 from mcchain.parameters import TABLE
 
 __all__ = [  # the codes are re-exported: they are the model's
@@ -97,6 +98,15 @@ class Model:
             (:data:`mcchain.contact.MODEL_CODES`: 0 link, 1 contact, 2 auto; 0 for ideal
             joints). Statics and modes always use the link.
         joint_contact_law: (njoint,) int64 contact law code (:data:`mcchain.contact.LAW_CODES`).
+        joint_written: (njoint,) int64 where the scene writes the journal of a clearance
+            joint of model contact or auto (both bodies' positions written or sampled, or
+            ground), judged on the scene as written: 1 off its wall (free or pressed: kept
+            where written, not a constraint of the assembly), 2 on it (seated: held on the
+            wall); 0 for the others (assembly places them as the link).
+        joint_start: (*, njoint) the mode each contact-law joint starts its time history in
+            (:data:`mcchain.contact.START_LINK`, ``START_LAW``, ``START_SEATED``), set from
+            the start state by :func:`mcchain.solvers.simulate.start_modes`; default: the
+            law for model contact, the link for the others.
         driver_body: (ndriver,) int64 driven body.
         driver_row: (ndriver,) int64 constraint row of each driver.
         force_body: (nforce,) int64 loaded body.
@@ -189,6 +199,8 @@ class Model:
     joint_contact_restitution: np.ndarray = None  # type: ignore[assignment]
     joint_contact_friction: np.ndarray = None  # type: ignore[assignment]
     joint_contact_radius: np.ndarray = None  # type: ignore[assignment]
+    joint_written: np.ndarray = None  # type: ignore[assignment]
+    joint_start: np.ndarray = None  # type: ignore[assignment]
     # Prismatic joints (optional: None gives no axis, as for revolute joints).
     joint_axis: np.ndarray = None  # type: ignore[assignment]
     joint_relative_angle: np.ndarray = None  # type: ignore[assignment]
@@ -229,6 +241,7 @@ class Model:
             "force_table_coef": np.zeros((nforce, 0)),
             "joint_model": np.zeros(njoint, dtype=np.int64),
             "joint_contact_law": np.zeros(njoint, dtype=np.int64),
+            "joint_written": np.zeros(njoint, dtype=np.int64),
         }
         # ... and parameter arrays: the value of the unset key, from the parameter table.
         count = {"joint": njoint, "driver": ndriver, "force": nforce}
@@ -241,6 +254,9 @@ class Model:
         for name, value in defaults.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
+        if self.joint_start is None:  # the law from t = 0 for model contact, else the link
+            start = (np.asarray(self.joint_model).reshape(-1) == CONTACT).astype(np.float64)
+            object.__setattr__(self, "joint_start", start[np.newaxis, :njoint].copy())
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -369,7 +385,7 @@ class Model:
             if f.name == "parameters":
                 changes[f.name] = arr[index]
             elif (
-                f.name in _PER_SAMPLE_FIELDS
+                (f.name in _PER_SAMPLE_FIELDS or f.name in _START_FIELDS)
                 and isinstance(arr, np.ndarray)
                 and arr.shape[0] == self.nsample
                 and self.nsample > 1
@@ -390,6 +406,8 @@ KernelModel = NamedTuple(  # type: ignore[misc]
 :class:`Model` but ``parameters``, in its order (meanings and shapes there). Numba accepts a
 NamedTuple of arrays as one argument (:mod:`mcchain.kernels.kernel_model` makes it one
 structure), which keeps kernel signatures short."""
+_START_FIELDS = frozenset({"joint_start"})
+"""Per-sample arrays set from the start state (not parameters of the scene)."""
 
 _PER_SAMPLE_FIELDS = frozenset(
     name for row in TABLE for name in (row.field if isinstance(row.field, tuple) else (row.field,))

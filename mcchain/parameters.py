@@ -342,10 +342,13 @@ def packed_slots(
                         target.append(Slot(template.format(i=i), field, at, inv))
             if kind == "joint" and contact[i]:
                 # The law and the model (contact or auto) are data too: one module serves
-                # them all. Their Model arrays have no sample axis (topology).
+                # them all. Their Model arrays have no sample axis (topology); the start
+                # mode's has one.
                 plain += [
                     Slot(f"lw{i}", "joint_contact_law", (i,), False),
                     Slot(f"md{i}", "joint_model", (i,), False),
+                    # the mode it starts in, per sample (mcchain.contact.START_LINK, ...)
+                    Slot(f"fs{i}", "joint_start", (i,), False),
                 ]
             out += plain + inverse
     return out

@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
-        "accel": "853d5af98baa25820c21228a158f63589547c6ec6d7851d2f24ece521d1c5dfb",
-        "rk4": "aaeac0067e15dfea65d0f41342f249e266d6c665116404f12aff6629c116c89f",
-        "rk4-projection": "16f4117cf6d053d811b3d0239293aa70c083b258f2203cb0a197ada99de2aa5e",
-        "rk45": "df9057224b11a40a0d85cc271b2a1dcc74ccace0aca0443665c218daf243c3ee",
+        "accel": "6a44c7cefc23ab8e36f71a24779fd0051f5e4cc3454e467114545cbe9c9fc7df",
+        "rk4": "d3e606dcbe50c6c6baf647b29913feea543b84dc00e9c6375ace2ee1c95a6351",
+        "rk4-projection": "b99d003623345f4058fd1c7608a8f0a32e1355789b80dba31a47520a7a5b5406",
+        "rk45": "821663405d9bead360daa563fe75519f2458d495f15250262cfd422e83715e5a",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

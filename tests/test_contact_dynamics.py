@@ -185,6 +185,38 @@ def test_contact__restitution_of_a_dropped_journal_matches_the_reference(law):
     print(f"{law}: " + ", ".join(rows))
 
 
+@pytest.mark.parametrize("law", ["gonthier", "hu-guo"])
+@pytest.mark.parametrize("method", ["rk45", "rk4"])
+def test_contact__journal_dropped_free_matches_the_reference(law, method):
+    """The two laws added last, on a journal dropped free from mid-clearance (off the wall:
+    the first contact has a located onset), against the event-located scipy reference
+    (e = 0.7: at 0.5 both laws have χ = 1.5)."""
+    t_end, e = 0.045, 0.7
+    text = journal_scene(law=law, restitution=e, t_end=t_end, rtol=1e-11, atol=1e-14)
+    text = text.replace(f"position = [0.0, {CLEARANCE!r}]", f"position = [0.0, {CLEARANCE / 2!r}]")
+    text = text.replace(f"velocity = [{SIDEWAYS!r}, 0.0]", "velocity = [0.0, 0.0]")
+    overrides = {"dt": 2e-7} if method == "rk4" else {}
+    out = run(text.replace('method = "rk45"', f'method = "{method}"'), **overrides)
+    history = journal_in_bearing(
+        Law(law, 1e9, 1.5, e),
+        clearance=CLEARANCE,
+        mass=MASS,
+        inertia=INERTIA,
+        radius=RADIUS,
+        position=(0.0, CLEARANCE / 2),
+        gravity=GRAVITY,
+        t_end=t_end,
+        times=out["time"],
+    )
+    assert out["status"][0] == 0
+    assert len(history.impacts) >= 2
+    assert int(out["impact_count"][0, 0]) == len(history.impacts)
+    q = out["q"][0, :, 0, :2].astype(np.float64)
+    position_error = np.max(np.abs(q - history.position[:, :2]))
+    print(f"{law} {method}: {len(history.impacts)} impacts, position {position_error:.2e} m")
+    assert position_error <= 1e-8
+
+
 def swinging(model: str, sideways_squared: float, **keys) -> str:
     """The journal on the bottom of its bearing, swinging along the wall like a pendulum of
     length c: v0² = ``sideways_squared`` g c (λ > 0 while v²/c + g cos φ > 0)."""

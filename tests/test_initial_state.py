@@ -149,9 +149,12 @@ def test_warnings__a_written_position_moved_far_is_named_with_its_distance():
     )
     written, assembled = written_state(load_scene_text(text))
     lines = initial_state_warnings(written, assembled)
-    assert len(lines) == 1
+    # every written body moved is named, whatever its size: the coupler follows by 3e-8 m
+    assert [line.split(":")[0] for line in lines] == ["body.coupler", "body.rocker"]
     move = np.hypot(3.3 - 0.30085606180870794, 1.2 - 0.12499706859834622)
-    assert lines[0].startswith(f"body.rocker: assembly moved it by {move:.3g} m")
+    assert lines[1].startswith(f"body.rocker: assembly moved it by {move:.3g} m")
+    coupler = np.hypot(*(assembled.q[0, 3:5] - written.q0[0, 3:5]))
+    assert 1e-9 < coupler < 1e-6 and f"(centre {coupler:.3g} m" in lines[0]
 
 
 def test_warnings__written_velocities_corrected_are_named():
@@ -176,7 +179,9 @@ def test_validate__prints_the_assembled_state_and_the_warnings(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "initial state at t = 0 (assembled):" in out
     assert re.search(
-        r"B: \|d\| 0\.0001 m at 0\.95\d+ rad \(eccentricity\), contact force 6\.5", out
+        r"B: \|d\| 0\.0001 m at 0\.95\d+ rad \(eccentricity\), \|d\| - c \S+ m; starts on "
+        r"the link: link force 6\.5",
+        out,
     )
     assert "contact holds" in out
     assert "warning: body.rocker: assembly moved it by 3.19 m" in out
@@ -192,6 +197,6 @@ def test_run__records_the_warnings_in_run_json(tmp_path, capsys):
     assert "warning: body.rocker: assembly moved it" in captured.err
     folder = next((tmp_path / "runs").iterdir())
     record = json.loads((folder / "run.json").read_text())
-    assert len(record["warnings"]) == 1 and record["warnings"][0].startswith("body.rocker")
+    assert [w.split(":")[0] for w in record["warnings"]] == ["body.coupler", "body.rocker"]
     _, model = default_loader(path, None, None)
     assert model.meta["warnings"] == record["warnings"]

@@ -239,10 +239,17 @@ class Emitter:
             self._point(b, f"p_sbx{k}", f"p_sby{k}", f"pb{k}", q, tag)
             self.emit(f"dx{k} = pb{k}X - pa{k}X", f"dy{k} = pb{k}Y - pa{k}Y")
             if topo.joint_kind[k] == JOINT_CLEARANCE:
-                # One division per joint: ex, ey and γ multiply by 1/ρ.
+                # One division per joint: ex, ey and γ multiply by 1/ρ. Under a contact law
+                # the journal may sit at the bearing centre (ρ = 0, written there): no normal,
+                # and none needed (F_n = 0 there), so n = 0 rather than NaN.
+                inverse = (
+                    f"1.0 / rho{k} if rho{k} > 0.0 else 0.0"
+                    if k in self.contact_row
+                    else f"1.0 / rho{k}"
+                )
                 self.emit(
                     f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
-                    f"irho{k} = 1.0 / rho{k}",
+                    f"irho{k} = {inverse}",
                     f"ex{k} = dx{k} * irho{k}",
                     f"ey{k} = dy{k} * irho{k}",
                 )
@@ -793,7 +800,7 @@ class Emitter:
         """Output quantities at (q, v, λ): ``jfx{k}``, ``jfy{k}``, ``cf{k}``, ``dtq{d}``,
         ``energy``, ``phimax``. Needs ``lam{r}`` in scope."""
         topo = self.topo
-        self._load_contact_state("fm")
+        self._load_contact_state("fm", "vi")
         self.bodies()
         self.joints()
         self.constraint_values(t=t, v=None)
@@ -840,13 +847,13 @@ class Emitter:
                 f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
                 f"energy += 0.5 * p_k{s} * st{s} * st{s}",
             )
-        # Contact joints: δ, the mode (0 link, 1 contact, 2 free) and the elastic energy
-        # K δ^(m+1) / (m+1) stored in the contact.
+        # Contact joints: δ, the mode (0 link, 1 contact, 2 free; seated, vi < 0, is in
+        # contact whichever the sign of δ) and the elastic energy K δ^(m+1) / (m+1).
         for k in self.contact_row:
             (eel,) = self.inline("elastic_energy", [f"pen{k}", f"p_K{k}", f"p_mx{k}"], k)
             self.emit(
                 f"pen{k} = rho{k} - p_cl{k}",
-                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0) * 1.0)",
+                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0 and vi{k} >= 0.0) * 1.0)",
                 f"eel{k} = {eel}",
                 f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )

@@ -29,13 +29,15 @@ from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (
     AUTO,
-    CONTACT,
     CONTACT_STEP_LIMIT,
     CONTACT_SUMMARY,
     RESEAT_NEWTON,
     RESEAT_PERIODS,
     RESEAT_RATE,
     RESEAT_TOLERANCE,
+    SEAT_TOLERANCE,
+    START_LINK,
+    START_SEATED,
     SWITCH_OVERSHOOT,
 )
 from mcchain.kernels.tableaux import (
@@ -392,8 +394,8 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         return [
             f"if {at('fm', j)} == 0.0 and {at(lamrow, r)} <= 0.0 and {model(k)} == {AUTO!r}.0:",
             f"    {at('fm', j)} = 1.0",
-            f"    {at('vi', j)} = 0.0",
-            f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
+            f"    {at('vi', j)} = -1.0",  # seated: the link's δ is 0 up to rounding
+            f"    {at('ins', j)} = 1.0",
             f"    if {at('tse', j)} != {at('tse', j)}:",
             f"        {at('tse', j)} = {t}",
         ]
@@ -435,21 +437,37 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peak
         penetration (the peak force is tracked with the joint forces: _peak_blocks)."""
         d0, r0 = at("pd", j), at("pr", j)
+        seat = f"{SEAT_TOLERANCE!r} * {at('P', slots[f'cl{k}'])}"
         return [
             f"if {at('fm', j)} == 1.0:",
-            f"    if {d0} <= 0.0 and {d1} > 0.0:",
-            f"        th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
-            f"        {at('vi', j)} = rate",
-            f"        {at('nim', j)} += 1.0",
-            f"        {at('tff', j)} += th * {h}",
-            f"    elif {d0} > 0.0 and {d1} <= 0.0:",
-            f"        th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
-            f"        {at('tff', j)} += (1.0 - th) * {h}",
-            f"        if {at('tse', j)} != {at('tse', j)}:",
-            f"            {at('tse', j)} = {t} - {h} + th * {h}",
-            f"    elif {d0} <= 0.0:",
-            f"        {at('tff', j)} += {h}",
-            f"    {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
+            # seated (vi < 0: from a start on the wall or the link): in contact, undamped,
+            # no onset, until the journal is off the wall by more than the seat tolerance
+            f"    if {at('vi', j)} < 0.0:",
+            f"        if {d1} < -{seat}:",
+            "            th = 0.0",
+            f"            if {d0} > 0.0:",
+            f"                th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
+            f"            {at('tff', j)} += (1.0 - th) * {h}",
+            f"            if {at('tse', j)} != {at('tse', j)}:",
+            f"                {at('tse', j)} = {t} - {h} + th * {h}",
+            f"            {at('vi', j)} = 0.0",
+            f"            {at('ins', j)} = 0.0",
+            "        else:",
+            f"            {at('ins', j)} = 1.0",
+            "    else:",
+            f"        if {d0} <= 0.0 and {d1} > 0.0:",
+            f"            th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
+            f"            {at('vi', j)} = rate",
+            f"            {at('nim', j)} += 1.0",
+            f"            {at('tff', j)} += th * {h}",
+            f"        elif {d0} > 0.0 and {d1} <= 0.0:",
+            f"            th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
+            f"            {at('tff', j)} += (1.0 - th) * {h}",
+            f"            if {at('tse', j)} != {at('tse', j)}:",
+            f"                {at('tse', j)} = {t} - {h} + th * {h}",
+            f"        elif {d0} <= 0.0:",
+            f"            {at('tff', j)} += {h}",
+            f"        {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
             f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
             *indent(reseat(j, k, lamrow, h, d1, r1, vrow)),
             f"{d0} = {d1}",
@@ -459,8 +477,16 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     b: dict[str, str] = {}
     setup = ["for l in range(nl):"]
     for j, k in enumerate(joints):
-        law_from_start = f"1.0 if {model(k)} == {CONTACT!r}.0 else 0.0"
-        setup += indent([f"{at('fm', j)} = {law_from_start}"])
+        # the mode it starts in (Model.joint_start: link, law, or law seated on the wall); a
+        # contact present at t = 0 has no onset: undamped (vi 0, or < 0 while seated)
+        first_mode = at("P", slots[f"fs{k}"])
+        setup += indent(
+            [
+                f"{at('fm', j)} = 1.0 if {first_mode} != {START_LINK!r}.0 else 0.0",
+                f"{at('ins', j)} = {at('fm', j)}",
+                f"{at('vi', j)} = -1.0 if {first_mode} == {START_SEATED!r}.0 else 0.0",
+            ]
+        )
         setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
     b["contact_setup"] = "\n".join(setup)
     finish = ["for l in range(nl):", "    dead = (st[l] & FAILBITS) != 0"]
@@ -498,7 +524,8 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             [
                 f"{at('pd', j)} = {at('pdc', j)}",
                 f"{at('pr', j)} = {at('prc', j)}",
-                f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 else 0.0",
+                f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 or {at('vi', j)} < 0.0"
+                " else 0.0",
             ]
         )
     b["contact_start"] = "\n".join(start)

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from mcchain.contact import CONTACT, SEAT_TOLERANCE
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.forces import (
     applied_forces,
@@ -181,53 +182,77 @@ def fit_multipliers(B, minv, F, m, n, S, lam_out):
 # assembly
 # --------------------------------------------------------------------------------------
 @njit(**JIT)
-def _assembly_residual(km, s, q, target, psi_out, J_out):
+def _assembly_residual(km, s, q, target, free, psi_out, J_out):
     """Ψ(q) and ∂Ψ/∂q with every clearance joint held at d = c u (two rows each).
 
-    ``target`` (njoint, 2) holds u. Rows: two per joint (joint k at 2k), then drivers; a
-    prismatic joint's are its own two (offset normal to the axis, relative angle).
+    ``target`` (njoint, 2) holds u. Rows: two per joint in joint order, then drivers; a
+    prismatic joint's are its own two (offset normal to the axis, relative angle). A joint
+    with ``free[k]`` (a journal under the contact law written off its wall) has no rows: it
+    is not a constraint of the assembly.
     """
     J_out[:, :] = 0.0
     nj = km.joint_body_a.shape[0]
+    r = 0
     for k in range(nj):
+        if free[k]:
+            continue
         a = km.joint_body_a[k]
         b = km.joint_body_b[k]
         pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
         if km.joint_kind[k] == JOINT_PRISMATIC:
             nx, ny = prismatic_normal(km, s, q, k)
-            psi_out[2 * k] = nx * dx + ny * dy
+            psi_out[r] = nx * dx + ny * dy
             tha = q[3 * a + 2] if a >= 0 else 0.0
             thb = q[3 * b + 2] if b >= 0 else 0.0
             rel = km.joint_relative_angle[s % km.joint_relative_angle.shape[0], k]
-            psi_out[2 * k + 1] = thb - tha - rel
-            prismatic_rows(J_out, 2 * k, a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
+            psi_out[r + 1] = thb - tha - rel
+            prismatic_rows(J_out, r, a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
+            r += 2
             continue
         c = 0.0
         if km.joint_kind[k] == JOINT_CLEARANCE:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-        psi_out[2 * k] = dx - c * target[k, 0]
-        psi_out[2 * k + 1] = dy - c * target[k, 1]
-        _add_point_rows(J_out, 2 * k, b, 1.0, 1.0, 0.0, pbx, pby)
-        _add_point_rows(J_out, 2 * k, a, -1.0, 1.0, 0.0, pax, pay)
-        _add_point_rows(J_out, 2 * k + 1, b, 1.0, 0.0, 1.0, pbx, pby)
-        _add_point_rows(J_out, 2 * k + 1, a, -1.0, 0.0, 1.0, pax, pay)
+        psi_out[r] = dx - c * target[k, 0]
+        psi_out[r + 1] = dy - c * target[k, 1]
+        _add_point_rows(J_out, r, b, 1.0, 1.0, 0.0, pbx, pby)
+        _add_point_rows(J_out, r, a, -1.0, 1.0, 0.0, pax, pay)
+        _add_point_rows(J_out, r + 1, b, 1.0, 0.0, 1.0, pbx, pby)
+        _add_point_rows(J_out, r + 1, a, -1.0, 0.0, 1.0, pax, pay)
+        r += 2
     for j in range(km.driver_body.shape[0]):
         start = driver_start(km, s, j)[0]
         if km.driver_joint[j] >= 0:  # a slider driver: u·d = s_0
             along, k, ux, uy, pax, pay, pbx, pby, dx, dy = slider_displacement(km, s, q, j)
-            psi_out[2 * nj + j] = along - start
+            psi_out[r + j] = along - start
             a = km.joint_body_a[k]
             b = km.joint_body_b[k]
-            axis_row(J_out, 2 * nj + j, a, b, ux, uy, pax, pay, pbx, pby, dx, dy)
+            axis_row(J_out, r + j, a, b, ux, uy, pax, pay, pbx, pby, dx, dy)
             continue
         body = km.driver_body[j]
-        psi_out[2 * nj + j] = q[3 * body + 2] - start
-        J_out[2 * nj + j, 3 * body + 2] = 1.0
+        psi_out[r + j] = q[3 * body + 2] - start
+        J_out[r + j, 3 * body + 2] = 1.0
 
 
 @njit(**JIT)
-def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
-    """Gauss–Newton on Ψ(q) = 0 (:func:`_assembly_residual`), M-smallest steps, in place.
+def law_start_joints(km, s, q, free_out, seated_out):
+    """Clearance joints under the contact law whose journal the scene writes
+    (``km.joint_written``, judged on the scene as written): ``free_out[k]`` for a journal
+    written off its wall (free or pressed: not a constraint of the assembly), ``seated_out[k]``
+    for one written on it (held on the wall in its written direction). Returns the number
+    of free joints."""
+    count = 0
+    for k in range(km.joint_body_a.shape[0]):
+        free_out[k] = km.joint_written[k] == 1
+        seated_out[k] = km.joint_written[k] == 2
+        if free_out[k]:
+            count += 1
+    return count
+
+
+@njit(**JIT)
+def _close_joints(km, s, q, target, free, minv, lscale, psi, J, S):
+    """Gauss–Newton on Ψ(q) = 0 (:func:`_assembly_residual`, without the ``free`` joints),
+    M-smallest steps, in place.
 
     Returns:
         0 converged (|Ψ| ≤ 1e-14 × ``lscale``), 1 not converged, 2 singular Jacobian.
@@ -235,7 +260,7 @@ def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
     n = q.shape[0]
     ma = psi.shape[0]
     start = np.empty(n)
-    _assembly_residual(km, s, q, target, psi, J)
+    _assembly_residual(km, s, q, target, free, psi, J)
     for _it in range(ASSEMBLY_MAX_ITER):
         if max_abs(psi, ma) <= 1e-14 * lscale:
             return 0
@@ -247,7 +272,7 @@ def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
         for i in range(n):  # not start[:] = q: numba compiles its shape-error message (2.7 s)
             start[i] = q[i]
         project_onto_rows(J, minv, ma, n, S, psi, q)
-        _assembly_residual(km, s, q, target, psi, J)
+        _assembly_residual(km, s, q, target, free, psi, J)
         # Far from the solution (a rough guess, large rotations) a full step can overshoot
         # and cycle: halve it until the residual decreases. Near it the full step is taken.
         for _half in range(30):
@@ -255,7 +280,7 @@ def _close_joints(km, s, q, target, minv, lscale, psi, J, S):
                 break
             for i in range(n):
                 q[i] = start[i] + 0.5 * (q[i] - start[i])
-            _assembly_residual(km, s, q, target, psi, J)
+            _assembly_residual(km, s, q, target, free, psi, J)
     return 1
 
 
@@ -264,15 +289,16 @@ def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
     """Velocity analysis with every journal at rest in its bearing (ḋ = 0), in place.
 
     ``J`` is the two-rows-per-joint Jacobian of :func:`_assembly_residual` at the assembled
-    positions; the M-smallest change of ``v`` that makes J v = (0, …, ω_drivers). For a
-    driven mechanism without other freedom this is the velocity analysis from the driver
-    speeds. Returns False (``v`` untouched) when J is rank-deficient.
+    positions (drivers' rows last); the M-smallest change of ``v`` that makes
+    J v = (0, …, ω_drivers). For a driven mechanism without other freedom this is the
+    velocity analysis from the driver speeds. Returns False (``v`` untouched)
+    when J is rank-deficient.
     """
     ma = J.shape[0]
     n = v.shape[0]
     if not schur_factor(J, minv, ma, n, S):
         return False
-    nj = km.joint_body_a.shape[0]
+    first_driver = ma - km.driver_body.shape[0]
     residual = np.empty(ma)
     for i in range(ma):
         acc = 0.0
@@ -280,7 +306,7 @@ def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
             acc += J[i, k] * v[k]
         residual[i] = acc
     for j in range(km.driver_body.shape[0]):
-        residual[2 * nj + j] -= driver_rate(km, s, j, 0.0)
+        residual[first_driver + j] -= driver_rate(km, s, j, 0.0)
     project_onto_rows(J, minv, ma, n, S, residual, v)
     return True
 
@@ -303,12 +329,13 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     qi = q.copy()
     vi = v.copy()
     closed = np.zeros((nj, 2))
+    held = np.zeros(nj, dtype=np.bool_)  # the ideal mechanism: every joint closed
     psi = np.empty(ma)
     J = np.empty((ma, n))
     S = np.empty((ma, ma))
-    if _close_joints(km, s, qi, closed, minv, lscale, psi, J, S) != 0:
+    if _close_joints(km, s, qi, closed, held, minv, lscale, psi, J, S) != 0:
         return False
-    _assembly_residual(km, s, qi, closed, psi, J)
+    _assembly_residual(km, s, qi, closed, held, psi, J)
     if not _velocities_at_rest_in_bearings(km, s, J, minv, S, vi):
         return False
     F = np.empty(n)
@@ -350,14 +377,21 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
 def assemble_one(km, s, q, v):
     """Project q and v of sample ``s`` onto the constraints (t = 0), in place.
 
-    Positions already satisfying |Φ| ≤ 1e-12 × the length scale are kept bit for bit.
-    Otherwise every clearance joint is first placed at d = c u: u from ``eccentricity``;
-    else pressed on its bearing as the ideal-joint mechanism's force says
+    A clearance joint under the contact law (model contact or auto) whose journal the scene
+    places off its wall (:func:`law_start_joints`: free, |d| < c, or pressed, |d| > c) is
+    not a constraint of the assembly: only the other joints and the drivers are, and its
+    journal goes where they take it. A journal placed on its wall stays there.
+
+    Positions already satisfying |Φ| ≤ 1e-12 × the length scale (those constraints) are
+    kept bit for bit. Otherwise every clearance joint held is first placed at d = c u: u the
+    written d's direction for a journal under the law written on its wall; else from
+    ``eccentricity``; else pressed on its bearing as the ideal-joint mechanism's force says
     (:func:`ideal_joint_directions`); else the direction of the given d, gravity's, +x.
     Gauss–Newton then takes the M-smallest correction. Velocities that do not satisfy
-    B q̇ = ν are replaced by the velocity analysis with every journal at rest in its
-    bearing (:func:`_velocities_at_rest_in_bearings`), or, where that has no solution, the
-    M-smallest correction onto B q̇ = ν.
+    B q̇ = ν (without the rows of the joints under the law: a journal's relative velocity
+    is free there) are replaced by the velocity analysis with every held journal at rest in
+    its bearing (:func:`_velocities_at_rest_in_bearings`), or, where that has no solution,
+    the M-smallest correction onto B q̇ = ν.
 
     Returns:
         status bits (ASSEMBLY_FAILED, SINGULAR).
@@ -374,9 +408,20 @@ def assemble_one(km, s, q, v):
     mass_diagonal(km, s, minv)
     for i in range(n):
         minv[i] = 1.0 / minv[i]
+    free = np.zeros(nj, dtype=np.bool_)
+    seated = np.zeros(nj, dtype=np.bool_)
+    nfree = law_start_joints(km, s, q, free, seated)
     phi = np.empty(m)
     constraint_residual(km, s, q, 0.0, phi)
-    ma = 2 * nj + km.driver_body.shape[0]
+    for k in range(nj):  # a journal under the law written free or pressed holds; one
+        # written on its wall holds within the seat tolerance
+        if free[k]:
+            phi[km.joint_row[k]] = 0.0
+        elif seated[k]:
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            if abs(phi[km.joint_row[k]]) <= SEAT_TOLERANCE * c:
+                phi[km.joint_row[k]] = 0.0
+    ma = 2 * (nj - nfree) + km.driver_body.shape[0]
     psi = np.empty(ma)
     J = np.empty((ma, n))
     S = np.empty((ma, ma))
@@ -387,10 +432,16 @@ def assemble_one(km, s, q, v):
         found = np.zeros(nj, dtype=np.bool_)
         unset = False
         for k in range(nj):
-            if km.joint_kind[k] != JOINT_CLEARANCE:
+            if km.joint_kind[k] != JOINT_CLEARANCE or free[k]:
                 continue
             alpha = km.joint_eccentricity[s % km.joint_eccentricity.shape[0], k]
-            if alpha == alpha:
+            if seated[k]:  # written on the wall: it stays where it is written
+                _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
+                dist = hypot(dx, dy)
+                target[k, 0] = dx / dist
+                target[k, 1] = dy / dist
+                found[k] = True
+            elif alpha == alpha:
                 target[k, 0] = math.cos(alpha)
                 target[k, 1] = math.sin(alpha)
                 found[k] = True
@@ -401,7 +452,7 @@ def assemble_one(km, s, q, v):
         ig = s % km.gravity.shape[0]
         gnorm = hypot(km.gravity[ig, 0], km.gravity[ig, 1])
         for k in range(nj):
-            if km.joint_kind[k] != JOINT_CLEARANCE or found[k]:
+            if km.joint_kind[k] != JOINT_CLEARANCE or found[k] or free[k]:
                 continue
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
@@ -414,31 +465,56 @@ def assemble_one(km, s, q, v):
                 target[k, 1] = km.gravity[ig, 1] / gnorm
             else:
                 target[k, 0] = 1.0
-        code = _close_joints(km, s, q, target, minv, lscale, psi, J, S)
+        code = _close_joints(km, s, q, target, free, minv, lscale, psi, J, S)
         if code == 2:
             return ASSEMBLY_FAILED | SINGULAR
         constraint_residual(km, s, q, 0.0, phi)
+        for k in range(nj):
+            if free[k]:
+                phi[km.joint_row[k]] = 0.0
         if code != 0 or not max_abs(phi, m) <= tol:
             return ASSEMBLY_FAILED
     B = np.empty((m, n))
     constraint_jacobian(km, s, q, B)
     nu = np.empty(m)
     constraint_velocity_rhs(km, s, 0.0, nu)
-    vscale = 0.0
     for i in range(m):
         acc = -nu[i]
         for k in range(n):
             acc += B[i, k] * v[k]
         nu[i] = acc
-        vscale = max(vscale, abs(acc))
+    for k in range(nj):  # under the law the journal's relative velocity is free
+        if free[k] or (km.joint_kind[k] == JOINT_CLEARANCE and km.joint_model[k] == CONTACT):
+            nu[km.joint_row[k]] = 0.0
+    vscale = max_abs(nu, m)
     if vscale > 1e-12 * (1.0 + max_abs(v, n)):
-        _assembly_residual(km, s, q, np.zeros((nj, 2)), psi, J)  # J does not depend on d's target
+        _assembly_residual(km, s, q, np.zeros((nj, 2)), free, psi, J)  # J: any target
         if not _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
-            Sb = np.empty((m, m))
-            if not schur_factor(B, minv, m, n, Sb):
+            mb = _drop_free_rows(km, free, B, nu, m)
+            Sb = np.empty((mb, mb))
+            if not schur_factor(B, minv, mb, n, Sb):
                 return SINGULAR
-            project_onto_rows(B, minv, m, n, Sb, nu, v)
+            project_onto_rows(B, minv, mb, n, Sb, nu, v)
     return 0
+
+
+@njit(**JIT)
+def _drop_free_rows(km, free, B, nu, m):
+    """Move the rows of B (m, n) and ν (m,) of the joints without ``free[k]`` up, in order;
+    returns how many there are."""
+    kept = 0
+    for i in range(m):
+        drop = False
+        for k in range(free.shape[0]):
+            if free[k] and km.joint_row[k] == i:
+                drop = True
+        if drop:
+            continue
+        for c in range(B.shape[1]):
+            B[kept, c] = B[i, c]
+        nu[kept] = nu[i]
+        kept += 1
+    return kept
 
 
 @njit(**JIT)

@@ -17,9 +17,11 @@ import math
 
 from mcchain.contact import (
     AUTO,
-    CONTACT,
     RESEAT_PERIODS,
     RESEAT_RATE,
+    SEAT_TOLERANCE,
+    START_LINK,
+    START_SEATED,
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.contact import contact_crossing, contact_law, contact_slip, friction_force
@@ -28,7 +30,9 @@ from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 # Columns of ``cst``: the mode and the contact in progress ...
 FM = 0  # 1.0 while the law replaces the link (model contact, or auto after its switch)
 INS = 1  # 1.0 if the journal was in contact (δ > 0) at the last step's start
-VI = 2  # approach speed δ̇⁻ of the contact in progress (m/s), located at its onset
+VI = 2  # approach speed δ̇⁻ of the contact in progress (m/s), located at its onset; < 0:
+# seated (a contact from a start on the wall or from the link: undamped, no onset, until the
+# journal is off the wall by more than mcchain.contact.seat_tolerance)
 PD = 3  # δ (m) and δ̇ (m/s) at the last bookkeeping (the previous step's start)
 PR = 4
 PDC = 5  # δ, δ̇ and ω_c² (1/s²) at the current step's start (its first stage)
@@ -75,14 +79,19 @@ def contact_joint_index(km, j):
 
 
 @njit(**JIT)
-def contact_start(km, cst):
-    """The state at t0: the law from the start for model contact, the link for auto; no
-    step behind (δ, δ̇, first separation: NaN), summaries 0."""
+def contact_start(km, s, cst):
+    """The state at t0 of sample ``s``: each joint in the mode it starts in
+    (``km.joint_start``: the link, the law, or the law seated on the wall; a contact present
+    at t0 has no onset: INS 1, undamped), no step behind (δ, δ̇, first separation: NaN),
+    summaries 0."""
     for j in range(cst.shape[0]):
         k = contact_joint_index(km, j)
         for c in range(NCST):
             cst[j, c] = 0.0
-        cst[j, FM] = 1.0 if km.joint_model[k] == CONTACT else 0.0
+        start = km.joint_start[s % km.joint_start.shape[0], k]
+        cst[j, FM] = 1.0 if start != START_LINK else 0.0
+        cst[j, INS] = cst[j, FM]
+        cst[j, VI] = -1.0 if start == START_SEATED else 0.0
         cst[j, PD] = math.nan
         cst[j, PR] = math.nan
         cst[j, TSE] = math.nan
@@ -115,8 +124,9 @@ def contact_forces(km, s, q, v, cst, F_out):
         pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
         ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
         rho = hypot(dx, dy)
-        ex = dx / rho
-        ey = dy / rho
+        # at the bearing centre (written there) no normal, and none needed: F_n = 0
+        ex = dx / rho if rho > 0.0 else 0.0
+        ey = dy / rho if rho > 0.0 else 0.0
         pen = rho - c
         pdot = ex * ddx + ey * ddy
         fn, delta_slope, rate_slope = contact_law(
@@ -186,13 +196,14 @@ def record_stage0(km, cst, row_law):
 
 @njit(**JIT)
 def contact_switch(km, cst, j, lam_r, t, d1):
-    """Model auto: the law from the first λ ≤ 0 on, starting from the link's state (δ̇⁻ = 0:
-    the contact entered from the link is undamped until the next onset)."""
+    """Model auto: the law from the first λ ≤ 0 on, starting from the link's state, seated
+    (VI < 0: the link's δ is 0 up to rounding; undamped, no onset, until the journal is off
+    the wall by more than the seat tolerance)."""
     k = contact_joint_index(km, j)
     if cst[j, FM] == 0.0 and lam_r <= 0.0 and km.joint_model[k] == AUTO:
         cst[j, FM] = 1.0
-        cst[j, VI] = 0.0
-        cst[j, INS] = 1.0 if d1 > 0.0 else 0.0
+        cst[j, VI] = -1.0
+        cst[j, INS] = 1.0
         if cst[j, TSE] != cst[j, TSE]:
             cst[j, TSE] = t
 
@@ -226,19 +237,33 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
     if cst[j, FM] == 1.0:
         d0 = cst[j, PD]
         r0 = cst[j, PR]
-        if d0 <= 0.0 and d1 > 0.0:
-            theta, rate = contact_crossing(d0, r0, d1, r1, h)
-            cst[j, VI] = rate
-            cst[j, NIM] += 1.0
-            cst[j, TFF] += theta * h
-        elif d0 > 0.0 and d1 <= 0.0:
-            theta, rate = contact_crossing(d0, r0, d1, r1, h)
-            cst[j, TFF] += (1.0 - theta) * h
-            if cst[j, TSE] != cst[j, TSE]:
-                cst[j, TSE] = t - h + theta * h
-        elif d0 <= 0.0:
-            cst[j, TFF] += h
-        cst[j, INS] = 1.0 if d1 > 0.0 else 0.0
+        if cst[j, VI] < 0.0:  # seated: in contact until off the wall by the tolerance
+            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
+            if d1 < -SEAT_TOLERANCE * c:
+                theta = 0.0
+                if d0 > 0.0:
+                    theta, rate = contact_crossing(d0, r0, d1, r1, h)
+                cst[j, TFF] += (1.0 - theta) * h
+                if cst[j, TSE] != cst[j, TSE]:
+                    cst[j, TSE] = t - h + theta * h
+                cst[j, VI] = 0.0
+                cst[j, INS] = 0.0
+            else:
+                cst[j, INS] = 1.0
+        else:
+            if d0 <= 0.0 and d1 > 0.0:
+                theta, rate = contact_crossing(d0, r0, d1, r1, h)
+                cst[j, VI] = rate
+                cst[j, NIM] += 1.0
+                cst[j, TFF] += theta * h
+            elif d0 > 0.0 and d1 <= 0.0:
+                theta, rate = contact_crossing(d0, r0, d1, r1, h)
+                cst[j, TFF] += (1.0 - theta) * h
+                if cst[j, TSE] != cst[j, TSE]:
+                    cst[j, TSE] = t - h + theta * h
+            elif d0 <= 0.0:
+                cst[j, TFF] += h
+            cst[j, INS] = 1.0 if d1 > 0.0 else 0.0
         cst[j, PKD] = max(cst[j, PKD], d1)
         wj = cst[j, WJC]
         wn = math.sqrt(wj) if wj > 0.0 else 0.0

@@ -28,6 +28,7 @@ from mcchain.kernels.clearance import (
     PKF,
     PRC,
     SUMMARY_COLUMNS,
+    VI,
     contact_forces,
     contact_joint_index,
     contact_joints,
@@ -397,7 +398,7 @@ def rk4_run(
         lam0 = np.zeros(ncon)
         row_law = np.zeros((ncon, 3))
         cst = np.zeros((ncj, NCST))
-        contact_start(km, cst)
+        contact_start(km, s, cst)
         pk = np.zeros(PEAK_WIDTH * npk + PEAK_CLOCK)
         peaks_start(pk)
         values = np.zeros(npk)
@@ -545,7 +546,8 @@ def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, 
             cf[k] = 0.0
         pen = cst[j, PDC]
         out_ct[s, it, 2 * j] = pen
-        out_ct[s, it, 2 * j + 1] = cst[j, FM] * (2.0 if pen <= 0.0 else 1.0)
+        free = pen <= 0.0 and cst[j, VI] >= 0.0  # seated (VI < 0): in contact
+        out_ct[s, it, 2 * j + 1] = cst[j, FM] * (2.0 if free else 1.0)
     for i in range(ndof):
         out_q[s, it, i] = q[i]
         out_v[s, it, i] = v[i]

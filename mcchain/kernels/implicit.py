@@ -130,7 +130,7 @@ def generalized_alpha_run(
         row_law = np.zeros((max(ncon, 1), 3))
         S = np.zeros((ncon, ncon))  # re-seat scratch
         work = np.zeros((4, ncon))
-        contact_start(km, cst)
+        contact_start(km, s, cst)
         pk = np.zeros(PEAK_WIDTH * npk + PEAK_CLOCK)
         peaks_start(pk)
         values = np.zeros(npk)

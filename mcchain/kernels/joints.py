@@ -316,6 +316,9 @@ def constraint_gamma(km, s, q, v, t, gamma_out):
             gamma_out[row + 1] = 0.0
         else:
             dist = hypot(dx, dy)
+            if not dist > 0.0:  # a journal at its bearing centre (under a law): no normal
+                gamma_out[row] = 0.0
+                continue
             ex = dx / dist
             ey = dy / dist
             ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
@@ -469,6 +472,8 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
             dist = hypot(dx, dy)
+            if not dist > 0.0:  # a journal at its bearing centre (under a law): no force
+                dist = math.inf
             force_out[k, 0] = -lam[row] * dx / dist
             force_out[k, 1] = -lam[row] * dy / dist
             contact_out[k] = lam[row]

@@ -13,7 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from mcchain.contact import LAW_CODES, LINK, MODEL_CODES, internal_cylinder_stiffness
+from mcchain.contact import (
+    LAW_CODES,
+    LINK,
+    MODEL_CODES,
+    internal_cylinder_stiffness,
+    seat_tolerance,
+)
 from mcchain.errors import SceneError
 from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
@@ -138,6 +144,8 @@ def compile_model(
     _contact_stiffness(scene, arrays, nsample)
     index = {name: i for i, name in enumerate(scene.body_names)}
     index[GROUND_NAME] = GROUND
+    written = _written_state(scene, paths)
+    joint_written = _written_journals(scene, written, joint_model, index)
 
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
@@ -157,6 +165,7 @@ def compile_model(
         joint_row=joint_row,
         joint_model=joint_model,
         joint_contact_law=joint_law,
+        joint_written=joint_written,
         driver_body=topo([GROUND_NAME if d.slides else str(d.body) for d in scene.driver]),
         driver_joint=np.array(
             [scene.joint_names.index(str(d.joint)) if d.slides else -1 for d in scene.driver],
@@ -174,7 +183,7 @@ def compile_model(
             "seed": seed,
             "design": sample.design if sample is not None else None,
             "nsample": nsample,
-            "written": _written_state(scene, paths),
+            "written": written,
         },
         **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
     )
@@ -196,6 +205,38 @@ def _written_state(scene: Scene, paths: list[str]) -> dict[str, tuple[bool, ...]
         )
         for key in keys
     }
+
+
+def _written_journals(
+    scene: Scene,
+    written: dict[str, tuple[bool, ...]],
+    joint_model: np.ndarray,
+    index: dict[str, int],
+) -> np.ndarray:
+    """``Model.joint_written``: per joint, where the scene writes the journal of a clearance
+    joint under a contact law (model contact or auto) — 1 off its wall (free, |d| < c, or
+    pressed, |d| > c), 2 on it (|δ| ≤ :func:`mcchain.contact.seat_tolerance`) — or 0 (not
+    such a joint, or a body of it placed by mcchain). Judged on the scene as written (its
+    nominal values, without ``[sample]``): a journal written on its wall stays seated on
+    it whatever clearance a sample draws."""
+    codes = np.zeros(len(scene.joint), dtype=np.int64)
+    nominal: dict[str, np.ndarray] | None = None
+    for k, joint in enumerate(scene.joint):
+        placed = all(b == GROUND_NAME or written["position"][index[b]] for b in joint.bodies)
+        clearance = joint.clearance
+        if joint_model[k] == LINK or not placed or not clearance > 0.0:
+            continue
+        if nominal is None:
+            nominal = _base_arrays(scene)
+            _unwritten_angles(scene, nominal, index)
+        a, b = (index[name] for name in joint.bodies)
+        q0 = nominal["q0"]
+        d = world_point(q0, b, nominal["joint_point_b"][:, k]) - world_point(
+            q0, a, nominal["joint_point_a"][:, k]
+        )
+        delta = float(np.hypot(d[0, 0], d[0, 1])) - clearance
+        codes[k] = 2 if abs(delta) <= seat_tolerance(clearance) else 1
+    return codes
 
 
 def _items(scene: Scene, kind: str) -> list[Any]:
@@ -239,7 +280,7 @@ def _check_domain(ref: ParamRef, path: str, column: np.ndarray) -> None:
         )
 
 
-def _world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
+def world_point(q0: np.ndarray, body: int, point: np.ndarray) -> np.ndarray:
     """r + A(θ) s for a body (or the point itself on ground); shapes broadcast over samples."""
     if body == GROUND:
         return point
@@ -307,7 +348,7 @@ def _derived_defaults(
             continue
         a, b = index[spring.bodies[0]], index[spring.bodies[1]]
         pa, pb = arrays["spring_point_a"][:, s], arrays["spring_point_b"][:, s]
-        wa, wb = _world_point(q0, a, pa), _world_point(q0, b, pb)
+        wa, wb = world_point(q0, a, pa), world_point(q0, b, pb)
         length = np.hypot(*(wb - wa).T)
         per_sample = (
             body_varied(a)
@@ -334,7 +375,7 @@ def _axial_displacement(
     q0 = np.broadcast_to(arrays["q0"], (rows, arrays["q0"].shape[1]))
     point_a = np.broadcast_to(arrays["joint_point_a"][:, k], (rows, 2))
     point_b = np.broadcast_to(arrays["joint_point_b"][:, k], (rows, 2))
-    d = _world_point(q0, b, point_b) - _world_point(q0, a, point_a)
+    d = world_point(q0, b, point_b) - world_point(q0, a, point_a)
     u = np.broadcast_to(arrays["joint_axis"][:, k], (rows, 2))
     u = u / np.hypot(u[:, 0], u[:, 1])[:, None]
     theta = q0[:, 3 * a + 2] if a != GROUND else np.zeros(rows)
@@ -456,7 +497,7 @@ def _place_on_joints(scene: Scene, arrays: dict[str, np.ndarray], index: dict[st
                          s * new_point[:, 0] + c * new_point[:, 1]],
                         axis=1,
                     )  # fmt: skip
-                    centre = _world_point(q0, known, known_point) - rotated
+                    centre = world_point(q0, known, known_point) - rotated
                     written = q0[:, 3 * new : 3 * new + 2]
                     q0[:, 3 * new : 3 * new + 2] = np.where(np.isnan(written), centre, written)
                     unplaced.discard(new)

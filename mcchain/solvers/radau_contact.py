@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from mcchain.contact import AUTO, RESEAT_PERIODS
+from mcchain.contact import AUTO, RESEAT_PERIODS, seat_tolerance
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
@@ -80,7 +80,7 @@ class _Sample:
         mass_diagonal(self.km, i, self.minv)
         self.minv = 1.0 / self.minv
         self.cst = np.zeros((len(self.joints), cl.NCST))
-        cl.contact_start(self.km, self.cst)
+        cl.contact_start(self.km, i, self.cst)
         self.alpha2, self.beta2 = 2.0 * run.settings.gains[0], run.settings.gains[1] ** 2
         self.due = math.inf  # when a re-seat's dwell was completed (an accepted step's end)
         self.t_prev = 0.0  # the last accepted step's end
@@ -174,7 +174,12 @@ class _Sample:
         return found, kinds
 
     def gap(self, j: int, t: float, y: np.ndarray) -> float:
-        """Event: δ of contact-law joint ``j``."""
+        """Event: δ of contact-law joint ``j`` (seated, VI < 0: δ + the seat tolerance, so
+        that its contact ends where the journal is that far off the wall)."""
+        if self.cst[j, self.cl.VI] < 0.0:
+            k = int(self.joints[j])
+            clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
+            return self.penetration(j, y) + seat_tolerance(float(clearance))
         return self.penetration(j, y)
 
     def link_force(self, r: int, t: float, y: np.ndarray) -> float:
@@ -201,17 +206,16 @@ class _Sample:
                 if not math.isnan(self.free_since[j]):
                     cst[j, cl.TFF] += t - self.free_since[j]
                 self.free_since[j] = math.nan
-            else:  # separation
+            else:  # separation (also the end of a seated contact)
                 cst[j, cl.INS] = 0.0
+                cst[j, cl.VI] = 0.0
                 self.free_since[j] = t
                 if math.isnan(cst[j, cl.TSE]):
                     cst[j, cl.TSE] = t
         elif kind == "switch":
-            cst[j, cl.FM] = 1.0
-            cst[j, cl.VI] = 0.0
-            cst[j, cl.INS] = 1.0 if self.penetration(j, y) > 0.0 else 0.0
-            if cst[j, cl.INS] == 0.0:
-                self.free_since[j] = t
+            cst[j, cl.FM] = 1.0  # seated: the link's δ is 0 up to rounding
+            cst[j, cl.VI] = -1.0
+            cst[j, cl.INS] = 1.0
             if math.isnan(cst[j, cl.TSE]):
                 cst[j, cl.TSE] = t
         else:  # re-seat of the joints marked
@@ -235,9 +239,15 @@ class _Sample:
         run, i, cl, cst = self.run, self.i, self.cl, self.cst
         t_end = float(run.time[-1])
         t, y = 0.0, np.concatenate([run.q[i], run.v[i]])
-        for j in range(len(self.joints)):
-            if cst[j, cl.FM] == 1.0 and self.penetration(j, y) <= 0.0:
+        for j in range(len(self.joints)):  # a free start watches its onset
+            if cst[j, cl.FM] == 1.0 and cst[j, cl.VI] >= 0.0 and self.penetration(j, y) <= 0.0:
                 self.free_since[j] = 0.0
+                cst[j, cl.INS] = 0.0
+        self.accelerations(t, y)  # model auto starts on the link only where it pushes
+        for j, k in enumerate(self.joints):
+            if cst[j, cl.FM] == 0.0 and self.model.joint_model[k] == AUTO:
+                if self.lam[self.rows[j]] <= 0.0:
+                    y = self.handle("switch", j, t, y)
         written, fail_bit, fail_time = 0, 0, math.nan
         while True:
             events, kinds = self.events()

@@ -220,7 +220,11 @@ def solve_modes_along(
     for j, turn in enumerate(phase):
         angles = angle0.copy()
         angles[:, driver] += turn
-        frozen = replace(model, driver_angle0=angles, joint_eccentricity=free)
+        # every clearance journal seated (joint_written 0: none kept off its wall)
+        frozen = replace(
+            model, driver_angle0=angles, joint_eccentricity=free,
+            joint_written=np.zeros_like(model.joint_written),
+        )  # fmt: skip
         status = np.zeros(nsample, dtype=STATUS_DTYPE)
         assembled = assemble(frozen, status, q, v)
         km = frozen.kernel_model()
@@ -271,10 +275,13 @@ def check_scene(model: Model) -> Assembled:
             "body: initial positions cannot be assembled: no configuration near them "
             "satisfies the joints and drivers (check joint points and body positions)"
         )
-    rank = constraint_rank(nominal, assembled.q[0])
-    if bits & Status.SINGULAR or rank < nominal.ncon:
+    # a journal written off its wall under a contact law is not a constraint at the start
+    rows = np.ones(nominal.ncon, dtype=bool)
+    rows[nominal.joint_row[np.asarray(nominal.joint_written) == 1]] = False
+    rank = constraint_rank(nominal, assembled.q[0], rows=rows)
+    if bits & Status.SINGULAR or rank < int(rows.sum()):
         raise SceneError(
-            f"joint: redundant constraints: rank of B is {rank} < {nominal.ncon} constraint "
+            f"joint: redundant constraints: rank of B is {rank} < {int(rows.sum())} constraint "
             "rows at the initial configuration (a joint or driver repeats another's constraint)"
         )
     return assembled
@@ -304,8 +311,8 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     is compared with its assembled state. A body's move is the largest displacement of its
     centre and its joint points; it is reported when the scene wrote (or sampled) the body's
     position (an angle written alone is a hint that picks the branch) and the move exceeds
-    1e-6 of the mechanism's size plus twice the sum of the clearances (a journal
-    legitimately moves within its clearance). Velocities the
+    1e-12 of the mechanism's size (assembly's tolerance: whatever its size relative to the
+    clearances, a journal moved onto its wall is a move). Velocities the
     scene wrote are reported when the largest change of those points' velocities exceeds
     1e-6 of the velocity scale (written speeds, driver speeds × size). Bodies whose state
     the scene leaves out are placed and analysed silently: that is what they ask for.
@@ -321,8 +328,7 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
         default=1.0,
     )
     size = size if size > 0 else 1.0
-    clearance = model.joint_clearance[0][model.joint_kind == JointKind.CLEARANCE]
-    position_tol = 1e-6 * size + 2.0 * float(np.sum(clearance))
+    position_tol = 1e-12 * size
     speeds = [
         np.abs(v0).max(initial=0.0) * size,
         np.abs(model.driver_omega[0]).max(initial=0.0) * size,
@@ -362,11 +368,22 @@ def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:
     return lines
 
 
-def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 0) -> np.ndarray:
+def start_multipliers(
+    model: Model,
+    q: np.ndarray,
+    v: np.ndarray,
+    sample: int = 0,
+    law: np.ndarray | None = None,
+) -> np.ndarray:
     """λ (ncon,) of M q̈ + Bᵀλ = F, B q̈ = γ at t = 0 for one sample's state q, v (3 nbody,):
-    a clearance joint's λ > 0 means its journal presses on the bearing (contact holds)."""
+    a clearance joint's λ > 0 means its journal presses on the bearing (contact holds).
+
+    ``law`` (njoint,) bool: the clearance joints under the contact law at t = 0. Their rows
+    leave the system; the law's force F_n = K max(δ, 0)^m (undamped: a contact present at
+    t = 0 has no onset) acts instead, −F_n n on the journal and +F_n n on the bearing, and is
+    their λ (N)."""
     from mcchain.kernels.forces import applied_forces, mass_diagonal
-    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian
+    from mcchain.kernels.joints import constraint_gamma, constraint_jacobian, joint_vectors
 
     km = model.kernel_model()
     q = np.ascontiguousarray(q, dtype=np.float64)
@@ -377,21 +394,49 @@ def start_multipliers(model: Model, q: np.ndarray, v: np.ndarray, sample: int = 
     constraint_gamma(km, sample, q, v, 0.0, gamma)
     applied_forces(km, sample, q, v, 0.0, F)
     mass_diagonal(km, sample, mass)
-    kkt = np.block([[np.diag(mass), B.T], [B, np.zeros((m, m))]])
-    return np.linalg.solve(kkt, np.concatenate([F, gamma]))[n:]
+    rows = np.ones(m, bool)
+    normal = np.zeros(model.njoint)
+    for k in np.flatnonzero(law) if law is not None else ():
+        r = int(model.joint_row[k])
+        rows[r] = False
+        pax, pay, pbx, pby, dx, dy = joint_vectors(km, sample, q, int(k))
+        rho = float(np.hypot(dx, dy))
+        ix = sample % model.joint_clearance.shape[0]
+        delta = rho - float(model.joint_clearance[ix, k])
+        stiffness = np.broadcast_to(model.joint_contact_stiffness, (sample + 1, model.njoint))
+        expo = np.broadcast_to(model.joint_contact_exponent, (sample + 1, model.njoint))
+        normal[k] = float(stiffness[sample, k]) * max(delta, 0.0) ** float(expo[sample, k])
+        fx, fy = -normal[k] * dx / rho, -normal[k] * dy / rho  # on the journal
+        for body, sign, px, py in ((model.joint_body_b[k], 1.0, pbx, pby),
+                                   (model.joint_body_a[k], -1.0, pax, pay)):  # fmt: skip
+            if body >= 0:
+                F[3 * body : 3 * body + 3] += sign * np.array([fx, fy, px * fy - py * fx])
+    Bk = B[rows]
+    mk = int(rows.sum())
+    kkt = np.block([[np.diag(mass), Bk.T], [Bk, np.zeros((mk, mk))]])
+    lam = np.zeros(m)
+    lam[rows] = np.linalg.solve(kkt, np.concatenate([F, gamma[rows]]))[n:]
+    lam[~rows] = normal[[k for k in range(model.njoint) if law is not None and law[k]]]
+    return lam
 
 
-def constraint_rank(model: Model, q: np.ndarray, sample: int = 0) -> int:
-    """Numerical rank of B at q (3 nbody,) for one sample, by the kernels' QR test."""
+def constraint_rank(
+    model: Model, q: np.ndarray, sample: int = 0, rows: np.ndarray | None = None
+) -> int:
+    """Numerical rank of B at q (3 nbody,) for one sample, by the kernels' QR test (of the
+    rows ``rows`` (ncon,) bool only, when given)."""
     from mcchain.kernels.joints import constraint_jacobian
     from mcchain.kernels.linalg import null_space
 
     km = model.kernel_model()
     B = np.zeros((model.ncon, model.ndof))
     constraint_jacobian(km, sample, np.ascontiguousarray(q, dtype=np.float64), B)
+    if rows is not None:
+        B = np.ascontiguousarray(B[rows])
+    m = B.shape[0]
     Q = np.empty((model.ndof, model.ndof))
-    work = np.empty((model.ndof, model.ncon + 1))
-    return int(null_space(B, model.ncon, model.ndof, kernels.RANK_RTOL, Q, work))
+    work = np.empty((model.ndof, m + 1))
+    return int(null_space(B, m, model.ndof, kernels.RANK_RTOL, Q, work))
 
 
 def describe_constraints(model: Model) -> list[tuple[str, str, int, int]]:
