@@ -93,15 +93,21 @@ def run(text: str, **overrides):
     )
 
 
-def reference(law: Law, t_end: float, times: np.ndarray):  # the journal of journal_scene
+def reference(
+    law: Law,
+    t_end: float,
+    times: np.ndarray | None = None,
+    height: float = CLEARANCE,
+    sideways: float = SIDEWAYS,
+):  # the journal of journal_scene, at (0, height) moving at (sideways, 0)
     return journal_in_bearing(
         law,
         clearance=CLEARANCE,
         mass=MASS,
         inertia=INERTIA,
         radius=RADIUS,
-        position=(0.0, CLEARANCE),
-        velocity=(SIDEWAYS, 0.0),
+        position=(0.0, height),
+        velocity=(sideways, 0.0),
         gravity=GRAVITY,
         t_end=t_end,
         times=times,
@@ -159,16 +165,7 @@ def dropped_restitution(law: str, e: float) -> tuple[float, float]:
     y, vy = out["q"][0, -1, 0, 1], out["v"][0, -1, 0, 1]
     separation = np.sqrt(vy**2 + 2.0 * GRAVITY * (y + CLEARANCE))
     approach = np.sqrt(4.0 * GRAVITY * CLEARANCE)
-    history = journal_in_bearing(
-        Law(law, 1e9, 1.5, e),
-        clearance=CLEARANCE,
-        mass=MASS,
-        inertia=INERTIA,
-        radius=RADIUS,
-        position=(0.0, CLEARANCE),
-        gravity=GRAVITY,
-        t_end=t_end,
-    )
+    history = reference(Law(law, 1e9, 1.5, e), t_end, sideways=0.0)
     return separation / approach, history.impacts[0].restitution
 
 
@@ -197,17 +194,7 @@ def test_contact__journal_dropped_free_matches_the_reference(law, method):
     text = text.replace(f"velocity = [{SIDEWAYS!r}, 0.0]", "velocity = [0.0, 0.0]")
     overrides = {"dt": 2e-7} if method == "rk4" else {}
     out = run(text.replace('method = "rk45"', f'method = "{method}"'), **overrides)
-    history = journal_in_bearing(
-        Law(law, 1e9, 1.5, e),
-        clearance=CLEARANCE,
-        mass=MASS,
-        inertia=INERTIA,
-        radius=RADIUS,
-        position=(0.0, CLEARANCE / 2),
-        gravity=GRAVITY,
-        t_end=t_end,
-        times=out["time"],
-    )
+    history = reference(Law(law, 1e9, 1.5, e), t_end, out["time"], CLEARANCE / 2, 0.0)
     assert out["status"][0] == 0
     assert len(history.impacts) >= 2
     assert int(out["impact_count"][0, 0]) == len(history.impacts)
