@@ -29,12 +29,16 @@ LABELS = {
     "lankarani-nikravesh": "Lankarani–Nikravesh, χ = 3(1−e²)/4",
     "flores": "Flores et al., χ = 8(1−e)/(5e)",
     "hunt-crossley": "Hunt–Crossley, χ = 3(1−e)/2",
+    "gonthier": "Gonthier et al., χ = (1−e²)/e",
+    "hu-guo": "Hu–Guo, χ = 3(1−e)/(2e)",
 }
 COLORS = {
     "hertz": "tab:gray",
     "lankarani-nikravesh": "tab:blue",
     "flores": "tab:green",
     "hunt-crossley": "tab:red",
+    "gonthier": "tab:purple",
+    "hu-guo": "tab:orange",
 }
 
 

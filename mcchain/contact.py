@@ -16,6 +16,7 @@ and the stiffness of internal cylindrical contact from radius, clearance and mat
 from __future__ import annotations
 
 import math
+from typing import Literal, get_args
 
 HERTZ = 0
 """Purely elastic Hertz law, D = 0."""
@@ -26,19 +27,28 @@ FLORES = 2
 357–375)."""
 HUNT_CROSSLEY = 3
 """D = 3 (1 − e) / (2 δ̇⁻) (Hunt & Crossley 1975, J. Appl. Mech. 42, 440–445)."""
+GONTHIER = 4
+"""D = (1 − e²) / (e δ̇⁻) (Gonthier, McPhee, Lange & Piedbœuf 2004, Multibody Syst. Dyn. 11,
+209–233)."""
+HU_GUO = 5
+"""D = 3 (1 − e) / (2 e δ̇⁻) (Hu & Guo 2015, Multibody Syst. Dyn. 35, 131–151)."""
 
-LAW_CODES: dict[str, int] = {
-    "hertz": HERTZ,
-    "lankarani-nikravesh": LANKARANI_NIKRAVESH,
-    "flores": FLORES,
-    "hunt-crossley": HUNT_CROSSLEY,
-}
+HERTZ_EXPONENT = 1.5
+"""The exponent m of Hertz's law for the contact of curved surfaces: the default exponent of
+``[joint.contact]`` (:data:`mcchain.parameters.TABLE`) and the one
+:func:`internal_cylinder_stiffness` gives K for."""
+
+LawName = Literal["hertz", "lankarani-nikravesh", "flores", "hunt-crossley", "gonthier", "hu-guo"]
+"""``[joint.contact] law`` as a scene spells it, in the order of the codes above (the scene
+schema takes this type; χ(e) of each is :func:`mcchain.kernels.contact.restitution_factor`)."""
+
+LAW_CODES: dict[str, int] = {name: code for code, name in enumerate(get_args(LawName))}
 """Scene spelling of ``[joint.contact] law`` → the integer code the kernels take."""
 
 LAW_NAMES: dict[int, str] = {code: name for name, code in LAW_CODES.items()}
 """Integer code → scene spelling."""
 
-DAMPED_LAWS = ("lankarani-nikravesh", "flores", "hunt-crossley")
+DAMPED_LAWS = tuple(name for name, code in LAW_CODES.items() if code != HERTZ)
 """The laws whose damping needs a coefficient of restitution."""
 
 LINK = 0

@@ -20,131 +20,54 @@ Shapes are written ``(*, nbody)`` for a parameter with a leading sample axis of 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
-from enum import IntEnum
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from mcchain.codes import (
+    DRIVER_CONSTANT,
+    DRIVER_HARMONIC,
+    DRIVER_LAWS,
+    DRIVER_TABLE,
+    GROUND,
+    JOINT_CLEARANCE,
+    JOINT_IDEAL,
+    JOINT_PRISMATIC,
+    LOAD_CONSTANT,
+    LOAD_HARMONIC,
+    LOAD_LAWS,
+    LOAD_TABLE,
+    JointKind,
+)
 from mcchain.contact import CONTACT
+from mcchain.parameters import TABLE
 
-GROUND = -1
-"""Body index of the fixed ground body (r = 0, θ = 0)."""
-
-
-class JointKind(IntEnum):
-    """The kind of a joint, as stored in ``Model.joint_kind``; each knows its constraint rows.
-
-    * ``IDEAL``: ideal revolute joint, Φ = d = 0 (two rows);
-    * ``CLEARANCE``: revolute joint with radial clearance c, Φ = |d| − c = 0 (one row);
-    * ``PRISMATIC``: ideal prismatic (sliding) joint along the unit axis u fixed in body a,
-      Φ = (n·d, θ_b − θ_a − θ_0) with n = A_a Ω u the axis' normal (two rows).
-    """
-
-    IDEAL = 0
-    CLEARANCE = 1
-    PRISMATIC = 2
-
-    @property
-    def rows(self) -> int:
-        """Number of constraint rows of a joint of this kind."""
-        return _JOINT_ROWS[self]
-
-
-_JOINT_ROWS = {JointKind.IDEAL: 2, JointKind.CLEARANCE: 1, JointKind.PRISMATIC: 2}
-
-JOINT_IDEAL = int(JointKind.IDEAL)
-"""``JointKind.IDEAL`` as a plain int, for numba kernels (they read int module globals)."""
-JOINT_CLEARANCE = int(JointKind.CLEARANCE)
-"""``JointKind.CLEARANCE`` as a plain int, for numba kernels."""
-JOINT_PRISMATIC = int(JointKind.PRISMATIC)
-"""``JointKind.PRISMATIC`` as a plain int, for numba kernels."""
-
-DRIVER_CONSTANT = 0
-"""``Model.driver_law`` of θ0 + ω t."""
-DRIVER_HARMONIC = 1
-"""``Model.driver_law`` of θ0 + ω t + A (sin(2π f t + φ) − sin φ)."""
-DRIVER_TABLE = 2
-"""``Model.driver_law`` of a cubic spline through a table (θ0 = f(0), ω = 0)."""
-DRIVER_LAWS = {"constant": DRIVER_CONSTANT, "harmonic": DRIVER_HARMONIC, "table": DRIVER_TABLE}
-"""``[[driver]] law`` -> ``Model.driver_law`` code."""
-LOAD_CONSTANT = 0
-"""``Model.force_law`` of a constant load."""
-LOAD_HARMONIC = 1
-"""``Model.force_law`` of a load times sin(2π f t + φ)."""
-LOAD_TABLE = 2
-"""``Model.force_law`` of a load times a cubic spline through a table of factors."""
-LOAD_LAWS = {"constant": LOAD_CONSTANT, "harmonic": LOAD_HARMONIC, "table": LOAD_TABLE}
-"""``[[force]] law`` -> ``Model.force_law`` code."""
+__all__ = [  # the codes are re-exported: they are the model's
+    "DRIVER_CONSTANT",
+    "DRIVER_HARMONIC",
+    "DRIVER_LAWS",
+    "DRIVER_TABLE",
+    "GROUND",
+    "JOINT_CLEARANCE",
+    "JOINT_IDEAL",
+    "JOINT_PRISMATIC",
+    "LOAD_CONSTANT",
+    "LOAD_HARMONIC",
+    "LOAD_LAWS",
+    "LOAD_TABLE",
+    "PER_SAMPLE_FIELDS",
+    "JointKind",
+    "KernelModel",
+    "Model",
+    "constraint_rows",
+    "joint_rows",
+]
 
 
 def joint_rows(joint_kind: np.ndarray) -> np.ndarray:
     """(njoint,) int64 number of constraint rows of each joint (:attr:`JointKind.rows`)."""
     table = np.array([JointKind(k).rows for k in range(len(JointKind))], dtype=np.int64)
     return table[np.asarray(joint_kind, dtype=np.int64).reshape(-1)]
-
-
-class KernelModel(NamedTuple):
-    """The arrays a numba kernel reads, in one (heterogeneous) named tuple.
-
-    Numba accepts a NamedTuple of arrays as one argument; passing the model this way keeps
-    kernel signatures short. Field meanings and shapes are those of :class:`Model`.
-    """
-
-    joint_body_a: np.ndarray
-    joint_body_b: np.ndarray
-    joint_kind: np.ndarray
-    joint_row: np.ndarray
-    joint_model: np.ndarray
-    joint_contact_law: np.ndarray
-    joint_written: np.ndarray
-    driver_body: np.ndarray
-    driver_row: np.ndarray
-    driver_law: np.ndarray
-    driver_joint: np.ndarray
-    driver_table_size: np.ndarray
-    driver_table_knots: np.ndarray
-    driver_table_coef: np.ndarray
-    force_body: np.ndarray
-    force_law: np.ndarray
-    force_table_size: np.ndarray
-    force_table_knots: np.ndarray
-    force_table_coef: np.ndarray
-    spring_body_a: np.ndarray
-    spring_body_b: np.ndarray
-    gravity: np.ndarray
-    body_mass: np.ndarray
-    body_inertia: np.ndarray
-    joint_point_a: np.ndarray
-    joint_point_b: np.ndarray
-    joint_clearance: np.ndarray
-    joint_eccentricity: np.ndarray
-    joint_axis: np.ndarray
-    joint_relative_angle: np.ndarray
-    joint_contact_stiffness: np.ndarray
-    joint_contact_exponent: np.ndarray
-    joint_contact_restitution: np.ndarray
-    joint_contact_friction: np.ndarray
-    joint_contact_radius: np.ndarray
-    joint_start: np.ndarray
-    driver_angle0: np.ndarray
-    driver_omega: np.ndarray
-    driver_amplitude: np.ndarray
-    driver_frequency: np.ndarray
-    driver_phase: np.ndarray
-    driver_displacement0: np.ndarray
-    driver_speed: np.ndarray
-    force_point: np.ndarray
-    force_value: np.ndarray
-    force_torque: np.ndarray
-    force_frequency: np.ndarray
-    force_phase: np.ndarray
-    spring_point_a: np.ndarray
-    spring_point_b: np.ndarray
-    spring_stiffness: np.ndarray
-    spring_rest_length: np.ndarray
-    spring_damping: np.ndarray
-    q0: np.ndarray
-    v0: np.ndarray
 
 
 def _i64(values: object = ()) -> np.ndarray:
@@ -304,34 +227,30 @@ class Model:
         njoint = len(self.joint_names)
         ndriver = len(self.driver_names)
         nforce = len(self.force_names)
+        # Topology arrays a scene without drivers' or loads' laws, prismatic joints or
+        # contact leaves out ...
         defaults = {
             "force_law": np.zeros(nforce, dtype=np.int64),
-            "force_frequency": np.zeros((1, nforce)),
-            "force_phase": np.zeros((1, nforce)),
             "driver_law": np.zeros(ndriver, dtype=np.int64),
-            "driver_amplitude": np.zeros((1, ndriver)),
-            "driver_frequency": np.zeros((1, ndriver)),
-            "driver_phase": np.zeros((1, ndriver)),
             "driver_joint": np.full(ndriver, -1, dtype=np.int64),
-            "driver_displacement0": np.full((1, ndriver), np.nan),
-            "driver_speed": np.zeros((1, ndriver)),
             "driver_table_size": np.zeros(ndriver, dtype=np.int64),
             "driver_table_knots": np.zeros((ndriver, 0)),
             "driver_table_coef": np.zeros((ndriver, 0)),
             "force_table_size": np.zeros(nforce, dtype=np.int64),
             "force_table_knots": np.zeros((nforce, 0)),
             "force_table_coef": np.zeros((nforce, 0)),
-            "joint_axis": np.full((1, njoint, 2), np.nan),
-            "joint_relative_angle": np.full((1, njoint), np.nan),
             "joint_model": np.zeros(njoint, dtype=np.int64),
             "joint_contact_law": np.zeros(njoint, dtype=np.int64),
-            "joint_contact_stiffness": np.full((1, njoint), np.nan),
-            "joint_contact_exponent": np.full((1, njoint), 1.5),
-            "joint_contact_restitution": np.ones((1, njoint)),
-            "joint_contact_friction": np.zeros((1, njoint)),
-            "joint_contact_radius": np.zeros((1, njoint)),
             "joint_written": np.zeros(njoint, dtype=np.int64),
         }
+        # ... and parameter arrays: the value of the unset key, from the parameter table.
+        count = {"joint": njoint, "driver": ndriver, "force": nforce}
+        for row in TABLE:
+            if row.unset is None or row.kind not in count:
+                continue
+            names = row.field if isinstance(row.field, tuple) else (row.field,)
+            shape = (1, *row.field_shape(count[row.kind]))
+            defaults |= {name: np.full(shape, row.unset) for name in names}
         for name, value in defaults.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
@@ -397,7 +316,8 @@ class Model:
     # -- arrays for kernels ----------------------------------------------------------------
     def kernel_arrays(self) -> KernelModel:
         """The arrays as one :class:`KernelModel`, contiguous with the dtypes kernels expect."""
-        values = {}
+        values: dict[str, np.ndarray] = {}
+        name: str
         for name in KernelModel._fields:
             arr = getattr(self, name)
             dtype = np.int64 if arr.dtype.kind in "iub" else np.float64
@@ -474,35 +394,24 @@ class Model:
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
-_TOPOLOGY_FIELDS = frozenset(
-    {
-        "joint_body_a",
-        "joint_body_b",
-        "joint_kind",
-        "joint_row",
-        "joint_model",
-        "joint_contact_law",
-        "joint_written",
-        "driver_body",
-        "driver_row",
-        "driver_law",
-        "driver_joint",
-        "driver_table_size",
-        "driver_table_knots",
-        "driver_table_coef",
-        "force_body",
-        "force_law",
-        "force_table_size",
-        "force_table_knots",
-        "force_table_coef",
-        "spring_body_a",
-        "spring_body_b",
-    }
+KernelModel = NamedTuple(  # type: ignore[misc]
+    "KernelModel",
+    [
+        (f.name, np.ndarray)
+        for f in fields(Model)
+        if f.type == "np.ndarray" and f.name != "parameters"
+    ],
 )
+"""The arrays a numba kernel reads, in one (heterogeneous) named tuple: every array field of
+:class:`Model` but ``parameters``, in its order (meanings and shapes there). Numba accepts a
+NamedTuple of arrays as one argument (:mod:`mcchain.kernels.kernel_model` makes it one
+structure), which keeps kernel signatures short."""
 _START_FIELDS = frozenset({"joint_start"})
 """Per-sample arrays set from the start state (not parameters of the scene)."""
-_PER_SAMPLE_FIELDS = frozenset(KernelModel._fields) - _TOPOLOGY_FIELDS - _START_FIELDS
 
+_PER_SAMPLE_FIELDS = frozenset(
+    name for row in TABLE for name in (row.field if isinstance(row.field, tuple) else (row.field,))
+)
 PER_SAMPLE_FIELDS = _PER_SAMPLE_FIELDS
 """Names of the parameter arrays that carry a leading sample axis (size 1 or nsample)."""
 

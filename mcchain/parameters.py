@@ -32,7 +32,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from mcchain.model import DRIVER_HARMONIC, LOAD_HARMONIC, JointKind
+from mcchain.codes import DRIVER_HARMONIC, LOAD_HARMONIC, JointKind
+from mcchain.contact import HERTZ_EXPONENT
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,7 @@ TABLE: tuple[Parameter, ...] = (
     _P("joint", "contact.stiffness", (),   "joint_contact_stiffness", "N m-1.5", POSITIVE,
       slots=("K{i}",), packed_for=CONTACT_JOINTS, unset=_NAN),
     _P("joint", "contact.exponent", (),    "joint_contact_exponent", "1",       POSITIVE,
-      slots=("mx{i}",), packed_for=CONTACT_JOINTS, unset=1.5),
+      slots=("mx{i}",), packed_for=CONTACT_JOINTS, unset=HERTZ_EXPONENT),
     _P("joint", "contact.restitution", (), "joint_contact_restitution", "1",    UNIT_INTERVAL,
       slots=("er{i}",), packed_for=CONTACT_JOINTS, unset=1.0),
     _P("joint", "contact.friction", (),    "joint_contact_friction", "1",       NON_NEGATIVE,
@@ -239,6 +240,16 @@ TABLE: tuple[Parameter, ...] = (
 
 PARAMETERS: dict[tuple[str, str], Parameter] = {(p.kind, p.key): p for p in TABLE}
 """The rows by (kind, key)."""
+
+
+def unset_value(kind: str, key: str) -> float:
+    """The value a scene key takes when the scene leaves it out (its row's ``unset``): the
+    one statement of that default, read by the scene model and the Model."""
+    value = PARAMETERS[kind, key].unset
+    if value is None:
+        raise KeyError(f"{kind}.{key} has no default")
+    return value
+
 
 KINDS: tuple[str, ...] = tuple(dict.fromkeys(p.kind for p in TABLE))
 """The kinds, in packed order: scene, body, joint, driver, force, spring."""

@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
     },
     "fourbar-clearance-auto": {
-        "accel": "495ddb56126c4b544e4d7730a2ad83907da6b166dcead56bff5ca0b5ce2449cb",
-        "rk4": "fb84c5cd0bf37158f58ce99bda79fb7aebc043723df63521013e84307f8957c5",
-        "rk4-projection": "8c7bab655b5c28f8b4b3d90e71f6718522fe88f75e3a078de7bfa095e5943502",
-        "rk45": "1ec4172cabfdc7f820e9aa62bc161e389355b9917ac83e19ec5651657695e13f",
+        "accel": "6a44c7cefc23ab8e36f71a24779fd0051f5e4cc3454e467114545cbe9c9fc7df",
+        "rk4": "d3e606dcbe50c6c6baf647b29913feea543b84dc00e9c6375ace2ee1c95a6351",
+        "rk4-projection": "b99d003623345f4058fd1c7608a8f0a32e1355789b80dba31a47520a7a5b5406",
+        "rk45": "821663405d9bead360daa563fe75519f2458d495f15250262cfd422e83715e5a",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

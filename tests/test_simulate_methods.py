@@ -213,36 +213,60 @@ def test_demand_order__same_stores_as_written():
     assert np.array_equal(_run_lane_body(demand_order(body), W.copy()), expected)
 
 
-def test_radau__reports_the_steps_and_evaluations_scipy_takes():
-    """``steps`` and ``evaluations`` of radau (diagnostics) = the accepted steps and ``nfev``
-    of scipy's Radau on the same index-1 right-hand side, integrated here without output
-    times; ``rejected_steps`` is -1 (scipy does not count them)."""
-    from scipy.integrate import solve_ivp
-
-    from mcchain.scene.models import DEFAULT_BAUMGARTE
+def _index1_functions(model, sim):
+    """f(t, y) and ∂f/∂y of the index-1 equations of sample 0 as the compiled Radau
+    evaluates them (:func:`mcchain.kernels.radau.radau_rhs` and ``radau_jacobian``)."""
+    from mcchain.kernels import radau as kr
+    from mcchain.kernels.clearance import NCST
+    from mcchain.kernels.forces import mass_diagonal
+    from mcchain.scene.models import Simulate
     from mcchain.solvers.simulate import SINGULAR_PIVOT
 
-    model = scene_model("clearance_bar")
-    sim = dict(t_end=0.05, dt=0.01, method="radau", rtol=1e-8, atol=1e-10)
-    res = simulate(model, sim, diagnostics=True)
-    steps = res["steps"]
-    module = lane_kernels(Topology.from_model(model), "accel")
-    P = pack_parameters(model)[:, :1].copy()
-    alpha, beta = DEFAULT_BAUMGARTE
-    n = model.ndof
-    qdd, lam, chk, sing = np.zeros((n, 1)), np.zeros((model.ncon, 1)), np.zeros(1), np.zeros(1)
+    km = model.kernel_model()
+    cols, first = model.constraint_pattern()
+    ncon, ndof = model.ncon, model.ndof
+    minv = np.zeros(ndof)
+    mass_diagonal(km, 0, minv)
+    acc = (1.0 / minv, cols, first, np.zeros((0, NCST)), np.zeros((ncon, 3)),
+           np.zeros((ncon, ndof)), np.zeros((ncon, ncon)), np.zeros(ndof), np.zeros(ncon),
+           np.zeros(ncon), np.zeros(ndof), np.zeros(ncon))  # fmt: skip
+    alpha, beta = Simulate(**sim).gains
+    args = (2.0 * alpha, beta * beta, SINGULAR_PIVOT, acc)
 
     def rhs(t, y):
-        Q, V = y[:n, None].copy(), y[n:, None].copy()
-        module.accel(P, Q, V, t, 2 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
-        return np.concatenate([y[n:], qdd[:, 0]])
+        f = np.zeros(2 * ndof)
+        assert kr.radau_rhs(km, 0, t, np.ascontiguousarray(y), f, *args)
+        return f
 
+    def jac(t, y):
+        y = np.ascontiguousarray(y)
+        J = np.zeros((2 * ndof, 2 * ndof))
+        work = (np.zeros(2 * ndof), np.zeros(2 * ndof))
+        assert kr.radau_jacobian(km, 0, t, y, rhs(t, y), J, *work, *args)
+        return J
+
+    return rhs, jac
+
+
+def test_radau__takes_the_steps_scipy_takes_with_the_same_jacobian():
+    """The compiled Radau (:mod:`mcchain.kernels.radau`) is scipy's Radau step for step:
+    given the Jacobian it forms, scipy's ``solve_ivp(method="Radau")`` on the same
+    right-hand side takes the same accepted steps with the same evaluations (``nfev``) and
+    ends at the same state, to rounding; ``rejected_steps`` is -1 (not counted)."""
+    from scipy.integrate import solve_ivp
+
+    model = scene_model("clearance_bar")
+    sim = dict(t_end=0.05, dt=0.01, output_dt=0.05, method="radau", rtol=1e-8, atol=1e-10)
+    res = simulate(model, sim, history_dtype=np.float64, diagnostics=True)
+    rhs, jac = _index1_functions(model, sim)
     y0 = np.concatenate([model.q0[0], model.v0[0]])
-    sol = solve_ivp(rhs, (0.0, 0.05), y0, method="Radau", rtol=1e-8, atol=1e-10)
-    assert sol.status == 0 and steps.shape == (1,)
-    assert steps[0] == len(sol.t) - 1 > 5
+    sol = solve_ivp(rhs, (0.0, 0.05), y0, method="Radau", rtol=1e-8, atol=1e-10, jac=jac)
+    assert sol.status == 0 and res["steps"].shape == (1,)
+    assert res["steps"][0] == len(sol.t) - 1 > 5
     assert res["evaluations"][0] == sol.nfev
     assert res["rejected_steps"][0] == -1
+    end = np.concatenate([res["q"][0, -1].ravel(), res["v"][0, -1].ravel()])
+    np.testing.assert_allclose(end, sol.y[:, -1], rtol=1e-12, atol=1e-14)
     assert all(res[k].dtype == np.int64 for k in ("steps", "rejected_steps", "evaluations"))
 
 

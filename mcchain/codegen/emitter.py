@@ -17,16 +17,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mcchain.codegen.inline import inline
 from mcchain.codegen.topology import Topology
-from mcchain.contact import (
-    FLORES,
-    FRICTION_V0,
-    FRICTION_V1,
-    HUNT_CROSSLEY,
-    LANKARANI_NIKRAVESH,
-)
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 from mcchain.scene.compile import spline_value
+
+CONTACT_KERNELS = "mcchain.kernels.contact"
+"""The module whose functions define the contact law for the loop kernels and the lanes."""
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -703,56 +700,55 @@ class Emitter:
         self.schur_solve("rhs", "lam")
         self.apply_wt("lam", "qdd", a0)
 
+    def inline(self, function: str, arguments: list[str], k: int) -> list[str]:
+        """Emit the text of ``mcchain.kernels.contact.<function>(*arguments)`` for joint ``k``
+        (:func:`mcchain.codegen.inline.inline`: the kernels' own definition, its locals
+        suffixed with ``k``) and return the expressions of its results."""
+        statements, results = inline(CONTACT_KERNELS, function, arguments, str(k))
+        self.emit(*statements)
+        return results
+
     def contact_law(self, k: int) -> None:
         """The normal force of contact joint ``k`` (after :meth:`constraint_values` with v):
-        ``pen{k}`` δ, ``pdot{k}`` δ̇, ``fn{k}`` F_n (mcchain.kernels.contact.normal_force),
-        and ``kc{k}`` = fm ∂F_n/∂δ (for the step-size check only).
-
-        D comes from the approach speed δ̇⁻ of the contact in progress (``vi``, located when
-        it began) or, in a step that started in free flight, from the current δ̇: the
-        contact's first instants, where the onset is located only at the step's end.
+        ``pen{k}`` δ, ``pdot{k}`` δ̇, ``fn{k}`` F_n, and ``kc{k}`` = fm ∂F_n/∂δ (for the
+        step-size check only), from :func:`mcchain.kernels.contact.contact_law` inlined
+        (the loop kernels call the same function).
         """
         r = self.contact_row[k]
-        self.emit(
-            f"pen{k} = rho{k} - p_cl{k}",
-            f"pdot{k} = phid{r}",
-            f"pp{k} = max(pen{k}, 0.0)",
-            f"pw{k} = pp{k} ** p_mx{k}",
-            # χ(e) of the law (its code is data, so one module serves every law)
-            f"chi{k} = (0.75 * (1.0 - p_er{k} * p_er{k}) if p_lw{k} == {LANKARANI_NIKRAVESH!r}.0"
-            f" else (1.6 * (1.0 - p_er{k}) / p_er{k} if p_lw{k} == {FLORES!r}.0"
-            f" else (1.5 * (1.0 - p_er{k}) if p_lw{k} == {HUNT_CROSSLEY!r}.0 else 0.0)))",
-            f"rr{k} = ins{k} * vi{k} + (1.0 - ins{k}) * pdot{k}",
-            f"dmp{k} = chi{k} / rr{k} if rr{k} > 1e-200 else 0.0",
-            f"sdm{k} = max(1.0 + dmp{k} * pdot{k}, 0.0)",
+        self.emit(f"pen{k} = rho{k} - p_cl{k}", f"pdot{k} = phid{r}")
+        fn, delta_slope, _rate_slope = self.inline(
+            "contact_law",
+            [f"{x}{k}" for x in ("pen", "pdot", "ins", "vi", "p_K", "p_mx", "p_lw", "p_er")],
+            k,
         )
-        self.emit(
-            f"fn{k} = p_K{k} * pw{k} * sdm{k}",
-            f"kc{k} = fm{k} * p_K{k} * p_mx{k} * (pw{k} / pp{k} if pp{k} > 0.0 else 0.0) * sdm{k}",
-        )
+        if fn != f"fn{k}":
+            self.emit(f"fn{k} = {fn}")
+        self.emit(f"kc{k} = fm{k} * {delta_slope}")
 
     def contact_friction(self, k: int, a0: dict[int, Coef]) -> None:
         """Regularised Coulomb friction of contact joint ``k`` under the law, added to the free
-        accelerations ``a0`` of its two bodies (mcchain.kernels.contact.friction_force).
+        accelerations ``a0`` of its two bodies (mcchain.kernels.contact.contact_slip and
+        friction_force, inlined).
 
-        Slip of the journal's surface point on the bearing's, along t = (−n_y, n_x):
-        v_t = t·ḋ + R ω_journal − (R + c) ω_bearing (R the journal radius, ``radius``; 0: at
-        the centres). The journal receives F_t t at its contact point (centre + R n), the
+        The journal receives F_t t at its contact point (centre + R n), t = (−n_y, n_x), the
         bearing −F_t t at its own (centre + (R + c) n). On the link, and at μ = 0, the terms
         are exact zeros: a0 keeps its value bit for bit.
         """
         topo = self.topo
         a, b = topo.joint_a[k], topo.joint_b[k]
-        ramp = 1.0 / (FRICTION_V1 - FRICTION_V0)  # Ambrósio's c_d between v0 and v1
         wa = f"v{3 * a + 2}" if a != GROUND else "0.0"
         wb = f"v{3 * b + 2}" if b != GROUND else "0.0"
+        (slip,) = self.inline(
+            "contact_slip",
+            [f"ex{k}", f"ey{k}", f"ddx{k}", f"ddy{k}", f"p_R{k}", f"p_cl{k}", wa, wb],
+            k,
+        )
+        self.emit(f"slip{k} = {slip}")
+        (ftn,) = self.inline("friction_force", [f"fn{k}", f"slip{k}", f"p_mu{k}"], k)
         self.emit(
             f"tx{k} = -ey{k}",
             f"ty{k} = ex{k}",
-            f"slip{k} = tx{k} * ddx{k} + ty{k} * ddy{k} + p_R{k} * {wb}"
-            f" - (p_R{k} + p_cl{k}) * {wa}",
-            f"cd{k} = min(max((abs(slip{k}) - {FRICTION_V0!r}) * {ramp!r}, 0.0), 1.0)",
-            f"ftn{k} = -p_mu{k} * cd{k} * fn{k} * (1.0 if slip{k} > 0.0 else -1.0)",
+            f"ftn{k} = {ftn}",
             f"ft{k} = ftn{k} if fm{k} == 1.0 else 0.0",
             f"ftx{k} = ft{k} * tx{k}",
             f"fty{k} = ft{k} * ty{k}",
@@ -854,10 +850,10 @@ class Emitter:
         # Contact joints: δ, the mode (0 link, 1 contact, 2 free; seated, vi < 0, is in
         # contact whichever the sign of δ) and the elastic energy K δ^(m+1) / (m+1).
         for k in self.contact_row:
+            (eel,) = self.inline("elastic_energy", [f"pen{k}", f"p_K{k}", f"p_mx{k}"], k)
             self.emit(
                 f"pen{k} = rho{k} - p_cl{k}",
-                f"pp{k} = max(pen{k}, 0.0)",
                 f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0 and vi{k} >= 0.0) * 1.0)",
-                f"eel{k} = p_K{k} * pp{k} ** (p_mx{k} + 1.0) / (p_mx{k} + 1.0)",
+                f"eel{k} = {eel}",
                 f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )

@@ -17,11 +17,6 @@ import math
 
 from mcchain.contact import (
     AUTO,
-    FLORES,
-    FRICTION_V0,
-    FRICTION_V1,
-    HUNT_CROSSLEY,
-    LANKARANI_NIKRAVESH,
     RESEAT_PERIODS,
     RESEAT_RATE,
     SEAT_TOLERANCE,
@@ -29,7 +24,7 @@ from mcchain.contact import (
     START_SEATED,
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
-from mcchain.kernels.contact import contact_crossing
+from mcchain.kernels.contact import contact_crossing, contact_law, contact_slip, friction_force
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 
 # Columns of ``cst``: the mode and the contact in progress ...
@@ -134,27 +129,14 @@ def contact_forces(km, s, q, v, cst, F_out):
         ey = dy / rho if rho > 0.0 else 0.0
         pen = rho - c
         pdot = ex * ddx + ey * ddy
-        pp = max(pen, 0.0)
-        pw = pp**expo
-        if law == LANKARANI_NIKRAVESH:
-            chi = 0.75 * (1.0 - e * e)
-        elif law == FLORES:
-            chi = 1.6 * (1.0 - e) / e
-        elif law == HUNT_CROSSLEY:
-            chi = 1.5 * (1.0 - e)
-        else:
-            chi = 0.0
-        ins = cst[j, INS]
-        rate = ins * cst[j, VI] + (1.0 - ins) * pdot
-        damping = chi / rate if rate > 1e-200 else 0.0
-        factor = max(1.0 + damping * pdot, 0.0)
-        fn = stiffness * pw * factor
-        slope = pw / pp if pp > 0.0 else 0.0
+        fn, delta_slope, rate_slope = contact_law(
+            pen, pdot, cst[j, INS], cst[j, VI], stiffness, expo, law, e
+        )
         cst[j, PEN] = pen
         cst[j, PDOT] = pdot
         cst[j, FN] = fn
-        cst[j, KC] = cst[j, FM] * stiffness * expo * slope * factor
-        cst[j, DFR] = cst[j, FM] * stiffness * pw * damping if factor > 0.0 else 0.0
+        cst[j, KC] = cst[j, FM] * delta_slope
+        cst[j, DFR] = cst[j, FM] * rate_slope
         mu = km.joint_contact_friction[s % km.joint_contact_friction.shape[0], k]
         if cst[j, FM] != 1.0 or mu == 0.0:
             continue
@@ -163,9 +145,8 @@ def contact_forces(km, s, q, v, cst, F_out):
         ty = ex
         wa = v[3 * a + 2] if a >= 0 else 0.0
         wb = v[3 * b + 2] if b >= 0 else 0.0
-        slip = tx * ddx + ty * ddy + radius * wb - (radius + c) * wa
-        cd = min(max((abs(slip) - FRICTION_V0) / (FRICTION_V1 - FRICTION_V0), 0.0), 1.0)
-        ft = -mu * cd * fn * (1.0 if slip > 0.0 else -1.0)
+        slip = contact_slip(ex, ey, ddx, ddy, radius, c, wa, wb)
+        ft = friction_force(fn, slip, mu)
         ftx = ft * tx
         fty = ft * ty
         if b >= 0:

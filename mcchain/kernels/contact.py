@@ -12,6 +12,8 @@ where ``D`` is fixed at the contact's onset (δ crossing 0 upwards, approach spe
     lankarani-nikravesh   D = 3 (1 − e²) / (4 δ̇⁻)
     flores                D = 8 (1 − e) / (5 e δ̇⁻)
     hunt-crossley         D = 3 (1 − e) / (2 δ̇⁻)
+    gonthier              D = (1 − e²) / (e δ̇⁻)
+    hu-guo                D = 3 (1 − e) / (2 e δ̇⁻)
 
 The journal body receives −F_n n at its point, the bearing body +F_n n. The law codes and
 the friction defaults live in :mod:`mcchain.contact` (no numba), so the scene loader can name
@@ -27,7 +29,9 @@ from mcchain.contact import (
     FLORES,
     FRICTION_V0,
     FRICTION_V1,
+    GONTHIER,
     HERTZ,
+    HU_GUO,
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
 )
@@ -35,102 +39,145 @@ from mcchain.kernels.config import JIT, njit
 
 __all__ = [
     "FLORES",
+    "FRICTION_RAMP",
     "FRICTION_V0",
     "FRICTION_V1",
+    "GONTHIER",
     "HERTZ",
     "HUNT_CROSSLEY",
+    "HU_GUO",
     "LANKARANI_NIKRAVESH",
     "contact_crossing",
+    "contact_law",
+    "contact_slip",
     "damping_factor",
+    "elastic_energy",
     "friction_factor",
     "friction_force",
     "normal_force",
     "normal_force_derivatives",
+    "restitution_factor",
 ]
 
 
 @njit(**JIT)
-def damping_factor(law, e, approach_speed):
-    """Hysteresis damping factor D (s/m) of ``law`` for restitution ``e`` ∈ (0, 1] and the
-    approach speed δ̇⁻ (m/s) at the contact's onset.
-
-    D = 0 for ``HERTZ``, for an unknown code, and when δ̇⁻ is not > 0 (no located onset: a
-    contact present at t = 0, or one entered from the link with δ̇ = 0, stays undamped).
-    """
-    if not (approach_speed > 0.0):
-        return 0.0
+def restitution_factor(law, e):
+    """χ(e) of ``law`` for restitution ``e`` ∈ (0, 1]: the hysteresis damping factor is
+    D = χ / δ̇⁻ (:func:`damping_factor`). The one table of the laws: the loop kernels call
+    it, the lane generator inlines it (:mod:`mcchain.codegen.inline`). 0 for ``HERTZ`` and
+    for an unknown code."""
     if law == LANKARANI_NIKRAVESH:
-        return 3.0 * (1.0 - e * e) / (4.0 * approach_speed)
+        return 0.75 * (1.0 - e * e)
     if law == FLORES:
-        return 8.0 * (1.0 - e) / (5.0 * e * approach_speed)
+        return 1.6 * (1.0 - e) / e
     if law == HUNT_CROSSLEY:
-        return 3.0 * (1.0 - e) / (2.0 * approach_speed)
+        return 1.5 * (1.0 - e)
+    if law == GONTHIER:
+        return (1.0 - e * e) / e
+    if law == HU_GUO:
+        return 1.5 * (1.0 - e) / e
     return 0.0
 
 
 @njit(**JIT)
-def normal_force(delta, delta_rate, K, m, D):
-    """F_n = K δ^m (1 + D δ̇) (N) for δ > 0, clipped at ≥ 0; 0 for δ ≤ 0.
+def damping_factor(law, e, approach_speed):
+    """Hysteresis damping factor D = χ(e) / δ̇⁻ (s/m) of ``law`` for restitution ``e`` and
+    the approach speed δ̇⁻ (m/s) at the contact's onset.
+
+    D = 0 for ``HERTZ``, for an unknown code, and when δ̇⁻ is not > 1e-200 (no located
+    onset: a contact present at t = 0, or one entered from the link, stays undamped).
+    """
+    chi = restitution_factor(law, e)
+    return chi / approach_speed if approach_speed > 1e-200 else 0.0
+
+
+@njit(**JIT)
+def normal_force_derivatives(delta, delta_rate, K, m, D):
+    """F_n = K δ^m (1 + D δ̇) clipped at ≥ 0 (0 for δ ≤ 0) and its partial derivatives, in
+    straight-line form (the lanes inline it).
 
     Args:
         delta: penetration δ, m.
         delta_rate: δ̇, m/s (positive while the journal goes in).
         K: stiffness, N/m^m.  m: exponent.  D: damping factor, s/m (:func:`damping_factor`).
-    """
-    if not (delta > 0.0):
-        return 0.0
-    f = K * delta**m * (1.0 + D * delta_rate)
-    if f > 0.0:
-        return f
-    return 0.0
-
-
-@njit(**JIT)
-def normal_force_derivatives(delta, delta_rate, K, m, D):
-    """F_n and its partial derivatives, for implicit steps and Newton iterations.
 
     Returns:
         (F_n, ∂F_n/∂δ, ∂F_n/∂δ̇): N, N/m, N s/m. Where the force is zero (δ ≤ 0 or clipped)
         both derivatives are zero; at δ = 0 and at the clip they are the one-sided values
         from the zero side.
     """
-    if not (delta > 0.0):
-        return 0.0, 0.0, 0.0
-    p = delta**m
-    s = 1.0 + D * delta_rate
-    f = K * p * s
-    if not (f > 0.0):
-        return 0.0, 0.0, 0.0
-    return f, K * m * delta ** (m - 1.0) * s, K * p * D
+    pp = max(delta, 0.0)
+    pw = pp**m
+    factor = max(1.0 + D * delta_rate, 0.0)
+    fn = K * pw * factor
+    delta_slope = K * m * (pw / pp if pp > 0.0 else 0.0) * factor
+    rate_slope = K * pw * D if factor > 0.0 else 0.0
+    return fn, delta_slope, rate_slope
 
 
 @njit(**JIT)
-def friction_factor(tangential_speed, v0=FRICTION_V0, v1=FRICTION_V1):
+def normal_force(delta, delta_rate, K, m, D):
+    """F_n = K δ^m (1 + D δ̇) (N) for δ > 0, clipped at ≥ 0; 0 for δ ≤ 0
+    (:func:`normal_force_derivatives`'s first value)."""
+    fn, _delta_slope, _rate_slope = normal_force_derivatives(delta, delta_rate, K, m, D)
+    return fn
+
+
+@njit(**JIT)
+def contact_law(delta, delta_rate, in_contact, onset_rate, K, m, law, e):
+    """The law at one instant of a joint: F_n, ∂F_n/∂δ, ∂F_n/∂δ̇ (N, N/m, N s/m).
+
+    D comes from the approach speed ``onset_rate`` δ̇⁻ of the contact in progress (located
+    when it began; ≤ 0: none, undamped) when ``in_contact`` = 1 (in contact at the step's
+    start), else from the current δ̇: the contact's first instants, where the onset is
+    located only at the step's end. The loop kernels (mcchain.kernels.clearance) call it; the
+    lanes inline it (mcchain.codegen.emitter).
+    """
+    rate = in_contact * onset_rate + (1.0 - in_contact) * delta_rate
+    damping = damping_factor(law, e, rate)
+    return normal_force_derivatives(delta, delta_rate, K, m, damping)
+
+
+FRICTION_RAMP = 1.0 / (FRICTION_V1 - FRICTION_V0)
+"""1/(v1 − v0), s/m: the slope of Ambrósio's c_d between v0 and v1."""
+
+
+@njit(**JIT)
+def friction_factor(tangential_speed, v0=FRICTION_V0, ramp=FRICTION_RAMP):
     """Ambrósio's dynamic correction c_d ∈ [0, 1] of the regularised Coulomb law.
 
     c_d = 0 for |v_t| ≤ v0, (|v_t| − v0)/(v1 − v0) for v0 < |v_t| < v1, 1 for |v_t| ≥ v1
     (J. Ambrósio, "Impact of rigid and flexible multibody systems: deformation description
     and contact models", in *Virtual Nonlinear Multibody Systems*, Kluwer 2003; used for
-    clearance joints by Flores et al. 2008). ``v0 < v1``, m/s.
+    clearance joints by Flores et al. 2008). ``v0`` (m/s) and ``ramp`` = 1/(v1 − v0) (s/m)
+    default to ``FRICTION_V0`` and ``FRICTION_RAMP``.
     """
-    a = abs(tangential_speed)
-    if a <= v0:
-        return 0.0
-    if a >= v1:
-        return 1.0
-    return (a - v0) / (v1 - v0)
+    return min(max((abs(tangential_speed) - v0) * ramp, 0.0), 1.0)
 
 
 @njit(**JIT)
-def friction_force(normal, tangential_speed, mu, v0=FRICTION_V0, v1=FRICTION_V1):
+def friction_force(normal, tangential_speed, mu, v0=FRICTION_V0, ramp=FRICTION_RAMP):
     """Tangential friction force F_t = −μ c_d(v_t) F_n sign(v_t) (N) on the body whose contact
-    point slides at ``tangential_speed`` v_t (m/s) relative to the other; ``normal`` F_n ≥ 0."""
-    cd = friction_factor(tangential_speed, v0, v1)
-    if cd == 0.0:
-        return 0.0
-    if tangential_speed > 0.0:
-        return -mu * cd * normal
-    return mu * cd * normal
+    point slides at ``tangential_speed`` v_t (m/s) relative to the other; ``normal`` F_n ≥ 0
+    (``v0``, ``ramp``: :func:`friction_factor`)."""
+    cd = friction_factor(tangential_speed, v0, ramp)
+    return -mu * cd * normal * (1.0 if tangential_speed > 0.0 else -1.0)
+
+
+@njit(**JIT)
+def contact_slip(ex, ey, ddx, ddy, radius, clearance, omega_a, omega_b):
+    """Slip v_t (m/s) of the journal's surface point on the bearing's along t = (−n_y, n_x):
+    v_t = t·ḋ + R ω_b − (R + c) ω_a, with n = (``ex``, ``ey``), ḋ = (``ddx``, ``ddy``), R the
+    journal radius (0: at the centres), c the clearance, ω_a, ω_b the bearing's and the
+    journal's angular speeds (rad/s)."""
+    return -ey * ddx + ex * ddy + radius * omega_b - (radius + clearance) * omega_a
+
+
+@njit(**JIT)
+def elastic_energy(delta, K, m):
+    """K δ^(m+1) / (m+1) (J): the elastic energy the law stores at penetration δ (0 for
+    δ ≤ 0)."""
+    return K * max(delta, 0.0) ** (m + 1.0) / (m + 1.0)
 
 
 @njit(**JIT)

@@ -40,6 +40,7 @@ from mcchain.kernels.clearance import (
     record_stage0,
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
+from mcchain.kernels.contact import elastic_energy
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
 from mcchain.kernels.joints import (
     constraint_gamma,
@@ -317,7 +318,7 @@ def contact_energy(km, s, q, cst):
         pen = hypot(dx, dy) - km.joint_clearance[s % km.joint_clearance.shape[0], k]
         stiffness = km.joint_contact_stiffness[s % km.joint_contact_stiffness.shape[0], k]
         expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
-        energy += stiffness * max(pen, 0.0) ** (expo + 1.0) / (expo + 1.0)
+        energy += elastic_energy(pen, stiffness, expo)
     return energy
 
 

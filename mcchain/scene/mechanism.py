@@ -12,6 +12,8 @@ from pydantic import (
     model_validator,
 )
 
+from mcchain.contact import HERTZ_EXPONENT, LAW_CODES, LawName
+from mcchain.parameters import unset_value
 from mcchain.scene.fields import (
     BodyRef,
     Name,
@@ -76,18 +78,24 @@ class Contact(Section):
     flight; D is fixed at each contact's onset from the restitution and the approach speed.
     """
 
-    law: Literal["hertz", "lankarani-nikravesh", "flores", "hunt-crossley"] = Field(
+    law: LawName = Field(
         default="lankarani-nikravesh",
-        description='"hertz" (elastic), "lankarani-nikravesh" (default), "flores" or '
-        '"hunt-crossley": the hysteresis damping D of the law.',
+        description=", ".join(f'"{name}"' for name in LAW_CODES)
+        + ": the hysteresis damping D of the law "
+        '("hertz": none; default "lankarani-nikravesh").',
     )
     stiffness: Num | None = Field(
         default=None,
         gt=0,
         description="K, N/m^exponent; required unless ``radius``, ``youngs_modulus`` and "
-        "``poisson_ratio`` are given (then K of internal cylindrical contact, exponent 1.5).",
+        "``poisson_ratio`` are given (then K of internal cylindrical contact, exponent "
+        f"{HERTZ_EXPONENT}).",
     )
-    exponent: Num = Field(default=1.5, gt=0, description="m; default 1.5 (Hertz).")
+    exponent: Num = Field(
+        default=unset_value("joint", "contact.exponent"),
+        gt=0,
+        description=f"m; default {unset_value('joint', 'contact.exponent')} (Hertz).",
+    )
     restitution: Num | None = Field(
         default=None,
         gt=0,
@@ -125,8 +133,10 @@ class Contact(Section):
             raise ValueError(
                 "needs `stiffness`, or all of `radius`, `youngs_modulus` and `poisson_ratio`"
             )
-        if self.stiffness is None and self.exponent != 1.5:
-            raise ValueError("K from `radius` and the materials is for `exponent = 1.5`")
+        if self.stiffness is None and self.exponent != HERTZ_EXPONENT:
+            raise ValueError(
+                f"K from `radius` and the materials is for `exponent = {HERTZ_EXPONENT}`"
+            )
         if self.law != "hertz" and self.restitution is None:
             raise ValueError(f"law {self.law!r} needs `restitution` (e in (0, 1])")
         return self

@@ -1,10 +1,14 @@
-"""scipy's Radau with clearance joints under the contact law: one sample at a time, in
-segments between located events (the slow reference of the contact law).
+"""``radau``: Radau IIA(5) one sample at a time, in segments between located events — the
+slow, independent reference of every method, with and without contact-law joints (without
+them, one segment and no events).
 
-Within a segment every contact-law joint keeps its mode, so the right-hand side is smooth
-(the index-1 accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`, with the
-law's row λ_r = F_n). A segment ends at the first of these events, located by solve_ivp on
-its dense output:
+The steps are :mod:`mcchain.kernels.radau` (scipy's Radau, compiled, on the index-1
+accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`); this driver does
+what ``scipy.integrate.solve_ivp`` did around them: evaluates the events after each accepted
+step, locates a crossing on the step's dense output (``brentq``, as solve_ivp), writes the
+outputs at the output times the step passed from its dense output, and starts a new
+segment after an event. Within a segment every contact-law joint keeps its mode, so the
+right-hand side is smooth. A segment ends at the first of these events:
 
 * onset of a contact (δ crosses 0 upwards): D is fixed from δ̇⁻ there (exact, no "first
   instants" as in a fixed-step kernel);
@@ -23,7 +27,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -31,25 +35,84 @@ from mcchain.contact import AUTO, RESEAT_PERIODS, seat_tolerance
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
+if TYPE_CHECKING:
+    from mcchain.model import Model
+    from mcchain.scene.models import Simulate
 
-class _Singular(Exception):
-    pass
+EVENT_XTOL = 4.0 * float(np.finfo(float).eps)
+"""brentq's absolute and relative tolerance on an event's time (solve_ivp's)."""
 
 
-def run_radau_contact(run: Any, singular_pivot: float) -> None:
-    """Integrate every sample of ``run`` (a :class:`mcchain.solvers.simulate._Run` whose
-    model has contact-law joints) with Radau; outputs as the lane kernels'."""
+class RadauRun(Protocol):
+    """What :func:`run_radau` reads and writes of a run (``mcchain.solvers.simulate``'s):
+    the model and settings, the start state (nsample, ndof), the output times (ntime,), the
+    per-sample status, failure times and diagnostics (nsample,), and the contact arrays
+    (None without contact-law joints)."""
+
+    model: Model
+    settings: Simulate
+    q: np.ndarray
+    v: np.ndarray
+    time: np.ndarray
+    status: np.ndarray
+    t_div: np.ndarray
+    t_sing: np.ndarray
+    t_cl: np.ndarray
+    steps: np.ndarray
+    rejected_steps: np.ndarray
+    evaluations: np.ndarray
+    contact_history: np.ndarray | None
+    contact_summary: np.ndarray | None
+    peaks: np.ndarray | None
+
+
+def run_radau(run: RadauRun, flat: tuple[np.ndarray, ...], singular_pivot: float) -> None:
+    """Integrate every sample of ``run`` with Radau into the history arrays ``flat`` (the
+    kernels' layout: q, v, joint force, contact force, driver torque, constraint error,
+    energy, each (sample, time, ...)); the contact arrays as the lane kernels'."""
     from mcchain.kernels.explicit import nan_history
-    from mcchain.solvers.simulate import _flat_outputs
 
-    flat = _flat_outputs(run.out, run.model.nsample, len(run.time))
-    run.rejected_steps[:] = -1  # scipy's Radau does not count them
+    run.rejected_steps[:] = -1  # the rejected attempts are not counted
+    n, ntime = run.model.nsample, len(run.time)
+    contact = (
+        (run.contact_history, run.contact_summary)
+        if run.contact_history is not None and run.contact_summary is not None
+        else (np.zeros((n, ntime, 0)), np.zeros((n, 0)))
+    )
     shared = (run.model.kernel_model(), *run.model.constraint_pattern())
-    for i in range(run.model.nsample):
+    for i in range(n):
         if run.status[i] & FAILURE_BITS:
             nan_history(i, 0, *flat)
             continue
-        _Sample(run, i, singular_pivot, flat, shared).integrate()
+        _Sample(run, i, singular_pivot, flat, contact, shared).integrate()
+
+
+class _Dense:
+    """The dense output of a segment's accepted steps, as scipy's ``OdeSolution``: the
+    state at t (s) by the step that holds t; ``ts`` the step ends, the segment's start
+    first."""
+
+    def __init__(self, t0: float) -> None:
+        self.ts = [t0]
+        self.pieces: list[tuple[float, float, np.ndarray, np.ndarray]] = []
+
+    def add(self, t_old: float, t: float, y_old: np.ndarray, Q: np.ndarray) -> None:
+        self.ts.append(t)
+        self.pieces.append((t_old, t - t_old, y_old.copy(), Q.copy()))
+
+    def clip(self, t: float) -> None:
+        """The last step ends at t (an event inside it)."""
+        self.ts[-1] = t
+
+    @staticmethod
+    def piece(t: float, piece: tuple[float, float, np.ndarray, np.ndarray]) -> np.ndarray:
+        t_old, h, y_old, Q = piece
+        x = (t - t_old) / h
+        return y_old + Q @ np.array([x, x * x, x * x * x])
+
+    def __call__(self, t: float) -> np.ndarray:
+        k = int(np.searchsorted(self.ts, t, side="left"))
+        return self.piece(t, self.pieces[min(max(k - 1, 0), len(self.pieces) - 1)])
 
 
 class _Sample:
@@ -57,14 +120,24 @@ class _Sample:
     scratch arrays, and the callbacks solve_ivp takes."""
 
     def __init__(
-        self, run: Any, i: int, pivot: float, flat: tuple[np.ndarray, ...], shared: tuple[Any, ...]
+        self,
+        run: RadauRun,
+        i: int,
+        pivot: float,
+        flat: tuple[np.ndarray, ...],
+        contact: tuple[np.ndarray, np.ndarray],
+        shared: tuple[Any, ...],
     ) -> None:
-        """``shared``: the kernel model and the constraint pattern, built once per run."""
+        """``contact``: the contact history and summary arrays (empty without contact-law
+        joints); ``shared``: the kernel model and the constraint pattern, built once per
+        run."""
         from mcchain.kernels import clearance as cl
+        from mcchain.kernels import radau as kr
         from mcchain.kernels.forces import mass_diagonal
 
         model = run.model
         self.run, self.i, self.pivot, self.flat, self.cl = run, i, pivot, flat, cl
+        self.contact = contact
         self.model, self.ndof = model, model.ndof
         self.km, self.cols, self.first = shared
         self.joints = np.flatnonzero(model.joint_model)
@@ -85,6 +158,18 @@ class _Sample:
         self.due = math.inf  # when a re-seat's dwell was completed (an accepted step's end)
         self.t_prev = 0.0  # the last accepted step's end
         self.free_since = [math.nan] * len(self.joints)
+        # the compiled stepper's arrays (mcchain.kernels.radau.radau_step)
+        n = 2 * ndof
+        self.acc = (self.minv, self.cols, self.first, self.cst, self.row_law, self.B, self.S,
+                    self.F, self.g, self.phi, self.qdd, self.lam)  # fmt: skip
+        self.stepper = dict(
+            f=np.zeros(n), J=np.zeros((n, n)), LUr=np.zeros((n, n)),
+            piv_r=np.zeros(n, np.int64), LUc=np.zeros((n, n), complex),
+            piv_c=np.zeros(n, np.int64), Z=np.zeros((3, n)), W=np.zeros((3, n)),
+            F=np.zeros((3, n)), y_old=np.zeros(n), Q=np.zeros((n, 3)),
+        )  # fmt: skip
+        self.state = np.zeros(kr.NSTATE)
+        self.work = (np.zeros(n), np.zeros(n), np.zeros(n, complex))
         self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
 
     # -- the right-hand side and the step hook ---------------------------------------------
@@ -111,20 +196,15 @@ class _Sample:
         peak_values(self.km, self.lam, self.cst, values)
         return values
 
-    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
-        self.run.evaluations[self.i] += 1
-        if self.accelerations(t, y) < 0.0:
-            raise _Singular(t)
-        return np.concatenate([y[self.ndof :], self.qdd])
-
     def on_step(self, t: float, y: np.ndarray) -> float:
-        """solve_ivp's call once per accepted step (an event that never fires): the step
-        count, the peak penetration, and the re-seat dwell of model auto."""
+        """The hook at every accepted step's end (and a segment's start), the first of the
+        events, evaluated before the others (it never fires): the step count, the peak
+        penetration, and the re-seat dwell of model auto, from the accelerations the stepper
+        evaluated last, at (t, y)."""
         from mcchain.kernels.forces import kinetic_energy
 
         cl, cst = self.cl, self.cst
-        self.run.steps[self.i] += 1
-        self.accelerations(t, y)
+        self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
         h, self.t_prev = t - self.t_prev, t
         kinetic = kinetic_energy(self.km, self.i, np.ascontiguousarray(y[self.ndof :]))
         for j, k in enumerate(self.joints):
@@ -231,10 +311,8 @@ class _Sample:
 
     # -- the whole run ---------------------------------------------------------------------
     def integrate(self) -> None:
-        from scipy.integrate import solve_ivp
-
+        from mcchain.kernels import radau as kr
         from mcchain.kernels.explicit import finish_contact, nan_history
-        from mcchain.solvers.peaks import dense_peaks
 
         run, i, cl, cst = self.run, self.i, self.cl, self.cst
         t_end = float(run.time[-1])
@@ -250,37 +328,18 @@ class _Sample:
                     y = self.handle("switch", j, t, y)
         written, fail_bit, fail_time = 0, 0, math.nan
         while True:
-            events, kinds = self.events()
-            try:
-                sol = solve_ivp(
-                    self.rhs, (t, t_end), y, method="Radau", t_eval=run.time[written:],
-                    rtol=run.settings.rtol, atol=run.settings.atol, events=events,
-                    dense_output=True,
-                )  # fmt: skip
-                if sol.sol is not None:  # the segment's peaks, in its modes
-                    dense_peaks(sol.sol, sol.sol.ts, self.quantities, self.peaks)
-            except _Singular as exc:
-                fail_bit, fail_time = SINGULAR, float(exc.args[0])
+            outcome = self.segment(t, y, written)
+            written = outcome.written
+            if outcome.fail_bit:
+                fail_bit, fail_time = outcome.fail_bit, outcome.fail_time
                 break
-            run.steps[i] -= 1  # the hook's call at the segment's start
-            base = written
-            for m, tm in enumerate(sol.t):
-                err = self.write(base + m, float(tm), sol.y[:, m])
-                if not err <= run.settings.constraint_tolerance:
-                    fail_bit, fail_time = DIVERGED, float(tm)
-                    break
-                written = base + m + 1
-            if fail_bit:
+            if outcome.event is None:  # t_end reached
                 break
-            if sol.status == -1:
-                fail_bit, fail_time = DIVERGED, float(sol.t[-1]) if len(sol.t) else t
-                break
-            if sol.status == 0:  # t_end reached
-                break
-            e = next(e for e in range(1, len(sol.t_events)) if len(sol.t_events[e]))
-            t = float(sol.t_events[e][0])
-            kind, j = kinds[e - 1]
-            y = self.handle(kind, j, t, np.array(sol.y_events[e][0]))
+            kind, j = outcome.event
+            t = outcome.t
+            assert outcome.y is not None
+            y = self.handle(kind, j, t, outcome.y)
+        run.evaluations[i] = int(self.state[kr.NFEV])
         for j in range(len(self.joints)):
             if not math.isnan(self.free_since[j]) and not fail_bit:
                 cst[j, cl.TFF] += t_end - self.free_since[j]
@@ -288,9 +347,73 @@ class _Sample:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
         nan_history(i, written, *self.flat)
+        assert run.peaks is not None
         run.peaks[i] = np.nan if fail_bit else self.peaks
-        finish_contact(self.km, i, int(run.status[i]), written, cst, run.contact_history,
-                       run.contact_summary, run.peaks)  # fmt: skip
+        finish_contact(self.km, i, int(run.status[i]), written, cst, *self.contact, run.peaks)
+
+    def segment(self, t: float, y: np.ndarray, written: int) -> _Segment:
+        """Integrate from (t, y) to the first event or t_end, writing the output times from
+        index ``written`` on that the steps pass (solve_ivp's loop around its solver)."""
+        from scipy.optimize import brentq
+
+        from mcchain.kernels import radau as kr
+        from mcchain.solvers.peaks import dense_peaks
+
+        run, i, st = self.run, self.i, self.stepper
+        rtol, atol = float(run.settings.rtol), float(run.settings.atol)
+        t_end, times = float(run.time[-1]), run.time
+        events, kinds = self.events()
+        y = np.array(y, dtype=float)
+        model_args = (self.alpha2, self.beta2, self.pivot, self.acc)
+        code = kr.radau_start(
+            self.km, i, t, t_end, y, st["f"], st["J"], rtol, atol, self.state, *self.work[:2],
+            *model_args,
+        )  # fmt: skip
+        if code != kr.ACCEPTED:
+            return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
+        g = [event(t, y) for event in events]
+        run.steps[i] -= 1  # the hook's call at the segment's start
+        dense = _Dense(t)
+        while t < t_end:
+            code = kr.radau_step(
+                self.km, i, t_end, y, st["f"], st["J"], st["LUr"], st["piv_r"], st["LUc"],
+                st["piv_c"], st["Z"], st["W"], st["F"], st["y_old"], st["Q"], rtol, atol,
+                self.state, *self.work, *model_args,
+            )  # fmt: skip
+            if code == kr.SINGULAR_EVALUATION:
+                return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
+            if code != kr.ACCEPTED:
+                return _Segment(written, DIVERGED, t)
+            t_old, t = float(self.state[kr.T_OLD]), float(self.state[kr.T_NOW])
+            dense.add(t_old, t, st["y_old"], st["Q"])
+            step = dense.pieces[-1]
+            g_new = [event(t, y) for event in events]
+            found: tuple[float, int] | None = None
+            for e, event in enumerate(events):
+                if not _crosses(g[e], g_new[e], getattr(event, "direction", 0.0)):
+                    continue
+                root = float(brentq(
+                    lambda tt, ev=event, step=step: ev(tt, _Dense.piece(tt, step)), t_old, t,
+                    xtol=EVENT_XTOL, rtol=EVENT_XTOL,
+                ))  # fmt: skip
+                if found is None or root < found[0]:
+                    found = (root, e)
+            stop = t if found is None else found[0]
+            while written < len(times) and times[written] <= stop:
+                tw = float(times[written])
+                err = self.write(written, tw, _Dense.piece(tw, step))
+                if not err <= run.settings.constraint_tolerance:
+                    return _Segment(written, DIVERGED, tw)
+                written += 1
+            g = g_new
+            if found is not None:
+                dense.clip(stop)
+                dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
+                y_stop = _Dense.piece(stop, step)
+                return _Segment(written, 0, math.nan, kinds[found[1] - 1], stop, y_stop)
+        if dense.pieces:  # the segment's peaks, in its modes
+            dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
+        return _Segment(written, 0, math.nan)
 
     def write(self, it: int, t: float, y: np.ndarray) -> float:
         """The outputs at history index ``it`` (as the kernels write them) and the contact
@@ -303,7 +426,7 @@ class _Sample:
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
         write_outputs(
             self.km, self.i, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,
-            run.contact_history,
+            self.contact[0],
         )  # fmt: skip
         for k in range(model.njoint):
             clearance_link = model.joint_kind[k] == JOINT_CLEARANCE and model.joint_model[k] == 0
@@ -323,3 +446,23 @@ def _event(function: Callable[[float, np.ndarray], float], direction: float) -> 
     event.terminal = True  # type: ignore[attr-defined]
     event.direction = direction  # type: ignore[attr-defined]
     return event
+
+
+class _Segment(NamedTuple):
+    """How a segment ended: the output times written so far, a failure (status bit, time)
+    or the event that ended it (kind and joint, time, state); no event at t_end."""
+
+    written: int
+    fail_bit: int
+    fail_time: float
+    event: tuple[str, int] | None = None
+    t: float = math.nan
+    y: np.ndarray | None = None
+
+
+def _crosses(g: float, g_new: float, direction: float) -> bool:
+    """Whether an event's value went through 0 in its direction over a step (solve_ivp's
+    ``find_active_events``)."""
+    up = g <= 0.0 <= g_new
+    down = g >= 0.0 >= g_new
+    return (up and direction > 0) or (down and direction < 0) or ((up or down) and direction == 0)

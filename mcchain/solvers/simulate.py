@@ -55,11 +55,11 @@ import numpy as np
 
 from mcchain.contact import CONTACT_SUMMARY
 from mcchain.errors import SceneError
-from mcchain.model import JOINT_CLEARANCE, JointKind, Model
+from mcchain.model import JointKind, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import LOOP_METHODS, Simulate
 from mcchain.solvers.threads import over_samples
-from mcchain.status import ASSEMBLY_FAILED, CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
+from mcchain.status import ASSEMBLY_FAILED, FAILURE_BITS
 
 SINGULAR_PIVOT = 1e-8
 """Relative LDLᵀ pivot of S below which the constraints count as rank-deficient."""
@@ -506,137 +506,13 @@ def _run_rk45(run: _Run) -> None:
     )  # fmt: skip
 
 
-class _Singular(Exception):
-    pass
-
-
 def _run_radau(run: _Run) -> None:
-    """scipy's Radau on the index-1 equations, one sample at a time (the slow reference);
-    with contact-law joints, in segments between located events (:mod:`.radau_contact`)."""
-    if run.model.has_contact:
-        from mcchain.solvers.radau_contact import run_radau_contact
+    """Radau IIA(5) on the index-1 equations, one sample at a time (the slow reference), in
+    segments between located events where there are contact-law joints
+    (:mod:`.radau_contact`)."""
+    from mcchain.solvers.radau_contact import run_radau
 
-        run_radau_contact(run, SINGULAR_PIVOT)
-        return
-    from scipy.integrate import solve_ivp
-
-    from mcchain.kernels.clearance import NCST
-    from mcchain.kernels.peaks import peak_values
-    from mcchain.solvers.peaks import dense_peaks
-
-    module, P_all, _, _ = _lane_setup(run, "accel")
-    s = run.settings
-    alpha, beta = s.gains
-    model = run.model
-    km = model.kernel_model()
-    no_contact = np.zeros((0, NCST))
-    assert run.peaks is not None
-    ndof, ncon, n = model.ndof, max(model.ncon, 1), model.nsample
-    flat = _flat_outputs(run.out, n, len(run.time))
-    qdd = np.zeros((ndof, 1))
-    lam = np.zeros((ncon, 1))
-    chk = np.zeros(1)
-    sing = np.zeros(1)
-    nsteps = run.steps
-    run.rejected_steps[:] = -1  # scipy's Radau does not count them
-    for i in range(n):
-        if run.status[i] & FAILURE_BITS:
-            for array in flat:
-                array[i] = np.nan
-            continue
-        P = np.ascontiguousarray(P_all[:, i : i + 1])
-
-        # solve_ivp evaluates events once per accepted step (and at the start): a step count.
-        def count_step(t: float, y: np.ndarray, i: int = i) -> float:
-            nsteps[i] += 1
-            return 1.0
-
-        def rhs(t: float, y: np.ndarray, P: np.ndarray = P, i: int = i) -> np.ndarray:
-            run.evaluations[i] += 1
-            Q = np.ascontiguousarray(y[:ndof, None])
-            V = np.ascontiguousarray(y[ndof:, None])
-            module.accel(P, Q, V, t, 2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
-            if sing[0] > 0.0:
-                raise _Singular(t)
-            return np.concatenate([y[ndof:], qdd[:, 0]])
-
-        def quantities(t: float, y: np.ndarray, P: np.ndarray = P) -> np.ndarray:
-            """|joint force| per joint and |λ| per driver at (t, y) (mcchain.kernels.peaks)."""
-            Q = np.ascontiguousarray(y[:ndof, None])
-            V = np.ascontiguousarray(y[ndof:, None])
-            module.accel(P, Q, V, t, 2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd, lam, chk, sing)
-            values = np.zeros(model.njoint + model.ndriver)
-            peak_values(km, np.ascontiguousarray(lam[:, 0]), no_contact, values)
-            return values
-
-        y0 = np.concatenate([run.q[i], run.v[i]])
-        try:
-            sol = solve_ivp(
-                rhs, (0.0, float(run.time[-1])), y0, method="Radau", t_eval=run.time,
-                rtol=s.rtol, atol=s.atol, events=count_step, dense_output=True,
-            )  # fmt: skip
-            run.evaluations[i] = sol.nfev
-            ys, ok = sol.y, sol.status == 0
-            fail_bit, fail_time = DIVERGED, (sol.t[-1] if len(sol.t) else 0.0)
-            if ok:
-                run.peaks[i] = 0.0
-                dense_peaks(sol.sol, sol.sol.ts, quantities, run.peaks[i])
-        except _Singular as exc:
-            ys, ok = np.zeros((2 * ndof, 0)), False
-            fail_bit, fail_time = SINGULAR, float(exc.args[0])
-        nsteps[i] -= 1  # the event's evaluation at the start
-        nt = ys.shape[1]
-        Q = np.ascontiguousarray(ys[:ndof])
-        V = np.ascontiguousarray(ys[ndof:])
-        LAM = np.zeros((ncon, nt))
-        qdd_all = np.zeros((ndof, nt))
-        chk_all = np.zeros(nt)
-        sing_all = np.zeros(nt)
-        Pn = np.ascontiguousarray(np.repeat(P, nt, axis=1))
-        jf = np.zeros((2 * model.njoint, nt))
-        cf = np.zeros((model.njoint, nt))
-        dtq = np.zeros((model.ndriver, nt))
-        cerr = np.zeros(nt)
-        en = np.zeros(nt)
-        for j in range(nt):
-            module.accel(
-                Pn[:, j : j + 1], Q[:, j : j + 1], V[:, j : j + 1], float(run.time[j]),
-                2.0 * alpha, beta * beta, SINGULAR_PIVOT, qdd_all[:, j : j + 1],
-                LAM[:, j : j + 1], chk_all[j : j + 1], sing_all[j : j + 1],
-            )  # fmt: skip
-            module.outputs(
-                Pn[:, j : j + 1], Q[:, j : j + 1], V[:, j : j + 1], LAM[:, j : j + 1],
-                float(run.time[j]), jf[:, j : j + 1], cf[:, j : j + 1], dtq[:, j : j + 1],
-                cerr[j : j + 1], en[j : j + 1],
-            )  # fmt: skip
-        # Failures at output times: constraint error past tolerance or non-finite.
-        bad = ~(chk_all <= s.constraint_tolerance)
-        if bad.any():
-            first = int(np.argmax(bad))
-            if ok or run.time[first] < fail_time:
-                ok, fail_bit, fail_time = False, DIVERGED, float(run.time[first])
-            nt = first
-        if not ok:
-            nt = min(nt, int(np.searchsorted(run.time, fail_time, side="left")))
-            run.peaks[i] = np.nan
-            run.status[i] |= fail_bit
-            (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
-        flat[0][i, :nt] = Q[:, :nt].T
-        flat[1][i, :nt] = V[:, :nt].T
-        flat[2][i, :nt] = jf[:, :nt].T
-        flat[3][i, :nt] = cf[:, :nt].T
-        flat[4][i, :nt] = dtq[:, :nt].T
-        flat[5][i, :nt] = cerr[:nt]
-        flat[6][i, :nt] = en[:nt]
-        for array in flat:  # from the failure on (or past scipy's last time): NaN
-            array[i, nt:] = np.nan
-        kinds = model.joint_kind
-        rows = [model.joint_row[k] for k in range(model.njoint) if kinds[k] == JOINT_CLEARANCE]
-        if rows:
-            lost = np.any(LAM[rows, :nt] <= 0.0, axis=0)
-            if lost.any():
-                run.status[i] |= CONTACT_LOST
-                run.t_cl[i] = run.time[int(np.argmax(lost))]
+    run_radau(run, _flat_outputs(run.out, run.model.nsample, len(run.time)), SINGULAR_PIVOT)
 
 
 def _run_generalized_alpha(run: _Run) -> None:
@@ -744,7 +620,12 @@ METHODS: dict[str, Method] = {
             False,
             "Dormand–Prince 5(4) with per-sample step control on the index-1 form (Baumgarte)",
         ),
-        Method("radau", _run_radau, False, "scipy Radau, one sample at a time (reference)"),
+        Method(
+            "radau",
+            _run_radau,
+            False,
+            "Radau IIA(5), scipy's algorithm compiled, one sample at a time (reference)",
+        ),
     )
 }
 """Every integration method by its ``[simulate] method`` name."""
@@ -844,14 +725,14 @@ def simulate(
             projection's Newton iterations evaluate Φ, not accelerations, and are not
             counted). rk45: accepted and rejected attempts up to the end or the failure;
             ``evaluations`` 1 (the first stage) + 6 per attempt (7 stages, the last one is
-            the next step's first: FSAL). radau: scipy's accepted steps and its ``nfev``
-            (its finite-difference Jacobian's evaluations not included; a sample stopped
-            by a singular evaluation reports every call up to it); ``rejected_steps`` -1,
-            scipy does not count them. generalized-alpha: the steps completed (up to a
-            failure), ``rejected_steps`` 0, ``evaluations`` 1 (the start's index-1 solve) +
-            one residual per Newton iteration (+ 1: the index-1 solve after a last step
-            shortened to land on t_end). Samples failed on entry: all 0 (radau's
-            ``rejected_steps`` -1).
+            the next step's first: FSAL). radau: the accepted steps and the right-hand-side
+            evaluations over all segments (scipy's ``nfev``; the finite-difference
+            Jacobian's not included; a sample stopped by a singular evaluation reports
+            every call up to it); ``rejected_steps`` -1, not counted. generalized-alpha:
+            the steps completed (up to a failure), ``rejected_steps`` 0, ``evaluations`` 1
+            (the start's index-1 solve) + one residual per Newton iteration (+ 1: the
+            index-1 solve after a last step shortened to land on t_end). Samples failed
+            on entry: all 0 (radau's ``rejected_steps`` -1).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,

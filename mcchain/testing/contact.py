@@ -6,7 +6,7 @@ or :mod:`mcchain.contact`, so a slip in one shows as a difference from the other
     δ = |d| − c,  n = d/|d|,  δ̇ = n·ḋ,
     F_n = K δ^m (1 + D δ̇) for δ > 0, clipped at F_n ≥ 0;   F_n = 0 for δ ≤ 0,
     D = 0 (hertz), 3(1 − e²)/(4 δ̇⁻) (lankarani-nikravesh), 8(1 − e)/(5 e δ̇⁻) (flores),
-        3(1 − e)/(2 δ̇⁻) (hunt-crossley),
+        3(1 − e)/(2 δ̇⁻) (hunt-crossley), (1 − e²)/(e δ̇⁻) (gonthier), 3(1 − e)/(2 e δ̇⁻) (hu-guo),
 
 δ̇⁻ being δ̇ at the contact's onset. Two scenes:
 
@@ -39,6 +39,8 @@ _DAMPING: dict[str, Callable[[float], float]] = {
     "lankarani-nikravesh": lambda e: 0.75 * (1.0 - e**2),
     "flores": lambda e: 1.6 * (1.0 - e) / e,
     "hunt-crossley": lambda e: 1.5 * (1.0 - e),
+    "gonthier": lambda e: (1.0 - e**2) / e,
+    "hu-guo": lambda e: 3.0 * (1.0 - e) / (2.0 * e),
 }
 
 LAWS: tuple[str, ...] = tuple(_DAMPING)

@@ -1,0 +1,228 @@
+"""Straight-line lane text from the kernels' own numba functions: one definition of the physics.
+
+A law of :mod:`mcchain.kernels` (say :func:`mcchain.kernels.contact.contact_law`) is the
+only place its formulas are written. The loop kernels call it; the lane generator asks
+:func:`inline` for its text, specialised to one joint: the function's syntax tree is read
+from its module's source file (parsed, not imported: the generator never imports numba),
+its parameters replaced by the lane's expressions, its locals renamed with the joint's
+suffix, module constants written as literals, and calls of the module's other functions
+inlined in turn. The text is the function's arithmetic operation for operation, so the
+lanes and the loop kernels round alike.
+
+The functions it takes are the straight-line subset both targets share: a docstring,
+assignments to plain names (one name or a tuple of names from an inlined call), and a
+``return`` of one expression or a tuple; the only branching is a leading chain of
+``if test: return value`` (a table of cases, written as nested selects), or ``x if c else y``
+inside an expression. Anything else is refused with :class:`TypeError` at generation time.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import importlib
+import importlib.util
+from collections.abc import Sequence
+from pathlib import Path
+
+_BUILTINS = frozenset({"abs", "max", "min"})
+"""Calls kept as written: the lane text's own functions (mcchain.codegen.native)."""
+
+
+@functools.cache
+def _module(name: str) -> tuple[dict[str, ast.FunctionDef], dict[str, ast.expr], dict[str, str]]:
+    """The top level of module ``name``'s source, parsed without importing it: its functions,
+    its constant assignments and the module each ``from … import`` name comes from."""
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.origin is None:
+        raise TypeError(f"{name}: no source")
+    tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    functions: dict[str, ast.FunctionDef] = {}
+    constants: dict[str, ast.expr] = {}
+    imported: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef):
+            functions[node.name] = node
+        elif isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target = node.targets[0]
+            if isinstance(target, ast.Name):
+                constants[target.id] = node.value
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            for alias in node.names:
+                imported[alias.asname or alias.name] = node.module
+    return functions, constants, imported
+
+
+def _constant(module: str, name: str, where: str) -> float:
+    """The value of module constant ``name``: a numeric assignment of the module (evaluated
+    over its other constants) or a number imported from a module free of numba."""
+    _functions, constants, imported = _module(module)
+    if name in constants:
+        node = constants[name]
+        names = {n.id for n in ast.walk(node) if isinstance(n, ast.Name)}
+        scope = {n: _constant(module, n, where) for n in names}
+        value = eval(compile(ast.Expression(node), module, "eval"), {"__builtins__": {}}, scope)
+    elif name in imported:
+        value = getattr(importlib.import_module(imported[name]), name)
+    else:
+        raise TypeError(f"{where}: unknown name {name}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"{where}: only numeric module constants can be inlined")
+    return float(value)
+
+
+class _Inliner:
+    """Inlines one call: ``names`` maps each parameter and renamed local to its expression."""
+
+    def __init__(self, module: str, function: str, suffix: str, out: list[str]) -> None:
+        self.module = module
+        functions, _constants, _imported = _module(module)
+        if function not in functions:
+            raise TypeError(f"{module}.{function}: no such function")
+        self.tree = functions[function]
+        self.suffix = suffix
+        self.out = out
+        self.names: dict[str, ast.expr] = {}
+
+    def where(self, node: ast.AST) -> str:
+        return f"{self.module}.{self.tree.name} line {getattr(node, 'lineno', '?')}"
+
+    def run(self, arguments: Sequence[str]) -> list[ast.expr]:
+        params = [a.arg for a in self.tree.args.args]
+        defaults = self.tree.args.defaults
+        if len(arguments) > len(params) or len(arguments) < len(params) - len(defaults):
+            raise TypeError(f"{self.where(self.tree)}: {len(arguments)} arguments")
+        for name, text in zip(params, arguments, strict=False):
+            self.names[name] = ast.parse(text, mode="eval").body
+        for name, default in zip(params[::-1], defaults[::-1], strict=False):
+            self.names.setdefault(name, self.expr(default))
+        body = list(self.tree.body)
+        if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+            body = body[1:]  # the docstring
+        return self.block(body)
+
+    def block(self, body: list[ast.stmt]) -> list[ast.expr]:
+        for i, stmt in enumerate(body):
+            if isinstance(stmt, ast.Return) and stmt.value is not None:
+                if isinstance(stmt.value, ast.Tuple):
+                    return [self.expr(e) for e in stmt.value.elts]
+                if isinstance(stmt.value, ast.Call):  # a tail call passes all its values on
+                    return self.call(stmt.value)
+                return [self.expr(stmt.value)]
+            if isinstance(stmt, ast.If) and self._is_case(stmt):
+                # A table of cases: ``if c: return a`` … then the rest → a if c else (rest).
+                test = self.expr(stmt.test)
+                chosen = self.block(stmt.body)
+                other = self.block(stmt.orelse + body[i + 1 :])
+                if len(chosen) != len(other):
+                    raise TypeError(f"{self.where(stmt)}: branches return different counts")
+                return [
+                    ast.IfExp(test=test, body=a, orelse=b)
+                    for a, b in zip(chosen, other, strict=True)
+                ]
+            if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1:
+                self.assign(stmt.targets[0], stmt.value)
+                continue
+            raise TypeError(f"{self.where(stmt)}: not straight-line code")
+        raise TypeError(f"{self.where(self.tree)}: no return")
+
+    def _is_case(self, stmt: ast.If) -> bool:
+        def returns(body: list[ast.stmt]) -> bool:
+            return len(body) == 1 and (
+                isinstance(body[0], ast.Return)
+                or (isinstance(body[0], ast.If) and self._is_case(body[0]))
+            )
+
+        return returns(stmt.body) and (not stmt.orelse or returns(stmt.orelse))
+
+    def assign(self, target: ast.expr, value: ast.expr) -> None:
+        if isinstance(target, ast.Name):
+            results = [self.expr(value)]
+            targets = [target.id]
+        elif isinstance(target, ast.Tuple) and all(isinstance(e, ast.Name) for e in target.elts):
+            if not isinstance(value, ast.Call):
+                raise TypeError(f"{self.where(target)}: unpack only an inlined call")
+            results = self.call(value)
+            targets = [e.id for e in target.elts]  # type: ignore[attr-defined]
+        else:
+            raise TypeError(f"{self.where(target)}: assign plain names only")
+        if len(results) != len(targets):
+            raise TypeError(f"{self.where(target)}: {len(results)} values for {len(targets)}")
+        for name, result in zip(targets, results, strict=True):
+            if isinstance(result, (ast.Name, ast.Constant)):
+                self.names[name] = result  # no new line for a plain name or literal
+                continue
+            local = f"{name}{self.suffix}"
+            self.out.append(f"{local} = {ast.unparse(result)}")
+            self.names[name] = ast.Name(local, ast.Load())
+
+    def call(self, node: ast.Call) -> list[ast.expr]:
+        if node.keywords:
+            raise TypeError(f"{self.where(node)}: keyword arguments")
+        func = node.func
+        if isinstance(func, ast.Name) and func.id in _BUILTINS:
+            return [ast.Call(func, [self.expr(a) for a in node.args], [])]
+        if isinstance(func, ast.Attribute) and ast.unparse(func) == "math.sqrt":
+            return [ast.Call(func, [self.expr(a) for a in node.args], [])]
+        if not isinstance(func, ast.Name) or func.id not in _module(self.module)[0]:
+            raise TypeError(f"{self.where(node)}: cannot inline {ast.unparse(func)}")
+        arguments = [ast.unparse(self.expr(a)) for a in node.args]
+        return _Inliner(self.module, func.id, self.suffix, self.out).run(arguments)
+
+    def expr(self, node: ast.expr) -> ast.expr:
+        if isinstance(node, ast.Name):
+            if node.id in self.names:
+                return self.names[node.id]
+            # a module constant (a law code, a friction speed) as a float literal: the lane
+            # text holds every parameter, law codes included, as float64
+            return ast.Constant(_constant(self.module, node.id, self.where(node)))
+        if isinstance(node, ast.Constant):
+            return ast.Constant(float(node.value)) if type(node.value) is int else node
+        if isinstance(node, ast.Attribute):
+            text = ast.unparse(node)
+            if text in ("math.nan", "math.inf", "math.pi"):
+                return node
+            raise TypeError(f"{self.where(node)}: attribute {text}")
+        if isinstance(node, ast.Call):
+            results = self.call(node)
+            if len(results) != 1:
+                raise TypeError(f"{self.where(node)}: a call of several values in an expression")
+            return results[0]
+        if isinstance(node, ast.BinOp):
+            return ast.BinOp(self.expr(node.left), node.op, self.expr(node.right))
+        if isinstance(node, ast.UnaryOp):
+            return ast.UnaryOp(node.op, self.expr(node.operand))
+        if isinstance(node, ast.Compare):
+            return ast.Compare(
+                self.expr(node.left), node.ops, [self.expr(c) for c in node.comparators]
+            )
+        if isinstance(node, ast.BoolOp):
+            return ast.BoolOp(node.op, [self.expr(v) for v in node.values])
+        if isinstance(node, ast.IfExp):
+            return ast.IfExp(self.expr(node.test), self.expr(node.body), self.expr(node.orelse))
+        raise TypeError(f"{self.where(node)}: {type(node).__name__} is not lane text")
+
+
+def inline(
+    module: str, function: str, arguments: Sequence[str], suffix: str
+) -> tuple[list[str], list[str]]:
+    """Lane text of the call ``module.function(*arguments)``.
+
+    Args:
+        module: the kernel module's dotted name (its source is parsed, not imported).
+        function: a function of that module, of the subset the module docstring names.
+        arguments: the lane expression of each positional parameter (text); parameters
+            left out take their default.
+        suffix: appended to each local's name (e.g. the joint index), so the text of two
+            joints does not collide.
+
+    Returns:
+        (statements, results): the lines to emit, in order, and the expression text of each
+        returned value.
+    """
+    out: list[str] = []
+    results = _Inliner(module, function, suffix, out).run(arguments)
+    return out, [ast.unparse(r) for r in results]
+
+
+__all__ = ["inline"]
