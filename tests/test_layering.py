@@ -19,13 +19,10 @@ KNOWN_EDGES = {
     # issue 28, items 1 and 3 (h-physics): the Model builds its kernels' KernelModel, which
     # imports the Model's constants.
     ("mcchain.model", "mcchain.kernels.kernel_model"),
-    # issue 28, item 5 (h-radau): simulate calls the contact Radau path, which imports
-    # simulate's run and outputs.
-    ("mcchain.solvers.simulate", "mcchain.solvers.radau_contact"),
     # issue 28: the disk estimate reads the output grid (``output_times``) from simulate,
     # which imports the code generator, whose emitter imports scene.compile, which checks the
-    # memory; the grid is to move to a plain module once simulate's owners (h-radau,
-    # h-physics) have landed.
+    # memory; the grid is to move to a plain module (simulate belonged to h-radau and h-physics
+    # while this test was written).
     ("mcchain.resources", "mcchain.solvers.simulate"),
 }
 """Edges of circles through modules other branches are rewriting (issue 28): left out of
