@@ -416,6 +416,8 @@ def execute(
             removed = remove_temporaries(parts_dir) + remove_temporaries(folder)
             if removed:
                 log.info("removed %d temporary files left by an interrupted run", removed)
+            compiled_by = {"kernel_compiler": kernel_compiler(job)}
+            attributes = {**job.attributes(versions), **compiled_by}
             live = None
             if rerun is not None:
                 live = LiveRun(rerun, job, folder, session.setdefault("rerun", {}))
@@ -423,7 +425,7 @@ def execute(
                 stats = _compute(
                     job,
                     parts_dir,
-                    {**job.attributes(versions), "kernel_compiler": kernel_compiler(job)},
+                    attributes,
                     run_chunks(record, job.chunk_size),
                     base=base,
                     dask=dask,
@@ -447,7 +449,7 @@ def execute(
                 added = _compute(
                     job,
                     parts_dir,
-                    job.attributes(versions),
+                    attributes,
                     run_chunks(record, job.chunk_size),
                     dask=dask,
                     threads=threads,
@@ -465,7 +467,9 @@ def execute(
                 compression=job.compression,
                 complevel=job.complevel,
                 nsample=nsample,
-                attrs=job.resized(nsample).attributes(versions) if grown else None,
+                attrs={**job.resized(nsample).attributes(versions), **compiled_by}
+                if grown
+                else None,
             )
             log.info(
                 "merged %d parts into %s: %.1f MB -> %.1f MB in %.2f s (%.0f MB/s)",

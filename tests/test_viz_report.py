@@ -262,8 +262,13 @@ def saltelli_scene_parameters(count: int, vary: dict[str, tuple[float, float]]) 
 def test_sobol__saltelli_design_clearance_bar_pulsations_agree_with_a_direct_estimate(
     tmp_path: Path,
 ) -> None:
-    names = PROBLEM["names"]
-    params = saltelli_scene_parameters(4 * 2**11, dict(zip(names, PROBLEM["bounds"], strict=True)))
+    # CLEARANCE reaches 0.3 m, past what the scene check allows a real joint of this bar (it
+    # would be a unit mistake there), so the design is drawn on a stand-in path with the
+    # same bounds: the scene's draws depend on the design and the bounds, not on the path.
+    stand_ins = ["body.bar.position[0]", "body.bar.mass"]
+    params = saltelli_scene_parameters(
+        4 * 2**11, dict(zip(stand_ins, PROBLEM["bounds"], strict=True))
+    )
     assert report.saltelli_layout(params, second_order=False) == (2**11, False)
     produced = report.sobol_figure(
         _pulsation_dataset(params), "saltelli", tmp_path / "sobol.png", tmp_path / "sobol.csv"

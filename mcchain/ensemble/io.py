@@ -321,7 +321,11 @@ class _PartCache:
         self._check_attrs(nc, name_of)
 
     def _check_attrs(self, nc: netCDF4.Dataset, name_of: str) -> None:
+        # What ran a session's chunks is provenance, not the study: parts written by a
+        # session that ran interpreted and by one that ran compiled hold the same values.
         attrs, expected = _attrs(nc), self.attrs
+        attrs = {key: value for key, value in attrs.items() if key not in SESSION_ATTRIBUTES}
+        expected = {key: value for key, value in expected.items() if key not in SESSION_ATTRIBUTES}
         if self._given is not None:  # the run grew since the part was written
             attrs, expected = study_attributes(attrs), study_attributes(expected)
         if set(attrs) != set(expected) or not all(
@@ -351,6 +355,12 @@ def check_tiling(parts: Sequence[Part], nsample: int | None = None) -> int:
     if nsample is not None and position != nsample:
         raise MergeError(f"parts cover samples 0:{position}, expected 0:{nsample}")
     return position
+
+
+SESSION_ATTRIBUTES = ("kernel_compiler",)
+"""Global attributes that say how a session ran, not what the study is: not compared
+between parts. The merged file carries the first part's (a run that grew: the merging
+session's); run.json's sessions record every session's."""
 
 
 def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
