@@ -1,14 +1,16 @@
 """Straight-line code of one lane of a :class:`~mcchain.codegen.topology.Topology`.
 
-:class:`Emitter` writes the index-1 acceleration (Schur complement S = B M⁻¹ Bᵀ, sparse
-LDLᵀ in a bandwidth-reducing row order), the constraint projection and the outputs (joint
-forces, energy, max |Φ|); the generator (``generate.py``) puts these blocks into the time
-loops of ``templates.py``. :func:`sincos_code` is the branch-free sine/cosine it inlines.
+:class:`Emitter` writes the index-1 acceleration, the constraint projection and the outputs
+(joint forces, energy, max |Φ|); the generator (``generate.py``) puts these blocks into the
+time loops of ``templates.py``. :func:`sincos_code` is the branch-free sine/cosine it inlines.
 
-Formulation: the constraints and forces of ``mcchain/kernels/joints.py`` and
-``mcchain/kernels/forces.py``, whose conventions are mirrored (rotated point p = A(θ) s,
-d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
-"""
+The physics is not written here: each joint's Φ, Φ̇ and γ, B's turning entries, the driver
+and load laws, the spring-dampers and the energies are the straight-line functions of
+``mcchain/kernels/joints.py`` and ``forces.py`` (the contact law: ``contact.py``), which the
+loop kernels call and :meth:`Emitter.kernel` inlines (:mod:`mcchain.codegen.inline`), a ground
+body's terms as literal 0.0 / 1.0 folded away. What stays here is structure: which bodies and
+rows, the ground skipped, the sparse pattern of B; the Schur complement S = B M⁻¹ Bᵀ and its
+sparse LDLᵀ are :mod:`mcchain.codegen.sparse_ldl`'s."""
 
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mcchain.codegen.inline import inline
+from mcchain.codegen.sparse_ldl import Coef, SchurComplement, _mul, _sum
 from mcchain.codegen.topology import Topology
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 from mcchain.scene.compile import spline_value
@@ -83,69 +86,7 @@ def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
     return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
 
 
-# ---------------------------------------------------------------------------------------------
-# Symbolic helpers: a coefficient is a float constant or the name of a scalar variable.
-
-Coef = float | str
-
-
-def _mul(*factors: Coef) -> Coef:
-    const = 1.0
-    names = []
-    for f in factors:
-        if isinstance(f, str):
-            names.append(f)
-        else:
-            const *= f
-    if const == 0.0:
-        return 0.0
-    if not names:
-        return const
-    expr = " * ".join(names)
-    if const == 1.0:
-        return expr
-    if const == -1.0:
-        return f"(-{expr})" if len(names) == 1 else f"(-({expr}))"
-    return f"({const!r} * {expr})"
-
-
-def _sum(terms: list[Coef]) -> Coef:
-    const = sum(t for t in terms if not isinstance(t, str))
-    names = [t for t in terms if isinstance(t, str)]
-    if not names:
-        return float(const)
-    expr = " + ".join(names)
-    if const != 0.0:
-        expr = f"{expr} + {const!r}"
-    return f"({expr})" if len(names) > 1 or const != 0.0 else expr
-
-
-def _row_order(pattern: list[set[int]]) -> list[int]:
-    """A bandwidth-reducing order of the rows of S (reverse Cuthill–McKee on its graph)."""
-    n = len(pattern)
-    if n == 0:
-        return []
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-    rows, cols = [], []
-    for i, nbrs in enumerate(pattern):
-        for j in nbrs:
-            rows.append(i)
-            cols.append(j)
-    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    order = [int(i) for i in reverse_cuthill_mckee(graph, symmetric_mode=True)]
-
-    # Keep the natural order when it is at least as narrow (chains are already banded).
-    def bandwidth(perm: list[int]) -> int:
-        pos = {r: i for i, r in enumerate(perm)}
-        return max((abs(pos[i] - pos[j]) for i in range(n) for j in pattern[i]), default=0)
-
-    natural = list(range(n))
-    return natural if bandwidth(natural) <= bandwidth(order) else order
-
-
-class Emitter:
+class Emitter(SchurComplement):
     """Generates the straight-line code of one lane for a :class:`Topology`.
 
     Names in the generated code: ``q{i}``, ``v{i}`` the lane's coordinates and velocities,
@@ -352,10 +293,10 @@ class Emitter:
                 a, b = topo.joint_a[k], topo.joint_b[k]
                 qa, qb = self._angle(a, q), self._angle(b, q)
                 vectors = [f"nx{k}", f"ny{k}", f"dx{k}", f"dy{k}"]
-                phi = self.kernel(
+                offset, angle = self.kernel(
                     JOINT_KERNELS, "prismatic_residual", [*vectors, qa, qb, f"p_rel{k}"]
                 )
-                self.emit(f"phi{r} = {phi[0]}", f"phi{r + 1} = {phi[1]}")
+                self.emit(f"phi{r} = {offset}", f"phi{r + 1} = {angle}")
                 if v is not None:
                     rates = [f"ddx{k}", f"ddy{k}", self._angle(a, v), self._angle(b, v)]
                     phid = self.kernel(JOINT_KERNELS, "prismatic_rate", [*vectors, *rates])
@@ -364,8 +305,8 @@ class Emitter:
                 self.emit(f"phi{r} = rho{k} - p_cl{k}")
                 if v is not None:
                     arguments = [f"ex{k}", f"ey{k}", f"ddx{k}", f"ddy{k}"]
-                    (phid,) = self.kernel(JOINT_KERNELS, "clearance_rate", arguments)
-                    self.emit(f"phid{r} = {phid}")
+                    (rate,) = self.kernel(JOINT_KERNELS, "clearance_rate", arguments)
+                    self.emit(f"phid{r} = {rate}")
         self._swing_acc: dict[int, str] = {}  # f̈ of each driver with a law, for γ
         for d in range(topo.ndriver):
             # f = f0 + rate · t (+ A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too)
@@ -379,8 +320,8 @@ class Emitter:
                     f"tv1{d} = tvs{d}[1]",
                     f"tv2{d} = tvs{d}[2]",
                 )
-                start = spline_value(np.asarray(knots), np.asarray(coef), 0.0)
-                swing, swing_rate = f"tv{d} - {start!r}", f"tv1{d}"
+                g0 = spline_value(np.asarray(knots), np.asarray(coef), 0.0)
+                swing, swing_rate = f"tv{d} - {g0!r}", f"tv1{d}"
                 self._swing_acc[d] = f"tv2{d}"
             if d in topo.harmonic_drivers:
                 self.emit(f"hw{d} = {TWO_PI!r} * p_frq{d}")
@@ -392,23 +333,23 @@ class Emitter:
             g = topo.slider_drivers.get(d)
             if g is None:  # θ − θ0 − ω t
                 i = 3 * topo.driver_body[d] + 2
-                coordinate, start, rate, rate_now = f"{q}{i}", f"p_th0_{d}", f"p_om{d}", f"{v}{i}"
+                coordinate, start, speed, rate_now = f"{q}{i}", f"p_th0_{d}", f"p_om{d}", f"{v}{i}"
             else:  # a slider driver: u·d − s0 − v t
                 a = topo.joint_a[g]
                 coordinate = f"ax{g} * dx{g} + ay{g} * dy{g}"
-                start, rate = f"p_s0_{d}", f"p_spd{d}"
+                start, speed = f"p_s0_{d}", f"p_spd{d}"
                 if v is not None:
-                    arguments = [f"ax{g}", f"ay{g}", f"dx{g}", f"dy{g}", f"ddx{g}", f"ddy{g}"]
+                    vectors = [f"ax{g}", f"ay{g}", f"dx{g}", f"dy{g}", f"ddx{g}", f"ddy{g}"]
                     rate_now = self.kernel(
-                        JOINT_KERNELS, "prismatic_rate", [*arguments, self._angle(a, v), "0.0"]
+                        JOINT_KERNELS, "prismatic_rate", [*vectors, self._angle(a, v), "0.0"]
                     )[0]
             (phi,) = self.kernel(
-                JOINT_KERNELS, "driver_residual", [coordinate, start, rate, t, swing]
+                JOINT_KERNELS, "driver_residual", [coordinate, start, speed, t, swing]
             )
             self.emit(f"phi{r} = {phi}")
             if v is not None:
-                (speed,) = self.kernel(JOINT_KERNELS, "driver_speed", [rate, swing_rate])
-                self.emit(f"phid{r} = {_tidy(f'{rate_now} - ({speed})')}")
+                (rate,) = self.kernel(JOINT_KERNELS, "driver_speed", [speed, swing_rate])
+                self.emit(f"phid{r} = {_tidy(f'{rate_now} - ({rate})')}")
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
         terms = []
@@ -522,119 +463,6 @@ class Emitter:
                     f"F{3 * body + 1} {sign}= sfy{s}",
                     f"F{3 * body + 2} {sign}= {torque}",
                 )
-
-    # -- Schur complement and its sparse LDLᵀ ---------------------------------------------
-    def _minv(self, col: int) -> str:
-        return f"p_{self._minv_slot(col)}"
-
-    def _minv_slot(self, col: int) -> str:
-        """Parameter slot of M⁻¹ at coordinate ``col`` (1/m or 1/J of its body)."""
-        b, k = divmod(col, 3)
-        return f"iJ{b}" if k == 2 else f"im{b}"
-
-    def schur_factor(self) -> None:
-        """``Wt{r}_{c}`` = (M⁻¹Bᵀ)ᵀ, S = B M⁻¹ Bᵀ and its LDLᵀ; ``sing`` counts dropped pivots.
-
-        A pivot ``d_j ≤ tau · S_jj`` is dropped (its inverse set to 0: the row is treated as
-        dependent on the previous ones, λ_j = 0) and counted in ``sing``; integrators either
-        flag the sample SINGULAR or, on the robust path, carry on with the basic solution.
-        """
-        rows = self.rows()
-        n = len(rows)
-        for r, row in enumerate(rows):
-            for col, val in row.items():
-                self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
-        pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
-        order = _row_order(pattern)
-        self.order = order
-        # Entries of S in the permuted numbering (i, j: positions), lower part.
-        pos = {r: i for i, r in enumerate(order)}
-        S: dict[tuple[int, int], str] = {}
-        # A row whose joint is under the contact law (fm = 1) is replaced by λ_r = F_n:
-        # its S row and column become the unit vector (so the factors keep their pattern)
-        # and the coupling S_jr F_n moves to the right-hand side (:meth:`acceleration`). In
-        # link mode (fm = 0) the selects give the values of the link alone.
-        self.coupling: dict[tuple[int, int], str] = {}
-        for ri in range(n):
-            for rj in pattern[ri]:
-                i, j = pos[ri], pos[rj]
-                if j > i:
-                    continue
-                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
-                laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
-                if not laws:
-                    self.emit(f"S{i}_{j} = {_sum(terms)}")
-                else:
-                    self.emit(f"Sx{i}_{j} = {_sum(terms)}")
-                    self.coupling[ri, rj] = self.coupling[rj, ri] = f"Sx{i}_{j}"
-                    held = " + ".join(laws) + " == 0.0"
-                    unit = "1.0" if i == j else "0.0"
-                    self.emit(f"S{i}_{j} = Sx{i}_{j} if {held} else {unit}")
-                S[i, j] = f"S{i}_{j}"
-        # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
-        L: set[tuple[int, int]] = set()
-        lower: list[set[int]] = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
-        for j in range(n):
-            for i in range(j + 1, n):
-                if (i, j) in S or (lower[i] & lower[j]):
-                    L.add((i, j))
-                    lower[i].add(j)
-
-        for j in range(n):
-            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
-            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
-            self.emit(
-                f"D{j} = {dj}",
-                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
-                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
-            )
-            for i in range(j + 1, n):
-                if (i, j) not in L:
-                    continue
-                common = sorted(lower[i] & lower[j])
-                sij = S.get((i, j), "0.0")
-                prods = [f"L{i}_{k} * E{j}_{k}" for k in common]
-                num = sij + ("" if not prods else " - (" + " + ".join(prods) + ")")
-                self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
-            # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
-        self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
-        self._L = L
-        self._lower = lower
-
-    def schur_solve(self, rhs: str, out: str) -> None:
-        """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
-        n = len(self.order)
-        order = self.order
-        for i in range(n):
-            terms = [f"L{i}_{k} * y{out}{k}" for k in sorted(self._lower[i])]
-            expr = f"{rhs}{order[i]}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
-            self.emit(f"y{out}{i} = {expr}")
-        upper: list[list[int]] = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
-        for i, k in self._L:
-            upper[k].append(i)
-        for k in reversed(range(n)):
-            terms = [f"L{i}_{k} * x{out}{i}" for i in sorted(upper[k])]
-            expr = f"y{out}{k} * Di{k}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
-            self.emit(f"x{out}{k} = {expr}")
-        for i in range(n):
-            self.emit(f"{out}{order[i]} = x{out}{i}")
-
-    def apply_wt(self, x: str, out: str, base: dict[int, Coef] | None) -> None:
-        """``{out}{c}`` = base_c − M⁻¹_c Σ_r B_rc x_r  (base None: 0).
-
-        Bᵀx first, then one product by M⁻¹ (loaded again): the entries of B (point
-        coordinates, ±1) are fewer values to keep across the Schur solve than those of M⁻¹Bᵀ,
-        and ±1 costs no product.
-        """
-        rows = self.rows()
-        for c in range(self.topo.ndof):
-            terms = [_mul(row[c], f"{x}{r}") for r, row in enumerate(rows) if c in row]
-            head = base[c] if base else 0.0
-            if not terms:
-                self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
-                continue
-            total = f"{self._reload(self._minv_slot(c))} * ({_sum(terms)})"
-            self.emit(f"{out}{c} = -{total}" if head == 0.0 else f"{out}{c} = {head} - {total}")
 
     # -- whole blocks ----------------------------------------------------------------------
     def acceleration(self, t: str = "t", baumgarte: bool = True) -> None:
