@@ -16,7 +16,6 @@ from mcchain.kernels.joints import (
     add_pair_column,
     add_pair_outer,
     add_pair_product,
-    body_point,
     body_pose,
     joint_separation_rate,
     rotate,
@@ -109,13 +108,9 @@ def spring_vectors(km, s, q, k):
     ib = s % km.spring_point_b.shape[0]
     xa, ya, ca, sa = body_pose(q, a)
     xb, yb, cb, sb = body_pose(q, b)
-    pax, pay, pax_abs, pay_abs = body_point(
-        xa, ya, ca, sa, km.spring_point_a[ia, k, 0], km.spring_point_a[ia, k, 1]
-    )
-    pbx, pby, pbx_abs, pby_abs = body_point(
-        xb, yb, cb, sb, km.spring_point_b[ib, k, 0], km.spring_point_b[ib, k, 1]
-    )
-    return pax, pay, pbx, pby, pbx_abs - pax_abs, pby_abs - pay_abs
+    pax, pay = rotate(ca, sa, km.spring_point_a[ia, k, 0], km.spring_point_a[ia, k, 1])
+    pbx, pby = rotate(cb, sb, km.spring_point_b[ib, k, 0], km.spring_point_b[ib, k, 1])
+    return pax, pay, pbx, pby, xb + pbx - xa - pax, yb + pby - ya - pay
 
 
 @njit(**JIT)
