@@ -14,6 +14,13 @@ assignments to plain names (one name or a tuple of names from an inlined call), 
 ``return`` of one expression or a tuple; the only branching is a leading chain of
 ``if test: return value`` (a table of cases, written as nested selects), or ``x if c else y``
 inside an expression. Anything else is refused with :class:`TypeError` at generation time.
+
+Literal arguments specialise the text (:func:`_fold_binary`): a ground body's θ̇ = 0.0 or
+(cos, sin) = (1.0, 0.0), a constant load's factor 1.0, a ``guarded`` flag. Operations on
+literals only are evaluated, a case whose test is a literal keeps its one branch, and
+x·1 → x, x·(−1) → −x, x/1 → x, x ± 0 → x, 0 − x → −x (exact), x·0 → 0, 0/x → 0 (for finite
+x). The folded text gives the kernel's values for finite operands; only the sign of a zero
+result may differ (−0.0 + 0.0 is +0.0 in the kernel, −0.0 folded), which no comparison sees.
 """
 
 from __future__ import annotations
