@@ -350,9 +350,8 @@ def constraint_jacobian(km, s, q, B_out):
         else:
             dist = hypot(dx, dy)
             if dist > 0.0:
-                irho = inverse_distance(dist, 1.0)
-                ex = dx * irho
-                ey = dy * irho
+                ex = dx / dist
+                ey = dy / dist
                 _add_point_rows(B_out, row, b, 1.0, ex, ey, pbx, pby)
                 _add_point_rows(B_out, row, a, -1.0, ex, ey, pax, pay)
     for j in range(km.driver_body.shape[0]):
@@ -559,8 +558,9 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
             contact_out[k] = -lam[row + 1]
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-            # a journal at its bearing centre (under a law): no normal, no force
-            irho = inverse_distance(hypot(dx, dy), 1.0)
-            force_out[k, 0] = -lam[row] * (dx * irho)
-            force_out[k, 1] = -lam[row] * (dy * irho)
+            dist = hypot(dx, dy)
+            if not dist > 0.0:  # a journal at its bearing centre (under a law): no force
+                dist = math.inf
+            force_out[k, 0] = -lam[row] * dx / dist
+            force_out[k, 1] = -lam[row] * dy / dist
             contact_out[k] = lam[row]
