@@ -16,9 +16,6 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "mcchain"
 
 KNOWN_EDGES = {
-    # issue 28, items 1 and 3 (h-physics): the Model builds its kernels' KernelModel, which
-    # imports the Model's constants.
-    ("mcchain.model", "mcchain.kernels.kernel_model"),
     # issue 28: the disk estimate reads the output grid (``output_times``) from simulate,
     # which imports the code generator, whose emitter imports scene.compile, which checks the
     # memory; the grid is to move to a plain module (simulate belonged to h-radau and h-physics
@@ -28,12 +25,13 @@ KNOWN_EDGES = {
 """Edges of circles through modules other branches are rewriting (issue 28): left out of
 the graph before circles are looked for. Remove an entry when its circle is gone."""
 
-PLAIN = {"mcchain.caches", "mcchain.contact", "mcchain.status"}
+PLAIN = {"mcchain.caches", "mcchain.codes", "mcchain.contact", "mcchain.status"}
 """Modules of constants and helpers outside ``mcchain/kernels`` that the kernels may import:
 each imports nothing of mcchain (asserted), so no codegen, cache or I/O module either."""
 
-KERNELS_MAY_IMPORT = PLAIN | {"mcchain.model"}
-"""With the Model (issue 28, h-physics: the kernels' model is to be cut from it)."""
+KERNELS_MAY_IMPORT = PLAIN
+"""The kernels read the Model's codes from :mod:`mcchain.codes` and take its arrays as a
+NamedTuple (:class:`mcchain.model.KernelModel`), never importing the Model itself."""
 
 
 def _module_files() -> dict[str, Path]:

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from mcchain.codes import JOINT_CLEARANCE
 from mcchain.contact import CONTACT_STEP_LIMIT, RESEAT_NEWTON, RESEAT_TOLERANCE
 from mcchain.kernels.assembly import max_abs
 from mcchain.kernels.clearance import (
@@ -58,7 +59,6 @@ from mcchain.kernels.peaks import (
     peaks_finish,
     peaks_start,
 )
-from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
     CONTACT_STEP_TOO_LARGE,
