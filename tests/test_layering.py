@@ -15,16 +15,6 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "mcchain"
 
-KNOWN_EDGES = {
-    # issue 28: the disk estimate reads the output grid (``output_times``) from simulate,
-    # which imports the code generator, whose emitter imports scene.compile, which checks the
-    # memory; the grid is to move to a plain module (simulate belonged to h-radau and h-physics
-    # while this test was written).
-    ("mcchain.resources", "mcchain.solvers.simulate"),
-}
-"""Edges of circles through modules other branches are rewriting (issue 28): left out of
-the graph before circles are looked for. Remove an entry when its circle is gone."""
-
 PLAIN = {"mcchain.caches", "mcchain.codes", "mcchain.contact", "mcchain.status"}
 """Modules of constants and helpers outside ``mcchain/kernels`` that the kernels may import:
 each imports nothing of mcchain (asserted), so no codegen, cache or I/O module either."""
@@ -125,10 +115,8 @@ def _circles(graph: dict[str, set[str]]) -> list[set[str]]:
     return found
 
 
-def test_layering__no_import_circle_but_the_known():
+def test_layering__no_import_circle():
     graph = import_graph()
-    for module, target in KNOWN_EDGES:
-        graph[module].discard(target)
     circles = [
         f"{a} -> {b}"
         for component in _circles(graph)

@@ -514,7 +514,7 @@ def rk4_run(
 def step_time(n, nstep, out_every, h, t_out):
     """Time of step ``n`` of ``nstep`` (s): t_out[n // out_every] + (n % out_every) h, and
     t_end = t_out[-1] for n = ``nstep``; from n, never accumulated (see
-    :class:`mcchain.solvers.simulate.OutputGrid`, which the lanes' loop follows too)."""
+    :class:`mcchain.solvers.grid.OutputGrid`, which the lanes' loop follows too)."""
     if n == nstep:
         return t_out[t_out.shape[0] - 1]
     return t_out[n // out_every] + (n % out_every) * h

@@ -7,8 +7,8 @@ Contract of :func:`simulate`:
    from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
    method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.
 2. Methods are the rows of :data:`METHODS`; all share the start state, the output times
-   (:func:`output_times`: k · ``output_dt``, then t_end itself as the last) and the outputs
-   below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
+   (:func:`.grid.output_times`: k · ``output_dt``, then t_end itself as the last) and the
+   outputs below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
    with ``dt`` as written, except a last step shortened to land on t_end; adaptive ones
    land exactly on every output time.
 3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
@@ -45,7 +45,6 @@ Contract of :func:`simulate`:
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
@@ -58,6 +57,7 @@ from mcchain.errors import SceneError
 from mcchain.model import JointKind, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import LOOP_METHODS, Simulate
+from mcchain.solvers.grid import output_times
 from mcchain.solvers.threads import over_samples
 from mcchain.status import ASSEMBLY_FAILED, FAILURE_BITS
 
@@ -80,94 +80,11 @@ class Method:
 
     name: str
     run: Callable[..., None]
-    fixed_step: bool
     description: str
 
 
 # ---------------------------------------------------------------------------------------------
-# Output times and the start state
-
-
-@dataclass(frozen=True)
-class OutputGrid:
-    """The output times of a run and the fixed-step schedule that reaches them.
-
-    Attributes:
-        time: (ntime,) k · ``output_dt`` for k = 0, 1, … below t_end, then t_end itself, bit
-            for bit, as the last point (a k · ``output_dt`` within :data:`GRID_RTOL` of
-            t_end is t_end).
-        every: steps of ``dt`` per output interval (fixed-step methods; adaptive ones land
-            on every output time and use ``dt`` as their first step only).
-        dt: the step as written, s.
-        nstep: steps from 0 to t_end (fixed-step methods; 0 for adaptive ones): ``every``
-            per output interval, then those of the last interval, up to ``every``.
-        last_step: the length of the last step, s: ``dt``, or shorter so that the last
-            step lands on t_end when t_end is no whole number of steps after the last
-            k · ``output_dt`` (fixed-step methods).
-
-    Step n of a fixed-step method starts at :meth:`step_time` (n), computed from n, never
-    accumulated, so two runs that differ only in t_end take the same steps, bit for bit,
-    up to the shorter one's last whole step; the kernels compute it the same way.
-    """
-
-    time: np.ndarray
-    every: int
-    dt: float
-    nstep: int
-    last_step: float
-
-    def step_time(self, n: int) -> float:
-        """Time of step n, s: ``time[n // every] + (n % every) · dt``, and t_end for
-        n = ``nstep``; an output time is thus the very float the kernels step from."""
-        if n == self.nstep:
-            return float(self.time[-1])
-        return float(self.time[n // self.every] + (n % self.every) * self.dt)
-
-
-GRID_RTOL = 1e-12
-"""A grid point (k · output_dt, or a whole step after the last one) within this, relative to
-t_end, below t_end is t_end: the gap is rounding (0.3 / 1e-4 = 2999.9999999999995), not an
-interval, and no step that short is taken."""
-
-
-def output_times(settings: Simulate) -> OutputGrid:
-    """The output grid of ``settings`` and its fixed-step schedule (see :class:`OutputGrid`)."""
-    ratio = settings.output_step / settings.dt
-    every = round(ratio)
-    fixed = METHODS[settings.method].fixed_step
-    if fixed and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
-        raise SceneError(
-            f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
-            f"{settings.method!r}, got {settings.output_step:g}"
-        )
-    every = max(every, 1)
-    t_end, dt, interval = float(settings.t_end), float(settings.dt), float(settings.output_step)
-    below = t_end - GRID_RTOL * t_end  # a point at or past this is t_end
-    # count: the grid points k · output_dt (k < count) strictly below t_end
-    count = max(1, math.floor(t_end / interval) + 1)
-    while count > 1 and (count - 1) * interval >= below:
-        count -= 1
-    while count * interval < below:
-        count += 1
-    time = np.append(np.arange(count) * interval, t_end)
-    if not fixed:
-        return OutputGrid(time, every, dt, 0, dt)
-    # The last interval: whole steps from its start while below t_end, then the step that
-    # lands on t_end (dt when t_end is a whole step further, within rounding; else shorter).
-    start = float(time[-2])
-    whole = max(0, math.floor((t_end - start) / dt))
-    while whole > 0 and start + whole * dt >= below:
-        whole -= 1
-    while start + (whole + 1) * dt < below:
-        whole += 1
-    # At most ``every`` steps per interval (an output_dt that is a multiple of dt only to
-    # within 1e-9 could leave room for one more): the last one then ends at t_end.
-    last = min(whole + 1, every)
-    lands = last == whole + 1 and abs(start + last * dt - t_end) <= GRID_RTOL * t_end
-    grid = OutputGrid(time, every, dt, (count - 1) * every + last, dt)
-    if lands:
-        return grid
-    return OutputGrid(time, every, dt, grid.nstep, t_end - grid.step_time(grid.nstep - 1))
+# The start state
 
 
 _PERTURB = re.compile(
@@ -599,11 +516,10 @@ def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
-        Method("rk4", _run_rk4, True, "classical RK4 on the index-1 form with Baumgarte"),
+        Method("rk4", _run_rk4, "classical RK4 on the index-1 form with Baumgarte"),
         Method(
             "rk4-projection",
             _run_rk4_projection,
-            True,
             "RK4 on the index-1 form (no Baumgarte), then q and v projected onto the "
             "constraints after each step; robust at rank loss (dependent rows dropped, the "
             "basic solution of S λ = r used, instead of a SINGULAR flag)",
@@ -611,19 +527,16 @@ METHODS: dict[str, Method] = {
         Method(
             "generalized-alpha",
             _run_generalized_alpha,
-            True,
             "index-3 generalized-α (Arnold & Brüls), Newton on the KKT system, ρ∞ settable",
         ),
         Method(
             "rk45",
             _run_rk45,
-            False,
             "Dormand–Prince 5(4) with per-sample step control on the index-1 form (Baumgarte)",
         ),
         Method(
             "radau",
             _run_radau,
-            False,
             "Radau IIA(5), scipy's algorithm compiled, one sample at a time (reference)",
         ),
     )
