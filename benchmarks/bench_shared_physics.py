@@ -32,26 +32,21 @@ sys.path.insert(0, str(REPO))
 from mcchain.testing.scenes import LOADED_TEXT  # noqa: E402
 
 SLIDER_CRANK = (REPO / "configs" / "slider-crank-flores.toml").read_text()
-DOUBLE_PENDULUM = (REPO / "configs" / "double-pendulum.toml").read_text()
 
 # (label, scene text, [simulate] keys, samples): a driven clearance double pendulum with a
 # force, a couple and two spring-dampers; the Flores slider-crank (prismatic joint, contact
-# law at the piston pin); the ideal double pendulum.
+# law at the piston pin). The loop kernels integrate with rk4 only.
 CASES = [
-    ("loaded, rk4 lanes", LOADED_TEXT, 't_end = 0.5\ndt = 1e-5\nmethod = "rk4"\n'
-     'kernels = "lanes"', 256),
+    ("loaded, rk4 lanes", LOADED_TEXT, 't_end = 0.2\ndt = 1e-5\nmethod = "rk4"\n'
+     'kernels = "lanes"', 128),
     ("loaded, rk45 lanes", LOADED_TEXT, 't_end = 0.5\ndt = 1e-5\nmethod = "rk45"\n'
-     'rtol = 1e-9\natol = 1e-12\nkernels = "lanes"', 256),
-    ("loaded, rk4 loop", LOADED_TEXT, 't_end = 0.5\ndt = 1e-5\nmethod = "rk4"\n'
-     'kernels = "loop"', 64),
-    ("slider-crank contact, rk45 lanes", SLIDER_CRANK, 't_end = 0.024\ndt = 1e-7\n'
-     'output_dt = 1e-5\nmethod = "rk45"\nrtol = 1e-7\natol = 1e-10\nkernels = "lanes"', 64),
-    ("slider-crank contact, rk4 loop", SLIDER_CRANK, 't_end = 0.002\ndt = 1e-7\n'
-     'output_dt = 1e-5\nmethod = "rk4"\nkernels = "loop"', 16),
-    ("double pendulum, rk4 lanes", DOUBLE_PENDULUM, 't_end = 1.0\ndt = 1e-5\nmethod = "rk4"\n'
-     'kernels = "lanes"', 64),
-    ("double pendulum, rk4 loop", DOUBLE_PENDULUM, 't_end = 0.25\ndt = 1e-5\nmethod = "rk4"\n'
+     'rtol = 1e-9\natol = 1e-12\nkernels = "lanes"', 128),
+    ("loaded, rk4 loop", LOADED_TEXT, 't_end = 0.1\ndt = 1e-5\nmethod = "rk4"\n'
      'kernels = "loop"', 16),
+    ("slider-crank contact, rk45 lanes", SLIDER_CRANK, 't_end = 0.024\ndt = 1e-7\n'
+     'output_dt = 1e-5\nmethod = "rk45"\nrtol = 1e-7\natol = 1e-10\nkernels = "lanes"', 32),
+    ("slider-crank contact, rk4 loop", SLIDER_CRANK, 't_end = 0.001\ndt = 1e-7\n'
+     'output_dt = 1e-5\nmethod = "rk4"\nkernels = "loop"', 8),
 ]  # fmt: skip
 
 
@@ -80,8 +75,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--after", type=Path, default=REPO, help="source tree after")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--only", default="", help="run only cases whose label has this")
+    parser.add_argument("--work", type=Path, help="work folder (its caches are reused)")
     args = parser.parse_args(argv)
-    work = Path(tempfile.mkdtemp(prefix="bench-shared-"))
+    work = args.work or Path(tempfile.mkdtemp(prefix="bench-shared-"))
+    work.mkdir(parents=True, exist_ok=True)
     trees = {"before": args.before.resolve(), "after": args.after.resolve()}
     rows = []
     for label, text, simulate, samples in CASES:
