@@ -26,6 +26,7 @@ the peak penetration kept at every accepted step, impacts and free-flight time a
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
 from collections.abc import Callable
@@ -113,7 +114,7 @@ class _Dense:
         return y_old + Q @ np.array([x, x * x, x * x * x])
 
     def __call__(self, t: float) -> np.ndarray:
-        k = int(np.searchsorted(self.ts, t, side="left"))
+        k = bisect.bisect_left(self.ts, t)  # on the list itself: O(log n), no copy
         return self.piece(t, self.pieces[min(max(k - 1, 0), len(self.pieces) - 1)])
 
 
