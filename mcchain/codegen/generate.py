@@ -380,6 +380,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         return dict.fromkeys(_CONTACT_BLOCKS, "")
     at = lay.at
     slots = topo.slots()
+    adaptive = "pw" in lay.rows  # the adaptive kernel's layout: the blocks it alone fills
 
     def indent(lines: list[str], n: int = 4) -> list[str]:
         return [" " * n + line for line in lines]
@@ -567,7 +568,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             [
                 f"{at('pd', j)} = {at('pdc', j)}",
                 f"{at('pr', j)} = {at('prc', j)}",
-                f"{at('pw', j)} = {at('wjc', j)}",
+                *([f"{at('pw', j)} = {at('wjc', j)}"] if adaptive else []),
                 f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 or {at('vi', j)} < 0.0"
                 " else 0.0",
             ]
@@ -580,7 +581,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     accept = []
     for j, k in enumerate(joints):
         end = f"({at('tl')} + hh)"
-        accept += step(j, k, "lamc", end, "hh", at("pdc", j), at("prc", j), "vn", located=True)
+        accept += step(j, k, "lamc", end, "hh", at("pdc", j), at("prc", j), "vn", located=adaptive)
     b["contact_accept"] = "\n".join(accept)
     # Adaptive, model auto: a step whose end has the link's λ ≤ 0 (its start λ > 0) is
     # retried to land just past the crossing (λ interpolated linearly; an undershoot is
@@ -601,7 +602,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     # Model auto under the law: a step in which the re-seat dwell completes is retried the
     # same way to end just past where (dwell) ω_c reaches 2π RESEAT_PERIODS (ω_c the end's),
     # so the re-seat time does not follow the steps.
-    for j, k in enumerate(joints):
+    for j, k in enumerate(joints if adaptive else ()):
         d1, r1 = at("pdc", j), at("prc", j)
         event += [
             f"if {at('fm', j)} == 1.0 and {model(k)} == {AUTO!r}.0:",
