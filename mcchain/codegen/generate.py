@@ -600,7 +600,7 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        evt = min(evt, frac * {SWITCH_OVERSHOOT!r})",
         ]
     # Model auto under the law: a step in which the re-seat dwell completes is retried the
-    # same way to end just past where (dwell) ω_c reaches 2π RESEAT_PERIODS (ω_c the end's),
+    # same way to end just past where (dwell) ω_c reaches 2π RESEAT_PERIODS,
     # so the re-seat time does not follow the steps.
     for j, k in enumerate(joints if adaptive else ()):
         d1, r1 = at("pdc", j), at("prc", j)
@@ -609,12 +609,21 @@ def _contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             *indent(dwell(j, k, "lamc", "hh", d1, r1, "vn")),
             f"    if dwn >= 0.0 and dwn * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
             # (dwell at the step's start + θ hh) ω_c(θ) = 2π RESEAT_PERIODS, ω_c linear
-            # between the ends: a fixed point (ω_c changes by ~1e-3 over a step)
-            "        frac = 1.0",
-            "        for itr in range(4):",
-            f"            frac = ({2.0 * math.pi * RESEAT_PERIODS!r} / (w0 + frac * (wn - w0))"
-            " - (dwn - hh)) / hh",
-            "        if frac >= 1e-3:",
+            # between the ends, by bisection (a fixed point does not converge where the dwell
+            # is many steps long: θ then moves by (dwell / hh)(Δω_c / ω_c) per iteration)
+            "        flo = 0.0",
+            "        fhi = 1.0",
+            "        for itr in range(50):",
+            "            frac = 0.5 * (flo + fhi)",
+            "            if (dwn - hh + frac * hh) * (w0 + frac * (wn - w0))"
+            f" >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
+            "                fhi = frac",
+            "            else:",
+            "                flo = frac",
+            "        frac = fhi",
+            # however early in the step (a retried step that ended just short of it, ω_c
+            # not quite linear, completes it at once in the next), down to 10 hmin
+            "        if frac * hh >= 10.0 * hmin:",
             f"            evt = min(evt, frac * {SWITCH_OVERSHOOT!r})",
         ]
     event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
