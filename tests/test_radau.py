@@ -1,4 +1,4 @@
-"""``radau`` (:mod:`mcchain.kernels.radau`, :mod:`mcchain.solvers.radau_contact`) on the
+"""``radau`` (:mod:`mcchain.kernels.radau`, :mod:`mcchain.solvers.radau`) on the
 Flores slider-crank with an impacting piston pin, against rk45 at a tighter tolerance.
 
 30 ms at 5000 rpm: the pin's link lets go at 9.9 ms, the journal impacts its bearing 6
