@@ -45,6 +45,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         return dict.fromkeys(CONTACT_BLOCKS, "")
     at = lay.at
     slots = topo.slots()
+    adaptive = "pw" in lay.rows  # the adaptive kernel's layout: the blocks it alone fills
 
     def indent(lines: list[str], n: int = 4) -> list[str]:
         return [" " * n + line for line in lines]
@@ -74,22 +75,61 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             terms.append(f"0.5 * ({m} * ({vx} * {vx} + {vy} * {vy}) + {inertia} * {w} * {w})")
         return " + ".join(terms)
 
-    def reseat(j: int, k: int, lamrow: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
-        """Model auto: back to the link once pressed quasi-statically for a dwell
-        (mcchain.contact.RESEAT_RATE, RESEAT_PERIODS) and, without drivers, with the kinetic
-        energy to pay for the position step (mcchain.kernels.clearance.reseat_ready); the lane
-        is then projected."""
+    def criterion(j: int, k: int, lamrow: str, d1: str, r1: str, vrow: str) -> str:
+        """Model auto: whether the joint may count the instant with δ1, δ̇1, its λ in W rows
+        ``lamrow`` and the velocities in ``vrow`` towards its re-seat dwell: pressed
+        quasi-statically (mcchain.contact.RESEAT_RATE) and, without drivers, with the kinetic
+        energy to pay for the position step (mcchain.kernels.clearance.reseat_ready); ``wn``
+        (ω_c) set before."""
         r = topo.joint_row[k]
-        wj, dwl = at("wjc", j), at("dwl", j)
         slow = f"abs({r1}) <= {RESEAT_RATE!r} * wn * {d1}"
         pressed = f"{d1} > 0.0 and {at(lamrow, r)} > 0.0 and {model(k)} == {AUTO!r}.0"
         mx = at("P", slots[f"mx{k}"])
         # without drivers, the kinetic energy must pay for the position step
         paid = f" and ({kinetic(vrow)}) > {mx} / ({mx} + 1.0) * {at(lamrow, r)} * {d1}"
+        return f"{pressed} and {slow}{'' if topo.ndriver else paid}"
+
+    def dwell(j: int, k: int, lamrow: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
+        """Adaptive, model auto: ``dwn``, how long (s) the joint has met the re-seat
+        criterion at the end of the step of length h (:func:`criterion`), −1 if it does not
+        there; ``w0``, ``wn``: ω_c at the step's start (``pw``) and end. A dwell that begins
+        in the step begins where RESEAT_RATE ω_c δ − |δ̇| rises through 0 on the step's
+        Hermite interpolant (``dwell_start``, ω_c linear between the ends), or at the step's
+        start if that term was ≥ 0 there (another condition decided)."""
+        wj, dwl, d0, r0, pw = at("wjc", j), at("dwl", j), at("pd", j), at("pr", j), at("pw", j)
         return [
             f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
-            f"if {pressed} and {slow}{'' if topo.ndriver else paid}:",
-            f"    {dwl} += {h}",
+            f"w0 = math.sqrt({pw}) if {pw} > 0.0 else wn",
+            "dwn = -1.0",
+            f"if {criterion(j, k, lamrow, d1, r1, vrow)}:",
+            f"    g0 = {RESEAT_RATE!r} * w0 * {d0} - abs({r0})",
+            "    th = 0.0",
+            f"    if {dwl} == 0.0 and g0 < 0.0:",
+            f"        th = dwell_start({d0}, {r0}, {d1}, {r1}, {h}, {RESEAT_RATE!r} * w0,"
+            f" {RESEAT_RATE!r} * wn)",
+            f"    dwn = {dwl} + (1.0 - th) * {h}",
+        ]
+
+    def reseat(
+        j: int, k: int, lamrow: str, h: str, d1: str, r1: str, vrow: str, located: bool
+    ) -> list[str]:
+        """Model auto: back to the link once the re-seat criterion (:func:`criterion`) has
+        held for RESEAT_PERIODS periods of the contact (mcchain.contact); the lane is then
+        projected. ``located`` (adaptive): the dwell's start located in its step
+        (:func:`dwell`) and the step that completes it retried to end there
+        (``contact_event``); else (fixed step) counted in whole steps: re-seated at the end
+        of the step that completes it."""
+        dwl, wj = at("dwl", j), at("wjc", j)
+        if located:
+            count = [*dwell(j, k, lamrow, h, d1, r1, vrow), "if dwn >= 0.0:", f"    {dwl} = dwn"]
+        else:
+            count = [
+                f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
+                f"if {criterion(j, k, lamrow, d1, r1, vrow)}:",
+                f"    {dwl} += {h}",
+            ]
+        return [
+            *count,
             f"    if {dwl} * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
             f"        {dwl} = -1.0",  # marked: group_reseat puts it on the link
             f"        {at('rsw')} = 1.0",
@@ -97,7 +137,9 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    {dwl} = 0.0",
         ]
 
-    def step(j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
+    def step(
+        j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str, vrow: str, located: bool
+    ) -> list[str]:
         """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
         (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peak
         penetration (the peak force is tracked with the joint forces: _peak_blocks)."""
@@ -134,9 +176,10 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"            {at('tff', j)} += {h}",
             f"        {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
             f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
-            *indent(reseat(j, k, lamrow, h, d1, r1, vrow)),
+            *indent(reseat(j, k, lamrow, h, d1, r1, vrow, located)),
             f"{d0} = {d1}",
             f"{r0} = {r1}",
+            *([f"{at('pw', j)} = {at('wjc', j)}"] if located else []),
         ]
 
     b: dict[str, str] = {}
@@ -168,7 +211,8 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     body = []
     for j, k in enumerate(joints):
         d1, r1 = at("pdc", j), at("prc", j)
-        body += switch(j, k, "lamc", "ts", d1) + step(j, k, "lamc", "ts", "hb", d1, r1, "v")
+        body += switch(j, k, "lamc", "ts", d1)
+        body += step(j, k, "lamc", "ts", "hb", d1, r1, "v", located=False)
     b["contact_step_c"] = "\n".join(
         [
             "if (st[l] & FAILBITS) == 0:",
@@ -189,6 +233,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             [
                 f"{at('pd', j)} = {at('pdc', j)}",
                 f"{at('pr', j)} = {at('prc', j)}",
+                *([f"{at('pw', j)} = {at('wjc', j)}"] if adaptive else []),
                 f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 or {at('vi', j)} < 0.0"
                 " else 0.0",
             ]
@@ -201,7 +246,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     accept = []
     for j, k in enumerate(joints):
         end = f"({at('tl')} + hh)"
-        accept += step(j, k, "lamc", end, "hh", at("pdc", j), at("prc", j), "vn")
+        accept += step(j, k, "lamc", end, "hh", at("pdc", j), at("prc", j), "vn", located=adaptive)
     b["contact_accept"] = "\n".join(accept)
     # Adaptive, model auto: a step whose end has the link's λ ≤ 0 (its start λ > 0) is
     # retried to land just past the crossing (λ interpolated linearly; an undershoot is
@@ -218,6 +263,33 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    frac = {lam0} / ({lam0} - {lam1})",
             "    if frac >= 1e-3:",
             f"        evt = min(evt, frac * {SWITCH_OVERSHOOT!r})",
+        ]
+    # Model auto under the law: a step in which the re-seat dwell completes is retried the
+    # same way to end just past where (dwell) ω_c reaches 2π RESEAT_PERIODS,
+    # so the re-seat time does not follow the steps.
+    for j, k in enumerate(joints if adaptive else ()):
+        d1, r1 = at("pdc", j), at("prc", j)
+        event += [
+            f"if {at('fm', j)} == 1.0 and {model(k)} == {AUTO!r}.0:",
+            *indent(dwell(j, k, "lamc", "hh", d1, r1, "vn")),
+            f"    if dwn >= 0.0 and dwn * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
+            # (dwell at the step's start + θ hh) ω_c(θ) = 2π RESEAT_PERIODS, ω_c linear
+            # between the ends, by bisection (a fixed point does not converge where the dwell
+            # is many steps long: θ then moves by (dwell / hh)(Δω_c / ω_c) per iteration)
+            "        flo = 0.0",
+            "        fhi = 1.0",
+            "        for itr in range(50):",
+            "            frac = 0.5 * (flo + fhi)",
+            "            if (dwn - hh + frac * hh) * (w0 + frac * (wn - w0))"
+            f" >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
+            "                fhi = frac",
+            "            else:",
+            "                flo = frac",
+            "        frac = fhi",
+            # however early in the step (a retried step that ended just short of it, ω_c
+            # not quite linear, completes it at once in the next), down to 10 hmin
+            "        if frac * hh >= 10.0 * hmin:",
+            f"            evt = min(evt, frac * {SWITCH_OVERSHOOT!r})",
         ]
     event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
     b["contact_event"] = "\n".join(event)

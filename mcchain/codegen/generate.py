@@ -420,13 +420,13 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     users, tableau, suffix, parts_of = VARIANTS[variant]
     parts = [templates.HEADER, f"# topology: {topo!r}\n# variant: {variant}\n"]
     nstage = RK4.nstage if tableau is None else tableau.nstage
-    lay = Layout(topo, nstage, lmax)
+    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45")
     if tableau is not None:
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
     if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
-        parts.append(_contact_functions())
+        parts.append(_contact_functions(adaptive=variant == "rk45"))
     if tableau is not None:
         parts.append(_peak_functions())
     if any(topo.driver_tables) or any(topo.load_tables):
@@ -446,21 +446,22 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     return "\n".join(parts)
 
 
-def _contact_functions() -> str:
+def _contact_functions(adaptive: bool) -> str:
     """The source of the contact kernels the lane kernels call, copied into the generated
     module from :mod:`mcchain.kernels.contact`.
 
     Copied, not imported: numba's cache of a generated module is keyed by the module's own
     file, so a change of a function it imported would not reach the cached machine code;
     with the source in the text, such a change makes a new module (its name is the text's
-    hash).
+    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell).
     """
     import inspect
 
     from mcchain.kernels import contact
 
     parts = []
-    for kernel in (contact._hermite, contact.contact_crossing):
+    kernels = (contact._hermite, contact.contact_crossing)
+    for kernel in (*kernels, contact.dwell_start) if adaptive else kernels:
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)

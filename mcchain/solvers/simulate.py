@@ -261,8 +261,8 @@ def _run_rk45(run: _Run) -> None:
 def _run_radau(run: _Run) -> None:
     """Radau IIA(5) on the index-1 equations, one sample at a time (the slow reference), in
     segments between located events where there are contact-law joints
-    (:mod:`.radau_contact`)."""
-    from mcchain.solvers.radau_contact import run_radau
+    (:mod:`.radau`)."""
+    from mcchain.solvers.radau import run_radau
 
     run_radau(run, _flat_outputs(run.out, run.model.nsample, len(run.time)), SINGULAR_PIVOT)
 
