@@ -209,14 +209,14 @@ def prepare_job(
 
 def resolve_kernels(scene: Any, model: Model, nsample: int) -> tuple[Any, str | None]:
     """The scene with ``[simulate] kernels = "auto"`` resolved for a run of ``nsample``
-    instances of ``model``'s topology (:func:`mcchain.solvers.simulate.choose_kernels`),
+    instances of ``model``'s topology (:func:`mcchain.solvers.kernel_choice.choose_kernels`),
     and a line for the user when that takes the loop kernels. A run resolves it once, for
     all its samples, so every chunk, its resume and a Dask run integrate on the same path;
     the resolved value is what ``ensemble.nc`` stores. Other scenes come back as given."""
     sim = _section(scene, "simulate")
     if getattr(sim, "kernels", None) != "auto":
         return scene, None
-    from mcchain.solvers.simulate import choose_kernels
+    from mcchain.solvers.kernel_choice import choose_kernels
 
     choice = choose_kernels(sim, int(model.ndof), nsample)
     simulate = sim.model_copy(update={"kernels": choice.kernels})

@@ -105,7 +105,7 @@ class Model:
             wall); 0 for the others (assembly places them as the link).
         joint_start: (*, njoint) the mode each contact-law joint starts its time history in
             (:data:`mcchain.contact.START_LINK`, ``START_LAW``, ``START_SEATED``), set from
-            the start state by :func:`mcchain.solvers.simulate.start_modes`; default: the
+            the start state by :func:`mcchain.solvers.start.start_modes`; default: the
             law for model contact, the link for the others.
         driver_body: (ndriver,) int64 driven body.
         driver_row: (ndriver,) int64 constraint row of each driver.

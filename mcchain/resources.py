@@ -119,7 +119,7 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
     """Bytes per sample of the variables a run of ``scene`` stores, uncompressed: what each
     part file holds per sample (``model`` gives the sizes of the dims: bodies, joints,
     drivers, modes, sampled paths; ``[simulate]`` the output times, from
-    :func:`mcchain.solvers.simulate.output_times`). Mirrors what
+    :func:`mcchain.solvers.grid.output_times`). Mirrors what
     :func:`mcchain.solvers.solve_chunk` returns; tests compare it with real part files."""
     from mcchain.ensemble.registry import VARIABLES
 
@@ -148,7 +148,7 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
         stored |= {"omega_cycle"} if along is not None else set()
     sim = scene.simulate
     if sim is not None:
-        from mcchain.solvers.simulate import output_times
+        from mcchain.solvers.grid import output_times
 
         sizes["time"] = len(output_times(sim).time)
         stored |= {

@@ -43,7 +43,7 @@ GOLDEN = {
         "accel": "6a44c7cefc23ab8e36f71a24779fd0051f5e4cc3454e467114545cbe9c9fc7df",
         "rk4": "d3e606dcbe50c6c6baf647b29913feea543b84dc00e9c6375ace2ee1c95a6351",
         "rk4-projection": "b99d003623345f4058fd1c7608a8f0a32e1355789b80dba31a47520a7a5b5406",
-        "rk45": "821663405d9bead360daa563fe75519f2458d495f15250262cfd422e83715e5a",
+        "rk45": "191080b04b33eb6de91a2a023c1975c42e7248e318fe0ff11b028ce802f87b90",
     },
     "chain4-mixed-spring": {
         "accel": "6374ec1e710b673fe61e05d1693e4fc89dd5383778283e6d3d3a9f33bd2489f6",

@@ -8,6 +8,7 @@ import sys
 CODEGEN_MODULES = (
     "mcchain.codegen",
     "mcchain.codegen.cache",
+    "mcchain.codegen.contact_blocks",
     "mcchain.codegen.emitter",
     "mcchain.codegen.generate",
     "mcchain.codegen.layout",

@@ -19,7 +19,8 @@ import pytest
 from mcchain import execution, open_run
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import Simulate
-from mcchain.solvers.simulate import GRID_RTOL, output_times, simulate
+from mcchain.solvers.grid import GRID_RTOL, output_times
+from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
 from mcchain.testing.contact import Law
 from mcchain.testing.scenes import fourbar_text, model_of

@@ -218,7 +218,7 @@ def test_choose_kernels__auto_takes_the_loop_only_for_short_runs_of_large_topolo
     per coordinate and 0.46 ms per squared coordinate count) and the loop's extra time
     (0.27 µs per coordinate and instance-step) stays under a quarter of that compile;
     written values are kept."""
-    from mcchain.solvers.simulate import choose_kernels
+    from mcchain.solvers.kernel_choice import choose_kernels
 
     auto = _simulate_section()
     assert choose_kernels(_simulate_section(kernels="lanes"), 96, 1).kernels == "lanes"

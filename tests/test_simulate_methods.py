@@ -348,7 +348,7 @@ def test_simulate__one_crank_turn_ends_at_t_end_with_the_written_grid(method, ke
 def test_simulate__a_whole_number_of_outputs_keeps_the_written_grid():
     from mcchain.scene.loading import load_section
     from mcchain.scene.models import Simulate
-    from mcchain.solvers.simulate import output_times
+    from mcchain.solvers.grid import output_times
 
     section = load_section(Simulate, "simulate", dict(t_end=0.05, dt=1e-4, output_dt=1e-3))
     grid = output_times(section)

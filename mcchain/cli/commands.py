@@ -225,7 +225,7 @@ def _validation_lines(scene_path: Any) -> list[str]:
     lines = [*describe_model(model, name, nominal), *describe_initial_state(written, assembled)]
     sim = getattr(scene, "simulate", None)
     if sim is not None:
-        from mcchain.solvers.simulate import choose_kernels
+        from mcchain.solvers.kernel_choice import choose_kernels
 
         choice = choose_kernels(sim, model.ndof, model.nsample)
         lines.append(f'simulate: {sim.method} on kernels = "{choice.kernels}" ({choice.reason})')

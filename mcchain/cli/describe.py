@@ -118,7 +118,7 @@ def describe_initial_state(model: Any, assembled: Any) -> list[str]:
     from mcchain.contact import START_LINK, START_SEATED
     from mcchain.kernels.joints import joint_vectors
     from mcchain.model import JointKind
-    from mcchain.solvers.simulate import start_modes
+    from mcchain.solvers.start import start_modes
     from mcchain.solvers.statics import start_multipliers
 
     if int(assembled.status[0]) != 0:

@@ -17,6 +17,8 @@ Modules, one job each:
 * ``emitter``: straight-line code of one lane (index-1 acceleration through the Schur
   complement and its sparse LDLᵀ, the constraint projection, the outputs, sin/cos).
 * ``layout``: the rows of the flat work array ``W`` and their length ``LMAX``.
+* ``contact_blocks``: the lanes' bookkeeping of contact-law joints (onsets, separations,
+  the switches of model auto, re-seats, summaries), put into the templates' blocks.
 * ``templates``: the texts of the time loops the emitter's blocks are put into.
 * ``schedule``: demand-order scheduling of the generated lane loops.
 * ``native``: the generated text translated to LLVM IR in one pass and compiled with numba's

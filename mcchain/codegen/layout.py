@@ -82,7 +82,11 @@ class Layout:
     """Rows of the flat work array W (each ``lmax`` long, default :data:`LMAX`) of one
     lane group."""
 
-    def __init__(self, topo: Topology, nstage: int, lmax: int | None = None):
+    def __init__(
+        self, topo: Topology, nstage: int, lmax: int | None = None, adaptive: bool = False
+    ):
+        """``adaptive``: with the rows only the adaptive kernel uses (``pw``: ω_c² at the
+        accepted state, per contact-law joint, for the located re-seat dwell)."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -113,6 +117,8 @@ class Layout:
             self.add("wcc", 1)
             self.add("rsw", 1)
             self.add("e0", 1)
+            if adaptive:
+                self.add("pw", ncj)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -209,20 +209,31 @@ def contact_switch(km, cst, j, lam_r, t, d1):
 
 
 @njit(**INLINE)
+def reseat_margin(km, s, k, lam_r, d1, r1, wn, kinetic):
+    """> 0 exactly where joint ``k`` (model auto, under the law) may count this instant
+    towards its re-seat dwell (:func:`reseat_ready`): the least of the criterion's margins,
+    δ, F_n, RESEAT_RATE ω_c δ − |δ̇| and, without drivers, T − m/(m+1) F_n δ. Each is in its
+    own unit: only the sign is meant; it changes where the criterion starts or stops holding,
+    which is where ``radau`` locates a dwell's start. −1 off model auto or on a NaN."""
+    if km.joint_model[k] != AUTO:
+        return -1.0
+    if d1 != d1 or r1 != r1 or lam_r != lam_r or wn != wn or kinetic != kinetic:
+        return -1.0
+    margin = min(d1, lam_r, RESEAT_RATE * wn * d1 - abs(r1))
+    if km.driver_row.shape[0] == 0:
+        expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
+        margin = min(margin, kinetic - expo / (expo + 1.0) * lam_r * d1)
+    return margin
+
+
+@njit(**INLINE)
 def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
     """Whether joint ``k`` (model auto, under the law) may count this instant towards its
-    re-seat dwell: pressed (δ > 0, F_n > 0) quasi-statically (|δ̇| ≤ RESEAT_RATE ω_c δ) and,
+    re-seat dwell: pressed (δ > 0, F_n > 0) quasi-statically (|δ̇| < RESEAT_RATE ω_c δ) and,
     without drivers, with the kinetic energy to pay for the re-seat's position step (it lifts
     the journal by δ against the load pressing it: m/(m+1) F_n δ beyond the elastic energy
     it drops, taken from the kinetic energy so that no energy is added)."""
-    if not (d1 > 0.0 and lam_r > 0.0 and km.joint_model[k] == AUTO):
-        return False
-    if not abs(r1) <= RESEAT_RATE * wn * d1:
-        return False
-    if km.driver_row.shape[0] > 0:
-        return True
-    expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
-    return kinetic > expo / (expo + 1.0) * lam_r * d1
+    return reseat_margin(km, s, k, lam_r, d1, r1, wn, kinetic) > 0.0
 
 
 @njit(**JIT)

@@ -51,6 +51,7 @@ __all__ = [
     "contact_law",
     "contact_slip",
     "damping_factor",
+    "dwell_start",
     "elastic_energy",
     "friction_factor",
     "friction_force",
@@ -244,3 +245,32 @@ def contact_crossing(d0, r0, d1, r1, h):
             break
     _value, slope = _hermite(theta, d0, r0, d1, r1, h)
     return theta, slope
+
+
+@njit(**JIT)
+def dwell_start(d0, r0, d1, r1, h, rate0, rate1):
+    """Where in a step the re-seat criterion's rate term ρ δ − |δ̇| rises through 0
+    (ρ = RESEAT_RATE ω_c, 1/s: mcchain.kernels.clearance.reseat_ready; ``rate0`` at the step's
+    start, ``rate1`` at its end, linear between), from < 0 at the start to ≥ 0 at the end.
+
+    δ and δ̇ are the cubic Hermite interpolant of :func:`contact_crossing` and its
+    derivative. A journal pressed in slowly meets the criterion at a shallow angle (δ̇ and
+    ρ δ both vary slowly), and ω_c grows with δ^((m−1)/2) by ~1e-3 per step there: a straight
+    line between the step's ends, or ρ held at one end, would place the crossing a tenth of
+    the step off; bisection on the interpolant finds it to 1e-14 of the step.
+
+    Returns:
+        θ ∈ [0, 1], the fraction of the step where the term first holds ≥ 0 (the bracket's
+        upper end).
+    """
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        theta = 0.5 * (lo + hi)
+        value, slope = _hermite(theta, d0, r0, d1, r1, h)
+        if (rate0 + theta * (rate1 - rate0)) * value - abs(slope) >= 0.0:
+            hi = theta
+        else:
+            lo = theta
+        if hi - lo <= 1e-14:
+            break
+    return hi

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from mcchain.codes import JOINT_CLEARANCE
 from mcchain.contact import CONTACT_STEP_LIMIT, RESEAT_NEWTON, RESEAT_TOLERANCE
 from mcchain.kernels.assembly import max_abs
 from mcchain.kernels.clearance import (
@@ -58,7 +59,6 @@ from mcchain.kernels.peaks import (
     peaks_finish,
     peaks_start,
 )
-from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
     CONTACT_STEP_TOO_LARGE,
@@ -514,7 +514,7 @@ def rk4_run(
 def step_time(n, nstep, out_every, h, t_out):
     """Time of step ``n`` of ``nstep`` (s): t_out[n // out_every] + (n % out_every) h, and
     t_end = t_out[-1] for n = ``nstep``; from n, never accumulated (see
-    :class:`mcchain.solvers.simulate.OutputGrid`, which the lanes' loop follows too)."""
+    :class:`mcchain.solvers.grid.OutputGrid`, which the lanes' loop follows too)."""
     if n == nstep:
         return t_out[t_out.shape[0] - 1]
     return t_out[n // out_every] + (n % out_every) * h

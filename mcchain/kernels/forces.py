@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+# numba reads module globals as compile-time constants
+from mcchain.codes import LOAD_CONSTANT, LOAD_HARMONIC, LOAD_TABLE
 from mcchain.kernels.config import JIT, hypot, njit
 from mcchain.kernels.joints import (
     TWO_PI,
@@ -20,10 +22,7 @@ from mcchain.kernels.joints import (
     body_velocity,
     rotate,
 )
-
-# numba reads module globals as compile-time constants
 from mcchain.kernels.tables import spline_at
-from mcchain.model import LOAD_CONSTANT, LOAD_HARMONIC, LOAD_TABLE
 
 
 @njit(**JIT)

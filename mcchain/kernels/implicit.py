@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from mcchain.codes import JOINT_CLEARANCE
 from mcchain.contact import CONTACT_STEP_LIMIT
 from mcchain.kernels.clearance import (
     DFR,
@@ -60,7 +61,6 @@ from mcchain.kernels.joints import (
 from mcchain.kernels.linalg import lu_factor, lu_solve
 from mcchain.kernels.peaks import peak_values, peaks_feed, peaks_finish, peaks_start
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
-from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import (
     CONTACT_LOST,
     CONTACT_STEP_TOO_LARGE,

@@ -22,11 +22,8 @@ from __future__ import annotations
 
 import math
 
-from mcchain.kernels.config import JIT, hypot, njit
-
 # numba reads module globals as compile-time constants
-from mcchain.kernels.tables import spline_at
-from mcchain.model import (  # noqa: F401 (re-exported)
+from mcchain.codes import (  # noqa: F401 (re-exported)
     DRIVER_CONSTANT,
     DRIVER_HARMONIC,
     DRIVER_TABLE,
@@ -34,6 +31,8 @@ from mcchain.model import (  # noqa: F401 (re-exported)
     JOINT_IDEAL,
     JOINT_PRISMATIC,
 )
+from mcchain.kernels.config import JIT, hypot, njit
+from mcchain.kernels.tables import spline_at
 
 TWO_PI = 2.0 * math.pi
 

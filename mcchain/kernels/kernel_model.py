@@ -5,17 +5,18 @@ numba passes a tuple by value, flattened to about 280 scalar arguments at every 
 helper, and that IR dominated the compile time (benchmarks/results/startup/breakdown.md). A
 StructRef is one pointer, and its fields read the same way, so no kernel changes. The
 structure is built once per solve by :func:`as_struct`, a cached kernel whose field types
-come from the NamedTuple it is given.
+come from the NamedTuple it is given (:class:`mcchain.model.KernelModel`, which the Model
+builds: the kernels import nothing of the Model, only its codes, from :mod:`mcchain.codes`).
 """
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, types
 from numba.core.extending import overload
 from numba.experimental import structref
 
 from mcchain.kernels.config import JIT
-from mcchain.model import KernelModel
 
 
 @structref.register
@@ -52,6 +53,8 @@ def _as_struct(arrays):
     return _from_tuple(arrays)
 
 
-def as_struct(arrays: KernelModel) -> KernelModelStruct:
-    """The kernel model that every kernel takes as ``km``, sharing the arrays of ``arrays``."""
+def as_struct(arrays: tuple[np.ndarray, ...]) -> KernelModelStruct:
+    """The kernel model that every kernel takes as ``km``, sharing the arrays of ``arrays``
+    (a :class:`~mcchain.model.KernelModel`: a NamedTuple of arrays, whose names and array
+    types become the structure's fields)."""
     return _as_struct(arrays)

@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import math
 
+from mcchain.codes import JOINT_IDEAL, JOINT_PRISMATIC
 from mcchain.kernels.config import JIT, hypot, njit
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
-from mcchain.model import JOINT_IDEAL, JOINT_PRISMATIC
 
 __all__ = ["PEAK_CLOCK", "PEAK_WIDTH"]
 

@@ -7,8 +7,8 @@ Contract of :func:`simulate`:
    from ``[simulate] baumgarte``) through the Schur complement S = B M⁻¹ Bᵀ; the index-3
    method (generalized-α) solves Φ(q) = 0 itself by Newton on the KKT system.
 2. Methods are the rows of :data:`METHODS`; all share the start state, the output times
-   (:func:`output_times`: k · ``output_dt``, then t_end itself as the last) and the outputs
-   below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
+   (:func:`.grid.output_times`: k · ``output_dt``, then t_end itself as the last) and the
+   outputs below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
    with ``dt`` as written, except a last step shortened to land on t_end; adaptive ones
    land exactly on every output time.
 3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
@@ -16,8 +16,8 @@ Contract of :func:`simulate`:
    named coordinates, and the other coordinates are then projected back onto the position
    and velocity constraints (the perturbed ones held fixed), so "the equilibrium plus 0.1 rad
    on the bar" is a consistent start. Each contact-law joint starts in the mode its journal's
-   place says (:func:`start_modes`: the law when free or pressed, seated on the wall, or the
-   link for model auto on the wall), the same for every method.
+   place says (:func:`.start.start_modes`: the law when free or pressed, seated on the wall,
+   or the link for model auto on the wall), the same for every method.
 4. Outputs at ``time`` (ntime,): ``q``, ``v`` (sample, time, body, dof); ``joint_force``
    (sample, time, joint, xy) = force on body b by body a (−λ ideal, −λ e clearance);
    ``contact_force`` (sample, time, joint) = λ of clearance joints (NaN for ideal ones);
@@ -45,8 +45,6 @@ Contract of :func:`simulate`:
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -54,12 +52,14 @@ from typing import Any
 import numpy as np
 
 from mcchain.contact import CONTACT_SUMMARY
-from mcchain.errors import SceneError
 from mcchain.model import JointKind, Model
 from mcchain.scene.loading import load_section
-from mcchain.scene.models import LOOP_METHODS, Simulate
+from mcchain.scene.models import Simulate
+from mcchain.solvers.grid import output_times
+from mcchain.solvers.kernel_choice import choose_kernels
+from mcchain.solvers.start import start_modes, start_state
 from mcchain.solvers.threads import over_samples
-from mcchain.status import ASSEMBLY_FAILED, FAILURE_BITS
+from mcchain.status import FAILURE_BITS
 
 SINGULAR_PIVOT = 1e-8
 """Relative LDLᵀ pivot of S below which the constraints count as rank-deficient."""
@@ -80,255 +80,7 @@ class Method:
 
     name: str
     run: Callable[..., None]
-    fixed_step: bool
     description: str
-
-
-# ---------------------------------------------------------------------------------------------
-# Output times and the start state
-
-
-@dataclass(frozen=True)
-class OutputGrid:
-    """The output times of a run and the fixed-step schedule that reaches them.
-
-    Attributes:
-        time: (ntime,) k · ``output_dt`` for k = 0, 1, … below t_end, then t_end itself, bit
-            for bit, as the last point (a k · ``output_dt`` within :data:`GRID_RTOL` of
-            t_end is t_end).
-        every: steps of ``dt`` per output interval (fixed-step methods; adaptive ones land
-            on every output time and use ``dt`` as their first step only).
-        dt: the step as written, s.
-        nstep: steps from 0 to t_end (fixed-step methods; 0 for adaptive ones): ``every``
-            per output interval, then those of the last interval, up to ``every``.
-        last_step: the length of the last step, s: ``dt``, or shorter so that the last
-            step lands on t_end when t_end is no whole number of steps after the last
-            k · ``output_dt`` (fixed-step methods).
-
-    Step n of a fixed-step method starts at :meth:`step_time` (n), computed from n, never
-    accumulated, so two runs that differ only in t_end take the same steps, bit for bit,
-    up to the shorter one's last whole step; the kernels compute it the same way.
-    """
-
-    time: np.ndarray
-    every: int
-    dt: float
-    nstep: int
-    last_step: float
-
-    def step_time(self, n: int) -> float:
-        """Time of step n, s: ``time[n // every] + (n % every) · dt``, and t_end for
-        n = ``nstep``; an output time is thus the very float the kernels step from."""
-        if n == self.nstep:
-            return float(self.time[-1])
-        return float(self.time[n // self.every] + (n % self.every) * self.dt)
-
-
-GRID_RTOL = 1e-12
-"""A grid point (k · output_dt, or a whole step after the last one) within this, relative to
-t_end, below t_end is t_end: the gap is rounding (0.3 / 1e-4 = 2999.9999999999995), not an
-interval, and no step that short is taken."""
-
-
-def output_times(settings: Simulate) -> OutputGrid:
-    """The output grid of ``settings`` and its fixed-step schedule (see :class:`OutputGrid`)."""
-    ratio = settings.output_step / settings.dt
-    every = round(ratio)
-    fixed = METHODS[settings.method].fixed_step
-    if fixed and (every < 1 or abs(ratio - every) > 1e-9 * ratio):
-        raise SceneError(
-            f"simulate.output_dt: must be a whole multiple of dt = {settings.dt:g} for method "
-            f"{settings.method!r}, got {settings.output_step:g}"
-        )
-    every = max(every, 1)
-    t_end, dt, interval = float(settings.t_end), float(settings.dt), float(settings.output_step)
-    below = t_end - GRID_RTOL * t_end  # a point at or past this is t_end
-    # count: the grid points k · output_dt (k < count) strictly below t_end
-    count = max(1, math.floor(t_end / interval) + 1)
-    while count > 1 and (count - 1) * interval >= below:
-        count -= 1
-    while count * interval < below:
-        count += 1
-    time = np.append(np.arange(count) * interval, t_end)
-    if not fixed:
-        return OutputGrid(time, every, dt, 0, dt)
-    # The last interval: whole steps from its start while below t_end, then the step that
-    # lands on t_end (dt when t_end is a whole step further, within rounding; else shorter).
-    start = float(time[-2])
-    whole = max(0, math.floor((t_end - start) / dt))
-    while whole > 0 and start + whole * dt >= below:
-        whole -= 1
-    while start + (whole + 1) * dt < below:
-        whole += 1
-    # At most ``every`` steps per interval (an output_dt that is a multiple of dt only to
-    # within 1e-9 could leave room for one more): the last one then ends at t_end.
-    last = min(whole + 1, every)
-    lands = last == whole + 1 and abs(start + last * dt - t_end) <= GRID_RTOL * t_end
-    grid = OutputGrid(time, every, dt, (count - 1) * every + last, dt)
-    if lands:
-        return grid
-    return OutputGrid(time, every, dt, grid.nstep, t_end - grid.step_time(grid.nstep - 1))
-
-
-_PERTURB = re.compile(
-    r"^body\.(?P<name>[^.\[\]]+)\."
-    r"(?P<key>position\[[01]\]|angle|velocity\[[01]\]|angular_velocity)$"
-)
-
-
-def perturbation_index(model: Model, path: str) -> tuple[str, int]:
-    """``("q" | "v", coordinate index)`` of a ``perturb`` path."""
-    m = _PERTURB.match(path)
-    if not m:
-        raise SceneError(
-            f"simulate.perturb.{path}: not a coordinate; use body.<name>.position[0|1], "
-            "body.<name>.angle, body.<name>.velocity[0|1] or body.<name>.angular_velocity"
-        )
-    name, key = m.group("name"), m.group("key")
-    if name not in model.body_names:
-        raise SceneError(f"simulate.perturb.{path}: no body named {name!r}")
-    b = model.body_names.index(name)
-    table = {
-        "position[0]": ("q", 0),
-        "position[1]": ("q", 1),
-        "angle": ("q", 2),
-        "velocity[0]": ("v", 0),
-        "velocity[1]": ("v", 1),
-        "angular_velocity": ("v", 2),
-    }
-    which, k = table[key]
-    return which, 3 * b + k
-
-
-def start_state(
-    model: Model,
-    settings: Simulate,
-    q_start: np.ndarray | None = None,
-    v_start: np.ndarray | None = None,
-    status: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Start positions and velocities (nsample, ndof) and the status after perturbation."""
-    n, ndof = model.nsample, model.ndof
-    q = np.array(np.broadcast_to(model.q0 if q_start is None else q_start, (n, ndof)), float)
-    v = np.array(np.broadcast_to(model.v0 if v_start is None else v_start, (n, ndof)), float)
-    status = np.zeros(n, np.uint32) if status is None else status.astype(np.uint32).copy()
-    if not settings.perturb:
-        return q, v, status
-    modes = start_modes(model, q)  # of the state before the perturbation
-    fixed_q: list[int] = []
-    fixed_v: list[int] = []
-    for path, value in settings.perturb.items():
-        which, i = perturbation_index(model, path)
-        (q if which == "q" else v)[:, i] += value
-        (fixed_q if which == "q" else fixed_v).append(i)
-    return (*_project_start(model, q, v, fixed_q, fixed_v, status, modes),)
-
-
-def start_modes(model: Model, q: np.ndarray) -> np.ndarray:
-    """The mode each contact-law joint starts in, (nsample, njoint) float64
-    (``Model.joint_start``), from the start positions q (nsample, 3 nbody).
-
-    A journal with |δ| ≤ :func:`mcchain.contact.seat_tolerance` is on the wall: model
-    contact starts seated under the law (``START_SEATED``), model auto on the link
-    (``START_LINK``; its kernels switch to the law at once where the link's λ ≤ 0). A journal
-    off the wall (free or pressed) starts under the law (``START_LAW``), whatever the
-    model. Other joints: ``START_LINK``.
-    """
-    from mcchain.contact import CONTACT as MODEL_CONTACT
-    from mcchain.contact import SEAT_TOLERANCE, START_LAW, START_LINK, START_SEATED
-
-    n = q.shape[0]
-    modes = np.full((n, model.njoint), float(START_LINK))
-    for k in np.flatnonzero(model.joint_model):
-        delta = _penetration(model, q, int(k))
-        clearance = np.broadcast_to(model.joint_clearance[:, k], (n,))
-        seated = np.abs(delta) <= SEAT_TOLERANCE * clearance
-        on_wall = START_SEATED if model.joint_model[k] == MODEL_CONTACT else START_LINK
-        modes[:, k] = np.where(seated, float(on_wall), float(START_LAW))
-    return modes
-
-
-def _penetration(model: Model, q: np.ndarray, k: int) -> np.ndarray:
-    """δ = |d| − c of joint ``k`` at the positions q (nsample, 3 nbody), (nsample,) m."""
-    from mcchain.scene.compile import world_point
-
-    n = q.shape[0]
-    ends = [
-        np.broadcast_to(world_point(q, int(body), np.broadcast_to(points[:, k], (n, 2))), (n, 2))
-        for body, points in ((model.joint_body_b[k], model.joint_point_b),
-                             (model.joint_body_a[k], model.joint_point_a))
-    ]  # fmt: skip
-    d = ends[0] - ends[1]
-    return np.hypot(d[:, 0], d[:, 1]) - np.broadcast_to(model.joint_clearance[:, k], (n,))
-
-
-def _project_start(
-    model: Model,
-    q: np.ndarray,
-    v: np.ndarray,
-    fixed_q: list[int],
-    fixed_v: list[int],
-    status: np.ndarray,
-    modes: np.ndarray | None = None,
-    tol: float = 1e-13,
-    iterations: int = 30,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Project q then v onto Φ = 0, B v = ν at t = 0 holding the given coordinates fixed.
-
-    Gauss–Newton with minimum-norm (M-weighted) corrections of the free coordinates; a
-    sample that does not converge gets ASSEMBLY_FAILED and NaN. ``modes`` (nsample, njoint),
-    :func:`start_modes` before the perturbation: a joint starting under the law has no
-    velocity row, and one off its wall (``START_LAW``) no position row either (its journal
-    stays free or pressed as it was).
-    """
-    from mcchain.contact import START_LAW, START_LINK
-    from mcchain.kernels.forces import mass_diagonal
-    from mcchain.kernels.joints import (
-        constraint_jacobian,
-        constraint_residual,
-        constraint_velocity_rhs,
-    )
-
-    km = model.kernel_model()
-    ncon, ndof = model.ncon, model.ndof
-    phi = np.zeros(ncon)
-    B = np.zeros((ncon, ndof))
-    nu = np.zeros(ncon)
-    m = np.zeros(ndof)
-    free_q = np.ones(ndof, bool)
-    free_q[fixed_q] = False
-    free_v = np.ones(ndof, bool)
-    free_v[fixed_v] = False
-    modes = np.zeros((model.nsample, model.njoint)) if modes is None else modes
-    for s in range(model.nsample):
-        if status[s] & FAILURE_BITS:
-            continue
-        rows_q = np.ones(ncon, bool)  # the rows that constrain this sample's start
-        rows_v = np.ones(ncon, bool)
-        rows_q[model.joint_row[modes[s] == START_LAW]] = False
-        rows_v[model.joint_row[modes[s] != START_LINK]] = False
-        mass_diagonal(km, s, m)
-        ok = False
-        for _ in range(iterations):
-            constraint_residual(km, s, q[s], 0.0, phi)
-            if np.max(np.abs(phi[rows_q]), initial=0.0) <= tol:
-                ok = True
-                break
-            constraint_jacobian(km, s, q[s], B)
-            W = B[np.ix_(rows_q, free_q)] / m[free_q]
-            step = np.linalg.lstsq(W * m[free_q] @ W.T, phi[rows_q], rcond=1e-12)[0]
-            q[s, free_q] -= W.T @ step
-        if not ok or not np.all(np.isfinite(q[s])):
-            status[s] |= ASSEMBLY_FAILED
-            q[s] = np.nan
-            v[s] = np.nan
-            continue
-        constraint_jacobian(km, s, q[s], B)
-        constraint_velocity_rhs(km, s, 0.0, nu)
-        W = B[np.ix_(rows_v, free_v)] / m[free_v]
-        res = (B @ v[s] - nu)[rows_v]
-        v[s, free_v] -= W.T @ np.linalg.lstsq(W * m[free_v] @ W.T, res, rcond=1e-12)[0]
-    return q, v, status
 
 
 # ---------------------------------------------------------------------------------------------
@@ -509,8 +261,8 @@ def _run_rk45(run: _Run) -> None:
 def _run_radau(run: _Run) -> None:
     """Radau IIA(5) on the index-1 equations, one sample at a time (the slow reference), in
     segments between located events where there are contact-law joints
-    (:mod:`.radau_contact`)."""
-    from mcchain.solvers.radau_contact import run_radau
+    (:mod:`.radau`)."""
+    from mcchain.solvers.radau import run_radau
 
     run_radau(run, _flat_outputs(run.out, run.model.nsample, len(run.time)), SINGULAR_PIVOT)
 
@@ -599,11 +351,10 @@ def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
-        Method("rk4", _run_rk4, True, "classical RK4 on the index-1 form with Baumgarte"),
+        Method("rk4", _run_rk4, "classical RK4 on the index-1 form with Baumgarte"),
         Method(
             "rk4-projection",
             _run_rk4_projection,
-            True,
             "RK4 on the index-1 form (no Baumgarte), then q and v projected onto the "
             "constraints after each step; robust at rank loss (dependent rows dropped, the "
             "basic solution of S λ = r used, instead of a SINGULAR flag)",
@@ -611,88 +362,21 @@ METHODS: dict[str, Method] = {
         Method(
             "generalized-alpha",
             _run_generalized_alpha,
-            True,
             "index-3 generalized-α (Arnold & Brüls), Newton on the KKT system, ρ∞ settable",
         ),
         Method(
             "rk45",
             _run_rk45,
-            False,
             "Dormand–Prince 5(4) with per-sample step control on the index-1 form (Baumgarte)",
         ),
         Method(
             "radau",
             _run_radau,
-            False,
             "Radau IIA(5), scipy's algorithm compiled, one sample at a time (reference)",
         ),
     )
 }
 """Every integration method by its ``[simulate] method`` name."""
-
-
-LANE_COMPILE_S_PER_COORDINATE = 0.03
-LANE_COMPILE_S_PER_COORDINATE_SQUARED = 0.46e-3
-"""Seconds the first run of a new topology spends compiling its rk4 lanes beyond what the
-loop kernels need: these two per coordinate (3 per body) and per squared coordinate count,
-summed. Fitted to chains of 32 and 64 bars (``benchmarks/bench_loop.py``, 2 cores: 7.1 s
-and 22.6 s), within 0.4 s of 16 and 48 bars. The square is LLVM's loop vectoriser, whose
-work grows with the square of a stage loop's length."""
-
-LOOP_EXTRA_S_PER_COORDINATE_STEP = 0.27e-6
-"""Seconds the loop kernels take beyond the lanes per instance-step, per coordinate:
-0.22-0.30 µs for chains of 16-64 bars (same benchmark)."""
-
-AUTO_LOOP_MIN_COMPILE_S = 20.0
-"""``kernels = "auto"`` considers the loop kernels only for topologies whose lanes would
-compile longer than this: the issue's budget for the first run of a new topology."""
-
-AUTO_LOOP_SHARE = 0.25
-"""... and only for runs whose extra time on the loop kernels stays under this share of
-that compile, so that rerunning the topology on the loop costs little against compiling
-its lanes once (which later runs would reuse)."""
-
-
-@dataclass(frozen=True)
-class KernelChoice:
-    """The kernels that integrate a run, and why (one line for the user); ``auto``: chosen
-    by ``kernels = "auto"``, not written in the scene."""
-
-    kernels: str
-    reason: str
-    auto: bool = True
-
-    def note(self) -> str | None:
-        """The line a run prints when ``auto`` took the loop kernels (None otherwise)."""
-        if self.kernels != "loop" or not self.auto:
-            return None
-        return (
-            f'simulate.kernels: "loop" ({self.reason}); kernels = "lanes" compiles the '
-            "lanes once for this topology, the fastest per step"
-        )
-
-
-def choose_kernels(sim: Simulate, ndof: int, nsample: int) -> KernelChoice:
-    """Resolve ``[simulate] kernels`` for a run of ``nsample`` instances of ``ndof``
-    coordinates. ``"lanes"`` and ``"loop"`` stay as written; ``"auto"`` follows the cost
-    model of the constants above. The choice depends on the scene and the sample count only,
-    never on what a cache holds, so that a run, its resume and a Dask run agree."""
-    if sim.kernels != "auto":
-        return KernelChoice(sim.kernels, "as set in the scene", auto=False)
-    if sim.method not in LOOP_METHODS:
-        return KernelChoice("lanes", f"auto: {sim.method} runs on the lanes only")
-    compile_s = (
-        LANE_COMPILE_S_PER_COORDINATE * ndof + LANE_COMPILE_S_PER_COORDINATE_SQUARED * ndof**2
-    )
-    work = nsample * max(1, round(sim.t_end / sim.dt))
-    extra_s = LOOP_EXTRA_S_PER_COORDINATE_STEP * ndof * work
-    estimate = (
-        f"the lanes of {ndof} coordinates compile in about {compile_s:.0f} s; "
-        f"{work:.3g} instance-steps take about {extra_s:.2g} s more on the loop"
-    )
-    if compile_s <= AUTO_LOOP_MIN_COMPILE_S or extra_s >= AUTO_LOOP_SHARE * compile_s:
-        return KernelChoice("lanes", f"auto: {estimate}")
-    return KernelChoice("loop", f"auto: {estimate}")
 
 
 def simulate(

@@ -14,9 +14,11 @@ right-hand side is smooth. A segment ends at the first of these events:
   instants" as in a fixed-step kernel);
 * separation (δ crosses 0 downwards);
 * model auto on the link: λ_r crosses 0 downwards (the switch to the law);
-* model auto under the law: the re-seat criterion met for its dwell
-  (:func:`mcchain.kernels.clearance.reseat_ready`, checked at every accepted step), then the
-  projection onto the link (:func:`mcchain.kernels.explicit.reseat`).
+* model auto under the law: the re-seat dwell complete, (t − t_s) ω_c(t) = 2π
+  RESEAT_PERIODS, located on the dense output as the other events, t_s being the located
+  instant the criterion (:func:`mcchain.kernels.clearance.reseat_margin`, checked at every
+  accepted step's end) last began to hold; then the projection onto the link
+  (:func:`mcchain.kernels.explicit.reseat`). Neither instant depends on the steps.
 
 Peaks of the forces are located on each segment's dense output (:mod:`mcchain.solvers.peaks`),
 the peak penetration kept at every accepted step, impacts and free-flight time at the events.
@@ -24,6 +26,7 @@ the peak penetration kept at every accepted step, impacts and free-flight time a
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
 from collections.abc import Callable
@@ -111,7 +114,7 @@ class _Dense:
         return y_old + Q @ np.array([x, x * x, x * x * x])
 
     def __call__(self, t: float) -> np.ndarray:
-        k = int(np.searchsorted(self.ts, t, side="left"))
+        k = bisect.bisect_left(self.ts, t)  # on the list itself: O(log n), no copy
         return self.piece(t, self.pieces[min(max(k - 1, 0), len(self.pieces) - 1)])
 
 
@@ -155,8 +158,9 @@ class _Sample:
         self.cst = np.zeros((len(self.joints), cl.NCST))
         cl.contact_start(self.km, i, self.cst)
         self.alpha2, self.beta2 = 2.0 * run.settings.gains[0], run.settings.gains[1] ** 2
-        self.due = math.inf  # when a re-seat's dwell was completed (an accepted step's end)
-        self.t_prev = 0.0  # the last accepted step's end
+        # per joint: the located instant its re-seat criterion began to hold (NaN: not now)
+        self.ready_since = [math.nan] * len(self.joints)
+        self.last_step: tuple[float, float, np.ndarray, np.ndarray] | None = None
         self.free_since = [math.nan] * len(self.joints)
         # the compiled stepper's arrays (mcchain.kernels.radau.radau_step)
         n = 2 * ndof
@@ -199,31 +203,55 @@ class _Sample:
     def on_step(self, t: float, y: np.ndarray) -> float:
         """The hook at every accepted step's end (and a segment's start), the first of the
         events, evaluated before the others (it never fires): the step count, the peak
-        penetration, and the re-seat dwell of model auto, from the accelerations the stepper
-        evaluated last, at (t, y)."""
-        from mcchain.kernels.forces import kinetic_energy
+        penetration, and where a re-seat dwell of model auto began (located on the step
+        ``last_step`` where the criterion turned true; reset where it is false at the step's
+        end), from the accelerations the stepper evaluated last, at (t, y)."""
+        from scipy.optimize import brentq
 
-        cl, cst = self.cl, self.cst
+        cl, cst, step = self.cl, self.cst, self.last_step
         self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
-        h, self.t_prev = t - self.t_prev, t
-        kinetic = kinetic_energy(self.km, self.i, np.ascontiguousarray(y[self.ndof :]))
-        for j, k in enumerate(self.joints):
-            r = self.rows[j]
-            lam_r = self.lam[r]
+        ready = [self.reseat_margin(j, t, y, evaluate=False) > 0.0 for j in range(len(self.joints))]
+        for j in range(len(self.joints)):
             if cst[j, cl.FM] != 1.0:
                 continue
-            d1, r1 = cst[j, cl.PEN], cst[j, cl.PDOT]
-            cst[j, cl.PKD] = max(cst[j, cl.PKD], d1)
-            wj = cst[j, cl.KC] * self.row_law[r, 2]
-            wn = math.sqrt(wj) if wj > 0.0 else 0.0
-            if h > 0.0 and cl.reseat_ready(self.km, self.i, k, lam_r, d1, r1, wn, kinetic):
-                cst[j, cl.DWL] += h
-                if cst[j, cl.DWL] * wn >= 2.0 * math.pi * RESEAT_PERIODS:
-                    cst[j, cl.DWL] = -1.0
-                    self.due = min(self.due, t)
-            elif cst[j, cl.DWL] >= 0.0:
-                cst[j, cl.DWL] = 0.0
+            cst[j, cl.PKD] = max(cst[j, cl.PKD], cst[j, cl.PEN])
+            if not ready[j]:
+                self.ready_since[j] = math.nan
+            elif math.isnan(self.ready_since[j]) and step is not None:
+                t_old = step[0]
+                margin = functools.partial(self.step_margin, j, step)
+                self.ready_since[j] = (
+                    t_old if margin(t_old) > 0.0
+                    else float(brentq(margin, t_old, t, xtol=EVENT_XTOL, rtol=EVENT_XTOL))
+                )  # fmt: skip
         return 1.0
+
+    def reseat_margin(self, j: int, t: float, y: np.ndarray, evaluate: bool = True) -> float:
+        """:func:`mcchain.kernels.clearance.reseat_margin` of contact-law joint ``j`` at
+        (t, y) (``evaluate`` False: from the last evaluation, there)."""
+        if evaluate:
+            self.accelerations(t, y)
+        cl, cst, r = self.cl, self.cst, self.rows[j]
+        if cst[j, cl.FM] != 1.0:
+            return -1.0
+        from mcchain.kernels.forces import kinetic_energy
+
+        kinetic = kinetic_energy(self.km, self.i, np.ascontiguousarray(y[self.ndof :]))
+        return float(cl.reseat_margin(
+            self.km, self.i, int(self.joints[j]), self.lam[r], cst[j, cl.PEN],
+            cst[j, cl.PDOT], self.pulsation(j), kinetic,
+        ))  # fmt: skip
+
+    def step_margin(
+        self, j: int, step: tuple[float, float, np.ndarray, np.ndarray], t: float
+    ) -> float:
+        """:meth:`reseat_margin` at t on the accepted step ``step``'s dense output."""
+        return self.reseat_margin(j, t, _Dense.piece(t, step))
+
+    def pulsation(self, j: int) -> float:
+        """ω_c of contact-law joint ``j`` (1/s) at the last evaluation."""
+        wj = self.cst[j, self.cl.KC] * self.row_law[self.rows[j], 2]
+        return math.sqrt(wj) if wj > 0.0 else 0.0
 
     # -- events ----------------------------------------------------------------------------
     def penetration(self, j: int, y: np.ndarray) -> float:
@@ -249,7 +277,7 @@ class _Sample:
             elif self.model.joint_model[k] == AUTO:
                 found.append(_event(functools.partial(self.link_force, int(self.rows[j])), -1.0))
                 kinds.append(("switch", j))
-        found.append(_event(self.reseat_clock, 0.0))
+        found.append(_event(self.reseat_clock, 1.0))
         kinds.append(("reseat", -1))
         return found, kinds
 
@@ -268,8 +296,17 @@ class _Sample:
         return float(self.lam[r])
 
     def reseat_clock(self, t: float, y: np.ndarray) -> float:
-        """Event: 0 at the end of the accepted step that completed a re-seat dwell."""
-        return self.due - t if math.isfinite(self.due) else 1.0
+        """Event, rising through 0 where a re-seat dwell is complete: the largest
+        (t − t_s) ω_c(t) − 2π RESEAT_PERIODS over the joints whose criterion holds since t_s
+        (< 0 before t_s); −1 if none."""
+        watched = [j for j, since in enumerate(self.ready_since) if not math.isnan(since)]
+        if not watched:
+            return -1.0
+        self.accelerations(t, y)
+        return max(
+            (t - self.ready_since[j]) * self.pulsation(j) - 2.0 * math.pi * RESEAT_PERIODS
+            for j in watched
+        )
 
     def handle(self, kind: str, j: int, t: float, y: np.ndarray) -> np.ndarray:
         """Apply the event ``kind`` of contact-law joint ``j`` at (t, y); the state to go on
@@ -287,26 +324,32 @@ class _Sample:
                     cst[j, cl.TFF] += t - self.free_since[j]
                 self.free_since[j] = math.nan
             else:  # separation (also the end of a seated contact)
+                self.ready_since[j] = math.nan
                 cst[j, cl.INS] = 0.0
                 cst[j, cl.VI] = 0.0
                 self.free_since[j] = t
                 if math.isnan(cst[j, cl.TSE]):
                     cst[j, cl.TSE] = t
         elif kind == "switch":
+            self.ready_since[j] = math.nan
             cst[j, cl.FM] = 1.0  # seated: the link's δ is 0 up to rounding
             cst[j, cl.VI] = -1.0
             cst[j, cl.INS] = 1.0
             if math.isnan(cst[j, cl.TSE]):
                 cst[j, cl.TSE] = t
-        else:  # re-seat of the joints marked
+        else:  # re-seat of the joint whose dwell completed (the clock's largest)
+            self.accelerations(t, y)
+            since = self.ready_since
+            dwell = [(t - s) * self.pulsation(j) if not math.isnan(s) else -math.inf
+                     for j, s in enumerate(since)]  # fmt: skip
+            done = int(np.argmax(dwell))
+            cst[done, cl.DWL], since[done] = -1.0, math.nan
             q, v = y[: self.ndof].copy(), y[self.ndof :].copy()
             reseat(
                 self.km, self.i, q, v, t, self.minv, self.cols, self.first, cst, self.row_law,
                 self.pivot, self.B, self.S, *self.scratch,
             )  # fmt: skip
             y = np.concatenate([q, v])
-            self.due = math.inf
-        self.t_prev = t
         return y
 
     # -- the whole run ---------------------------------------------------------------------
@@ -371,6 +414,7 @@ class _Sample:
         )  # fmt: skip
         if code != kr.ACCEPTED:
             return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
+        self.last_step = None
         g = [event(t, y) for event in events]
         run.steps[i] -= 1  # the hook's call at the segment's start
         dense = _Dense(t)
@@ -386,7 +430,7 @@ class _Sample:
                 return _Segment(written, DIVERGED, t)
             t_old, t = float(self.state[kr.T_OLD]), float(self.state[kr.T_NOW])
             dense.add(t_old, t, st["y_old"], st["Q"])
-            step = dense.pieces[-1]
+            step = self.last_step = dense.pieces[-1]
             g_new = [event(t, y) for event in events]
             found: tuple[float, int] | None = None
             for e, event in enumerate(events):
