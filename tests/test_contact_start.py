@@ -21,7 +21,7 @@ from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble, initial_state_warnings
 from mcchain.testing.factory import write_scene
-from mcchain.testing.scenes import fourbar_text
+from mcchain.testing.scenes import fourbar_text, journal_tables
 
 MASS, INERTIA, CLEARANCE, GRAVITY, STIFFNESS, EXPONENT = 0.5, 1e-4, 5e-4, 9.81, 1e9, 1.5
 ONSET_TOLERANCE = 1e-12  # s: the onset is located on the step's cubic Hermite interpolant,
@@ -54,32 +54,25 @@ law = "{law}"
 stiffness = {STIFFNESS!r}
 exponent = {EXPONENT!r}
 {e}"""
-    return f"""
-[scene]
-name = "journal"
-gravity = [0.0, {-GRAVITY!r}]
-
-[[body]]
-name = "journal"
-mass = {MASS!r}
-inertia = {INERTIA!r}
-position = [{x0!r}, {y0!r}]
-velocity = [{sideways!r}, 0.0]
-
-[[joint]]
-name = "J"
-bodies = ["ground", "journal"]
-points = [[0.0, 0.0], [0.0, 0.0]]
-clearance = {CLEARANCE!r}
-model = "{model}"
-{law_table if model != "link" else ""}
-
+    return (
+        journal_tables(
+            (x0, y0),
+            (sideways, 0.0),
+            model,
+            law_table if model != "link" else "",
+            MASS,
+            INERTIA,
+            CLEARANCE,
+            GRAVITY,
+        )
+        + f"""
 [simulate]
 t_end = {t_end!r}
 dt = 1e-6
 output_dt = 2.5e-4
 method = "rk4"
 """
+    )
 
 
 def run(text: str, **settings):

@@ -5,6 +5,8 @@
 * :func:`hanging_clearance_bar_text` — the bar of ``configs/clearance-bar.toml`` hanging on
   its clearance pin: the ``[scene]``, ``[[body]]`` and ``[[joint]]`` tables that the run
   tests (until, extend, the pipeline, the viewer) complete with sections of their own;
+* :func:`journal_tables` — a journal in a fixed bearing on ground (one free body, gravity
+  along −y): the contact tests' scene, written free, pressed or seated;
 * :func:`straight_chain_text` — bars pinned end to end, all at one angle, at rest (the
   chains benchmark; :data:`DOUBLE_PENDULUM` is its two-bar case);
 * :func:`fourbar_text` — the driven four-bar of ``configs/fourbar-clearance.toml``;
@@ -83,6 +85,43 @@ bodies = ["ground", "bar"]
 points = [[0.0, 0.0], [-0.5, 0.0]]
 clearance = 1e-3
 eccentricity = -1.5707963267948966
+"""
+
+
+def journal_tables(
+    position: tuple[float, float],
+    velocity: tuple[float, float] = (0.0, 0.0),
+    model: str = "contact",
+    contact: str = "",
+    mass: float = 0.5,
+    inertia: float = 1e-4,
+    clearance: float = 5e-4,
+    gravity: float = 9.81,
+) -> str:
+    """The ``[scene]``, ``[[body]]`` and ``[[joint]]`` tables of a journal (``mass`` kg,
+    ``inertia`` kg m²) in a bearing of radial ``clearance`` m fixed on ground at the origin,
+    under ``gravity`` m/s² along −y: its centre written at ``position`` (m, from the bearing
+    centre) moving at ``velocity`` (m/s), the joint's ``model`` followed by ``contact`` (the
+    text of its ``[joint.contact]`` table, or nothing). The caller appends ``[simulate]``."""
+    return f"""
+[scene]
+name = "journal"
+gravity = [0.0, {-gravity!r}]
+
+[[body]]
+name = "journal"
+mass = {mass!r}
+inertia = {inertia!r}
+position = [{position[0]!r}, {position[1]!r}]
+velocity = [{velocity[0]!r}, {velocity[1]!r}]
+
+[[joint]]
+name = "J"
+bodies = ["ground", "journal"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+clearance = {clearance!r}
+model = "{model}"
+{contact}
 """
 
 
