@@ -1,9 +1,11 @@
 """codegen.inline: the lane text of a kernel function computes what the function computes,
-bit for bit (the lanes and the loop kernels share one definition of the contact law)."""
+bit for bit (the lanes and the loop kernels share one definition of the contact law, of each
+joint's Φ, Φ̇ and γ, of the driver laws and of the applied forces)."""
 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -11,6 +13,8 @@ import pytest
 from mcchain.codegen.inline import inline
 from mcchain.contact import LAW_CODES
 from mcchain.kernels import contact as kc
+from mcchain.kernels import forces as kf
+from mcchain.kernels import joints as kj
 
 
 def _run(function, arguments: dict[str, float], suffix: str = "7") -> list[float]:
@@ -73,3 +77,103 @@ def test_inline__refuses_code_outside_the_straight_line_subset():
         inline(kc.__name__, "contact_crossing", ["a", "b", "c", "d", "h"], "0")
     with pytest.raises(TypeError, match="no such function"):
         inline(kc.__name__, "no_such_law", [], "0")
+
+
+def _normal(rng: np.random.Generator) -> float:
+    return float(rng.normal() * 10.0 ** rng.uniform(-3, 2))
+
+
+# Each straight-line law of the joints and forces kernels, with a draw of its arguments.
+JOINT_AND_FORCE_LAWS = {
+    (kj, "rotate"): lambda rng: [_normal(rng) for _ in range(4)],
+    (kj, "point_velocity"): lambda rng: [_normal(rng) for _ in range(5)],
+    (kj, "centripetal"): lambda rng: [_normal(rng) for _ in range(6)],
+    (kj, "inverse_distance"): lambda rng: [  # |d| = 0 only where guarded (else 1/0)
+        *((0.0, 1.0) if rng.random() < 0.3 else (abs(_normal(rng)), float(rng.integers(0, 2)))),
+    ],
+    (kj, "clearance_rate"): lambda rng: [_normal(rng) for _ in range(4)],
+    (kj, "clearance_gamma"): lambda rng: [_normal(rng) for _ in range(8)],
+    (kj, "axis_normal"): lambda rng: [_normal(rng) for _ in range(4)],
+    (kj, "axis_turn"): lambda rng: [_normal(rng) for _ in range(6)],
+    (kj, "prismatic_residual"): lambda rng: [_normal(rng) for _ in range(7)],
+    (kj, "prismatic_rate"): lambda rng: [_normal(rng) for _ in range(8)],
+    (kj, "prismatic_gamma"): lambda rng: [_normal(rng) for _ in range(9)],
+    (kj, "harmonic_swing"): lambda rng: [_normal(rng) for _ in range(5)],
+    (kj, "driver_residual"): lambda rng: [_normal(rng) for _ in range(5)],
+    (kj, "driver_speed"): lambda rng: [_normal(rng) for _ in range(2)],
+    (kf, "moment"): lambda rng: [_normal(rng) for _ in range(4)],
+    (kf, "load_wrench"): lambda rng: [_normal(rng) for _ in range(6)],
+    (kf, "spring_force"): lambda rng: [
+        *[_normal(rng) for _ in range(5)],
+        float(rng.choice([0.0, abs(_normal(rng))])),  # rest length 0: isotropic
+        abs(_normal(rng)),
+    ],
+    (kf, "spring_energy"): lambda rng: [
+        *[_normal(rng) for _ in range(3)],
+        float(rng.choice([0.0, abs(_normal(rng))])),
+    ],
+    (kf, "load_potential"): lambda rng: [_normal(rng) for _ in range(6)],
+    (kf, "gravity_potential"): lambda rng: [_normal(rng) for _ in range(5)],
+    (kf, "body_kinetic_energy"): lambda rng: [_normal(rng) for _ in range(5)],
+}
+
+
+@pytest.mark.parametrize(
+    ("module", "name"), list(JOINT_AND_FORCE_LAWS), ids=[n for _, n in JOINT_AND_FORCE_LAWS]
+)
+def test_inline__joint_driver_and_force_laws_equal_the_kernels_bit_for_bit(module, name):
+    """The lanes' text of each law, evaluated in Python, against the compiled kernel: the
+    same IEEE operations in the same order give the same bits."""
+    kernel = getattr(module, name)
+    draw = JOINT_AND_FORCE_LAWS[module, name]
+    rng = np.random.default_rng(sum(map(ord, name)))
+    for _ in range(200):
+        values = draw(rng)
+        args = {f"x{i}": v for i, v in enumerate(values)}
+        got = _run(kernel, args, suffix="_t")
+        want = kernel(*values)
+        want = want if isinstance(want, tuple) else (want,)
+        assert all(_same(g, w) for g, w in zip(got, want, strict=True)), (name, values, got)
+
+
+def _equal(a: float, b: float) -> bool:
+    return a == b or (a != a and b != b)
+
+
+@pytest.mark.parametrize(
+    ("name", "literal"),
+    [
+        ("centripetal", {4: 0.0}),  # bearing on the ground: θ̇_a = 0
+        ("centripetal", {5: 0.0}),  # journal on the ground
+        ("prismatic_gamma", {8: 0.0}),
+        ("prismatic_rate", {6: 0.0, 7: 0.0}),
+        ("prismatic_residual", {4: 0.0}),
+        ("axis_normal", {0: 1.0, 1: 0.0}),  # the ground's (cos, sin)
+        ("driver_residual", {4: 0.0}),  # constant speed: no swing
+        ("driver_speed", {1: 0.0}),
+        ("inverse_distance", {1: 1.0}),
+    ],
+)
+def test_inline__literal_ground_terms_fold_to_the_kernels_values(name, literal):
+    """With a literal 0.0 / 1.0 argument (a ground body's) the folded text gives the
+    kernel's values for finite operands (equal as numbers: a zero's sign may differ)."""
+    kernel = getattr(kj, name)
+    draw = JOINT_AND_FORCE_LAWS[kj, name]
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        values = draw(rng)
+        for i, value in literal.items():
+            values[i] = value
+        names = [repr(v) if i in literal else f"x{i}" for i, v in enumerate(values)]
+        statements, results = inline(kj.__name__, name, names, "_t")
+        scope = {f"x{i}": v for i, v in enumerate(values)}
+        for line in statements:
+            exec(line, {"math": math}, scope)
+        got = [eval(r, {"math": math}, scope) for r in results]
+        want = kernel(*values)
+        want = want if isinstance(want, tuple) else (want,)
+        assert all(_equal(g, w) for g, w in zip(got, want, strict=True)), (name, values, got)
+    folded = inline(kj.__name__, name, names, "_t")[1]
+    assert not any(
+        re.search(r"\* 0\.0\b|\b0\.0 \*|- 0\.0\b|\+ 0\.0\b|\b1\.0 \*", r) for r in folded
+    )

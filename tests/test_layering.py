@@ -27,13 +27,6 @@ NamedTuple (:class:`mcchain.model.KernelModel`), never importing the Model itsel
 MAX_LINES = 700
 """Lines a module of mcchain/ may have: past that it holds more than one job (issue 28)."""
 
-LONG_MODULES = {
-    # h-joints: the emitter's physics is being inlined from the kernels (issue 28 item 1),
-    # which shortens it; the lead removes this entry at merge.
-    "mcchain.codegen.emitter",
-}
-"""Modules allowed over :data:`MAX_LINES` for now."""
-
 
 def _module_files() -> dict[str, Path]:
     files = {}
@@ -161,5 +154,5 @@ def test_layering__argparse_only_in_the_cli():
 
 def test_layering__no_module_over_max_lines():
     lines = {module: len(path.read_text().splitlines()) for module, path in _module_files().items()}
-    long = {m: n for m, n in lines.items() if n > MAX_LINES and m not in LONG_MODULES}
+    long = {m: n for m, n in lines.items() if n > MAX_LINES}
     assert not long, f"modules over {MAX_LINES} lines: {long}"

@@ -20,6 +20,8 @@ from mcchain.caches import mcchain_cache
 _GENERATOR_FILES = (
     "topology.py",
     "emitter.py",
+    "sparse_ldl.py",
+    "inline.py",
     "layout.py",
     "templates.py",
     "schedule.py",

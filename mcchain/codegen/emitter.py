@@ -1,29 +1,43 @@
 """Straight-line code of one lane of a :class:`~mcchain.codegen.topology.Topology`.
 
-:class:`Emitter` writes the index-1 acceleration (Schur complement S = B M⁻¹ Bᵀ, sparse
-LDLᵀ in a bandwidth-reducing row order), the constraint projection and the outputs (joint
-forces, energy, max |Φ|); the generator (``generate.py``) puts these blocks into the time
-loops of ``templates.py``. :func:`sincos_code` is the branch-free sine/cosine it inlines.
+:class:`Emitter` writes the index-1 acceleration, the constraint projection and the outputs
+(joint forces, energy, max |Φ|); the generator (``generate.py``) puts these blocks into the
+time loops of ``templates.py``. :func:`sincos_code` is the branch-free sine/cosine it inlines.
 
-Formulation: the constraints and forces of ``mcchain/kernels/joints.py`` and
-``mcchain/kernels/forces.py``, whose conventions are mirrored (rotated point p = A(θ) s,
-d = r_b + p_b − r_a − p_a, springs with rest length 0 isotropic).
-"""
+The physics is not written here: each joint's Φ, Φ̇ and γ, B's turning entries, the driver
+and load laws, the spring-dampers and the energies are the straight-line functions of
+``mcchain/kernels/joints.py`` and ``forces.py`` (the contact law: ``contact.py``), which the
+loop kernels call and :meth:`Emitter.kernel` inlines (:mod:`mcchain.codegen.inline`), a ground
+body's terms as literal 0.0 / 1.0 folded away. What stays here is structure: which bodies and
+rows, the ground skipped, the sparse pattern of B; the Schur complement S = B M⁻¹ Bᵀ and its
+sparse LDLᵀ are :mod:`mcchain.codegen.sparse_ldl`'s."""
 
 from __future__ import annotations
 
+import ast
 import math
 from collections.abc import Callable
 
 import numpy as np
 
 from mcchain.codegen.inline import inline
+from mcchain.codegen.sparse_ldl import Coef, SchurComplement, _mul, _sum
 from mcchain.codegen.topology import Topology
 from mcchain.model import GROUND, JOINT_CLEARANCE, JOINT_IDEAL, JOINT_PRISMATIC
 from mcchain.scene.compile import spline_value
 
 CONTACT_KERNELS = "mcchain.kernels.contact"
 """The module whose functions define the contact law for the loop kernels and the lanes."""
+JOINT_KERNELS = "mcchain.kernels.joints"
+"""… the joints' and drivers' arithmetic (points, Φ, Φ̇, γ, B's turning entries)."""
+FORCE_KERNELS = "mcchain.kernels.forces"
+"""… the applied forces' arithmetic (loads, spring-dampers, moments, energies)."""
+
+
+def _tidy(text: str) -> str:
+    """``text`` with the parentheses it does not need dropped (a composed expression)."""
+    return ast.unparse(ast.parse(text, mode="eval"))
+
 
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
@@ -72,69 +86,7 @@ def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
     return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
 
 
-# ---------------------------------------------------------------------------------------------
-# Symbolic helpers: a coefficient is a float constant or the name of a scalar variable.
-
-Coef = float | str
-
-
-def _mul(*factors: Coef) -> Coef:
-    const = 1.0
-    names = []
-    for f in factors:
-        if isinstance(f, str):
-            names.append(f)
-        else:
-            const *= f
-    if const == 0.0:
-        return 0.0
-    if not names:
-        return const
-    expr = " * ".join(names)
-    if const == 1.0:
-        return expr
-    if const == -1.0:
-        return f"(-{expr})" if len(names) == 1 else f"(-({expr}))"
-    return f"({const!r} * {expr})"
-
-
-def _sum(terms: list[Coef]) -> Coef:
-    const = sum(t for t in terms if not isinstance(t, str))
-    names = [t for t in terms if isinstance(t, str)]
-    if not names:
-        return float(const)
-    expr = " + ".join(names)
-    if const != 0.0:
-        expr = f"{expr} + {const!r}"
-    return f"({expr})" if len(names) > 1 or const != 0.0 else expr
-
-
-def _row_order(pattern: list[set[int]]) -> list[int]:
-    """A bandwidth-reducing order of the rows of S (reverse Cuthill–McKee on its graph)."""
-    n = len(pattern)
-    if n == 0:
-        return []
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-    rows, cols = [], []
-    for i, nbrs in enumerate(pattern):
-        for j in nbrs:
-            rows.append(i)
-            cols.append(j)
-    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    order = [int(i) for i in reverse_cuthill_mckee(graph, symmetric_mode=True)]
-
-    # Keep the natural order when it is at least as narrow (chains are already banded).
-    def bandwidth(perm: list[int]) -> int:
-        pos = {r: i for i, r in enumerate(perm)}
-        return max((abs(pos[i] - pos[j]) for i in range(n) for j in pattern[i]), default=0)
-
-    natural = list(range(n))
-    return natural if bandwidth(natural) <= bandwidth(order) else order
-
-
-class Emitter:
+class Emitter(SchurComplement):
     """Generates the straight-line code of one lane for a :class:`Topology`.
 
     Names in the generated code: ``q{i}``, ``v{i}`` the lane's coordinates and velocities,
@@ -211,10 +163,10 @@ class Emitter:
         if body == GROUND:
             self.emit(f"{name}x = {sx}", f"{name}y = {sy}", f"{name}X = {sx}", f"{name}Y = {sy}")
             return
-        c, s = f"cs{body}{tag}", f"sn{body}{tag}"
+        px, py = self.kernel(JOINT_KERNELS, "rotate", [f"cs{body}{tag}", f"sn{body}{tag}", sx, sy])
         self.emit(
-            f"{name}x = {c} * {sx} - {s} * {sy}",
-            f"{name}y = {s} * {sx} + {c} * {sy}",
+            f"{name}x = {px}",
+            f"{name}y = {py}",
             f"{name}X = {q}{3 * body} + {name}x",
             f"{name}Y = {q}{3 * body + 1} + {name}y",
         )
@@ -224,11 +176,9 @@ class Emitter:
         if body == GROUND:
             self.emit(f"{name}vx = 0.0", f"{name}vy = 0.0")
             return
-        w = f"{v}{3 * body + 2}"
-        self.emit(
-            f"{name}vx = {v}{3 * body} - {w} * {name}y",
-            f"{name}vy = {v}{3 * body + 1} + {w} * {name}x",
-        )
+        rates = [f"{v}{3 * body + i}" for i in range(3)]
+        vx, vy = self.kernel(JOINT_KERNELS, "point_velocity", [*rates, f"{name}x", f"{name}y"])
+        self.emit(f"{name}vx = {vx}", f"{name}vy = {vy}")
 
     def joints(self, q: str = "q", tag: str = "") -> None:
         """Points ``pa{k}``, ``pb{k}`` and separation ``dx{k}``, ``dy{k}`` of every joint."""
@@ -242,11 +192,8 @@ class Emitter:
                 # One division per joint: ex, ey and γ multiply by 1/ρ. Under a contact law
                 # the journal may sit at the bearing centre (ρ = 0, written there): no normal,
                 # and none needed (F_n = 0 there), so n = 0 rather than NaN.
-                inverse = (
-                    f"1.0 / rho{k} if rho{k} > 0.0 else 0.0"
-                    if k in self.contact_row
-                    else f"1.0 / rho{k}"
-                )
+                guarded = "1.0" if k in self.contact_row else "0.0"
+                (inverse,) = self.kernel(JOINT_KERNELS, "inverse_distance", [f"rho{k}", guarded])
                 self.emit(
                     f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
                     f"irho{k} = {inverse}",
@@ -255,25 +202,24 @@ class Emitter:
                 )
             elif topo.joint_kind[k] == JOINT_PRISMATIC:
                 # n = A_a Ω u, the axis' normal, and B's θ_a entry n·(−Ω p_a) + (Ω n)·d
-                if a == GROUND:
-                    self.emit(f"nx{k} = -p_uy{k}", f"ny{k} = p_ux{k}")
-                else:
-                    c, sn = f"cs{a}{tag}", f"sn{a}{tag}"
-                    self.emit(
-                        f"nx{k} = -{c} * p_uy{k} - {sn} * p_ux{k}",
-                        f"ny{k} = -{sn} * p_uy{k} + {c} * p_ux{k}",
-                        f"pta{k} = nx{k} * (pa{k}y + dy{k}) - ny{k} * (pa{k}x + dx{k})",
-                    )
+                c, sn = ("1.0", "0.0") if a == GROUND else (f"cs{a}{tag}", f"sn{a}{tag}")
+                nx, ny = self.kernel(JOINT_KERNELS, "axis_normal", [c, sn, f"p_ux{k}", f"p_uy{k}"])
+                self.emit(f"nx{k} = {nx}", f"ny{k} = {ny}")
+                if a != GROUND:
+                    self._turn(f"pta{k}", f"nx{k}", f"ny{k}", k)
                 if k in topo.slider_drivers.values():
                     # u = A_a u_0 the axis itself (Ω u = n), and B's θ_a entry of u·d
                     if a == GROUND:
                         self.emit(f"ax{k} = p_ux{k}", f"ay{k} = p_uy{k}")
                     else:
-                        self.emit(
-                            f"ax{k} = ny{k}",
-                            f"ay{k} = -nx{k}",
-                            f"ptu{k} = ax{k} * (pa{k}y + dy{k}) - ay{k} * (pa{k}x + dx{k})",
-                        )
+                        self.emit(f"ax{k} = ny{k}", f"ay{k} = -nx{k}")
+                        self._turn(f"ptu{k}", f"ax{k}", f"ay{k}", k)
+
+    def _turn(self, name: str, wx: str, wy: str, k: int) -> None:
+        """B's θ_a entry of w·d for a vector w fixed in joint k's body a."""
+        arguments = [wx, wy, f"pa{k}x", f"pa{k}y", f"dx{k}", f"dy{k}"]
+        (turn,) = self.kernel(JOINT_KERNELS, "axis_turn", arguments)
+        self.emit(f"{name} = {turn}")
 
     def rows(self) -> list[dict[int, Coef]]:
         """Non-zeros of each row of B as {column: coefficient} (after :meth:`joints`)."""
@@ -345,28 +291,27 @@ class Emitter:
                     self.emit(f"phid{r} = ddx{k}", f"phid{r + 1} = ddy{k}")
             elif topo.joint_kind[k] == JOINT_PRISMATIC:
                 a, b = topo.joint_a[k], topo.joint_b[k]
-                qa = f"{q}{3 * a + 2}" if a != GROUND else "0.0"
-                qb = f"{q}{3 * b + 2}" if b != GROUND else "0.0"
-                self.emit(
-                    f"phi{r} = nx{k} * dx{k} + ny{k} * dy{k}",
-                    f"phi{r + 1} = {qb} - {qa} - p_rel{k}",
+                qa, qb = self._angle(a, q), self._angle(b, q)
+                vectors = [f"nx{k}", f"ny{k}", f"dx{k}", f"dy{k}"]
+                offset, angle = self.kernel(
+                    JOINT_KERNELS, "prismatic_residual", [*vectors, qa, qb, f"p_rel{k}"]
                 )
+                self.emit(f"phi{r} = {offset}", f"phi{r + 1} = {angle}")
                 if v is not None:
-                    va = f"{v}{3 * a + 2}" if a != GROUND else "0.0"
-                    vb = f"{v}{3 * b + 2}" if b != GROUND else "0.0"
-                    self.emit(
-                        f"phid{r} = nx{k} * ddx{k} + ny{k} * ddy{k} + {va} * "
-                        f"(-ny{k} * dx{k} + nx{k} * dy{k})",
-                        f"phid{r + 1} = {vb} - {va}",
-                    )
+                    rates = [f"ddx{k}", f"ddy{k}", self._angle(a, v), self._angle(b, v)]
+                    phid = self.kernel(JOINT_KERNELS, "prismatic_rate", [*vectors, *rates])
+                    self.emit(f"phid{r} = {phid[0]}", f"phid{r + 1} = {phid[1]}")
             else:
                 self.emit(f"phi{r} = rho{k} - p_cl{k}")
                 if v is not None:
-                    self.emit(f"phid{r} = ex{k} * ddx{k} + ey{k} * ddy{k}")
+                    arguments = [f"ex{k}", f"ey{k}", f"ddx{k}", f"ddy{k}"]
+                    (rate,) = self.kernel(JOINT_KERNELS, "clearance_rate", arguments)
+                    self.emit(f"phid{r} = {rate}")
+        self._swing_acc: dict[int, str] = {}  # f̈ of each driver with a law, for γ
         for d in range(topo.ndriver):
             # f = f0 + rate · t (+ A (sin(Ω t + φ) − sin φ), Ω = 2π f; hs, hc, hw serve γ too)
             r = topo.driver_row[d]
-            swing, swing_rate = "", ""
+            swing, swing_rate = "0.0", "0.0"
             if topo.driver_tables and topo.driver_tables[d]:  # g(t) − g(0), ġ, g̈ (g̈ serves γ)
                 knots, coef = topo.driver_tables[d]
                 self.emit(
@@ -375,32 +320,36 @@ class Emitter:
                     f"tv1{d} = tvs{d}[1]",
                     f"tv2{d} = tvs{d}[2]",
                 )
-                start = spline_value(np.asarray(knots), np.asarray(coef), 0.0)
-                swing, swing_rate = f" - (tv{d} - {start!r})", f" + tv1{d}"
+                g0 = spline_value(np.asarray(knots), np.asarray(coef), 0.0)
+                swing, swing_rate = f"tv{d} - {g0!r}", f"tv1{d}"
+                self._swing_acc[d] = f"tv2{d}"
             if d in topo.harmonic_drivers:
                 self.emit(f"hw{d} = {TWO_PI!r} * p_frq{d}")
                 self.emit(*sincos_code(f"(hw{d} * {t} + p_pha{d})", f"hs{d}", f"hc{d}", f"h{d}"))
                 self.emit(*sincos_code(f"p_pha{d}", f"hp{d}", f"_hpc{d}", f"hp{d}"))
-                swing = f" - p_amp{d} * (hs{d} - hp{d})"
-                swing_rate = f" + p_amp{d} * hw{d} * hc{d}"
+                arguments = [f"p_amp{d}", f"hw{d}", f"hs{d}", f"hc{d}", f"hp{d}"]
+                swing, swing_rate, acc = self.kernel(JOINT_KERNELS, "harmonic_swing", arguments)
+                self._swing_acc[d] = acc
             g = topo.slider_drivers.get(d)
             if g is None:  # θ − θ0 − ω t
                 i = 3 * topo.driver_body[d] + 2
-                rate = f"(p_om{d}{swing_rate})" if swing_rate else f"p_om{d}"
-                self.emit(f"phi{r} = {q}{i} - p_th0_{d} - p_om{d} * {t}{swing}")
+                coordinate, start, speed, rate_now = f"{q}{i}", f"p_th0_{d}", f"p_om{d}", f"{v}{i}"
+            else:  # a slider driver: u·d − s0 − v t
+                a = topo.joint_a[g]
+                coordinate = f"ax{g} * dx{g} + ay{g} * dy{g}"
+                start, speed = f"p_s0_{d}", f"p_spd{d}"
                 if v is not None:
-                    self.emit(f"phid{r} = {v}{i} - {rate}")
-                continue
-            # a slider driver: u·d − s0 − v t
-            a = topo.joint_a[g]
-            rate = f"(p_spd{d}{swing_rate})" if swing_rate else f"p_spd{d}"
-            along = f"ax{g} * dx{g} + ay{g} * dy{g}"
-            self.emit(f"phi{r} = {along} - p_s0_{d} - p_spd{d} * {t}{swing}")
+                    vectors = [f"ax{g}", f"ay{g}", f"dx{g}", f"dy{g}", f"ddx{g}", f"ddy{g}"]
+                    rate_now = self.kernel(
+                        JOINT_KERNELS, "prismatic_rate", [*vectors, self._angle(a, v), "0.0"]
+                    )[0]
+            (phi,) = self.kernel(
+                JOINT_KERNELS, "driver_residual", [coordinate, start, speed, t, swing]
+            )
+            self.emit(f"phi{r} = {phi}")
             if v is not None:
-                turn = (
-                    f" + {v}{3 * a + 2} * (-ay{g} * dx{g} + ax{g} * dy{g})" if a != GROUND else ""
-                )
-                self.emit(f"phid{r} = ax{g} * ddx{g} + ay{g} * ddy{g}{turn} - {rate}")
+                (rate,) = self.kernel(JOINT_KERNELS, "driver_speed", [speed, swing_rate])
+                self.emit(f"phid{r} = {_tidy(f'{rate_now} - ({rate})')}")
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
         terms = []
@@ -417,56 +366,46 @@ class Emitter:
         for k in range(topo.njoint):
             r = topo.joint_row[k]
             a, b = topo.joint_a[k], topo.joint_b[k]
-            wa2 = f"{v}{3 * a + 2} * {v}{3 * a + 2}" if a != GROUND else None
-            wb2 = f"{v}{3 * b + 2} * {v}{3 * b + 2}" if b != GROUND else None
-            for ax in ("x", "y"):
-                parts = []
-                if wb2:
-                    parts.append(f"pb{k}{ax} * {wb2}")
-                if wa2:
-                    parts.append(f"- pa{k}{ax} * {wa2}")
-                expr = " ".join(parts) if parts else "0.0"
-                if expr.startswith("- "):
-                    expr = "-" + expr[2:]
-                self.emit(f"cq{ax}{k} = {expr}")
+            wa, wb = self._angle(a, v), self._angle(b, v)
+            points = [f"pa{k}x", f"pa{k}y", f"pb{k}x", f"pb{k}y"]
+            cqx, cqy = self.kernel(JOINT_KERNELS, "centripetal", [*points, wa, wb])
+            self.emit(f"cqx{k} = {cqx}", f"cqy{k} = {cqy}")
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"gam{r} = cqx{k}", f"gam{r + 1} = cqy{k}")
             elif topo.joint_kind[k] == JOINT_PRISMATIC:
-                # n·(p_b θ̇_b² − p_a θ̇_a²) + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ
-                expr = f"nx{k} * cqx{k} + ny{k} * cqy{k}"
-                if wa2:
-                    wa = f"{v}{3 * a + 2}"
-                    expr += (
-                        f" + {wa2} * (nx{k} * dx{k} + ny{k} * dy{k})"
-                        f" - 2.0 * {wa} * (-ny{k} * ddx{k} + nx{k} * ddy{k})"
-                    )
-                self.emit(f"gam{r} = {expr}", f"gam{r + 1} = 0.0")
+                gam = self._axis_gamma(f"nx{k}", f"ny{k}", k, wa)
+                self.emit(f"gam{r} = {gam}", f"gam{r + 1} = 0.0")
             else:
-                self.emit(
-                    f"gam{r} = ex{k} * cqx{k} + ey{k} * cqy{k} - (ddx{k} * ddx{k} + ddy{k} * ddy{k}"
-                    f" - phid{r} * phid{r}) * irho{k}"
+                arguments = [f"ex{k}", f"ey{k}", f"cqx{k}", f"cqy{k}", f"ddx{k}", f"ddy{k}"]
+                (gam,) = self.kernel(
+                    JOINT_KERNELS, "clearance_gamma", [*arguments, f"phid{r}", f"irho{k}"]
                 )
+                self.emit(f"gam{r} = {gam}")
         for d in range(topo.ndriver):
             r = topo.driver_row[d]
             terms = []
             g = topo.slider_drivers.get(d)
             if g is not None:  # −(Ḃ q̇) of u·d, as a prismatic offset row with u for n
-                a = topo.joint_a[g]
-                terms.append(f"ax{g} * cqx{g} + ay{g} * cqy{g}")
-                if a != GROUND:
-                    wa, wa2 = f"{v}{3 * a + 2}", f"{v}{3 * a + 2} * {v}{3 * a + 2}"
-                    terms.append(
-                        f"{wa2} * (ax{g} * dx{g} + ay{g} * dy{g})"
-                        f" - 2.0 * {wa} * (-ay{g} * ddx{g} + ax{g} * ddy{g})"
-                    )
-            if d in topo.harmonic_drivers:  # −Φ_tt = f̈ = −A Ω² sin(Ω t + φ)
-                terms.append(f"-(p_amp{d} * hw{d} * hw{d} * hs{d})")
-            if topo.driver_tables and topo.driver_tables[d]:  # f̈ of the table's spline
-                terms.append(f"tv2{d}")
-            self.emit(f"gam{r} = " + (" + ".join(terms) if terms else "0.0"))
+                terms.append(
+                    self._axis_gamma(f"ax{g}", f"ay{g}", g, self._angle(topo.joint_a[g], v))
+                )
+            if d in self._swing_acc:  # −Φ_tt = f̈ of the law
+                terms.append(self._swing_acc[d])
+            self.emit(f"gam{r} = " + _tidy(" + ".join(terms) if terms else "0.0"))
         if baumgarte:
             for r in range(topo.ncon):
                 self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")
+
+    def _axis_gamma(self, wx: str, wy: str, k: int, wa: str) -> str:
+        """γ of the row w·d of joint k (a prismatic offset row, w = n, or its slider
+        driver's, w = u)."""
+        arguments = [wx, wy, f"cqx{k}", f"cqy{k}", f"dx{k}", f"dy{k}", f"ddx{k}", f"ddy{k}", wa]
+        return self.kernel(JOINT_KERNELS, "prismatic_gamma", arguments)[0]
+
+    @staticmethod
+    def _angle(body: int, q: str) -> str:
+        """The angle (or angular speed, q = "v") of ``body``: the literal 0.0 for the ground."""
+        return f"{q}{3 * body + 2}" if body != GROUND else "0.0"
 
     def loaded_bodies(self) -> set[int]:
         """Bodies carrying a load or a spring (the others feel gravity only)."""
@@ -487,6 +426,7 @@ class Emitter:
             if b == GROUND:
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", q, tag)
+            factor = "1.0"
             if f in topo.varying_loads:
                 if f in topo.harmonic_loads:
                     arg = f"({TWO_PI!r} * p_ffr{f} * {t} + p_fph{f})"
@@ -494,17 +434,10 @@ class Emitter:
                 else:  # a table's spline
                     n = len(topo.load_tables[f][0])
                     self.emit(f"lfs{f} = spline_at(FK{f}, FC{f}, {n}, {t})", f"lf{f} = lfs{f}[0]")
-                self.emit(
-                    f"F{3 * b} += lf{f} * p_fx{f}",
-                    f"F{3 * b + 1} += lf{f} * p_fy{f}",
-                    f"F{3 * b + 2} += lf{f} * (fp{f}x * p_fy{f} - fp{f}y * p_fx{f} + p_tq{f})",
-                )
-                continue
-            self.emit(
-                f"F{3 * b} += p_fx{f}",
-                f"F{3 * b + 1} += p_fy{f}",
-                f"F{3 * b + 2} += fp{f}x * p_fy{f} - fp{f}y * p_fx{f} + p_tq{f}",
-            )
+                factor = f"lf{f}"
+            arguments = [factor, f"p_fx{f}", f"p_fy{f}", f"fp{f}x", f"fp{f}y", f"p_tq{f}"]
+            wrench = self.kernel(FORCE_KERNELS, "load_wrench", arguments)
+            self.emit(*(f"F{3 * b + i} += {w}" for i, w in enumerate(wrench)))
         for s in range(len(topo.spring_a)):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}", q, tag)
@@ -516,138 +449,20 @@ class Emitter:
                 f"uy{s} = sb{s}Y - sa{s}Y",
                 f"dux{s} = sb{s}vx - sa{s}vx",
                 f"duy{s} = sb{s}vy - sa{s}vy",
-                f"len{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s})",
-                # iso: rest length 0, an isotropic spring −k u − c u̇ (as forces.py).
-                f"iso{s} = (p_l0{s} == 0.0) * 1.0",
-                f"ilen{s} = (1.0 - iso{s}) / (len{s} + iso{s})",
-                f"snx{s} = ux{s} * ilen{s}",
-                f"sny{s} = uy{s} * ilen{s}",
-                f"ten{s} = p_k{s} * (len{s} - p_l0{s})"
-                f" + p_cd{s} * (snx{s} * dux{s} + sny{s} * duy{s})",
-                f"sfx{s} = iso{s} * (-p_k{s} * ux{s} - p_cd{s} * dux{s}) - ten{s} * snx{s}",
-                f"sfy{s} = iso{s} * (-p_k{s} * uy{s} - p_cd{s} * duy{s}) - ten{s} * sny{s}",
             )
+            arguments = [f"ux{s}", f"uy{s}", f"dux{s}", f"duy{s}", f"p_k{s}", f"p_l0{s}"]
+            fx, fy = self.kernel(FORCE_KERNELS, "spring_force", [*arguments, f"p_cd{s}"], f"_s{s}")
+            self.emit(f"sfx{s} = {fx}", f"sfy{s} = {fy}")
             for body, sign, pt in ((b, "+", f"sb{s}"), (a, "-", f"sa{s}")):
                 if body == GROUND:
                     continue
+                arguments = [f"{pt}x", f"{pt}y", f"sfx{s}", f"sfy{s}"]
+                (torque,) = self.kernel(FORCE_KERNELS, "moment", arguments)
                 self.emit(
                     f"F{3 * body} {sign}= sfx{s}",
                     f"F{3 * body + 1} {sign}= sfy{s}",
-                    f"F{3 * body + 2} {sign}= {pt}x * sfy{s} - {pt}y * sfx{s}",
+                    f"F{3 * body + 2} {sign}= {torque}",
                 )
-
-    # -- Schur complement and its sparse LDLᵀ ---------------------------------------------
-    def _minv(self, col: int) -> str:
-        return f"p_{self._minv_slot(col)}"
-
-    def _minv_slot(self, col: int) -> str:
-        """Parameter slot of M⁻¹ at coordinate ``col`` (1/m or 1/J of its body)."""
-        b, k = divmod(col, 3)
-        return f"iJ{b}" if k == 2 else f"im{b}"
-
-    def schur_factor(self) -> None:
-        """``Wt{r}_{c}`` = (M⁻¹Bᵀ)ᵀ, S = B M⁻¹ Bᵀ and its LDLᵀ; ``sing`` counts dropped pivots.
-
-        A pivot ``d_j ≤ tau · S_jj`` is dropped (its inverse set to 0: the row is treated as
-        dependent on the previous ones, λ_j = 0) and counted in ``sing``; integrators either
-        flag the sample SINGULAR or, on the robust path, carry on with the basic solution.
-        """
-        rows = self.rows()
-        n = len(rows)
-        for r, row in enumerate(rows):
-            for col, val in row.items():
-                self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
-        pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
-        order = _row_order(pattern)
-        self.order = order
-        # Entries of S in the permuted numbering (i, j: positions), lower part.
-        pos = {r: i for i, r in enumerate(order)}
-        S: dict[tuple[int, int], str] = {}
-        # A row whose joint is under the contact law (fm = 1) is replaced by λ_r = F_n:
-        # its S row and column become the unit vector (so the factors keep their pattern)
-        # and the coupling S_jr F_n moves to the right-hand side (:meth:`acceleration`). In
-        # link mode (fm = 0) the selects give the values of the link alone.
-        self.coupling: dict[tuple[int, int], str] = {}
-        for ri in range(n):
-            for rj in pattern[ri]:
-                i, j = pos[ri], pos[rj]
-                if j > i:
-                    continue
-                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
-                laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
-                if not laws:
-                    self.emit(f"S{i}_{j} = {_sum(terms)}")
-                else:
-                    self.emit(f"Sx{i}_{j} = {_sum(terms)}")
-                    self.coupling[ri, rj] = self.coupling[rj, ri] = f"Sx{i}_{j}"
-                    held = " + ".join(laws) + " == 0.0"
-                    unit = "1.0" if i == j else "0.0"
-                    self.emit(f"S{i}_{j} = Sx{i}_{j} if {held} else {unit}")
-                S[i, j] = f"S{i}_{j}"
-        # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
-        L: set[tuple[int, int]] = set()
-        lower: list[set[int]] = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
-        for j in range(n):
-            for i in range(j + 1, n):
-                if (i, j) in S or (lower[i] & lower[j]):
-                    L.add((i, j))
-                    lower[i].add(j)
-
-        for j in range(n):
-            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
-            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
-            self.emit(
-                f"D{j} = {dj}",
-                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
-                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
-            )
-            for i in range(j + 1, n):
-                if (i, j) not in L:
-                    continue
-                common = sorted(lower[i] & lower[j])
-                sij = S.get((i, j), "0.0")
-                prods = [f"L{i}_{k} * E{j}_{k}" for k in common]
-                num = sij + ("" if not prods else " - (" + " + ".join(prods) + ")")
-                self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
-            # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
-        self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
-        self._L = L
-        self._lower = lower
-
-    def schur_solve(self, rhs: str, out: str) -> None:
-        """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
-        n = len(self.order)
-        order = self.order
-        for i in range(n):
-            terms = [f"L{i}_{k} * y{out}{k}" for k in sorted(self._lower[i])]
-            expr = f"{rhs}{order[i]}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
-            self.emit(f"y{out}{i} = {expr}")
-        upper: list[list[int]] = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
-        for i, k in self._L:
-            upper[k].append(i)
-        for k in reversed(range(n)):
-            terms = [f"L{i}_{k} * x{out}{i}" for i in sorted(upper[k])]
-            expr = f"y{out}{k} * Di{k}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
-            self.emit(f"x{out}{k} = {expr}")
-        for i in range(n):
-            self.emit(f"{out}{order[i]} = x{out}{i}")
-
-    def apply_wt(self, x: str, out: str, base: dict[int, Coef] | None) -> None:
-        """``{out}{c}`` = base_c − M⁻¹_c Σ_r B_rc x_r  (base None: 0).
-
-        Bᵀx first, then one product by M⁻¹ (loaded again): the entries of B (point
-        coordinates, ±1) are fewer values to keep across the Schur solve than those of M⁻¹Bᵀ,
-        and ±1 costs no product.
-        """
-        rows = self.rows()
-        for c in range(self.topo.ndof):
-            terms = [_mul(row[c], f"{x}{r}") for r, row in enumerate(rows) if c in row]
-            head = base[c] if base else 0.0
-            if not terms:
-                self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
-                continue
-            total = f"{self._reload(self._minv_slot(c))} * ({_sum(terms)})"
-            self.emit(f"{out}{c} = -{total}" if head == 0.0 else f"{out}{c} = {head} - {total}")
 
     # -- whole blocks ----------------------------------------------------------------------
     def acceleration(self, t: str = "t", baumgarte: bool = True) -> None:
@@ -701,10 +516,18 @@ class Emitter:
         self.apply_wt("lam", "qdd", a0)
 
     def inline(self, function: str, arguments: list[str], k: int) -> list[str]:
-        """Emit the text of ``mcchain.kernels.contact.<function>(*arguments)`` for joint ``k``
-        (:func:`mcchain.codegen.inline.inline`: the kernels' own definition, its locals
-        suffixed with ``k``) and return the expressions of its results."""
-        statements, results = inline(CONTACT_KERNELS, function, arguments, str(k))
+        """:meth:`kernel` of ``mcchain.kernels.contact.<function>`` for joint ``k``."""
+        return self.kernel(CONTACT_KERNELS, function, arguments, str(k))
+
+    def kernel(
+        self, module: str, function: str, arguments: list[str], suffix: str = ""
+    ) -> list[str]:
+        """Emit the text of ``module.function(*arguments)`` (:func:`mcchain.codegen.inline.
+        inline`: the kernels' own definition, its locals suffixed with ``suffix``, needed
+        only by a function with locals) and return the expressions of its results."""
+        statements, results = inline(module, function, arguments, suffix)
+        if statements and not suffix:
+            raise TypeError(f"{module}.{function} has locals: give a suffix")
         self.emit(*statements)
         return results
 
@@ -828,25 +651,28 @@ class Emitter:
         self.emit("energy = 0.0")
         for b in range(topo.nbody):
             x, y, th = 3 * b, 3 * b + 1, 3 * b + 2
-            self.emit(
-                f"energy += 0.5 * (p_m{b} * (v{x} * v{x} + v{y} * v{y}) + p_J{b} * v{th} * v{th})",
-                f"energy -= p_m{b} * (p_gx * q{x} + p_gy * q{y})",
+            rates = [f"v{x}", f"v{y}", f"v{th}"]
+            (kinetic,) = self.kernel(
+                FORCE_KERNELS, "body_kinetic_energy", [f"p_m{b}", f"p_J{b}", *rates]
             )
+            arguments = [f"p_m{b}", "p_gx", "p_gy", f"q{x}", f"q{y}"]
+            (potential,) = self.kernel(FORCE_KERNELS, "gravity_potential", arguments)
+            self.emit(f"energy += {kinetic}", f"energy -= {potential}")
         for f, b in enumerate(topo.force_body):
             if b == GROUND or f in topo.varying_loads:  # a load varying in time: no potential
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}")
-            self.emit(f"energy -= p_fx{f} * fp{f}X + p_fy{f} * fp{f}Y + p_tq{f} * q{3 * b + 2}")
+            arguments = [f"p_fx{f}", f"p_fy{f}", f"fp{f}X", f"fp{f}Y", f"p_tq{f}", f"q{3 * b + 2}"]
+            (potential,) = self.kernel(FORCE_KERNELS, "load_potential", arguments)
+            self.emit(f"energy -= {potential}")
         for s in range(len(topo.spring_a)):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}")
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}")
-            self.emit(
-                f"ux{s} = sb{s}X - sa{s}X",
-                f"uy{s} = sb{s}Y - sa{s}Y",
-                f"st{s} = math.sqrt(ux{s} * ux{s} + uy{s} * uy{s}) - p_l0{s}",
-                f"energy += 0.5 * p_k{s} * st{s} * st{s}",
-            )
+            self.emit(f"ux{s} = sb{s}X - sa{s}X", f"uy{s} = sb{s}Y - sa{s}Y")
+            arguments = [f"ux{s}", f"uy{s}", f"p_k{s}", f"p_l0{s}"]
+            (elastic,) = self.kernel(FORCE_KERNELS, "spring_energy", arguments, f"_s{s}")
+            self.emit(f"energy += {elastic}")
         # Contact joints: δ, the mode (0 link, 1 contact, 2 free; seated, vi < 0, is in
         # contact whichever the sign of δ) and the elastic energy K δ^(m+1) / (m+1).
         for k in self.contact_row:

@@ -14,6 +14,13 @@ assignments to plain names (one name or a tuple of names from an inlined call), 
 ``return`` of one expression or a tuple; the only branching is a leading chain of
 ``if test: return value`` (a table of cases, written as nested selects), or ``x if c else y``
 inside an expression. Anything else is refused with :class:`TypeError` at generation time.
+
+Literal arguments specialise the text (:func:`_fold_binary`): a ground body's θ̇ = 0.0 or
+(cos, sin) = (1.0, 0.0), a constant load's factor 1.0, a ``guarded`` flag. Operations on
+literals only are evaluated, a case whose test is a literal keeps its one branch, and
+x·1 → x, x·(−1) → −x, x/1 → x, x ± 0 → x, 0 − x → −x (exact), x·0 → 0, 0/x → 0 (for finite
+x). The folded text gives the kernel's values for finite operands; only the sign of a zero
+result may differ (−0.0 + 0.0 is +0.0 in the kernel, −0.0 folded), which no comparison sees.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ import ast
 import functools
 import importlib
 import importlib.util
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -112,6 +120,8 @@ class _Inliner:
             if isinstance(stmt, ast.If) and self._is_case(stmt):
                 # A table of cases: ``if c: return a`` … then the rest → a if c else (rest).
                 test = self.expr(stmt.test)
+                if isinstance(test, ast.Constant):  # decided by literal arguments: one case
+                    return self.block((stmt.body if test.value else stmt.orelse) + body[i + 1 :])
                 chosen = self.block(stmt.body)
                 other = self.block(stmt.orelse + body[i + 1 :])
                 if len(chosen) != len(other):
@@ -189,18 +199,106 @@ class _Inliner:
                 raise TypeError(f"{self.where(node)}: a call of several values in an expression")
             return results[0]
         if isinstance(node, ast.BinOp):
-            return ast.BinOp(self.expr(node.left), node.op, self.expr(node.right))
+            return _fold_binary(self.expr(node.left), node.op, self.expr(node.right))
         if isinstance(node, ast.UnaryOp):
-            return ast.UnaryOp(node.op, self.expr(node.operand))
+            operand = self.expr(node.operand)
+            if isinstance(node.op, ast.USub):
+                return _negate(operand)
+            return _fold_constant(ast.UnaryOp(node.op, operand))
         if isinstance(node, ast.Compare):
-            return ast.Compare(
-                self.expr(node.left), node.ops, [self.expr(c) for c in node.comparators]
+            return _fold_constant(
+                ast.Compare(
+                    self.expr(node.left), node.ops, [self.expr(c) for c in node.comparators]
+                )
             )
         if isinstance(node, ast.BoolOp):
-            return ast.BoolOp(node.op, [self.expr(v) for v in node.values])
+            return _fold_constant(ast.BoolOp(node.op, [self.expr(v) for v in node.values]))
         if isinstance(node, ast.IfExp):
-            return ast.IfExp(self.expr(node.test), self.expr(node.body), self.expr(node.orelse))
+            test = self.expr(node.test)
+            if isinstance(test, ast.Constant):  # a case fixed by the lane's structure
+                return self.expr(node.body if test.value else node.orelse)
+            return ast.IfExp(test, self.expr(node.body), self.expr(node.orelse))
         raise TypeError(f"{self.where(node)}: {type(node).__name__} is not lane text")
+
+
+def _is_number(node: ast.expr, value: float) -> bool:
+    return (
+        isinstance(node, ast.Constant)
+        and type(node.value) is float
+        and node.value == value
+        and math.copysign(1.0, node.value) == math.copysign(1.0, value)
+    )
+
+
+def _is_truth(node: ast.expr) -> bool:
+    """A comparison or a logical operation: a bool, not a float."""
+    return isinstance(node, (ast.Compare, ast.BoolOp)) or (
+        isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not)
+    )
+
+
+def _negate(node: ast.expr) -> ast.expr:
+    """−node, the sign moved onto the leftmost factor of a product or quotient (exact:
+    (−a) b = −(a b) in IEEE arithmetic), so ``0.0 - a * b`` reads ``-a * b``."""
+    if isinstance(node, ast.Constant) and type(node.value) is float:
+        return ast.Constant(-node.value)
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        return node.operand
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Mult, ast.Div)):
+        return ast.BinOp(_negate(node.left), node.op, node.right)
+    return ast.UnaryOp(ast.USub(), node)
+
+
+def _fold_constant(node: ast.expr) -> ast.expr:
+    """An operation on literals only, evaluated (IEEE double, as the kernels round it);
+    anything else (or a division by zero) unchanged."""
+    if all(isinstance(n, (ast.Constant, ast.operator, ast.unaryop, ast.cmpop, ast.boolop,
+                          ast.expr_context)) or n is node for n in ast.walk(node)):  # fmt: skip
+        try:
+            tree = ast.fix_missing_locations(ast.Expression(node))
+            value = eval(compile(tree, "<fold>", "eval"), {"__builtins__": {}})
+        except ArithmeticError:
+            return node
+        return ast.Constant(float(value) if type(value) is int else value)
+    return node
+
+
+def _fold_binary(left: ast.expr, op: ast.operator, right: ast.expr) -> ast.expr:
+    """left op right with the literal 0.0 and ±1.0 of a lane's structure folded away (a
+    ground body's zero angular speed, a constant load's factor 1): x·1 → x, x·(−1) → −x,
+    x/1 → x, x ± 0 → x and 0 − x → −x are exact; x·0 → 0 and 0/x → 0 hold for finite x.
+    Folding may change the sign of a zero result (−0.0 + 0.0 is +0.0, −0.0 · 0.0 is −0.0),
+    never a non-zero value: the lane's values equal the kernel's for finite operands,
+    which compare equal either way."""
+    node = _fold_constant(ast.BinOp(left, op, right))
+    if isinstance(node, ast.Constant) or _is_truth(left) or _is_truth(right):
+        return node  # (a truth value times 1.0 is how it becomes a float: kept)
+    zero = ast.Constant(0.0)
+    if isinstance(op, ast.Mult):
+        if _is_number(left, 0.0) or _is_number(right, 0.0) or _is_number(left, -0.0) or \
+                _is_number(right, -0.0):  # fmt: skip
+            return zero
+        for one, other in ((left, right), (right, left)):
+            if _is_number(one, 1.0):
+                return other
+            if _is_number(one, -1.0):
+                return _negate(other)
+    elif isinstance(op, ast.Div):
+        if _is_number(right, 1.0):
+            return left
+        if _is_number(left, 0.0):
+            return zero
+    elif isinstance(op, ast.Add):
+        if _is_number(right, 0.0) or _is_number(right, -0.0):
+            return left
+        if _is_number(left, 0.0) or _is_number(left, -0.0):
+            return right
+    elif isinstance(op, ast.Sub):
+        if _is_number(right, 0.0) or _is_number(right, -0.0):
+            return left
+        if _is_number(left, 0.0) or _is_number(left, -0.0):
+            return _negate(right)
+    return node
 
 
 def inline(

@@ -19,10 +19,70 @@ from mcchain.kernels.joints import (
     add_pair_outer,
     add_pair_product,
     body_pose,
-    body_velocity,
+    joint_separation_rate,
     rotate,
 )
 from mcchain.kernels.tables import spline_at
+
+# ---------------------------------------------------------------------------------------------
+# Straight-line scalar laws: the one definition of each force's arithmetic. The loop kernels
+# below call them; the lane generator inlines their text (mcchain.codegen.inline).
+
+
+@njit(**JIT)
+def moment(px, py, fx, fy):
+    """p × f: the moment of force f (N) applied at the rotated point p (m), N m."""
+    return px * fy - py * fx
+
+
+@njit(**JIT)
+def load_wrench(factor, fx, fy, px, py, torque):
+    """A load's generalised force on its body, times its time factor: (factor f,
+    factor (p × f + τ)), N and N m."""
+    return factor * fx, factor * fy, factor * (moment(px, py, fx, fy) + torque)
+
+
+@njit(**JIT)
+def spring_force(ux, uy, dux, duy, stiffness, rest, damping):
+    """Force (fx, fy), N, of a linear spring-damper on its b end, u = b − a its vector
+    (m) and u̇ its rate (m/s): −(k (L − L₀) + c e·u̇) e, e = u/L; with L₀ = 0 an isotropic
+    spring −k u − c u̇, defined also at L = 0. Branch-free (the isotropic flag is a 0/1
+    factor), so that the lanes vectorise."""
+    length = math.sqrt(ux * ux + uy * uy)
+    iso = (rest == 0.0) * 1.0
+    ilen = (1.0 - iso) / (length + iso)
+    ex = ux * ilen
+    ey = uy * ilen
+    tension = stiffness * (length - rest) + damping * (ex * dux + ey * duy)
+    fx = iso * (-stiffness * ux - damping * dux) - tension * ex
+    fy = iso * (-stiffness * uy - damping * duy) - tension * ey
+    return fx, fy
+
+
+@njit(**JIT)
+def spring_energy(ux, uy, stiffness, rest):
+    """½ k (L − L₀)², J, of a spring of vector u (m)."""
+    stretch = math.sqrt(ux * ux + uy * uy) - rest
+    return 0.5 * stiffness * stretch * stretch
+
+
+@njit(**JIT)
+def load_potential(fx, fy, x, y, torque, theta):
+    """f·(r + p) + τ θ of a constant load at the absolute point (x, y) of its body (at
+    angle θ), J: the potential energy is its negative."""
+    return fx * x + fy * y + torque * theta
+
+
+@njit(**JIT)
+def gravity_potential(mass, gx, gy, x, y):
+    """m g·r, J: a body's potential energy in gravity is its negative."""
+    return mass * (gx * x + gy * y)
+
+
+@njit(**JIT)
+def body_kinetic_energy(mass, inertia, vx, vy, w):
+    """½ (m |ṙ|² + J θ̇²), J."""
+    return 0.5 * (mass * (vx * vx + vy * vy) + inertia * w * w)
 
 
 @njit(**JIT)
@@ -74,7 +134,7 @@ def _add_generalised(F_out, body, sign, fx, fy, px, py):
         return
     F_out[3 * body] += sign * fx
     F_out[3 * body + 1] += sign * fy
-    F_out[3 * body + 2] += sign * (px * fy - py * fx)
+    F_out[3 * body + 2] += sign * moment(px, py, fx, fy)
 
 
 @njit(**JIT)
@@ -98,37 +158,22 @@ def applied_forces(km, s, q, v, t, F_out):
         if b < 0:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
-        factor = load_factor(km, s, k, t)
-        _add_generalised(F_out, b, factor, fx, fy, px, py)
-        F_out[3 * b + 2] += factor * km.force_torque[s % km.force_torque.shape[0], k]
+        torque = km.force_torque[s % km.force_torque.shape[0], k]
+        wx, wy, wt = load_wrench(load_factor(km, s, k, t), fx, fy, px, py, torque)
+        F_out[3 * b] += wx
+        F_out[3 * b + 1] += wy
+        F_out[3 * b + 2] += wt
     for k in range(km.spring_body_a.shape[0]):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
         pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
-        dux, duy = spring_rate(v, a, b, pax, pay, pbx, pby)
+        dux, duy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
         stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
         rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
         damping = km.spring_damping[s % km.spring_damping.shape[0], k]
-        if rest == 0.0:
-            fx = -stiffness * ux - damping * dux
-            fy = -stiffness * uy - damping * duy
-        else:
-            length = hypot(ux, uy)
-            ex = ux / length
-            ey = uy / length
-            tension = stiffness * (length - rest) + damping * (ex * dux + ey * duy)
-            fx = -tension * ex
-            fy = -tension * ey
+        fx, fy = spring_force(ux, uy, dux, duy, stiffness, rest, damping)
         _add_generalised(F_out, b, 1.0, fx, fy, pbx, pby)
         _add_generalised(F_out, a, -1.0, fx, fy, pax, pay)
-
-
-@njit(**JIT)
-def spring_rate(v, a, b, pax, pay, pbx, pby):
-    """u̇ = ṙ_b + ω_b Ω p_b − ṙ_a − ω_a Ω p_a: the rate of a spring's vector, m/s."""
-    vax, vay, wa = body_velocity(v, a)
-    vbx, vby, wb = body_velocity(v, b)
-    return vbx - pby * wb - vax + pay * wa, vby + pbx * wb - vay - pax * wa
 
 
 @njit(**JIT)
@@ -148,7 +193,7 @@ def damper_stiffness_add(km, s, q, v, K_out):
         a = km.spring_body_a[k]
         b = km.spring_body_b[k]
         pax, pay, pbx, pby, ux, uy = spring_vectors(km, s, q, k)
-        dux, duy = spring_rate(v, a, b, pax, pay, pbx, pby)
+        dux, duy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
         isotropic = km.spring_rest_length[s % km.spring_rest_length.shape[0], k] == 0.0
         ex, ey = 1.0, 0.0
         if isotropic:
@@ -254,22 +299,22 @@ def potential_energy(km, s, q):
     energy = 0.0
     ig = s % km.gravity.shape[0]
     im = s % km.body_mass.shape[0]
+    gx, gy = km.gravity[ig, 0], km.gravity[ig, 1]
     for b in range(km.body_mass.shape[1]):
-        energy -= km.body_mass[im, b] * (
-            km.gravity[ig, 0] * q[3 * b] + km.gravity[ig, 1] * q[3 * b + 1]
-        )
+        energy -= gravity_potential(km.body_mass[im, b], gx, gy, q[3 * b], q[3 * b + 1])
     for k in range(km.force_body.shape[0]):
         b = km.force_body[k]
         if b < 0 or km.force_law[k] != LOAD_CONSTANT:
             continue
         px, py, fx, fy = force_lever(km, s, q, k)
-        energy -= fx * (q[3 * b] + px) + fy * (q[3 * b + 1] + py)
-        energy -= km.force_torque[s % km.force_torque.shape[0], k] * q[3 * b + 2]
+        torque = km.force_torque[s % km.force_torque.shape[0], k]
+        x, y = q[3 * b] + px, q[3 * b + 1] + py
+        energy -= load_potential(fx, fy, x, y, torque, q[3 * b + 2])
     for k in range(km.spring_body_a.shape[0]):
         _, _, _, _, ux, uy = spring_vectors(km, s, q, k)
         stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
-        stretch = hypot(ux, uy) - km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
-        energy += 0.5 * stiffness * stretch * stretch
+        rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
+        energy += spring_energy(ux, uy, stiffness, rest)
     return energy
 
 
@@ -280,10 +325,8 @@ def kinetic_energy(km, s, v):
     im = s % km.body_mass.shape[0]
     ij = s % km.body_inertia.shape[0]
     for b in range(km.body_mass.shape[1]):
-        vx = v[3 * b]
-        vy = v[3 * b + 1]
-        w = v[3 * b + 2]
-        energy += 0.5 * (km.body_mass[im, b] * (vx * vx + vy * vy) + km.body_inertia[ij, b] * w * w)
+        mass, inertia = km.body_mass[im, b], km.body_inertia[ij, b]
+        energy += body_kinetic_energy(mass, inertia, v[3 * b], v[3 * b + 1], v[3 * b + 2])
     return energy
 
 

@@ -36,6 +36,104 @@ from mcchain.kernels.tables import spline_at
 
 TWO_PI = 2.0 * math.pi
 
+# ---------------------------------------------------------------------------------------------
+# Straight-line scalar laws: the one definition of each joint's, driver's and point's
+# arithmetic. The loop kernels below call them; the lane generator inlines their text
+# (mcchain.codegen.inline: same operations in the same order), with literal 0.0 / 1.0 for a
+# ground body's terms, which it folds away.
+
+
+@njit(**JIT)
+def rotate(c, sn, px, py):
+    """A(θ) p for (cos θ, sin θ) = (c, sn)."""
+    return c * px - sn * py, sn * px + c * py
+
+
+@njit(**JIT)
+def point_velocity(vx, vy, w, px, py):
+    """Velocity ṙ + θ̇ Ω p of the rotated point p of a body moving with (ẋ, ẏ, θ̇), m/s."""
+    return vx - w * py, vy + w * px
+
+
+@njit(**JIT)
+def centripetal(pax, pay, pbx, pby, wa, wb):
+    """g = p_b θ̇_b² − p_a θ̇_a²: the part of d̈ that B q̈ leaves out (d̈ = ∂d/∂q q̈ − g), m/s²."""
+    return pbx * wb * wb - pax * wa * wa, pby * wb * wb - pay * wa * wa
+
+
+@njit(**JIT)
+def inverse_distance(rho, guarded):
+    """1/|d| of a clearance joint; with ``guarded`` = 1 (a journal that may sit at its
+    bearing centre: under a contact law, and in the loop kernels) 0 at |d| = 0, where there
+    is no normal and none is needed."""
+    if guarded == 1.0:
+        return 1.0 / rho if rho > 0.0 else 0.0
+    return 1.0 / rho
+
+
+@njit(**JIT)
+def clearance_rate(ex, ey, ddx, ddy):
+    """Φ̇ = e·ḋ of a clearance row |d| − c, m/s."""
+    return ex * ddx + ey * ddy
+
+
+@njit(**JIT)
+def clearance_gamma(ex, ey, gx, gy, ddx, ddy, along, irho):
+    """γ of a clearance row |d| − c: e·g − (|ḋ|² − (e·ḋ)²)/|d|, with e = d/|d|, ``along``
+    = e·ḋ and ``irho`` = 1/|d| (0 where there is no normal: γ = 0)."""
+    return ex * gx + ey * gy - (ddx * ddx + ddy * ddy - along * along) * irho
+
+
+@njit(**JIT)
+def axis_normal(c, sn, ux, uy):
+    """n = A_a Ω u_0 of a prismatic joint's unit axis u_0 fixed in body a at angle θ_a
+    (c, sn = cos θ_a, sin θ_a): the world normal to the axis."""
+    return rotate(c, sn, -uy, ux)
+
+
+@njit(**JIT)
+def axis_turn(wx, wy, pax, pay, dx, dy):
+    """B's θ_a entry of w·d for a vector w fixed in body a: w·(−Ω p_a) + (Ω w)·d."""
+    return wx * (pay + dy) - wy * (pax + dx)
+
+
+@njit(**JIT)
+def prismatic_residual(nx, ny, dx, dy, tha, thb, rel):
+    """Φ of a prismatic joint: (n·d, θ_b − θ_a − θ_0), m and rad."""
+    return nx * dx + ny * dy, thb - tha - rel
+
+
+@njit(**JIT)
+def prismatic_rate(nx, ny, dx, dy, ddx, ddy, wa, wb):
+    """Φ̇ of a prismatic joint: (n·ḋ + θ̇_a (Ω n)·d, θ̇_b − θ̇_a), m/s and rad/s (ṅ = θ̇_a Ω n)."""
+    return nx * ddx + ny * ddy + wa * (-ny * dx + nx * dy), wb - wa
+
+
+@njit(**JIT)
+def prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa):
+    """γ of a prismatic joint's offset row n·d: n·(p_b θ̇_b² − p_a θ̇_a²) (``gx``, ``gy``)
+    + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ, from n̈ = θ̈_a Ω n − θ̇_a² n and ṅ = θ̇_a Ω n."""
+    return nx * gx + ny * gy + wa * wa * (nx * dx + ny * dy) - 2.0 * wa * (-ny * ddx + nx * ddy)
+
+
+@njit(**JIT)
+def harmonic_swing(amp, w, sin_arg, cos_arg, sin_phase):
+    """A harmonic driver law's swing and its derivatives, from sin/cos of Ωt + φ and sin φ:
+    (A (sin(Ωt + φ) − sin φ), A Ω cos(Ωt + φ), −A Ω² sin(Ωt + φ)), Ω = ``w`` in rad/s."""
+    return amp * (sin_arg - sin_phase), amp * w * cos_arg, -amp * w * w * sin_arg
+
+
+@njit(**JIT)
+def driver_residual(coordinate, start, rate, t, swing):
+    """Φ = x − f(t), f = f(0) + rate · t + swing: θ_j (rad) or a slider's u·d (m)."""
+    return coordinate - start - rate * t - swing
+
+
+@njit(**JIT)
+def driver_speed(rate, swing_rate):
+    """ḟ = rate + the swing's rate (rad/s or m/s): ν = −Φ_t of the driver's row."""
+    return rate + swing_rate
+
 
 @njit(**JIT)
 def driver_swing(km, s, j, t):
@@ -55,8 +153,7 @@ def driver_swing(km, s, j, t):
     w = TWO_PI * km.driver_frequency[s % km.driver_frequency.shape[0], j]
     phase = km.driver_phase[s % km.driver_phase.shape[0], j]
     arg = w * t + phase
-    sn = math.sin(arg)
-    return amp * (sn - math.sin(phase)), amp * w * math.cos(arg), -amp * w * w * sn
+    return harmonic_swing(amp, w, math.sin(arg), math.cos(arg), math.sin(phase))
 
 
 @njit(**JIT)
@@ -78,7 +175,7 @@ def driver_start(km, s, j):
 def driver_rate(km, s, j, t):
     """ḟ of driver ``j`` at ``t`` (rad/s, or m/s for a slider driver): the steady rate plus
     the swing's."""
-    return driver_start(km, s, j)[1] + driver_swing(km, s, j, t)[1]
+    return driver_speed(driver_start(km, s, j)[1], driver_swing(km, s, j, t)[1])
 
 
 @njit(**JIT)
@@ -117,12 +214,6 @@ def body_velocity(v, b):
 
 
 @njit(**JIT)
-def rotate(c, sn, px, py):
-    """A(θ) p for (cos θ, sin θ) = (c, sn)."""
-    return c * px - sn * py, sn * px + c * py
-
-
-@njit(**JIT)
 def joint_vectors(km, s, q, k):
     """Rotated points p_a, p_b and separation d of joint ``k``.
 
@@ -137,6 +228,9 @@ def joint_vectors(km, s, q, k):
     xb, yb, cb, sb = body_pose(q, b)
     pax, pay = rotate(ca, sa, km.joint_point_a[ia, k, 0], km.joint_point_a[ia, k, 1])
     pbx, pby = rotate(cb, sb, km.joint_point_b[ib, k, 0], km.joint_point_b[ib, k, 1])
+    # (r_b + p_b) − (r_a + p_a) rounds as the lanes' pbX − paX; this order is the kernels'
+    # own (kept: the contact switch of the loop kernels reads it, and a last-place change
+    # there moves a chaotic impact sequence)
     dx = xb + pbx - xa - pax
     dy = yb + pby - ya - pay
     return pax, pay, pbx, pby, dx, dy
@@ -147,7 +241,7 @@ def prismatic_normal(km, s, q, k):
     """World normal n = A_a Ω u of prismatic joint ``k``'s unit axis u (fixed in body a)."""
     i = s % km.joint_axis.shape[0]
     _, _, ca, sa = body_pose(q, km.joint_body_a[k])
-    return rotate(ca, sa, -km.joint_axis[i, k, 1], km.joint_axis[i, k, 0])
+    return axis_normal(ca, sa, km.joint_axis[i, k, 0], km.joint_axis[i, k, 1])
 
 
 @njit(**JIT)
@@ -155,6 +249,8 @@ def joint_separation_rate(v, a, b, pax, pay, pbx, pby):
     """ḋ = ṙ_b + Ω p_b θ̇_b − ṙ_a − Ω p_a θ̇_a, m/s."""
     vax, vay, wa = body_velocity(v, a)
     vbx, vby, wb = body_velocity(v, b)
+    # the lanes' (ṙ_b + θ̇_b Ω p_b) − (ṙ_a + θ̇_a Ω p_a) in the kernels' own order (see
+    # joint_vectors)
     ddx = vbx - pby * wb - vax + pay * wa
     ddy = vby + pbx * wb - vay - pax * wa
     return ddx, ddy
@@ -175,9 +271,8 @@ def constraint_residual(km, s, q, t, phi_out):
             b = km.joint_body_b[k]
             tha = q[3 * a + 2] if a >= 0 else 0.0
             thb = q[3 * b + 2] if b >= 0 else 0.0
-            phi_out[row] = nx * dx + ny * dy
             rel = km.joint_relative_angle[s % km.joint_relative_angle.shape[0], k]
-            phi_out[row + 1] = thb - tha - rel
+            phi_out[row], phi_out[row + 1] = prismatic_residual(nx, ny, dx, dy, tha, thb, rel)
         else:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
             phi_out[row] = hypot(dx, dy) - c
@@ -185,15 +280,16 @@ def constraint_residual(km, s, q, t, phi_out):
         if km.driver_joint[j] >= 0:
             start, rate = driver_start(km, s, j)
             along = slider_displacement(km, s, q, j)[0]
-            phi_out[km.driver_row[j]] = along - start - rate * t - driver_swing(km, s, j, t)[0]
+            swing = driver_swing(km, s, j, t)[0]
+            phi_out[km.driver_row[j]] = driver_residual(along, start, rate, t, swing)
             continue
         i = s % km.driver_omega.shape[0]
         i0 = s % km.driver_angle0.shape[0]
         theta = q[3 * km.driver_body[j] + 2]
-        phi = theta - km.driver_angle0[i0, j] - km.driver_omega[i, j] * t
-        if km.driver_law[j] != DRIVER_CONSTANT:  # (a constant law keeps its exact rounding)
-            phi -= driver_swing(km, s, j, t)[0]
-        phi_out[km.driver_row[j]] = phi
+        swing = driver_swing(km, s, j, t)[0]  # 0.0 at constant speed: x − 0.0 is x
+        phi_out[km.driver_row[j]] = driver_residual(
+            theta, km.driver_angle0[i0, j], km.driver_omega[i, j], t, swing
+        )
 
 
 @njit(**JIT)
@@ -211,9 +307,10 @@ def axis_row(B_out, row, a, b, wx, wy, pax, pay, pbx, pby, dx, dy):
     """Add w·∂d/∂q to row ``row`` of B for a vector w fixed in body a (∂w/∂θ_a = Ω w: the
     term (Ω w)·d on θ_a): a prismatic joint's offset row (w = n) or a slider driver's (w = u)."""
     _add_point_rows(B_out, row, b, 1.0, wx, wy, pbx, pby)
-    _add_point_rows(B_out, row, a, -1.0, wx, wy, pax, pay)
     if a >= 0:
-        B_out[row, 3 * a + 2] += -wy * dx + wx * dy
+        B_out[row, 3 * a] -= wx
+        B_out[row, 3 * a + 1] -= wy
+        B_out[row, 3 * a + 2] += axis_turn(wx, wy, pax, pay, dx, dy)
 
 
 @njit(**JIT)
@@ -279,16 +376,8 @@ def joint_rate_terms(km, s, q, v, k):
     pax, pay, pbx, pby, dx, dy = joint_vectors(km, s, q, k)
     wa = v[3 * a + 2] if a >= 0 else 0.0
     wb = v[3 * b + 2] if b >= 0 else 0.0
-    gx = pbx * wb * wb - pax * wa * wa
-    gy = pby * wb * wb - pay * wa * wa
+    gx, gy = centripetal(pax, pay, pbx, pby, wa, wb)
     return pax, pay, pbx, pby, dx, dy, wa, gx, gy
-
-
-@njit(**JIT)
-def prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa):
-    """γ of a prismatic joint's offset row n·d: n·(p_b θ̇_b² − p_a θ̇_a²) (``gx``, ``gy``)
-    + θ̇_a² n·d − 2 θ̇_a (Ω n)·ḋ, from n̈ = θ̈_a Ω n − θ̇_a² n and ṅ = θ̇_a Ω n."""
-    return nx * gx + ny * gy + wa * wa * (nx * dx + ny * dy) - 2.0 * wa * (-ny * ddx + nx * ddy)
 
 
 @njit(**JIT)
@@ -314,15 +403,13 @@ def constraint_gamma(km, s, q, v, t, gamma_out):
             gamma_out[row] = prismatic_gamma(nx, ny, gx, gy, dx, dy, ddx, ddy, wa)
             gamma_out[row + 1] = 0.0
         else:
-            dist = hypot(dx, dy)
-            if not dist > 0.0:  # a journal at its bearing centre (under a law): no normal
-                gamma_out[row] = 0.0
-                continue
-            ex = dx / dist
-            ey = dy / dist
+            # a journal at its bearing centre (under a law): no normal, 1/|d| = 0, γ = 0
+            irho = inverse_distance(hypot(dx, dy), 1.0)
+            ex = dx * irho
+            ey = dy * irho
             ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
-            along = ex * ddx + ey * ddy
-            gamma_out[row] = ex * gx + ey * gy - (ddx * ddx + ddy * ddy - along * along) / dist
+            along = clearance_rate(ex, ey, ddx, ddy)
+            gamma_out[row] = clearance_gamma(ex, ey, gx, gy, ddx, ddy, along, irho)
     for j in range(km.driver_body.shape[0]):
         acc = driver_swing(km, s, j, t)[2]  # −Φ_tt = f̈
         if km.driver_joint[j] >= 0:  # −(Ḃ q̇) of u·d: as a prismatic offset row, u for n

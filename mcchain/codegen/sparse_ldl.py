@@ -1,0 +1,203 @@
+"""The Schur complement S = B M⁻¹ Bᵀ of a lane and its sparse LDLᵀ, written symbolically.
+
+:class:`SchurComplement` is the linear-algebra half of :class:`mcchain.codegen.emitter.
+Emitter`: from the non-zeros of B (:meth:`rows`, coefficients as :data:`Coef`) it emits
+M⁻¹Bᵀ, S in a bandwidth-reducing row order, its LDLᵀ with the fill-in found symbolically,
+the two triangular solves and the product by M⁻¹Bᵀ. Structure only: the physics (Φ, B's
+values, γ, forces) is the emitter's, inlined from the kernels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from mcchain.codegen.topology import Topology
+
+# ---------------------------------------------------------------------------------------------
+# Symbolic helpers: a coefficient is a float constant or the name of a scalar variable.
+
+Coef = float | str
+
+
+def _mul(*factors: Coef) -> Coef:
+    const = 1.0
+    names = []
+    for f in factors:
+        if isinstance(f, str):
+            names.append(f)
+        else:
+            const *= f
+    if const == 0.0:
+        return 0.0
+    if not names:
+        return const
+    expr = " * ".join(names)
+    if const == 1.0:
+        return expr
+    if const == -1.0:
+        return f"(-{expr})" if len(names) == 1 else f"(-({expr}))"
+    return f"({const!r} * {expr})"
+
+
+def _sum(terms: list[Coef]) -> Coef:
+    const = sum(t for t in terms if not isinstance(t, str))
+    names = [t for t in terms if isinstance(t, str)]
+    if not names:
+        return float(const)
+    expr = " + ".join(names)
+    if const != 0.0:
+        expr = f"{expr} + {const!r}"
+    return f"({expr})" if len(names) > 1 or const != 0.0 else expr
+
+
+def _row_order(pattern: list[set[int]]) -> list[int]:
+    """A bandwidth-reducing order of the rows of S (reverse Cuthill–McKee on its graph)."""
+    n = len(pattern)
+    if n == 0:
+        return []
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    rows, cols = [], []
+    for i, nbrs in enumerate(pattern):
+        for j in nbrs:
+            rows.append(i)
+            cols.append(j)
+    graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    order = [int(i) for i in reverse_cuthill_mckee(graph, symmetric_mode=True)]
+
+    # Keep the natural order when it is at least as narrow (chains are already banded).
+    def bandwidth(perm: list[int]) -> int:
+        pos = {r: i for i, r in enumerate(perm)}
+        return max((abs(pos[i] - pos[j]) for i in range(n) for j in pattern[i]), default=0)
+
+    natural = list(range(n))
+    return natural if bandwidth(natural) <= bandwidth(order) else order
+
+
+class SchurComplement:
+    """Emits S = B M⁻¹ Bᵀ, its sparse LDLᵀ and the solves; the host class provides
+    :meth:`rows` (B's non-zeros), :meth:`emit`, :meth:`_reload` and :meth:`_row_law`
+    (the contact-law rows, replaced by λ_r = F_n)."""
+
+    topo: Topology
+    coupling: dict[tuple[int, int], str]
+    order: list[int]
+    emit: Callable[..., None]
+    rows: Callable[[], list[dict[int, Coef]]]
+    _reload: Callable[[str], str]
+    _row_law: Callable[[int], str | None]
+
+    def _minv(self, col: int) -> str:
+        return f"p_{self._minv_slot(col)}"
+
+    def _minv_slot(self, col: int) -> str:
+        """Parameter slot of M⁻¹ at coordinate ``col`` (1/m or 1/J of its body)."""
+        b, k = divmod(col, 3)
+        return f"iJ{b}" if k == 2 else f"im{b}"
+
+    def schur_factor(self) -> None:
+        """``Wt{r}_{c}`` = (M⁻¹Bᵀ)ᵀ, S = B M⁻¹ Bᵀ and its LDLᵀ; ``sing`` counts dropped pivots.
+
+        A pivot ``d_j ≤ tau · S_jj`` is dropped (its inverse set to 0: the row is treated as
+        dependent on the previous ones, λ_j = 0) and counted in ``sing``; integrators either
+        flag the sample SINGULAR or, on the robust path, carry on with the basic solution.
+        """
+        rows = self.rows()
+        n = len(rows)
+        for r, row in enumerate(rows):
+            for col, val in row.items():
+                self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
+        pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
+        order = _row_order(pattern)
+        self.order = order
+        # Entries of S in the permuted numbering (i, j: positions), lower part.
+        pos = {r: i for i, r in enumerate(order)}
+        S: dict[tuple[int, int], str] = {}
+        # A row whose joint is under the contact law (fm = 1) is replaced by λ_r = F_n:
+        # its S row and column become the unit vector (so the factors keep their pattern)
+        # and the coupling S_jr F_n moves to the right-hand side (:meth:`acceleration`). In
+        # link mode (fm = 0) the selects give the values of the link alone.
+        self.coupling: dict[tuple[int, int], str] = {}
+        for ri in range(n):
+            for rj in pattern[ri]:
+                i, j = pos[ri], pos[rj]
+                if j > i:
+                    continue
+                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
+                laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
+                if not laws:
+                    self.emit(f"S{i}_{j} = {_sum(terms)}")
+                else:
+                    self.emit(f"Sx{i}_{j} = {_sum(terms)}")
+                    self.coupling[ri, rj] = self.coupling[rj, ri] = f"Sx{i}_{j}"
+                    held = " + ".join(laws) + " == 0.0"
+                    unit = "1.0" if i == j else "0.0"
+                    self.emit(f"S{i}_{j} = Sx{i}_{j} if {held} else {unit}")
+                S[i, j] = f"S{i}_{j}"
+        # Symbolic fill: L_ij nonzero if S_ij nonzero or L_ik, L_jk nonzero for some k < j.
+        L: set[tuple[int, int]] = set()
+        lower: list[set[int]] = [set() for _ in range(n)]  # lower[i] = {k < i : L_ik != 0}
+        for j in range(n):
+            for i in range(j + 1, n):
+                if (i, j) in S or (lower[i] & lower[j]):
+                    L.add((i, j))
+                    lower[i].add(j)
+
+        for j in range(n):
+            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
+            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
+            self.emit(
+                f"D{j} = {dj}",
+                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
+                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
+            )
+            for i in range(j + 1, n):
+                if (i, j) not in L:
+                    continue
+                common = sorted(lower[i] & lower[j])
+                sij = S.get((i, j), "0.0")
+                prods = [f"L{i}_{k} * E{j}_{k}" for k in common]
+                num = sij + ("" if not prods else " - (" + " + ".join(prods) + ")")
+                self.emit(f"E{i}_{j} = {num}", f"L{i}_{j} = E{i}_{j} * Di{j}")
+            # E{i}_{j} = L_ij d_j is needed by later columns (for rows i > j).
+        self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
+        self._L = L
+        self._lower = lower
+
+    def schur_solve(self, rhs: str, out: str) -> None:
+        """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
+        n = len(self.order)
+        order = self.order
+        for i in range(n):
+            terms = [f"L{i}_{k} * y{out}{k}" for k in sorted(self._lower[i])]
+            expr = f"{rhs}{order[i]}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(f"y{out}{i} = {expr}")
+        upper: list[list[int]] = [[] for _ in range(n)]  # upper[k] = rows i > k with L_ik
+        for i, k in self._L:
+            upper[k].append(i)
+        for k in reversed(range(n)):
+            terms = [f"L{i}_{k} * x{out}{i}" for i in sorted(upper[k])]
+            expr = f"y{out}{k} * Di{k}" + ("" if not terms else " - (" + " + ".join(terms) + ")")
+            self.emit(f"x{out}{k} = {expr}")
+        for i in range(n):
+            self.emit(f"{out}{order[i]} = x{out}{i}")
+
+    def apply_wt(self, x: str, out: str, base: dict[int, Coef] | None) -> None:
+        """``{out}{c}`` = base_c − M⁻¹_c Σ_r B_rc x_r  (base None: 0).
+
+        Bᵀx first, then one product by M⁻¹ (loaded again): the entries of B (point
+        coordinates, ±1) are fewer values to keep across the Schur solve than those of M⁻¹Bᵀ,
+        and ±1 costs no product.
+        """
+        rows = self.rows()
+        for c in range(self.topo.ndof):
+            terms = [_mul(row[c], f"{x}{r}") for r, row in enumerate(rows) if c in row]
+            head = base[c] if base else 0.0
+            if not terms:
+                self.emit(f"{out}{c} = {float(head) if isinstance(head, float) else head}")
+                continue
+            total = f"{self._reload(self._minv_slot(c))} * ({_sum(terms)})"
+            self.emit(f"{out}{c} = -{total}" if head == 0.0 else f"{out}{c} = {head} - {total}")
