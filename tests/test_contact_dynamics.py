@@ -18,6 +18,7 @@ from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
 from mcchain.status import CONTACT_LOST, CONTACT_STEP_TOO_LARGE
 from mcchain.testing.contact import Law, journal_in_bearing
+from mcchain.testing.scenes import journal_tables
 
 MASS, INERTIA, RADIUS, CLEARANCE, GRAVITY = 0.5, 1e-4, 0.01, 5e-4, 9.81
 SIDEWAYS = 0.05  # m/s at the top of the bearing
@@ -44,29 +45,17 @@ def journal_scene(
     if friction:
         e += f"\nfriction = {friction!r}\nradius = {RADIUS!r}"
     sample = "" if count is None else f"[sample]\ncount = {count}\n[sample.vary]\n{vary}\n"
-    return f"""
-[scene]
-name = "journal"
-gravity = [0.0, {-GRAVITY!r}]
-
-[[body]]
-name = "journal"
-mass = {MASS!r}
-inertia = {INERTIA!r}
-position = [0.0, {-CLEARANCE if bottom else CLEARANCE!r}]
-velocity = [{sideways!r}, 0.0]
-
-[[joint]]
-name = "J"
-bodies = ["ground", "journal"]
-points = [[0.0, 0.0], [0.0, 0.0]]
-clearance = {CLEARANCE!r}
-model = "{model}"
-[joint.contact]
+    contact = f"""[joint.contact]
 law = "{law}"
 stiffness = {stiffness!r}
 {e}
-
+"""
+    height = -CLEARANCE if bottom else CLEARANCE
+    return (
+        journal_tables(
+            (0.0, height), (sideways, 0.0), model, contact, MASS, INERTIA, CLEARANCE, GRAVITY
+        )
+        + f"""
 [simulate]
 t_end = {t_end!r}
 dt = {dt!r}
@@ -75,6 +64,7 @@ method = "{method}"
 rtol = {rtol!r}
 atol = {atol!r}
 {sample}"""
+    )
 
 
 def run(text: str, **overrides):

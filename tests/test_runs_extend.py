@@ -20,30 +20,16 @@ from mcchain import execution, runs
 from mcchain.cli import main
 from mcchain.errors import RunError
 from mcchain.parallel import plan_chunks
+from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow  # real solvers
 
 
 def scene_text(design: str) -> str:
     """The clearance bar with a 20 ms swing, clearance and mass sampled."""
-    return f"""
-[scene]
-name = "extend-bar"
-gravity = [0.0, -9.81]
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = 0.16666666666666666
-position = [0.0, -0.501]
-angle = -1.5707963267948966
-angular_velocity = 1.0
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = 1e-3
-eccentricity = -1.5707963267948966
-[equilibrium]
+    return (
+        hanging_clearance_bar_text("extend-bar", angular_velocity=1.0)
+        + f"""[equilibrium]
 [modes]
 [simulate]
 t_end = 0.02
@@ -58,6 +44,7 @@ design = "{design}"
 "joint.O.clearance" = {{ uniform = [1e-4, 1e-3] }}
 "body.bar.mass" = {{ normal = [2.0, 0.02] }}
 """
+    )
 
 
 def write_scene(folder: Path, design: str) -> Path:

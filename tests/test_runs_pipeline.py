@@ -27,6 +27,7 @@ from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.parallel import WORKER_ENV
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
+from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow  # end to end through the CLI with real solvers, Dask and kills
 
@@ -188,25 +189,9 @@ def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
         xr.testing.assert_identical(partial_values, b.sel(sample=finished).load())
 
 
-SWING = """
-[scene]
-name = "clearance-bar-swing"
-gravity = [0.0, -9.81]
-
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = 0.16666666666666666
-position = [0.0, -0.501]
-angle = -1.5707963267948966
-
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = 1e-3
-eccentricity = -1.5707963267948966
-
+SWING = (
+    hanging_clearance_bar_text("clearance-bar-swing")
+    + """
 [sample]
 count = 100000
 seed = 7
@@ -223,6 +208,7 @@ method = "rk4"
 [storage]
 compression = "zstd"
 """
+)
 
 REAL_MEMORY_SCRIPT = """
 import json, resource, sys

@@ -22,6 +22,7 @@ from mcchain.cli import main
 from mcchain.decision.sequential import confidence_sequence
 from mcchain.decision.summary import export_requirements
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
+from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow  # real solvers
 
@@ -37,23 +38,9 @@ def rolling_limit(p_fail: float) -> float:
 def scene_text(
     p_fail: float, target: float, until: str = 'until = "decided"\nmax_count = 2048'
 ) -> str:
-    return f"""
-[scene]
-name = "until-bar"
-gravity = [0.0, -9.81]
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = 0.16666666666666666
-position = [0.0, -0.501]
-angle = -1.5707963267948966
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = 1e-3
-eccentricity = -1.5707963267948966
-[equilibrium]
+    return (
+        hanging_clearance_bar_text("until-bar")
+        + f"""[equilibrium]
 [modes]
 shapes = false
 [[requirement]]
@@ -69,6 +56,7 @@ seed = 5
 [sample.vary]
 "joint.O.clearance" = {{ uniform = [{C_LOW!r}, {C_HIGH!r}] }}
 """
+    )
 
 
 def write(folder: Path, name: str, text: str) -> Path:

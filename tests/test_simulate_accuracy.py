@@ -16,7 +16,7 @@ pytestmark = (
 )  # convergence orders and references: minutes of integration at tight tolerances
 
 ORDER_SLACK = 0.3  # fitted slope within ±0.3 of the theoretical order
-MINIMAL_TOL = 1e-9  # m: radau (index 1, absolute coordinates) vs a minimal-coordinate Radau
+MINIMAL_TOL = 1e-9  # m: radau (index 1, absolute coordinates) vs a minimal-coordinate DOP853
 ENERGY_TOL = 1e-9  # relative drift over 2 s, rk4 at dt 1e-5 (issue 3)
 RADAU = REFERENCE
 

