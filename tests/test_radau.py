@@ -4,10 +4,12 @@ Flores slider-crank with an impacting piston pin, against rk45 at a tighter tole
 30 ms at 5000 rpm: the pin's link lets go at 9.9 ms, the journal impacts its bearing 6
 times and re-seats twice (model auto, 21.76 and 26.41 ms). Both adaptive methods locate the
 re-seat (its dwell's start and end, docs/contact.md), so the whole history is held to
-1e-9 m. The reference is rk45 at rtol 1e-14, converged (1e-13 against 1e-14: 1.2e-9 m, the
-re-seat's dwell starts where a slowly pressed journal's δ̇ meets RESEAT_RATE ω_c δ at a
-shallow angle, ~30 s of re-seat time per m of error in δ, ~3e-3 s per m/s in δ̇: rk45 at
-1e-12, 9e-10 m off before the re-seat, is 7.6e-9 m off after it).
+1e-9 m. The reference is rk45 at rtol 1e-14, converged (1e-14 against 1e-15: 1.3e-10 m;
+1e-13: 1.1e-9 m; 1e-12: 7.4e-9 m). Not from the re-seats: rk45 at 1e-12 locates the first
+dwell's start 4e-13 s and its end 3e-10 s from rk45 at 1e-14 (6e-12 m at δ̇ 0.02 m/s) and
+its error does not jump there; it is 6e-12 m already before the first impact, and the
+impacting journal amplifies any such error ~1000 times by 30 ms (a clearance 1e-13 m larger
+moves rk45 at 1e-15 by 5e-12 m before the impact, 1.1e-8 m at 30 ms).
 """
 
 from __future__ import annotations
