@@ -88,6 +88,18 @@ def seat_tolerance(clearance: float) -> float:
     return SEAT_TOLERANCE * clearance
 
 
+SEATED = -1.0
+"""The kernels' approach-speed column (``VI``) of a seated contact: a start on the wall."""
+SEATED_AT_SWITCH = -2.0
+"""... and of the contact seated by the switch of model auto, while the journal stays within
+the tolerance of the wall: the link's λ reached 0 there and the journal leaves the wall, so
+its free flight counts from the switch (the instant ``first_separation_time`` records), not
+from where it is the tolerance off the wall — that instant hangs on the link's constraint
+residual at the switch (δ ≈ ±4e-14 m moves it by 3e-8 s on the Flores slider-crank). Should
+δ exceed the tolerance first (the journal presses back), it is an ordinary seated contact
+(:data:`SEATED`) from there, and its free flight ends there."""
+
+
 MODE_LINK = 0
 """``contact_mode`` output: the joint is the link (constraint row active)."""
 MODE_CONTACT = 1

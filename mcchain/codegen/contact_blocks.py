@@ -17,6 +17,8 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
     SEAT_TOLERANCE,
+    SEATED,
+    SEATED_AT_SWITCH,
     START_LINK,
     START_SEATED,
     SWITCH_OVERSHOOT,
@@ -60,7 +62,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         return [
             f"if {at('fm', j)} == 0.0 and {at(lamrow, r)} <= 0.0 and {model(k)} == {AUTO!r}.0:",
             f"    {at('fm', j)} = 1.0",
-            f"    {at('vi', j)} = -1.0",  # seated: the link's δ is 0 up to rounding
+            f"    {at('vi', j)} = {SEATED_AT_SWITCH!r}",  # seated: the link's δ is 0 up to rounding
             f"    {at('ins', j)} = 1.0",
             f"    if {at('tse', j)} != {at('tse', j)}:",
             f"        {at('tse', j)} = {t}",
@@ -152,7 +154,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"    if {at('vi', j)} < 0.0:",
             f"        if {d1} < -{seat}:",
             "            th = 0.0",
-            f"            if {d0} > 0.0:",
+            f"            if {d0} > 0.0 and {at('vi', j)} == {SEATED!r}:",
             f"                th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
             f"            {at('tff', j)} += (1.0 - th) * {h}",
             f"            if {at('tse', j)} != {at('tse', j)}:",
@@ -161,6 +163,15 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"            {at('ins', j)} = 0.0",
             "        else:",
             f"            {at('ins', j)} = 1.0",
+            # from the switch of auto: free flight while within the tolerance of the wall
+            f"            if {at('vi', j)} == {SEATED_AT_SWITCH!r}:",
+            f"                if {d1} <= {seat}:",
+            f"                    {at('tff', j)} += {h}",
+            "                else:",
+            f"                    th, rate = contact_crossing({d0} - {seat}, {r0}, {d1} - {seat},"
+            f" {r1}, {h})",
+            f"                    {at('tff', j)} += th * {h}",
+            f"                    {at('vi', j)} = {SEATED!r}",
             "    else:",
             f"        if {d0} <= 0.0 and {d1} > 0.0:",
             f"            th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
@@ -192,7 +203,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             [
                 f"{at('fm', j)} = 1.0 if {first_mode} != {START_LINK!r}.0 else 0.0",
                 f"{at('ins', j)} = {at('fm', j)}",
-                f"{at('vi', j)} = -1.0 if {first_mode} == {START_SEATED!r}.0 else 0.0",
+                f"{at('vi', j)} = {SEATED!r} if {first_mode} == {START_SEATED!r}.0 else 0.0",
             ]
         )
         setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
@@ -211,8 +222,8 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     body = []
     for j, k in enumerate(joints):
         d1, r1 = at("pdc", j), at("prc", j)
-        body += switch(j, k, "lamc", "ts", d1)
         body += step(j, k, "lamc", "ts", "hb", d1, r1, "v", located=False)
+        body += switch(j, k, "lamc", "ts", d1)  # after: the step hb was on the link
     b["contact_step_c"] = "\n".join(
         [
             "if (st[l] & FAILBITS) == 0:",

@@ -20,6 +20,8 @@ from mcchain.contact import (
     RESEAT_PERIODS,
     RESEAT_RATE,
     SEAT_TOLERANCE,
+    SEATED,
+    SEATED_AT_SWITCH,
     START_LINK,
     START_SEATED,
 )
@@ -32,7 +34,8 @@ FM = 0  # 1.0 while the law replaces the link (model contact, or auto after its 
 INS = 1  # 1.0 if the journal was in contact (δ > 0) at the last step's start
 VI = 2  # approach speed δ̇⁻ of the contact in progress (m/s), located at its onset; < 0:
 # seated (a contact from a start on the wall or from the link: undamped, no onset, until the
-# journal is off the wall by more than mcchain.contact.seat_tolerance)
+# journal is off the wall by more than mcchain.contact.seat_tolerance; SEATED_AT_SWITCH: from
+# the link, free flight from the switch while within the tolerance)
 PD = 3  # δ (m) and δ̇ (m/s) at the last bookkeeping (the previous step's start)
 PR = 4
 PDC = 5  # δ, δ̇ and ω_c² (1/s²) at the current step's start (its first stage)
@@ -91,7 +94,7 @@ def contact_start(km, s, cst):
         start = km.joint_start[s % km.joint_start.shape[0], k]
         cst[j, FM] = 1.0 if start != START_LINK else 0.0
         cst[j, INS] = cst[j, FM]
-        cst[j, VI] = -1.0 if start == START_SEATED else 0.0
+        cst[j, VI] = SEATED if start == START_SEATED else 0.0
         cst[j, PD] = math.nan
         cst[j, PR] = math.nan
         cst[j, TSE] = math.nan
@@ -202,7 +205,7 @@ def contact_switch(km, cst, j, lam_r, t, d1):
     k = contact_joint_index(km, j)
     if cst[j, FM] == 0.0 and lam_r <= 0.0 and km.joint_model[k] == AUTO:
         cst[j, FM] = 1.0
-        cst[j, VI] = -1.0
+        cst[j, VI] = SEATED_AT_SWITCH
         cst[j, INS] = 1.0
         if cst[j, TSE] != cst[j, TSE]:
             cst[j, TSE] = t
@@ -250,9 +253,10 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
         r0 = cst[j, PR]
         if cst[j, VI] < 0.0:  # seated: in contact until off the wall by the tolerance
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-            if d1 < -SEAT_TOLERANCE * c:
+            seat = SEAT_TOLERANCE * c
+            if d1 < -seat:
                 theta = 0.0
-                if d0 > 0.0:
+                if d0 > 0.0 and cst[j, VI] == SEATED:
                     theta, rate = contact_crossing(d0, r0, d1, r1, h)
                 cst[j, TFF] += (1.0 - theta) * h
                 if cst[j, TSE] != cst[j, TSE]:
@@ -261,6 +265,13 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
                 cst[j, INS] = 0.0
             else:
                 cst[j, INS] = 1.0
+                if cst[j, VI] == SEATED_AT_SWITCH:  # free flight from the switch ...
+                    if d1 <= seat:
+                        cst[j, TFF] += h
+                    else:  # ... until it presses back
+                        theta, rate = contact_crossing(d0 - seat, r0, d1 - seat, r1, h)
+                        cst[j, TFF] += theta * h
+                        cst[j, VI] = SEATED
         else:
             if d0 <= 0.0 and d1 > 0.0:
                 theta, rate = contact_crossing(d0, r0, d1, r1, h)

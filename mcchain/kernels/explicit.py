@@ -480,9 +480,9 @@ def rk4_run(
                     kinetic = kinetic_energy(km, s, v)
                     for j in range(ncj):
                         lam_r = lam0[km.joint_row[contact_joint_index(km, j)]]
-                        contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
                         d1, r1 = cst[j, PDC], cst[j, PRC]
                         contact_step(km, s, cst, j, lam_r, t, hb, d1, r1, kinetic)
+                        contact_switch(km, cst, j, lam_r, t, d1)  # after: hb was on the link
                     wca = 0.0
                 peak_values(km, lam0, cst, values)
                 peaks_feed(pk, values, t)

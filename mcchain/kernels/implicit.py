@@ -290,8 +290,8 @@ def generalized_alpha_run(
 @njit(**INLINE)
 def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     """At a step's start (q, v, t) with the multipliers ``lam``: δ, δ̇ and ω_c² of every
-    contact-law joint, then the switch of model auto and the bookkeeping of the step that
-    ended here (:func:`mcchain.kernels.clearance.contact_step`). Returns False when
+    contact-law joint, then the bookkeeping of the step that ended here
+    (:func:`mcchain.kernels.clearance.contact_step`) and the switch of model auto. Returns False when
     ω_c h > CONTACT_STEP_LIMIT (``F``, ``B``: scratch)."""
     contact_forces(km, s, q, v, cst, F)
     constraint_jacobian(km, s, q, B)
@@ -309,8 +309,8 @@ def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
         return False
     for j in range(cst.shape[0]):
         lam_r = lam[km.joint_row[contact_joint_index(km, j)]]
-        contact_switch(km, cst, j, lam_r, t, cst[j, PDC])
         contact_step(km, s, cst, j, lam_r, t, h, cst[j, PDC], cst[j, PRC], kinetic)
+        contact_switch(km, cst, j, lam_r, t, cst[j, PDC])  # after: h was on the link
     return True
 
 

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
-from mcchain.contact import AUTO, RESEAT_PERIODS, seat_tolerance
+from mcchain.contact import AUTO, RESEAT_PERIODS, SEATED, SEATED_AT_SWITCH, seat_tolerance
 from mcchain.model import JOINT_CLEARANCE
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
@@ -274,6 +274,9 @@ class _Sample:
                 gap = functools.partial(self.gap, j)
                 found.append(_event(gap, -1.0 if self.cst[j, cl.INS] == 1.0 else 1.0))
                 kinds.append(("gap", j))
+                if self.cst[j, cl.VI] == SEATED_AT_SWITCH:  # free flight until it presses
+                    found.append(_event(functools.partial(self.pressed, j), 1.0))
+                    kinds.append(("press", j))
             elif self.model.joint_model[k] == AUTO:
                 found.append(_event(functools.partial(self.link_force, int(self.rows[j])), -1.0))
                 kinds.append(("switch", j))
@@ -289,6 +292,13 @@ class _Sample:
             clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
             return self.penetration(j, y) + seat_tolerance(float(clearance))
         return self.penetration(j, y)
+
+    def pressed(self, j: int, t: float, y: np.ndarray) -> float:
+        """Event: δ − the seat tolerance of contact-law joint ``j`` (seated by the switch of
+        auto: the journal presses back where it rises through 0)."""
+        k = int(self.joints[j])
+        clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
+        return self.penetration(j, y) - seat_tolerance(float(clearance))
 
     def link_force(self, r: int, t: float, y: np.ndarray) -> float:
         """Event: λ of row ``r`` (a joint of model auto on the link)."""
@@ -326,15 +336,21 @@ class _Sample:
             else:  # separation (also the end of a seated contact)
                 self.ready_since[j] = math.nan
                 cst[j, cl.INS] = 0.0
+                if cst[j, cl.VI] != SEATED_AT_SWITCH:  # that one flies free since the switch
+                    self.free_since[j] = t
                 cst[j, cl.VI] = 0.0
-                self.free_since[j] = t
                 if math.isnan(cst[j, cl.TSE]):
                     cst[j, cl.TSE] = t
+        elif kind == "press":  # seated by the switch, the journal presses back: contact
+            cst[j, cl.TFF] += t - self.free_since[j]
+            self.free_since[j] = math.nan
+            cst[j, cl.VI] = SEATED
         elif kind == "switch":
             self.ready_since[j] = math.nan
             cst[j, cl.FM] = 1.0  # seated: the link's δ is 0 up to rounding
-            cst[j, cl.VI] = -1.0
+            cst[j, cl.VI] = SEATED_AT_SWITCH
             cst[j, cl.INS] = 1.0
+            self.free_since[j] = t  # the link's λ is 0: the journal leaves the wall here
             if math.isnan(cst[j, cl.TSE]):
                 cst[j, cl.TSE] = t
         else:  # re-seat of the joint whose dwell completed (the clock's largest)
@@ -344,6 +360,9 @@ class _Sample:
                      for j, s in enumerate(since)]  # fmt: skip
             done = int(np.argmax(dwell))
             cst[done, cl.DWL], since[done] = -1.0, math.nan
+            if not math.isnan(self.free_since[done]):  # still seated by its switch
+                cst[done, cl.TFF] += t - self.free_since[done]
+                self.free_since[done] = math.nan
             q, v = y[: self.ndof].copy(), y[self.ndof :].copy()
             reseat(
                 self.km, self.i, q, v, t, self.minv, self.cols, self.first, cst, self.row_law,
