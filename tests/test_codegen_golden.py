@@ -41,9 +41,9 @@ GOLDEN = {
     },
     "fourbar-clearance-auto": {
         "accel": "6a44c7cefc23ab8e36f71a24779fd0051f5e4cc3454e467114545cbe9c9fc7df",
-        "rk4": "d3e606dcbe50c6c6baf647b29913feea543b84dc00e9c6375ace2ee1c95a6351",
-        "rk4-projection": "b99d003623345f4058fd1c7608a8f0a32e1355789b80dba31a47520a7a5b5406",
-        "rk45": "191080b04b33eb6de91a2a023c1975c42e7248e318fe0ff11b028ce802f87b90",
+        "rk4": "92ef80981446dc780229106b1545f78ab7c3710efe57296b5879d378579a3f82",
+        "rk4-projection": "cf6ff0f2cefb04bd8d6ceb4ae0900d8806b8a960732a18be9fb88d98ec9733ef",
+        "rk45": "7f3b293a0ec3345467374dc3b36160a574a3390cff3c7c367399d33cd35eefe6",
     },
     "chain4-mixed-spring": {
         "accel": "4d04a603ee6b60d207852da239fbcd306aa299bb3461268e7f5f4a09d4e73afc",
