@@ -291,8 +291,8 @@ def generalized_alpha_run(
 def _contact_bookkeeping(km, s, q, v, t, h, lam, minv, B, F, cst, row_law):
     """At a step's start (q, v, t) with the multipliers ``lam``: δ, δ̇ and ω_c² of every
     contact-law joint, then the bookkeeping of the step that ended here
-    (:func:`mcchain.kernels.clearance.contact_step`) and the switch of model auto. Returns False when
-    ω_c h > CONTACT_STEP_LIMIT (``F``, ``B``: scratch)."""
+    (:func:`mcchain.kernels.clearance.contact_step`) and the switch of model auto. Returns
+    False when ω_c h > CONTACT_STEP_LIMIT (``F``, ``B``: scratch)."""
     contact_forces(km, s, q, v, cst, F)
     constraint_jacobian(km, s, q, B)
     kinetic = kinetic_energy(km, s, v)
