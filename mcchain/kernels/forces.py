@@ -21,6 +21,7 @@ from mcchain.kernels.joints import (
     body_pose,
     joint_separation_rate,
     rotate,
+    separation,
 )
 from mcchain.kernels.tables import spline_at
 
@@ -109,7 +110,8 @@ def spring_vectors(km, s, q, k):
     xb, yb, cb, sb = body_pose(q, b)
     pax, pay = rotate(ca, sa, km.spring_point_a[ia, k, 0], km.spring_point_a[ia, k, 1])
     pbx, pby = rotate(cb, sb, km.spring_point_b[ib, k, 0], km.spring_point_b[ib, k, 1])
-    return pax, pay, pbx, pby, xb + pbx - xa - pax, yb + pby - ya - pay
+    ux, uy = separation(xa, ya, pax, pay, xb, yb, pbx, pby)
+    return pax, pay, pbx, pby, ux, uy
 
 
 @njit(**JIT)
