@@ -455,7 +455,8 @@ def _contact_functions(adaptive: bool) -> str:
     Copied, not imported: numba's cache of a generated module is keyed by the module's own
     file, so a change of a function it imported would not reach the cached machine code;
     with the source in the text, such a change makes a new module (its name is the text's
-    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell).
+    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell) and the
+    ``quasi_static_slack`` it calls.
     """
     import inspect
 
@@ -463,7 +464,8 @@ def _contact_functions(adaptive: bool) -> str:
 
     parts = []
     kernels = (contact._hermite, contact.contact_crossing)
-    for kernel in (*kernels, contact.dwell_start) if adaptive else kernels:
+    located = (contact.quasi_static_slack, contact.dwell_start)
+    for kernel in (*kernels, *located) if adaptive else kernels:
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)
