@@ -7,13 +7,15 @@ relative to the variable's largest value, absolute, and in ulps of that largest 
 
     python benchmarks/compare_ensembles.py BEFORE_TREE AFTER_TREE [--samples 8] [--out DIR]
 
-The trees are checkouts (e.g. ``git worktree add --detach``); prints a Markdown table.
+The trees are checkouts (e.g. ``git worktree add --detach``); prints a Markdown table. A
+finished run in ``--out`` is reused (delete ``DIR/after`` after changing the after tree).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +28,9 @@ def run_tree(tree: Path, config: str, out: Path, samples: int) -> Path:
     """``mcchain run`` of ``config`` from ``tree`` into ``out``; the ensemble's path."""
     env = dict(os.environ, PYTHONPATH=str(tree), MCCHAIN_CACHE_DIR=str(out / "cache"))
     run = out / Path(config).stem
+    if (run / "ensemble.nc").exists():  # a finished run of this tree: reused
+        return run / "ensemble.nc"
+    shutil.rmtree(run, ignore_errors=True)
     command = [sys.executable, "-m", "mcchain.cli", "run", str(tree / config), "--quiet",
                "--samples", str(samples), "--run-dir", str(run)]  # fmt: skip
     subprocess.run(command, env=env, check=True, cwd=tree, stdout=subprocess.DEVNULL)

@@ -180,33 +180,26 @@ class Emitter(SchurComplement):
             px, py = self.kernel(JOINT_KERNELS, "rotate", [c, sn, sx, sy])
             self.emit(f"{name}x = {px}", f"{name}y = {py}")
         if world:
-            x, y = (f"{c} + " if body != GROUND else "" for c in self._centre(body, q))
+            x, y = (f"{c} + " if body != GROUND else "" for c in self._coordinates(body, q, 2))
             self.emit(f"{name}X = {x}{name}x", f"{name}Y = {y}{name}y")
 
-    def _separation(self, out: tuple[str, str], a: int, b: int, pa: str, pb: str, q="q") -> None:
-        """``out`` = (dx, dy) names, d = (r_b + p_b) − (r_a + p_a) between the rotated points ``pa``
-        and ``pb`` (:meth:`_point`) of bodies a and b."""
-        points = [*self._centre(a, q), f"{pa}x", f"{pa}y", *self._centre(b, q), f"{pb}x", f"{pb}y"]
-        dx, dy = self.kernel(JOINT_KERNELS, "separation", points)
-        self.emit(f"{out[0]} = {dx}", f"{out[1]} = {dy}")
-
-    def _separation_rate(
-        self, out: tuple[str, str], a: int, b: int, pa: str, pb: str, v: str = "v"
+    def _separation(
+        self, out: tuple[str, str], a: int, b: int, pa: str, pb: str, state: str, rate=False
     ) -> None:
-        """``out`` = (ḋx, ḋy) names, the rate of :meth:`_separation`."""
-        rates = [*self._rates(a, v), f"{pa}x", f"{pa}y", *self._rates(b, v), f"{pb}x", f"{pb}y"]
-        ddx, ddy = self.kernel(JOINT_KERNELS, "separation_rate", rates, f"_{out[0]}")
-        self.emit(f"{out[0]} = {ddx}", f"{out[1]} = {ddy}")
+        """Names ``out`` = d = (r_b + p_b) − (r_a + p_a) between the rotated points ``pa``
+        and ``pb`` (:meth:`_point`) of bodies a and b at the positions ``state``; with
+        ``rate``, ḋ at the velocities ``state``."""
+        count, function = (3, "separation_rate") if rate else (2, "separation")
+        ends = [[*self._coordinates(body, state, count), f"{p}x", f"{p}y"] for body, p in
+                ((a, pa), (b, pb))]  # fmt: skip
+        x, y = self.kernel(JOINT_KERNELS, function, ends[0] + ends[1], f"_{out[0]}")
+        self.emit(f"{out[0]} = {x}", f"{out[1]} = {y}")
 
     @staticmethod
-    def _centre(body: int, q: str) -> tuple[str, str]:
-        """The centre (x, y) of ``body`` in ``q``: literal 0.0 for the ground."""
-        return (f"{q}{3 * body}", f"{q}{3 * body + 1}") if body != GROUND else ("0.0", "0.0")
-
-    @staticmethod
-    def _rates(body: int, v: str) -> list[str]:
-        """(ẋ, ẏ, θ̇) of ``body`` in ``v``: literal 0.0 for the ground."""
-        return [f"{v}{3 * body + i}" if body != GROUND else "0.0" for i in range(3)]
+    def _coordinates(body: int, state: str, count: int) -> list[str]:
+        """The first ``count`` of (x, y, θ) of ``body`` in ``state`` (or of their rates):
+        literal 0.0 for the ground."""
+        return [f"{state}{3 * body + i}" if body != GROUND else "0.0" for i in range(count)]
 
     def joints(self, q: str = "q", tag: str = "") -> None:
         """Points ``pa{k}``, ``pb{k}`` and separation ``dx{k}``, ``dy{k}`` of every joint."""
@@ -309,7 +302,7 @@ class Emitter(SchurComplement):
             r = topo.joint_row[k]
             if v is not None:
                 a, b = topo.joint_a[k], topo.joint_b[k]
-                self._separation_rate((f"ddx{k}", f"ddy{k}"), a, b, f"pa{k}", f"pb{k}", v)
+                self._separation((f"ddx{k}", f"ddy{k}"), a, b, f"pa{k}", f"pb{k}", v, rate=True)
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"phi{r} = dx{k}", f"phi{r + 1} = dy{k}")
                 if v is not None:
@@ -468,7 +461,7 @@ class Emitter(SchurComplement):
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}", q, tag)
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}", q, tag)
             self._separation((f"ux{s}", f"uy{s}"), a, b, f"sa{s}", f"sb{s}", q)
-            self._separation_rate((f"dux{s}", f"duy{s}"), a, b, f"sa{s}", f"sb{s}", v)
+            self._separation((f"dux{s}", f"duy{s}"), a, b, f"sa{s}", f"sb{s}", v, rate=True)
             arguments = [f"ux{s}", f"uy{s}", f"dux{s}", f"duy{s}", f"p_k{s}", f"p_l0{s}"]
             fx, fy = self.kernel(FORCE_KERNELS, "spring_force", [*arguments, f"p_cd{s}"], f"_s{s}")
             self.emit(f"sfx{s} = {fx}", f"sfy{s} = {fy}")
@@ -688,7 +681,7 @@ class Emitter(SchurComplement):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}")
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}")
-            self._separation((f"ux{s}", f"uy{s}"), a, b, f"sa{s}", f"sb{s}")
+            self._separation((f"ux{s}", f"uy{s}"), a, b, f"sa{s}", f"sb{s}", "q")
             arguments = [f"ux{s}", f"uy{s}", f"p_k{s}", f"p_l0{s}"]
             (elastic,) = self.kernel(FORCE_KERNELS, "spring_energy", arguments, f"_s{s}")
             self.emit(f"energy += {elastic}")

@@ -244,22 +244,29 @@ def body_velocity(v, b):
 
 
 @njit(**JIT)
-def joint_vectors(km, s, q, k):
-    """Rotated points p_a, p_b and separation d of joint ``k``.
+def pair_vectors(q, s, a, b, points_a, points_b, k):
+    """Rotated points p_a, p_b and separation d = (r_b + p_b) − (r_a + p_a) of the point
+    pair ``k`` of bodies a and b, whose local points are ``points_a[s, k]`` and
+    ``points_b[s, k]`` (broadcast over samples): a joint's or a spring's.
 
     Returns:
         (pax, pay, pbx, pby, dx, dy), m.
     """
-    a = km.joint_body_a[k]
-    b = km.joint_body_b[k]
-    ia = s % km.joint_point_a.shape[0]
-    ib = s % km.joint_point_b.shape[0]
+    ia = s % points_a.shape[0]
+    ib = s % points_b.shape[0]
     xa, ya, ca, sa = body_pose(q, a)
     xb, yb, cb, sb = body_pose(q, b)
-    pax, pay = rotate(ca, sa, km.joint_point_a[ia, k, 0], km.joint_point_a[ia, k, 1])
-    pbx, pby = rotate(cb, sb, km.joint_point_b[ib, k, 0], km.joint_point_b[ib, k, 1])
+    pax, pay = rotate(ca, sa, points_a[ia, k, 0], points_a[ia, k, 1])
+    pbx, pby = rotate(cb, sb, points_b[ib, k, 0], points_b[ib, k, 1])
     dx, dy = separation(xa, ya, pax, pay, xb, yb, pbx, pby)
     return pax, pay, pbx, pby, dx, dy
+
+
+@njit(**JIT)
+def joint_vectors(km, s, q, k):
+    """:func:`pair_vectors` of joint ``k`` (d: journal centre minus bearing centre)."""
+    a, b = km.joint_body_a[k], km.joint_body_b[k]
+    return pair_vectors(q, s, a, b, km.joint_point_a, km.joint_point_b, k)
 
 
 @njit(**JIT)
