@@ -114,7 +114,7 @@ first separation time."""
 
 RESEAT_RATE = 0.1
 """Model auto goes back to the link when the journal is quasi-statically pressed on the wall:
-|δ̇| ≤ RESEAT_RATE ω_c δ (the normal motion's kinetic energy ≤ 1 % of the contact's
+|δ̇| < RESEAT_RATE ω_c δ (the normal motion's kinetic energy ≤ 1 % of the contact's
 oscillation energy at amplitude δ; a rebound has |δ̇| ≈ ω_c δ_max; a journal sliding on the
 wall of a swinging mechanism shows 0.005–0.03 from its slowly varying load), with δ > 0 and
 F_n > 0, ..."""

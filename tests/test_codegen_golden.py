@@ -28,28 +28,28 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 
 GOLDEN = {
     "double-pendulum-clearance": {
-        "accel": "769ae1636e4f9d307cea35946b4cf32754755a3563c4dc23556ebe4336498bc8",
-        "rk4": "1377c010d32561d60de3560164b6156e5fe97150a4c2141e59e5508cf7d429ac",
-        "rk4-projection": "b2f6470fa65fa0fa43669cf68336ec8a32dd84d0c6d1b5efa48b50a252f42ce2",
-        "rk45": "f4cc0cceec6fd8b66cf4966b71d3453f06a2f00dcf8e57dfb5b949098396ee61",
+        "accel": "4ad99df1961cea05c65fe9ec5babf7f0f64b99deba91ed4c4c50d25378c28193",
+        "rk4": "4c30e2e3e05dfc14510516fa2ad7d0759a8498737f919c8186fb810ab82de5fa",
+        "rk4-projection": "64f07d536b1e4fca6c4a208c692c820bcc4ba0229b693a8adcde347ef69718c8",
+        "rk45": "d74225210309f8b83ef0ac3e9c4ba75b809734007a9599a5173b038ae3ccab18",
     },
     "fourbar-clearance": {
-        "accel": "14fff05d0afbcb6b91ddf87bd53ad050687319812e14acf28e101bd5f88c2d06",
-        "rk4": "b26a3a2819c6dd338502355d2db6ed730bfd19e7546465c960de0656a780ec87",
-        "rk4-projection": "b0dcaf925a312242dd1cfc7bb11e1ddfe0ce307dac17cd47df3f6b4dfd88df30",
-        "rk45": "90b78fa1422619920fb24e840e68a87e9af0f04278d806817f32cfbc265eeedd",
+        "accel": "ea24d2a29ea8272d76dd4172106ca88d596b1af8de51adbbeb3acd31218a0ccd",
+        "rk4": "8f261a84c3e43a06f03724c67f4d2ec9fac781165b48db6e35526994234e3e1a",
+        "rk4-projection": "870afc6bbb97d320d4f4833298846acbaf2dadfaca5beb77dd5d892c649bfd7a",
+        "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "6a44c7cefc23ab8e36f71a24779fd0051f5e4cc3454e467114545cbe9c9fc7df",
-        "rk4": "92ef80981446dc780229106b1545f78ab7c3710efe57296b5879d378579a3f82",
-        "rk4-projection": "cf6ff0f2cefb04bd8d6ceb4ae0900d8806b8a960732a18be9fb88d98ec9733ef",
-        "rk45": "7f3b293a0ec3345467374dc3b36160a574a3390cff3c7c367399d33cd35eefe6",
+        "accel": "a5886dff4d221a40e3a863cf56561209afcb430b572e282235b4af965ade4cce",
+        "rk4": "bc055c9cd021ef3b1c9472ab5954ad4d6447c5cea7159ff72694e50a230c3b45",
+        "rk4-projection": "9e311cb9a23eab3628d43000ae9aea93620121c4f3c7f8618bb4a9f93d1a49b5",
+        "rk45": "5702529e43318d33b8d7ee701cddbab08e66eaa5b66cb22ad94c328f5087ef10",
     },
     "chain4-mixed-spring": {
-        "accel": "4d04a603ee6b60d207852da239fbcd306aa299bb3461268e7f5f4a09d4e73afc",
-        "rk4": "872034756a03efca963c2ba9249e32a36f2f75c274455824a1eb56c1b55ad454",
-        "rk4-projection": "858b54a24107904f9e7a760f820b23d05a6d2fd6b87ef2052eea29f17db7e889",
-        "rk45": "211510c912a758a548f7187193dad470c73c3f9e508700ac4f7c4952b0eb4299",
+        "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",
+        "rk4": "f3033d3730ba2198f598793d5edfe7f953b77db61e5cff881148a11d7fab5f1c",
+        "rk4-projection": "54595bda750fb7c11eac47381a6473e4bbd506731a3d1cc7e328dc8c905340fa",
+        "rk45": "a4ee149aeb153f24b196b6b38f8f72e1651a939782af6c9627287d1ebdf88a77",
     },
 }
 

@@ -88,6 +88,12 @@ JOINT_AND_FORCE_LAWS = {
     (kj, "rotate"): lambda rng: [_normal(rng) for _ in range(4)],
     (kj, "point_velocity"): lambda rng: [_normal(rng) for _ in range(5)],
     (kj, "centripetal"): lambda rng: [_normal(rng) for _ in range(6)],
+    (kj, "separation"): lambda rng: [_normal(rng) for _ in range(8)],
+    (kj, "separation_rate"): lambda rng: [_normal(rng) for _ in range(10)],
+    (kj, "point_row"): lambda rng: [
+        float(rng.choice([-1.0, 1.0])),
+        *(_normal(rng) for _ in range(4)),
+    ],
     (kj, "inverse_distance"): lambda rng: [  # |d| = 0 only where guarded (else 1/0)
         *((0.0, 1.0) if rng.random() < 0.3 else (abs(_normal(rng)), float(rng.integers(0, 2)))),
     ],
@@ -115,6 +121,13 @@ JOINT_AND_FORCE_LAWS = {
     (kf, "load_potential"): lambda rng: [_normal(rng) for _ in range(6)],
     (kf, "gravity_potential"): lambda rng: [_normal(rng) for _ in range(5)],
     (kf, "body_kinetic_energy"): lambda rng: [_normal(rng) for _ in range(5)],
+    (kc, "quasi_static_slack"): lambda rng: [_normal(rng) for _ in range(3)],
+    (kc, "reseat_slack"): lambda rng: [
+        float(rng.choice([kc.AUTO, 1])),  # model auto or contact
+        *(float(rng.choice([_normal(rng), _normal(rng), math.nan])) for _ in range(5)),
+        float(rng.choice([1.0, 1.5])),  # the law's exponent
+        float(rng.integers(0, 2)),  # paid: a scene without drivers
+    ],
 }
 
 
@@ -152,6 +165,11 @@ def _equal(a: float, b: float) -> bool:
         ("driver_residual", {4: 0.0}),  # constant speed: no swing
         ("driver_speed", {1: 0.0}),
         ("inverse_distance", {1: 1.0}),
+        ("separation", {0: 0.0, 1: 0.0}),  # bearing on the ground: r_a = 0
+        ("separation_rate", {0: 0.0, 1: 0.0, 2: 0.0}),  # … at rest
+        ("separation_rate", {5: 0.0, 6: 0.0, 7: 0.0}),  # journal on the ground
+        ("point_row", {0: -1.0, 1: 1.0, 2: 0.0}),  # an ideal joint's x row on body a
+        ("point_row", {0: 1.0, 1: 0.0, 2: 1.0}),  # … its y row on body b
     ],
 )
 def test_inline__literal_ground_terms_fold_to_the_kernels_values(name, literal):
@@ -177,3 +195,16 @@ def test_inline__literal_ground_terms_fold_to_the_kernels_values(name, literal):
     assert not any(
         re.search(r"\* 0\.0\b|\b0\.0 \*|- 0\.0\b|\+ 0\.0\b|\b1\.0 \*", r) for r in folded
     )
+
+
+def test_inline__distance_is_hypot_in_the_kernels_and_a_root_of_squares_in_the_lanes():
+    """The one deliberate difference between the two targets: libm's hypot (robust) against
+    √(dx² + dy²) (vectorises), at most an ulp apart on lengths of 1e-6 … 1e2 m."""
+    (text,) = inline(kj.__name__, "distance", ["x0", "x1"], "")[1]
+    assert text == "math.sqrt(x0 * x0 + x1 * x1)"
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        dx, dy = (float(rng.normal() * 10.0 ** rng.uniform(-6, 2)) for _ in range(2))
+        (got,) = _run(kj.distance, {"x0": dx, "x1": dy})
+        want = kj.distance(dx, dy)
+        assert abs(got - want) <= math.ulp(want), (dx, dy, got, want)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+from mcchain.codegen.emitter import CONTACT_KERNELS, FORCE_KERNELS
+from mcchain.codegen.inline import inline
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (
@@ -69,27 +71,24 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
 
     def kinetic(vrow: str) -> str:
-        """The lane's kinetic energy from the velocities in W rows ``vrow``."""
+        """The lane's kinetic energy from the velocities in W rows ``vrow``
+        (:func:`mcchain.kernels.forces.body_kinetic_energy` of each body, summed)."""
         terms = []
         for b in range(topo.nbody):
-            vx, vy, w = (at(vrow, 3 * b + i) for i in range(3))
             m, inertia = at("P", slots[f"m{b}"]), at("P", slots[f"J{b}"])
-            terms.append(f"0.5 * ({m} * ({vx} * {vx} + {vy} * {vy}) + {inertia} * {w} * {w})")
+            rates = [at(vrow, 3 * b + i) for i in range(3)]
+            terms += inline(FORCE_KERNELS, "body_kinetic_energy", [m, inertia, *rates], "")[1]
         return " + ".join(terms)
 
-    def criterion(j: int, k: int, lamrow: str, d1: str, r1: str, vrow: str) -> str:
-        """Model auto: whether the joint may count the instant with δ1, δ̇1, its λ in W rows
-        ``lamrow`` and the velocities in ``vrow`` towards its re-seat dwell: pressed
-        quasi-statically (mcchain.contact.RESEAT_RATE) and, without drivers, with the kinetic
-        energy to pay for the position step (mcchain.kernels.clearance.reseat_ready); ``wn``
-        (ω_c) set before."""
-        r = topo.joint_row[k]
-        slow = f"abs({r1}) <= {RESEAT_RATE!r} * wn * {d1}"
-        pressed = f"{d1} > 0.0 and {at(lamrow, r)} > 0.0 and {model(k)} == {AUTO!r}.0"
-        mx = at("P", slots[f"mx{k}"])
-        # without drivers, the kinetic energy must pay for the position step
-        paid = f" and ({kinetic(vrow)}) > {mx} / ({mx} + 1.0) * {at(lamrow, r)} * {d1}"
-        return f"{pressed} and {slow}{'' if topo.ndriver else paid}"
+    def criterion(k: int, lamrow: str, d1: str, r1: str, vrow: str) -> list[str]:
+        """Lines that set ``rsk`` > 0 exactly where joint k may count the instant with δ1,
+        δ̇1, its λ in W rows ``lamrow`` and the velocities in ``vrow`` towards its re-seat
+        dwell (:func:`mcchain.kernels.contact.reseat_slack`); ``wn`` (ω_c) set before."""
+        paid = topo.ndriver == 0  # without drivers, the kinetic energy pays the re-seat
+        lam, mx = at(lamrow, topo.joint_row[k]), at("P", slots[f"mx{k}"])
+        arguments = [model(k), d1, r1, lam, "wn", "ken" if paid else "0.0", mx, f"{paid:d}.0"]
+        lines, (slack,) = inline(CONTACT_KERNELS, "reseat_slack", arguments, f"_rs{k}")
+        return [*([f"ken = {kinetic(vrow)}"] if paid else []), *lines, f"rsk = {slack}"]
 
     def dwell(j: int, k: int, lamrow: str, h: str, d1: str, r1: str, vrow: str) -> list[str]:
         """Adaptive, model auto: ``dwn``, how long (s) the joint has met the re-seat
@@ -99,12 +98,15 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         Hermite interpolant (``dwell_start``, ω_c linear between the ends), or at the step's
         start if that term was ≥ 0 there (another condition decided)."""
         wj, dwl, d0, r0, pw = at("wjc", j), at("dwl", j), at("pd", j), at("pr", j), at("pw", j)
+        rate0 = f"{RESEAT_RATE!r} * w0"
+        _, (slow,) = inline(CONTACT_KERNELS, "quasi_static_slack", [rate0, d0, r0], "")
         return [
             f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
             f"w0 = math.sqrt({pw}) if {pw} > 0.0 else wn",
             "dwn = -1.0",
-            f"if {criterion(j, k, lamrow, d1, r1, vrow)}:",
-            f"    g0 = {RESEAT_RATE!r} * w0 * {d0} - abs({r0})",
+            *criterion(k, lamrow, d1, r1, vrow),
+            "if rsk > 0.0:",
+            f"    g0 = {slow}",
             "    th = 0.0",
             f"    if {dwl} == 0.0 and g0 < 0.0:",
             f"        th = dwell_start({d0}, {r0}, {d1}, {r1}, {h}, {RESEAT_RATE!r} * w0,"
@@ -127,7 +129,8 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         else:
             count = [
                 f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
-                f"if {criterion(j, k, lamrow, d1, r1, vrow)}:",
+                *criterion(k, lamrow, d1, r1, vrow),
+                "if rsk > 0.0:",
                 f"    {dwl} += {h}",
             ]
         return [

@@ -39,6 +39,16 @@ def _tidy(text: str) -> str:
     return ast.unparse(ast.parse(text, mode="eval"))
 
 
+def _coef(text: str) -> Coef:
+    """A coefficient of B from an inlined expression: a literal as its float, a name as it
+    is, anything else in parentheses (it becomes a factor of products)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    return text if isinstance(ast.parse(text, mode="eval").body, ast.Name) else f"({text})"
+
+
 # ---------------------------------------------------------------------------------------------
 # sin / cos: fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free
 # (quadrant chosen by exact 0/1 and ±1 factors), so the lane loop vectorises, and free of
@@ -158,27 +168,38 @@ class Emitter(SchurComplement):
         for b in range(self.topo.nbody):
             self.emit(*sincos_code(f"{q}{3 * b + 2}", f"sn{b}{tag}", f"cs{b}{tag}", f"{b}{tag}"))
 
-    def _point(self, body: int, sx: str, sy: str, name: str, q: str = "q", tag: str = "") -> None:
-        """Rotated point ``{name}x/y`` = A s and absolute point ``{name}X/Y`` = r + A s."""
+    def _point(
+        self, body: int, sx: str, sy: str, name: str, q: str = "q", tag: str = "", world=False
+    ) -> None:
+        """Rotated point ``{name}x/y`` = A s (and with ``world`` the world point ``{name}X/Y``
+        = r + A s)."""
         if body == GROUND:
-            self.emit(f"{name}x = {sx}", f"{name}y = {sy}", f"{name}X = {sx}", f"{name}Y = {sy}")
-            return
-        px, py = self.kernel(JOINT_KERNELS, "rotate", [f"cs{body}{tag}", f"sn{body}{tag}", sx, sy])
-        self.emit(
-            f"{name}x = {px}",
-            f"{name}y = {py}",
-            f"{name}X = {q}{3 * body} + {name}x",
-            f"{name}Y = {q}{3 * body + 1} + {name}y",
-        )
+            self.emit(f"{name}x = {sx}", f"{name}y = {sy}")
+        else:
+            c, sn = f"cs{body}{tag}", f"sn{body}{tag}"
+            px, py = self.kernel(JOINT_KERNELS, "rotate", [c, sn, sx, sy])
+            self.emit(f"{name}x = {px}", f"{name}y = {py}")
+        if world:
+            x, y = (f"{c} + " if body != GROUND else "" for c in self._coordinates(body, q, 2))
+            self.emit(f"{name}X = {x}{name}x", f"{name}Y = {y}{name}y")
 
-    def _point_velocity(self, body: int, name: str, v: str = "v") -> None:
-        """Velocity ``{name}vx/vy`` of point ``name`` (zero on the ground)."""
-        if body == GROUND:
-            self.emit(f"{name}vx = 0.0", f"{name}vy = 0.0")
-            return
-        rates = [f"{v}{3 * body + i}" for i in range(3)]
-        vx, vy = self.kernel(JOINT_KERNELS, "point_velocity", [*rates, f"{name}x", f"{name}y"])
-        self.emit(f"{name}vx = {vx}", f"{name}vy = {vy}")
+    def _separation(
+        self, out: tuple[str, str], a: int, b: int, pa: str, pb: str, state: str, rate=False
+    ) -> None:
+        """Names ``out`` = d = (r_b + p_b) − (r_a + p_a) between the rotated points ``pa``
+        and ``pb`` (:meth:`_point`) of bodies a and b at the positions ``state``; with
+        ``rate``, ḋ at the velocities ``state``."""
+        count, function = (3, "separation_rate") if rate else (2, "separation")
+        ends = [[*self._coordinates(body, state, count), f"{p}x", f"{p}y"] for body, p in
+                ((a, pa), (b, pb))]  # fmt: skip
+        x, y = self.kernel(JOINT_KERNELS, function, ends[0] + ends[1], f"_{out[0]}")
+        self.emit(f"{out[0]} = {x}", f"{out[1]} = {y}")
+
+    @staticmethod
+    def _coordinates(body: int, state: str, count: int) -> list[str]:
+        """The first ``count`` of (x, y, θ) of ``body`` in ``state`` (or of their rates):
+        literal 0.0 for the ground."""
+        return [f"{state}{3 * body + i}" if body != GROUND else "0.0" for i in range(count)]
 
     def joints(self, q: str = "q", tag: str = "") -> None:
         """Points ``pa{k}``, ``pb{k}`` and separation ``dx{k}``, ``dy{k}`` of every joint."""
@@ -187,15 +208,16 @@ class Emitter(SchurComplement):
             a, b = topo.joint_a[k], topo.joint_b[k]
             self._point(a, f"p_sax{k}", f"p_say{k}", f"pa{k}", q, tag)
             self._point(b, f"p_sbx{k}", f"p_sby{k}", f"pb{k}", q, tag)
-            self.emit(f"dx{k} = pb{k}X - pa{k}X", f"dy{k} = pb{k}Y - pa{k}Y")
+            self._separation((f"dx{k}", f"dy{k}"), a, b, f"pa{k}", f"pb{k}", q)
             if topo.joint_kind[k] == JOINT_CLEARANCE:
                 # One division per joint: ex, ey and γ multiply by 1/ρ. Under a contact law
                 # the journal may sit at the bearing centre (ρ = 0, written there): no normal,
                 # and none needed (F_n = 0 there), so n = 0 rather than NaN.
                 guarded = "1.0" if k in self.contact_row else "0.0"
                 (inverse,) = self.kernel(JOINT_KERNELS, "inverse_distance", [f"rho{k}", guarded])
+                (rho,) = self.kernel(JOINT_KERNELS, "distance", [f"dx{k}", f"dy{k}"])
                 self.emit(
-                    f"rho{k} = math.sqrt(dx{k} * dx{k} + dy{k} * dy{k})",
+                    f"rho{k} = {rho}",
                     f"irho{k} = {inverse}",
                     f"ex{k} = dx{k} * irho{k}",
                     f"ey{k} = dy{k} * irho{k}",
@@ -231,12 +253,9 @@ class Emitter(SchurComplement):
         def point_row(body: int, sign: float, wx: Coef, wy: Coef, px: str, py: str) -> dict:
             if body == GROUND:
                 return {}
-            # sign · w·∂(r + p)/∂q = sign · (wx, wy, −wx py + wy px)
-            return {
-                3 * body: _mul(sign, wx),
-                3 * body + 1: _mul(sign, wy),
-                3 * body + 2: _sum([_mul(-sign, wx, py), _mul(sign, wy, px)]),
-            }
+            arguments = [repr(sign), str(wx), str(wy), px, py]
+            entries = self.kernel(JOINT_KERNELS, "point_row", arguments)
+            return {3 * body + i: _coef(entry) for i, entry in enumerate(entries)}
 
         for k in range(topo.njoint):
             a, b = topo.joint_a[k], topo.joint_b[k]
@@ -282,9 +301,8 @@ class Emitter(SchurComplement):
         for k in range(topo.njoint):
             r = topo.joint_row[k]
             if v is not None:
-                self._point_velocity(topo.joint_a[k], f"pa{k}", v)
-                self._point_velocity(topo.joint_b[k], f"pb{k}", v)
-                self.emit(f"ddx{k} = pb{k}vx - pa{k}vx", f"ddy{k} = pb{k}vy - pa{k}vy")
+                a, b = topo.joint_a[k], topo.joint_b[k]
+                self._separation((f"ddx{k}", f"ddy{k}"), a, b, f"pa{k}", f"pb{k}", v, rate=True)
             if topo.joint_kind[k] == JOINT_IDEAL:
                 self.emit(f"phi{r} = dx{k}", f"phi{r + 1} = dy{k}")
                 if v is not None:
@@ -442,14 +460,8 @@ class Emitter(SchurComplement):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}", q, tag)
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}", q, tag)
-            self._point_velocity(a, f"sa{s}", v)
-            self._point_velocity(b, f"sb{s}", v)
-            self.emit(
-                f"ux{s} = sb{s}X - sa{s}X",
-                f"uy{s} = sb{s}Y - sa{s}Y",
-                f"dux{s} = sb{s}vx - sa{s}vx",
-                f"duy{s} = sb{s}vy - sa{s}vy",
-            )
+            self._separation((f"ux{s}", f"uy{s}"), a, b, f"sa{s}", f"sb{s}", q)
+            self._separation((f"dux{s}", f"duy{s}"), a, b, f"sa{s}", f"sb{s}", v, rate=True)
             arguments = [f"ux{s}", f"uy{s}", f"dux{s}", f"duy{s}", f"p_k{s}", f"p_l0{s}"]
             fx, fy = self.kernel(FORCE_KERNELS, "spring_force", [*arguments, f"p_cd{s}"], f"_s{s}")
             self.emit(f"sfx{s} = {fx}", f"sfy{s} = {fy}")
@@ -661,7 +673,7 @@ class Emitter(SchurComplement):
         for f, b in enumerate(topo.force_body):
             if b == GROUND or f in topo.varying_loads:  # a load varying in time: no potential
                 continue
-            self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}")
+            self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", world=True)
             arguments = [f"p_fx{f}", f"p_fy{f}", f"fp{f}X", f"fp{f}Y", f"p_tq{f}", f"q{3 * b + 2}"]
             (potential,) = self.kernel(FORCE_KERNELS, "load_potential", arguments)
             self.emit(f"energy -= {potential}")
@@ -669,7 +681,7 @@ class Emitter(SchurComplement):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}")
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}")
-            self.emit(f"ux{s} = sb{s}X - sa{s}X", f"uy{s} = sb{s}Y - sa{s}Y")
+            self._separation((f"ux{s}", f"uy{s}"), a, b, f"sa{s}", f"sb{s}", "q")
             arguments = [f"ux{s}", f"uy{s}", f"p_k{s}", f"p_l0{s}"]
             (elastic,) = self.kernel(FORCE_KERNELS, "spring_energy", arguments, f"_s{s}")
             self.emit(f"energy += {elastic}")

@@ -22,7 +22,7 @@ import numpy as np
 from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.contact_blocks import contact_blocks
-from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.emitter import FORCE_KERNELS, Emitter
 from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.schedule import schedule_lane_loops
@@ -245,8 +245,10 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     # Kinetic energy of the lane and the velocities scaled by ``scale`` (re-seat).
     em.emit("ke = 0.0")
     for body in range(topo.nbody):
-        vx, vy, w = f"v{3 * body}", f"v{3 * body + 1}", f"v{3 * body + 2}"
-        em.emit(f"ke += 0.5 * (p_m{body} * ({vx} * {vx} + {vy} * {vy}) + p_J{body} * {w} * {w})")
+        rates = [f"v{3 * body + i}" for i in range(3)]
+        arguments = [f"p_m{body}", f"p_J{body}", *rates]
+        (kinetic,) = em.kernel(FORCE_KERNELS, "body_kinetic_energy", arguments)
+        em.emit(f"ke += {kinetic}")
     block("kinetic")
     em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(ndof)))
     block("scale_velocity")
@@ -453,7 +455,8 @@ def _contact_functions(adaptive: bool) -> str:
     Copied, not imported: numba's cache of a generated module is keyed by the module's own
     file, so a change of a function it imported would not reach the cached machine code;
     with the source in the text, such a change makes a new module (its name is the text's
-    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell).
+    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell) and the
+    ``quasi_static_slack`` it calls.
     """
     import inspect
 
@@ -461,7 +464,8 @@ def _contact_functions(adaptive: bool) -> str:
 
     parts = []
     kernels = (contact._hermite, contact.contact_crossing)
-    for kernel in (*kernels, contact.dwell_start) if adaptive else kernels:
+    located = (contact.quasi_static_slack, contact.dwell_start)
+    for kernel in (*kernels, *located) if adaptive else kernels:
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)

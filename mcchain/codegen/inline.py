@@ -9,6 +9,10 @@ suffix, module constants written as literals, and calls of the module's other fu
 inlined in turn. The text is the function's arithmetic operation for operation, so the
 lanes and the loop kernels round alike.
 
+The kernels' ``hypot(x, y)`` (libm's, robust to overflow) is written √(x² + y²) in the lanes,
+which vectorises; the two differ by at most an ulp, as the lanes' own sine and cosine
+(:func:`mcchain.codegen.emitter.sincos_code`) differ from libm's.
+
 The functions it takes are the straight-line subset both targets share: a docstring,
 assignments to plain names (one name or a tuple of names from an inlined call), and a
 ``return`` of one expression or a tuple; the only branching is a leading chain of
@@ -101,7 +105,7 @@ class _Inliner:
         if len(arguments) > len(params) or len(arguments) < len(params) - len(defaults):
             raise TypeError(f"{self.where(self.tree)}: {len(arguments)} arguments")
         for name, text in zip(params, arguments, strict=False):
-            self.names[name] = ast.parse(text, mode="eval").body
+            self.names[name] = _fold_constant(ast.parse(text, mode="eval").body)  # "-1.0"
         for name, default in zip(params[::-1], defaults[::-1], strict=False):
             self.names.setdefault(name, self.expr(default))
         body = list(self.tree.body)
@@ -174,6 +178,11 @@ class _Inliner:
             return [ast.Call(func, [self.expr(a) for a in node.args], [])]
         if isinstance(func, ast.Attribute) and ast.unparse(func) == "math.sqrt":
             return [ast.Call(func, [self.expr(a) for a in node.args], [])]
+        if isinstance(func, ast.Name) and func.id == "hypot" and len(node.args) == 2:
+            # libm's hypot → √(x² + y²), which vectorises in the lanes (≤ 1 ulp apart)
+            x, y = (self.expr(a) for a in node.args)
+            squares = ast.BinOp(ast.BinOp(x, ast.Mult(), x), ast.Add(), ast.BinOp(y, ast.Mult(), y))
+            return [ast.Call(ast.parse("math.sqrt", mode="eval").body, [squares], [])]
         if not isinstance(func, ast.Name) or func.id not in _module(self.module)[0]:
             raise TypeError(f"{self.where(node)}: cannot inline {ast.unparse(func)}")
         arguments = [ast.unparse(self.expr(a)) for a in node.args]
@@ -212,7 +221,15 @@ class _Inliner:
                 )
             )
         if isinstance(node, ast.BoolOp):
-            return _fold_constant(ast.BoolOp(node.op, [self.expr(v) for v in node.values]))
+            # an operand that cannot decide (False in an "or", True in an "and") drops out
+            neutral = isinstance(node.op, ast.And)
+            values = [self.expr(v) for v in node.values]
+            kept = [v for v in values if not (isinstance(v, ast.Constant) and v.value is neutral)]
+            if not all(_is_truth(v) for v in kept):  # a float operand is the result: kept
+                kept = values
+            if len(kept) <= 1:
+                return kept[0] if kept else ast.Constant(neutral)
+            return _fold_constant(ast.BoolOp(node.op, kept))
         if isinstance(node, ast.IfExp):
             test = self.expr(node.test)
             if isinstance(test, ast.Constant):  # a case fixed by the lane's structure
@@ -252,8 +269,10 @@ def _negate(node: ast.expr) -> ast.expr:
 def _fold_constant(node: ast.expr) -> ast.expr:
     """An operation on literals only, evaluated (IEEE double, as the kernels round it);
     anything else (or a division by zero) unchanged."""
-    if all(isinstance(n, (ast.Constant, ast.operator, ast.unaryop, ast.cmpop, ast.boolop,
-                          ast.expr_context)) or n is node for n in ast.walk(node)):  # fmt: skip
+    operation = (ast.BinOp, ast.UnaryOp, ast.Compare, ast.BoolOp)
+    literal = (ast.Constant, ast.operator, ast.unaryop, ast.cmpop, ast.boolop, ast.expr_context)
+    parts = ast.walk(node)
+    if isinstance(node, operation) and all(isinstance(n, literal) or n is node for n in parts):
         try:
             tree = ast.fix_missing_locations(ast.Expression(node))
             value = eval(compile(tree, "<fold>", "eval"), {"__builtins__": {}})

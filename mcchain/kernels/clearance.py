@@ -18,7 +18,6 @@ import math
 from mcchain.contact import (
     AUTO,
     RESEAT_PERIODS,
-    RESEAT_RATE,
     SEAT_TOLERANCE,
     SEATED,
     SEATED_AT_SWITCH,
@@ -26,7 +25,13 @@ from mcchain.contact import (
     START_SEATED,
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
-from mcchain.kernels.contact import contact_crossing, contact_law, contact_slip, friction_force
+from mcchain.kernels.contact import (
+    contact_crossing,
+    contact_law,
+    contact_slip,
+    friction_force,
+    reseat_slack,
+)
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
 
 # Columns of ``cst``: the mode and the contact in progress ...
@@ -213,29 +218,18 @@ def contact_switch(km, cst, j, lam_r, t, d1):
 
 @njit(**INLINE)
 def reseat_margin(km, s, k, lam_r, d1, r1, wn, kinetic):
-    """> 0 exactly where joint ``k`` (model auto, under the law) may count this instant
-    towards its re-seat dwell (:func:`reseat_ready`): the least of the criterion's margins,
-    δ, F_n, RESEAT_RATE ω_c δ − |δ̇| and, without drivers, T − m/(m+1) F_n δ. Each is in its
-    own unit: only the sign is meant; it changes where the criterion starts or stops holding,
-    which is where ``radau`` locates a dwell's start. −1 off model auto or on a NaN."""
-    if km.joint_model[k] != AUTO:
-        return -1.0
-    if d1 != d1 or r1 != r1 or lam_r != lam_r or wn != wn or kinetic != kinetic:
-        return -1.0
-    margin = min(d1, lam_r, RESEAT_RATE * wn * d1 - abs(r1))
-    if km.driver_row.shape[0] == 0:
-        expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
-        margin = min(margin, kinetic - expo / (expo + 1.0) * lam_r * d1)
-    return margin
+    """:func:`mcchain.kernels.contact.reseat_slack` of joint ``k`` (under the law) with δ1,
+    δ̇1, F_n = ``lam_r``, ω_c = ``wn`` and the kinetic energy ``kinetic``: > 0 exactly where
+    it may count this instant towards its re-seat dwell."""
+    expo = km.joint_contact_exponent[s % km.joint_contact_exponent.shape[0], k]
+    paid = 1.0 if km.driver_row.shape[0] == 0 else 0.0
+    return reseat_slack(km.joint_model[k], d1, r1, lam_r, wn, kinetic, expo, paid)
 
 
 @njit(**INLINE)
 def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
-    """Whether joint ``k`` (model auto, under the law) may count this instant towards its
-    re-seat dwell: pressed (δ > 0, F_n > 0) quasi-statically (|δ̇| < RESEAT_RATE ω_c δ) and,
-    without drivers, with the kinetic energy to pay for the re-seat's position step (it lifts
-    the journal by δ against the load pressing it: m/(m+1) F_n δ beyond the elastic energy
-    it drops, taken from the kinetic energy so that no energy is added)."""
+    """Whether joint ``k`` (under the law) may count this instant towards its re-seat dwell
+    (:func:`reseat_margin` > 0)."""
     return reseat_margin(km, s, k, lam_r, d1, r1, wn, kinetic) > 0.0
 
 

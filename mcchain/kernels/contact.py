@@ -26,6 +26,7 @@ zero gives inf/NaN under ``error_model="numpy"``).
 from __future__ import annotations
 
 from mcchain.contact import (
+    AUTO,
     FLORES,
     FRICTION_V0,
     FRICTION_V1,
@@ -34,6 +35,7 @@ from mcchain.contact import (
     HU_GUO,
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
+    RESEAT_RATE,
 )
 from mcchain.kernels.config import JIT, njit
 
@@ -57,6 +59,8 @@ __all__ = [
     "friction_force",
     "normal_force",
     "normal_force_derivatives",
+    "quasi_static_slack",
+    "reseat_slack",
     "restitution_factor",
 ]
 
@@ -248,9 +252,40 @@ def contact_crossing(d0, r0, d1, r1, h):
 
 
 @njit(**JIT)
+def quasi_static_slack(rate, delta, delta_rate):
+    """ρ δ − |δ̇|, m/s: > 0 where a journal pressed in by δ (m) moves slowly enough for a
+    re-seat, ρ = RESEAT_RATE ω_c (1/s; mcchain.contact)."""
+    return rate * delta - abs(delta_rate)
+
+
+@njit(**JIT)
+def reseat_slack(model, delta, delta_rate, normal, pulsation, kinetic, exponent, paid):
+    """> 0 exactly where a joint under the law may count this instant towards its re-seat
+    dwell (mcchain.contact): of model auto (``model`` = AUTO), pressed (δ > 0, F_n =
+    ``normal`` > 0) quasi-statically (:func:`quasi_static_slack` with ω_c = ``pulsation``,
+    1/s) and, with ``paid`` = 1 (a scene without drivers), with the kinetic energy T
+    (``kinetic``, J) to pay for the re-seat's position step: it lifts the journal by δ
+    against the load pressing it, m/(m+1) F_n δ beyond the elastic energy it drops
+    (``exponent`` m), taken from T so that no energy is added.
+
+    Returns the least of these margins, each in its own unit (m, N, m/s, J): only the sign
+    is meant; it changes where the criterion starts or stops holding, which is where the
+    ``radau`` path locates a dwell's start. −1 off model auto or on a NaN.
+    """
+    if model != AUTO or delta != delta or delta_rate != delta_rate or normal != normal or \
+            pulsation != pulsation or kinetic != kinetic:  # fmt: skip
+        return -1.0
+    slow = quasi_static_slack(RESEAT_RATE * pulsation, delta, delta_rate)
+    pressed = min(delta, normal, slow)
+    if paid == 1.0:
+        return min(pressed, kinetic - exponent / (exponent + 1.0) * normal * delta)
+    return pressed
+
+
+@njit(**JIT)
 def dwell_start(d0, r0, d1, r1, h, rate0, rate1):
     """Where in a step the re-seat criterion's rate term ρ δ − |δ̇| rises through 0
-    (ρ = RESEAT_RATE ω_c, 1/s: mcchain.kernels.clearance.reseat_ready; ``rate0`` at the step's
+    (:func:`quasi_static_slack`, ρ = RESEAT_RATE ω_c in 1/s; ``rate0`` at the step's
     start, ``rate1`` at its end, linear between), from < 0 at the start to ≥ 0 at the end.
 
     δ and δ̇ are the cubic Hermite interpolant of :func:`contact_crossing` and its
@@ -267,7 +302,7 @@ def dwell_start(d0, r0, d1, r1, h, rate0, rate1):
     for _ in range(60):
         theta = 0.5 * (lo + hi)
         value, slope = _hermite(theta, d0, r0, d1, r1, h)
-        if (rate0 + theta * (rate1 - rate0)) * value - abs(slope) >= 0.0:
+        if quasi_static_slack(rate0 + theta * (rate1 - rate0), value, slope) >= 0.0:
             hi = theta
         else:
             lo = theta

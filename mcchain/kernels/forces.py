@@ -20,6 +20,7 @@ from mcchain.kernels.joints import (
     add_pair_product,
     body_pose,
     joint_separation_rate,
+    pair_vectors,
     rotate,
 )
 from mcchain.kernels.tables import spline_at
@@ -100,16 +101,10 @@ def load_factor(km, s, k, t):
 
 @njit(**JIT)
 def spring_vectors(km, s, q, k):
-    """Rotated points p_a, p_b and the vector u from point a to point b of spring ``k``."""
-    a = km.spring_body_a[k]
-    b = km.spring_body_b[k]
-    ia = s % km.spring_point_a.shape[0]
-    ib = s % km.spring_point_b.shape[0]
-    xa, ya, ca, sa = body_pose(q, a)
-    xb, yb, cb, sb = body_pose(q, b)
-    pax, pay = rotate(ca, sa, km.spring_point_a[ia, k, 0], km.spring_point_a[ia, k, 1])
-    pbx, pby = rotate(cb, sb, km.spring_point_b[ib, k, 0], km.spring_point_b[ib, k, 1])
-    return pax, pay, pbx, pby, xb + pbx - xa - pax, yb + pby - ya - pay
+    """Rotated points p_a, p_b and the vector u from point a to point b of spring ``k``
+    (:func:`mcchain.kernels.joints.pair_vectors`)."""
+    a, b = km.spring_body_a[k], km.spring_body_b[k]
+    return pair_vectors(q, s, a, b, km.spring_point_a, km.spring_point_b, k)
 
 
 @njit(**JIT)

@@ -56,6 +56,36 @@ def point_velocity(vx, vy, w, px, py):
 
 
 @njit(**JIT)
+def separation(xa, ya, pax, pay, xb, yb, pbx, pby):
+    """d = (r_b + p_b) − (r_a + p_a) from the centres r and rotated points p of bodies a and
+    b (r = 0 for the ground), m: the world points first, so that a closed joint's d is their
+    exact difference."""
+    return (xb + pbx) - (xa + pax), (yb + pby) - (ya + pay)
+
+
+@njit(**JIT)
+def separation_rate(vax, vay, wa, pax, pay, vbx, vby, wb, pbx, pby):
+    """ḋ = (ṙ_b + θ̇_b Ω p_b) − (ṙ_a + θ̇_a Ω p_a), m/s: the points' velocities first."""
+    ubx, uby = point_velocity(vbx, vby, wb, pbx, pby)
+    uax, uay = point_velocity(vax, vay, wa, pax, pay)
+    return ubx - uax, uby - uay
+
+
+@njit(**JIT)
+def distance(dx, dy):
+    """|d|, m: libm's hypot in the kernels; the lanes write it √(dx² + dy²), which
+    vectorises (mcchain.codegen.inline; the two differ by at most an ulp)."""
+    return hypot(dx, dy)
+
+
+@njit(**JIT)
+def point_row(sign, wx, wy, px, py):
+    """B's entries (x, y, θ) of the row sign · w·(r + p) on the point's body: sign · (wx,
+    wy, w·Ω p) for the rotated point p = A s (w·Ω p = −wx py + wy px, m)."""
+    return sign * wx, sign * wy, sign * (-wx * py + wy * px)
+
+
+@njit(**JIT)
 def centripetal(pax, pay, pbx, pby, wa, wb):
     """g = p_b θ̇_b² − p_a θ̇_a²: the part of d̈ that B q̈ leaves out (d̈ = ∂d/∂q q̈ − g), m/s²."""
     return pbx * wb * wb - pax * wa * wa, pby * wb * wb - pay * wa * wa
@@ -214,26 +244,29 @@ def body_velocity(v, b):
 
 
 @njit(**JIT)
-def joint_vectors(km, s, q, k):
-    """Rotated points p_a, p_b and separation d of joint ``k``.
+def pair_vectors(q, s, a, b, points_a, points_b, k):
+    """Rotated points p_a, p_b and separation d = (r_b + p_b) − (r_a + p_a) of the point
+    pair ``k`` of bodies a and b, whose local points are ``points_a[s, k]`` and
+    ``points_b[s, k]`` (broadcast over samples): a joint's or a spring's.
 
     Returns:
         (pax, pay, pbx, pby, dx, dy), m.
     """
-    a = km.joint_body_a[k]
-    b = km.joint_body_b[k]
-    ia = s % km.joint_point_a.shape[0]
-    ib = s % km.joint_point_b.shape[0]
+    ia = s % points_a.shape[0]
+    ib = s % points_b.shape[0]
     xa, ya, ca, sa = body_pose(q, a)
     xb, yb, cb, sb = body_pose(q, b)
-    pax, pay = rotate(ca, sa, km.joint_point_a[ia, k, 0], km.joint_point_a[ia, k, 1])
-    pbx, pby = rotate(cb, sb, km.joint_point_b[ib, k, 0], km.joint_point_b[ib, k, 1])
-    # (r_b + p_b) − (r_a + p_a) rounds as the lanes' pbX − paX; this order is the kernels'
-    # own (kept: the contact switch of the loop kernels reads it, and a last-place change
-    # there moves a chaotic impact sequence)
-    dx = xb + pbx - xa - pax
-    dy = yb + pby - ya - pay
+    pax, pay = rotate(ca, sa, points_a[ia, k, 0], points_a[ia, k, 1])
+    pbx, pby = rotate(cb, sb, points_b[ib, k, 0], points_b[ib, k, 1])
+    dx, dy = separation(xa, ya, pax, pay, xb, yb, pbx, pby)
     return pax, pay, pbx, pby, dx, dy
+
+
+@njit(**JIT)
+def joint_vectors(km, s, q, k):
+    """:func:`pair_vectors` of joint ``k`` (d: journal centre minus bearing centre)."""
+    a, b = km.joint_body_a[k], km.joint_body_b[k]
+    return pair_vectors(q, s, a, b, km.joint_point_a, km.joint_point_b, k)
 
 
 @njit(**JIT)
@@ -249,11 +282,7 @@ def joint_separation_rate(v, a, b, pax, pay, pbx, pby):
     """ḋ = ṙ_b + Ω p_b θ̇_b − ṙ_a − Ω p_a θ̇_a, m/s."""
     vax, vay, wa = body_velocity(v, a)
     vbx, vby, wb = body_velocity(v, b)
-    # the lanes' (ṙ_b + θ̇_b Ω p_b) − (ṙ_a + θ̇_a Ω p_a) in the kernels' own order (see
-    # joint_vectors)
-    ddx = vbx - pby * wb - vax + pay * wa
-    ddy = vby + pbx * wb - vay - pax * wa
-    return ddx, ddy
+    return separation_rate(vax, vay, wa, pax, pay, vbx, vby, wb, pbx, pby)
 
 
 @njit(**JIT)
@@ -275,7 +304,7 @@ def constraint_residual(km, s, q, t, phi_out):
             phi_out[row], phi_out[row + 1] = prismatic_residual(nx, ny, dx, dy, tha, thb, rel)
         else:
             c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-            phi_out[row] = hypot(dx, dy) - c
+            phi_out[row] = distance(dx, dy) - c
     for j in range(km.driver_body.shape[0]):
         if km.driver_joint[j] >= 0:
             start, rate = driver_start(km, s, j)
@@ -297,9 +326,10 @@ def _add_point_rows(B_out, row, body, sign, wx, wy, px, py):
     """Add ``sign * w·∂(r + p)/∂q_body`` to row ``row`` of B (nothing for the ground)."""
     if body < 0:
         return
-    B_out[row, 3 * body] += sign * wx
-    B_out[row, 3 * body + 1] += sign * wy
-    B_out[row, 3 * body + 2] += sign * (-wx * py + wy * px)
+    bx, by, bt = point_row(sign, wx, wy, px, py)
+    B_out[row, 3 * body] += bx
+    B_out[row, 3 * body + 1] += by
+    B_out[row, 3 * body + 2] += bt
 
 
 @njit(**JIT)
@@ -347,7 +377,7 @@ def constraint_jacobian(km, s, q, B_out):
                 B_out, row, a, b, *prismatic_normal(km, s, q, k), pax, pay, pbx, pby, dx, dy
             )
         else:
-            dist = hypot(dx, dy)
+            dist = distance(dx, dy)
             if dist > 0.0:
                 ex = dx / dist
                 ey = dy / dist
@@ -404,7 +434,7 @@ def constraint_gamma(km, s, q, v, t, gamma_out):
             gamma_out[row + 1] = 0.0
         else:
             # a journal at its bearing centre (under a law): no normal, 1/|d| = 0, γ = 0
-            irho = inverse_distance(hypot(dx, dy), 1.0)
+            irho = inverse_distance(distance(dx, dy), 1.0)
             ex = dx * irho
             ey = dy * irho
             ddx, ddy = joint_separation_rate(v, a, b, pax, pay, pbx, pby)
@@ -437,8 +467,7 @@ def _pair_gradient(a, b, wx, wy, pax, pay, pbx, pby):
     """Indices and values of g = w·∂d/∂q, d = (r_b + p_b) − (r_a + p_a): six non-zeros,
     (+wx, +wy, w·Ωp_b) on b and their negatives on a; the ground's indices are negative."""
     idx = (3 * b, 3 * b + 1, 3 * b + 2, 3 * a, 3 * a + 1, 3 * a + 2)
-    val = (wx, wy, -wx * pby + wy * pbx, -wx, -wy, wx * pay - wy * pax)
-    return idx, val
+    return idx, point_row(1.0, wx, wy, pbx, pby) + point_row(-1.0, wx, wy, pax, pay)
 
 
 @njit(**JIT)
@@ -513,7 +542,7 @@ def constraint_hessian_add(km, s, q, lam, K_out):
             _prismatic_hessian_add(K_out, lam[row], a, b, nx, ny, pax, pay, pbx, pby, dx, dy)
             continue
         else:
-            dist = hypot(dx, dy)
+            dist = distance(dx, dy)
             ex = dx / dist
             ey = dy / dist
             lx = lam[row] * ex
@@ -557,7 +586,7 @@ def joint_forces(km, s, q, lam, force_out, contact_out):
             contact_out[k] = -lam[row + 1]
         else:
             _, _, _, _, dx, dy = joint_vectors(km, s, q, k)
-            dist = hypot(dx, dy)
+            dist = distance(dx, dy)
             if not dist > 0.0:  # a journal at its bearing centre (under a law): no force
                 dist = math.inf
             force_out[k, 0] = -lam[row] * dx / dist
