@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "a5886dff4d221a40e3a863cf56561209afcb430b572e282235b4af965ade4cce",
-        "rk4": "bc055c9cd021ef3b1c9472ab5954ad4d6447c5cea7159ff72694e50a230c3b45",
-        "rk4-projection": "9e311cb9a23eab3628d43000ae9aea93620121c4f3c7f8618bb4a9f93d1a49b5",
-        "rk45": "5702529e43318d33b8d7ee701cddbab08e66eaa5b66cb22ad94c328f5087ef10",
+        "accel": "9d7c0bd0d5da9fcfbc711c7378241a2170764a277aeb26a4345afdaeb5b35b80",
+        "rk4": "f3cd8e8ad0130b54f1e544fca0ce809e82b4f37c52d300bebf4381015e99ac9e",
+        "rk4-projection": "f196d4717817ffaa8204829c8e08bf16c0d7c5d8eb09ed4e4ec8fa6ceedde0c5",
+        "rk45": "31da5e5dbb25fd99598afc0d16445b1fdd194f0171775e5dd3b46701835c90ac",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",

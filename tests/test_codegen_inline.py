@@ -122,6 +122,11 @@ JOINT_AND_FORCE_LAWS = {
     (kf, "gravity_potential"): lambda rng: [_normal(rng) for _ in range(5)],
     (kf, "body_kinetic_energy"): lambda rng: [_normal(rng) for _ in range(5)],
     (kc, "quasi_static_slack"): lambda rng: [_normal(rng) for _ in range(3)],
+    (kc, "contact_mode"): lambda rng: [
+        float(rng.integers(0, 2)),
+        float(rng.choice([_normal(rng), 0.0, -0.0])),
+        float(rng.choice([-2.0, -1.0, 0.0, abs(_normal(rng))])),  # seated at switch, seated
+    ],
     (kc, "reseat_slack"): lambda rng: [
         float(rng.choice([kc.AUTO, 1])),  # model auto or contact
         *(float(rng.choice([_normal(rng), _normal(rng), math.nan])) for _ in range(5)),

@@ -315,3 +315,18 @@ def test_internal_cylinder_stiffness__steel_by_hand():
 def test_internal_cylinder_stiffness__rejects_bad_input(args):
     with pytest.raises(ValueError, match="must"):
         internal_cylinder_stiffness(*args)
+
+
+def test_contact_mode__codes_link_contact_free_and_the_two_seated_kinds():
+    """0 on the link; a seated journal (a start on the wall) is in contact whichever the
+    sign of its δ; one seated by the switch of auto is free (its free flight counts from
+    the switch); otherwise contact exactly where δ > 0."""
+    from mcchain.contact import SEATED, SEATED_AT_SWITCH
+    from mcchain.kernels.contact import contact_mode
+
+    assert contact_mode(0.0, 1e-6, 0.3) == 0.0
+    assert contact_mode(1.0, -1e-14, SEATED) == 1.0
+    assert contact_mode(1.0, 1e-14, SEATED_AT_SWITCH) == 2.0
+    assert contact_mode(1.0, -1e-14, SEATED_AT_SWITCH) == 2.0
+    assert contact_mode(1.0, 1e-9, 0.3) == 1.0
+    assert contact_mode(1.0, 0.0, 0.3) == 2.0

@@ -685,13 +685,14 @@ class Emitter(SchurComplement):
             arguments = [f"ux{s}", f"uy{s}", f"p_k{s}", f"p_l0{s}"]
             (elastic,) = self.kernel(FORCE_KERNELS, "spring_energy", arguments, f"_s{s}")
             self.emit(f"energy += {elastic}")
-        # Contact joints: δ, the mode (0 link, 1 contact, 2 free; seated, vi < 0, is in
-        # contact whichever the sign of δ) and the elastic energy K δ^(m+1) / (m+1).
+        # Contact joints: δ, the mode (0 link, 1 contact, 2 free) and the elastic energy
+        # K δ^(m+1) / (m+1).
         for k in self.contact_row:
+            self.emit(f"pen{k} = rho{k} - p_cl{k}")
             (eel,) = self.inline("elastic_energy", [f"pen{k}", f"p_K{k}", f"p_mx{k}"], k)
+            (mode,) = self.inline("contact_mode", [f"fm{k}", f"pen{k}", f"vi{k}"], k)
             self.emit(
-                f"pen{k} = rho{k} - p_cl{k}",
-                f"mode{k} = fm{k} * (1.0 + (pen{k} <= 0.0 and vi{k} >= 0.0) * 1.0)",
+                f"mode{k} = {mode}",
                 f"eel{k} = {eel}",
                 f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )

@@ -36,6 +36,7 @@ from mcchain.contact import (
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
     RESEAT_RATE,
+    SEATED_AT_SWITCH,
 )
 from mcchain.kernels.config import JIT, njit
 
@@ -51,6 +52,7 @@ __all__ = [
     "LANKARANI_NIKRAVESH",
     "contact_crossing",
     "contact_law",
+    "contact_mode",
     "contact_slip",
     "damping_factor",
     "dwell_start",
@@ -249,6 +251,16 @@ def contact_crossing(d0, r0, d1, r1, h):
             break
     _value, slope = _hermite(theta, d0, r0, d1, r1, h)
     return theta, slope
+
+
+@njit(**JIT)
+def contact_mode(law, delta, approach):
+    """The ``contact_mode`` code of a joint: 0 on the link (``law`` = 0), else 1 in contact
+    or 2 free. ``approach`` is the contact's δ̇⁻ column: a seated journal (< 0) is in contact
+    whichever the sign of its δ (m), except one seated by the switch of model auto
+    (SEATED_AT_SWITCH), which is free: its free flight counts from the switch."""
+    free = (delta <= 0.0 and approach >= 0.0) or approach == SEATED_AT_SWITCH
+    return law * (2.0 if free else 1.0)
 
 
 @njit(**JIT)

@@ -41,7 +41,7 @@ from mcchain.kernels.clearance import (
     record_stage0,
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
-from mcchain.kernels.contact import elastic_energy
+from mcchain.kernels.contact import contact_mode, elastic_energy
 from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
 from mcchain.kernels.joints import (
     constraint_gamma,
@@ -546,8 +546,7 @@ def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, 
             cf[k] = 0.0
         pen = cst[j, PDC]
         out_ct[s, it, 2 * j] = pen
-        free = pen <= 0.0 and cst[j, VI] >= 0.0  # seated (VI < 0): in contact
-        out_ct[s, it, 2 * j + 1] = cst[j, FM] * (2.0 if free else 1.0)
+        out_ct[s, it, 2 * j + 1] = contact_mode(cst[j, FM], pen, cst[j, VI])
     for i in range(ndof):
         out_q[s, it, i] = q[i]
         out_v[s, it, i] = v[i]
