@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "9d7c0bd0d5da9fcfbc711c7378241a2170764a277aeb26a4345afdaeb5b35b80",
-        "rk4": "f3cd8e8ad0130b54f1e544fca0ce809e82b4f37c52d300bebf4381015e99ac9e",
-        "rk4-projection": "f196d4717817ffaa8204829c8e08bf16c0d7c5d8eb09ed4e4ec8fa6ceedde0c5",
-        "rk45": "31da5e5dbb25fd99598afc0d16445b1fdd194f0171775e5dd3b46701835c90ac",
+        "accel": "9977f2f47672717147a95103567a7130cadfaa07ff21890f6ec6d83707adc707",
+        "rk4": "3583488dd656ea211c4b6c3793f9dc027671799f3b885b7eae09925c788a9033",
+        "rk4-projection": "4f34eb00a18bd967fcf7e08e2cb953f27ace96911d5b81784726ba11c3ae46fb",
+        "rk45": "ae97bf7a3e319272f24bb803eecedc717fbc695e62d2ee19fe06c05fef143fe4",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",

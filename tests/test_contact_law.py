@@ -330,3 +330,56 @@ def test_contact_mode__codes_link_contact_free_and_the_two_seated_kinds():
     assert contact_mode(1.0, -1e-14, SEATED_AT_SWITCH) == 2.0
     assert contact_mode(1.0, 1e-9, 0.3) == 1.0
     assert contact_mode(1.0, 0.0, 0.3) == 2.0
+
+
+HERMITE_ROUNDING = 16.0 * np.finfo(float).eps
+"""hermite_peak on an exact cubic: a few roundings of its four terms (relative to their sum
+of magnitudes); the root's own rounding moves the value only quadratically."""
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(1e-8, 1e-3),  # h, s
+    st.floats(0.02, 0.98),  # where in the step the maximum is
+    st.floats(1e-7, 1e-3),  # the maximum P, m
+    st.floats(1e-6, 1.0),  # how far the step's ends are below it, relative
+    st.floats(-0.5, 0.5),  # the cubic term, relative
+)
+def test_hermite_peak__the_maximum_of_a_cubic(h, where, top, dip, skew):
+    """δ(t) = P − k (t − t*)² + g (t − t*)³ with |g| h ≤ k/2: its only maximum on [0, h] is
+    P at t* (δ − P = (t − t*)² (g (t − t*) − k) < 0 elsewhere), and the cubic Hermite
+    interpolant of a cubic is the cubic itself."""
+    peak_time = where * h
+    k = top * dip / (h * h)
+    g = skew * k / h
+
+    def delta(t):
+        return top - k * (t - peak_time) ** 2 + g * (t - peak_time) ** 3
+
+    def rate(t):
+        return -2.0 * k * (t - peak_time) + 3.0 * g * (t - peak_time) ** 2
+
+    d0, r0, d1, r1 = delta(0.0), rate(0.0), delta(h), rate(h)
+    scale = abs(d0) + abs(d1) + h * (abs(r0) + abs(r1))
+    assert abs(kc.hermite_peak(d0, r0, d1, r1, h) - top) <= HERMITE_ROUNDING * scale
+
+
+@settings(max_examples=300, deadline=None)
+@given(penetrations, rates, penetrations, rates, st.floats(1e-7, 1e-3))
+def test_hermite_peak__the_largest_value_of_the_interpolant(d0, r0, d1, r1, h):
+    """Any step: never below the ends or the interpolant on a fine grid, never above the
+    grid by more than the grid's resolution (|δ''| ≤ 6 Σ|terms| per unit θ², spacing 1e-4)."""
+    grid = np.linspace(0.0, 1.0, 10001)
+    values = kc._hermite.py_func(grid, d0, r0, d1, r1, h)[0]
+    scale = abs(d0) + abs(d1) + h * (abs(r0) + abs(r1))
+    peak = kc.hermite_peak(d0, r0, d1, r1, h)
+    assert peak >= max(d0, d1)
+    assert peak >= max(values) - HERMITE_ROUNDING * scale
+    assert peak <= max(values) + 6.0 * scale * 1e-8 / 8.0 + HERMITE_ROUNDING * scale
+
+
+def test_hermite_peak__monotone_steps_and_no_step_behind():
+    assert kc.hermite_peak(0.0, 1.0, 1.0, 1.0, 1.0) == 1.0  # δ = θ: the end
+    assert kc.hermite_peak(1.0, -1.0, 0.0, -1.0, 1.0) == 1.0  # δ = 1 − θ: the start
+    assert kc.hermite_peak(0.0, 1.0, 0.0, -1.0, 1.0) == 0.25  # δ = θ − θ²
+    assert kc.hermite_peak(math.nan, math.nan, 2e-6, 0.1, 1e-6) == 2e-6  # the first step

@@ -147,7 +147,8 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     ) -> list[str]:
         """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
         (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peak
-        penetration (the peak force is tracked with the joint forces: _peak_blocks)."""
+        penetration (on the step's Hermite interpolant, ``hermite_peak``; the peak force is
+        tracked with the joint forces: _peak_blocks)."""
         d0, r0 = at("pd", j), at("pr", j)
         seat = f"{SEAT_TOLERANCE!r} * {at('P', slots[f'cl{k}'])}"
         return [
@@ -189,7 +190,10 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
             f"        elif {d0} <= 0.0:",
             f"            {at('tff', j)} += {h}",
             f"        {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
-            f"    {at('pkd', j)} = max({at('pkd', j)}, {d1})",
+            # in contact: δ's peak inside the step, on its Hermite interpolant
+            f"    if {d0} > 0.0 or {d1} > 0.0:",
+            f"        {at('pkd', j)} = max({at('pkd', j)},"
+            f" hermite_peak({d0}, {r0}, {d1}, {r1}, {h}))",
             *indent(reseat(j, k, lamrow, h, d1, r1, vrow, located)),
             f"{d0} = {d1}",
             f"{r0} = {r1}",

@@ -463,7 +463,7 @@ def _contact_functions(adaptive: bool) -> str:
     from mcchain.kernels import contact
 
     parts = []
-    kernels = (contact._hermite, contact.contact_crossing)
+    kernels = (contact._hermite, contact.contact_crossing, contact.hermite_peak)
     located = (contact.quasi_static_slack, contact.dwell_start)
     for kernel in (*kernels, *located) if adaptive else kernels:
         source = inspect.getsource(kernel.py_func)

@@ -30,6 +30,7 @@ from mcchain.kernels.contact import (
     contact_law,
     contact_slip,
     friction_force,
+    hermite_peak,
     reseat_slack,
 )
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
@@ -56,7 +57,7 @@ KC = 12  # FM · ∂F_n/∂δ, N/m (the step-size check)
 DFR = 13  # FM · ∂F_n/∂δ̇, N s/m (Newton iterations of implicit steps)
 NIM = 14  # impacts
 PKF = 15  # peak contact force, N (the continuous one, mcchain.kernels.peaks, at the end)
-PKD = 16  # peak penetration, m
+PKD = 16  # peak penetration, m (continuous: on each step's Hermite interpolant)
 TFF = 17  # free-flight time, s
 TSE = 18  # first separation time, s
 NCST = 19
@@ -237,9 +238,10 @@ def reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):
 def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
     """Bookkeeping of the step of length ``h`` that ended at time ``t`` with δ1, δ̇1 and
     the kinetic energy ``kinetic`` (J): onset (δ crosses 0 upwards: located on the cubic
-    Hermite interpolant, its rate is δ̇⁻), separation, free flight, peak penetration, and the re-seat
-    criterion of model auto (:func:`reseat_ready`). Returns True when the joint is marked
-    for re-seating."""
+    Hermite interpolant, its rate is δ̇⁻), separation, free flight, peak penetration (the
+    interpolant's maximum in a step in contact, :func:`mcchain.kernels.contact.
+    hermite_peak`), and the re-seat criterion of model auto (:func:`reseat_ready`). Returns
+    True when the joint is marked for re-seating."""
     k = contact_joint_index(km, j)
     marked = False
     if cst[j, FM] == 1.0:
@@ -280,7 +282,8 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
             elif d0 <= 0.0:
                 cst[j, TFF] += h
             cst[j, INS] = 1.0 if d1 > 0.0 else 0.0
-        cst[j, PKD] = max(cst[j, PKD], d1)
+        if d0 > 0.0 or d1 > 0.0:  # in contact: δ's peak inside the step, on its interpolant
+            cst[j, PKD] = max(cst[j, PKD], hermite_peak(d0, r0, d1, r1, h))
         wj = cst[j, WJC]
         wn = math.sqrt(wj) if wj > 0.0 else 0.0
         if reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):

@@ -25,6 +25,8 @@ zero gives inf/NaN under ``error_model="numpy"``).
 
 from __future__ import annotations
 
+import math
+
 from mcchain.contact import (
     AUTO,
     FLORES,
@@ -59,6 +61,7 @@ __all__ = [
     "elastic_energy",
     "friction_factor",
     "friction_force",
+    "hermite_peak",
     "normal_force",
     "normal_force_derivatives",
     "quasi_static_slack",
@@ -251,6 +254,66 @@ def contact_crossing(d0, r0, d1, r1, h):
             break
     _value, slope = _hermite(theta, d0, r0, d1, r1, h)
     return theta, slope
+
+
+@njit(**JIT)
+def hermite_peak(d0, r0, d1, r1, h):
+    """The largest penetration in a step: the maximum of the cubic Hermite interpolant of δ
+    (:func:`contact_crossing`'s, through δ0, δ̇0 at the step's start and δ1, δ̇1 at its end)
+    over the step, its ends included.
+
+    A contact's peak (δ̇ turning from + to −) lies inside a step; δ at the step ends misses
+    it by up to δ̈h²/8, the interpolant by O(h⁴), the order of the states' own error. With
+    θ the fraction of the step, the interpolant's derivative is the quadratic
+    a θ² + b θ + c, a = 3h(δ̇0 + δ̇1) − 6(δ1 − δ0), b = 6(δ1 − δ0) − h(4δ̇0 + 2δ̇1),
+    c = h δ̇0; its roots in (0, 1) are solved in closed form (the quadratic formula in its
+    cancellation-free form, as :func:`mcchain.kernels.peaks.cubic_peak`).
+
+    Args:
+        d0, r0: δ (m) and δ̇ (m/s) at the start of the step (NaN: no step behind, the
+            answer is δ1).
+        d1, r1: the same at its end.
+        h: the step, s (≥ 0).
+
+    Returns:
+        The largest δ on the step, m.
+    """
+    best = d1
+    if d0 > best:
+        best = d0
+    rise = d1 - d0
+    slope0 = h * r0
+    slope1 = h * r1
+    qa = 3.0 * (slope0 + slope1) - 6.0 * rise
+    qb = 6.0 * rise - 4.0 * slope0 - 2.0 * slope1
+    qc = slope0
+    size = max(abs(qa), abs(qb), abs(qc))
+    if size > 0.0:  # a largest coefficient of 1: tiny slopes' discriminant does not underflow
+        qa = qa / size
+        qb = qb / size
+        qc = qc / size
+    theta1 = math.nan
+    theta2 = math.nan
+    if qa == 0.0:
+        if qb != 0.0:
+            theta1 = -qc / qb
+    else:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc >= 0.0:
+            root = math.sqrt(disc)
+            qq = -0.5 * (qb + root) if qb >= 0.0 else -0.5 * (qb - root)
+            if qq != 0.0:
+                theta1 = qq / qa
+                theta2 = qc / qq
+            else:
+                theta1 = 0.0
+    if theta1 > 0.0 and theta1 < 1.0:
+        value, _slope = _hermite(theta1, d0, r0, d1, r1, h)
+        best = max(best, value)
+    if theta2 > 0.0 and theta2 < 1.0:
+        value, _slope = _hermite(theta2, d0, r0, d1, r1, h)
+        best = max(best, value)
+    return best
 
 
 @njit(**JIT)

@@ -25,16 +25,20 @@ def dense_peaks(
     ts: np.ndarray,
     quantities: Callable[[float, np.ndarray], np.ndarray],
     peaks: np.ndarray,
+    values: np.ndarray | None = None,
 ) -> None:
     """Raise ``peaks`` (npk,) to the continuous peaks of ``quantities(t, y)`` (npk,) over the
     steps ending at ``ts`` (ascending, the first the segment's start) of the dense output
-    ``dense(t)`` (the state y at t; scipy's ``OdeSolution``)."""
+    ``dense(t)`` (the state y at t; scipy's ``OdeSolution``). ``values`` (nts, npk): the
+    quantities at ``ts`` where the caller has them already (default: evaluated here); a NaN
+    column is not tracked."""
     from scipy.optimize import minimize_scalar
 
     ts = np.asarray(ts, dtype=float)
     if len(ts) == 0:
         return
-    values = np.array([quantities(float(t), dense(float(t))) for t in ts])  # (nts, npk)
+    if values is None:
+        values = np.array([quantities(float(t), dense(float(t))) for t in ts])  # (nts, npk)
     n, npk = values.shape
     for k in range(npk):
         f = values[:, k]

@@ -20,8 +20,9 @@ right-hand side is smooth. A segment ends at the first of these events:
   accepted step's end) last began to hold; then the projection onto the link
   (:func:`mcchain.kernels.explicit.reseat`). Neither instant depends on the steps.
 
-Peaks of the forces are located on each segment's dense output (:mod:`mcchain.solvers.peaks`),
-the peak penetration kept at every accepted step, impacts and free-flight time at the events.
+Peaks of the forces and of the penetration of the joints in contact are located on each
+segment's dense output (:mod:`mcchain.solvers.peaks`), impacts and free-flight time at the
+events.
 """
 
 from __future__ import annotations
@@ -161,6 +162,7 @@ class _Sample:
         # per joint: the located instant its re-seat criterion began to hold (NaN: not now)
         self.ready_since = [math.nan] * len(self.joints)
         self.last_step: tuple[float, float, np.ndarray, np.ndarray] | None = None
+        self.step_penetration: list[np.ndarray] = []  # δ at the segment's step ends (the hook)
         self.free_since = [math.nan] * len(self.joints)
         # the compiled stepper's arrays (mcchain.kernels.radau.radau_step)
         n = 2 * ndof
@@ -191,6 +193,34 @@ class _Sample:
             )
         )  # fmt: skip
 
+    def in_contact(self) -> np.ndarray:
+        """Which contact-law joints are in contact under the law in the present modes (INS:
+        δ > 0, or seated): the joints whose penetration peak is tracked."""
+        cl, cst = self.cl, self.cst
+        return (cst[:, cl.FM] == 1.0) & (cst[:, cl.INS] == 1.0)
+
+    def penetrations(self, t: float, y: np.ndarray) -> np.ndarray:
+        """δ (m) of each contact-law joint at (t, y), NaN off :meth:`in_contact`."""
+        return np.array([
+            self.penetration(j, y) if tracked else math.nan
+            for j, tracked in enumerate(self.in_contact())
+        ])  # fmt: skip
+
+    def segment_peaks(self, dense: _Dense, clipped: bool) -> None:
+        """The continuous peaks over the segment's steps (``clipped``: the last one ends at
+        its event), in its modes: of |joint force| per joint and |λ| per driver (``peaks``),
+        and of δ of the joints in contact (their PKD column, the kernels' max_penetration),
+        from δ at the step ends the hook recorded (``step_penetration``)."""
+        from mcchain.solvers.peaks import dense_peaks
+
+        ts = np.array(dense.ts)
+        dense_peaks(dense, ts, self.quantities, self.peaks)
+        if len(self.joints):
+            values = np.array(self.step_penetration)
+            if clipped:
+                values[-1] = self.penetrations(ts[-1], dense(ts[-1]))
+            dense_peaks(dense, ts, self.penetrations, self.cst[:, self.cl.PKD], values)
+
     def quantities(self, t: float, y: np.ndarray) -> np.ndarray:
         """|joint force| per joint and |λ| per driver at (t, y) with the present modes."""
         from mcchain.kernels.peaks import peak_values
@@ -202,19 +232,20 @@ class _Sample:
 
     def on_step(self, t: float, y: np.ndarray) -> float:
         """The hook at every accepted step's end (and a segment's start), the first of the
-        events, evaluated before the others (it never fires): the step count, the peak
-        penetration, and where a re-seat dwell of model auto began (located on the step
-        ``last_step`` where the criterion turned true; reset where it is false at the step's
-        end), from the accelerations the stepper evaluated last, at (t, y)."""
+        events, evaluated before the others (it never fires): the step count, δ of the joints
+        in contact (for :meth:`segment_peaks`), and where a re-seat dwell of model auto began
+        (located on the step ``last_step`` where the criterion turned true; reset where it
+        is false at the step's end), from the accelerations the stepper evaluated last, at
+        (t, y)."""
         from scipy.optimize import brentq
 
         cl, cst, step = self.cl, self.cst, self.last_step
         self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
+        self.step_penetration.append(np.where(self.in_contact(), cst[:, cl.PEN], math.nan))
         ready = [self.reseat_margin(j, t, y, evaluate=False) > 0.0 for j in range(len(self.joints))]
         for j in range(len(self.joints)):
             if cst[j, cl.FM] != 1.0:
                 continue
-            cst[j, cl.PKD] = max(cst[j, cl.PKD], cst[j, cl.PEN])
             if not ready[j]:
                 self.ready_since[j] = math.nan
             elif math.isnan(self.ready_since[j]) and step is not None:
@@ -419,7 +450,6 @@ class _Sample:
         from scipy.optimize import brentq
 
         from mcchain.kernels import radau as kr
-        from mcchain.solvers.peaks import dense_peaks
 
         run, i, st = self.run, self.i, self.stepper
         rtol, atol = float(run.settings.rtol), float(run.settings.atol)
@@ -434,6 +464,7 @@ class _Sample:
         if code != kr.ACCEPTED:
             return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
         self.last_step = None
+        self.step_penetration = []
         g = [event(t, y) for event in events]
         run.steps[i] -= 1  # the hook's call at the segment's start
         dense = _Dense(t)
@@ -471,11 +502,11 @@ class _Sample:
             g = g_new
             if found is not None:
                 dense.clip(stop)
-                dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
+                self.segment_peaks(dense, clipped=True)
                 y_stop = _Dense.piece(stop, step)
                 return _Segment(written, 0, math.nan, kinds[found[1] - 1], stop, y_stop)
         if dense.pieces:  # the segment's peaks, in its modes
-            dense_peaks(dense, np.array(dense.ts), self.quantities, self.peaks)
+            self.segment_peaks(dense, clipped=False)
         return _Segment(written, 0, math.nan)
 
     def write(self, it: int, t: float, y: np.ndarray) -> float:

@@ -19,7 +19,8 @@ Both integrate with ``scipy.integrate.solve_ivp`` (DOP853 by default, rtol ≤ 1
 phase: a free phase ends at the located onset (δ crossing 0 upwards, a terminal event) where
 δ̇⁻ is read and D fixed; a contact phase ends at the located separation (δ crossing 0
 downwards) where δ̇⁺ is read. A contact present at t = 0 has no onset: it is undamped and is
-not an impact.
+not an impact. The largest penetration of each contact is located as another event (δ̇
+crossing 0 downwards inside a contact phase), on the solver's dense output.
 """
 
 from __future__ import annotations
@@ -118,6 +119,9 @@ class ContactHistory:
         delta, delta_rate, normal_force: (nt,) m, m/s, N.
         impacts: every located onset, in order.
         events: (time, state) of every onset and separation, in order.
+        max_penetration: the largest δ (m): at the located maxima of the contacts (δ̇
+            crossing 0 downwards while in contact) and at the sample times; 0 if never in
+            contact.
     """
 
     t: np.ndarray
@@ -128,6 +132,7 @@ class ContactHistory:
     normal_force: np.ndarray
     impacts: list[Impact] = field(default_factory=list)
     events: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    max_penetration: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -156,6 +161,7 @@ def _run(
     D = 0.0  # a contact present at t = 0 has no onset: undamped
     impacts: list[Impact] = []
     events: list[tuple[float, np.ndarray]] = []
+    apexes: list[float] = []  # δ at the located maxima of the contacts
     ts: list[np.ndarray] = []
     ys: list[np.ndarray] = []
 
@@ -166,6 +172,11 @@ def _run(
 
         crossing.terminal = True  # type: ignore[attr-defined]
         crossing.direction = -1.0 if in_contact else 1.0  # type: ignore[attr-defined]
+
+        def apex(t, yy, *_):
+            return scene.gap_rate(yy)
+
+        apex.direction = -1.0  # type: ignore[attr-defined]
         sample = times[(times >= t0) & (times <= t_end)]
         last = next((t[-1] for t in reversed(ts) if len(t)), None)
         if last is not None and sample.size and sample[0] == last:
@@ -176,7 +187,7 @@ def _run(
             y,
             method=method,
             t_eval=sample,
-            events=crossing,
+            events=(crossing, apex),
             rtol=rtol,
             atol=atol,
             max_step=max_step,
@@ -187,6 +198,8 @@ def _run(
         ts.append(sol.t)
         # (a phase with no sample time in it gives scipy's empty list, not an array)
         ys.append(np.asarray(sol.y, dtype=float).reshape(y.size, -1).T)
+        if in_contact:
+            apexes += [scene.gap(state) for state in sol.y_events[1]]
         if sol.status == 0:
             break
         t0 = float(sol.t_events[0][0])
@@ -215,6 +228,7 @@ def _run(
             law.name, law.restitution, imp.approach_speed
         )
     fn = force(delta, rate, law.stiffness, law.exponent, D_t)
+    peak = max([0.0, *apexes, *delta[np.isfinite(delta)]])
     return ContactHistory(
         t=t,
         position=Y[:, : scene.ndof],
@@ -224,6 +238,7 @@ def _run(
         normal_force=fn,
         impacts=impacts,
         events=events,
+        max_penetration=float(peak),
     )
 
 
