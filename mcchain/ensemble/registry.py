@@ -307,7 +307,8 @@ VARIABLES: dict[str, VariableSpec] = {
             "max_penetration",
             ("sample", "joint"),
             "m",
-            "largest penetration under the contact law (0 if never in contact; NaN others)",
+            "largest penetration under the contact law, continuous: located within each step, "
+            "not from step ends or stored points (0 if never in contact; NaN others)",
             "float64",
             "simulate",
         ),
