@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "9d7c0bd0d5da9fcfbc711c7378241a2170764a277aeb26a4345afdaeb5b35b80",
-        "rk4": "f3cd8e8ad0130b54f1e544fca0ce809e82b4f37c52d300bebf4381015e99ac9e",
-        "rk4-projection": "f196d4717817ffaa8204829c8e08bf16c0d7c5d8eb09ed4e4ec8fa6ceedde0c5",
-        "rk45": "31da5e5dbb25fd99598afc0d16445b1fdd194f0171775e5dd3b46701835c90ac",
+        "accel": "30590a6ab1d229ba868138ebfa9789a8be8e44856322ea88199d73eb6b215611",
+        "rk4": "f46479ca30ffc0cf33bf94a3af9ee54a85dd31d9b906a0ffa1b2c71084bd2d48",
+        "rk4-projection": "7da17be2b9c47a4812eca47d85e33605a7ba3462464e13aa5dc54fa40bec447e",
+        "rk45": "6fe5a15b35c98c020482352c59c1a56a4abc4edfed36cc112e01f61ad1bba48b",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",
