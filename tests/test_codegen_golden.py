@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "9977f2f47672717147a95103567a7130cadfaa07ff21890f6ec6d83707adc707",
-        "rk4": "3583488dd656ea211c4b6c3793f9dc027671799f3b885b7eae09925c788a9033",
-        "rk4-projection": "4f34eb00a18bd967fcf7e08e2cb953f27ace96911d5b81784726ba11c3ae46fb",
-        "rk45": "ae97bf7a3e319272f24bb803eecedc717fbc695e62d2ee19fe06c05fef143fe4",
+        "accel": "57b74981031d1649aca72fe96bc667ca13c462a516d461390580e0b0a48dc6bd",
+        "rk4": "e068f28b4b612058aa1c854a634cbeb859ab194daecc9cfea3c27c5d2be2f80d",
+        "rk4-projection": "d61c6269e09481fcdbb1d5e010b3b0008c0e53757425b89892fec8461eeea600",
+        "rk45": "6fa10b38470e15e7945db555d2a352e120236ab8c6297f3dcccf67d3ffb0210b",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",

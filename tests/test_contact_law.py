@@ -383,3 +383,35 @@ def test_hermite_peak__monotone_steps_and_no_step_behind():
     assert kc.hermite_peak(1.0, -1.0, 0.0, -1.0, 1.0) == 1.0  # δ = 1 − θ: the start
     assert kc.hermite_peak(0.0, 1.0, 0.0, -1.0, 1.0) == 0.25  # δ = θ − θ²
     assert kc.hermite_peak(math.nan, math.nan, 2e-6, 0.1, 1e-6) == 2e-6  # the first step
+
+
+def test_contact_bookkeeping__onset_separation_and_the_seated_kinds_on_linear_steps():
+    """On a linear δ(t) the Hermite crossing is exact: an onset half-way books half the
+    step as free flight, one impact at δ̇⁻; a separation half-way books the other half and
+    the first separation's time; a journal seated by the switch of auto flies free while
+    within the tolerance and stops where it presses back."""
+    from mcchain.contact import SEATED, SEATED_AT_SWITCH
+    from mcchain.kernels.contact import contact_bookkeeping
+
+    nan = math.nan
+    # onset at t = 1.5 of a step [1, 2]: (vi, ins, nim, tff, tse, pkd)
+    books = contact_bookkeeping(
+        0.0, 0.0, 0.0, 0.25, nan, 0.0, -1e-6, 2e-6, 1e-6, 2e-6, 1.0, 2.0, 0.0
+    )
+    assert books[:4] == pytest.approx((2e-6, 1.0, 1.0, 0.75), rel=1e-12, abs=1e-12)
+    assert books[4] != books[4] and books[5] == 1e-6
+    # separation at t = 1.5: the other half is free flight, tse = 1.5
+    books = contact_bookkeeping(
+        2e-6, 1.0, 1.0, 0.0, nan, 1e-6, 1e-6, -2e-6, -1e-6, -2e-6, 1.0, 2.0, 0.0
+    )
+    assert books == pytest.approx((2e-6, 0.0, 1.0, 0.5, 1.5, 1e-6), rel=1e-12, abs=1e-12)
+    # seated by the switch, within the tolerance: a whole step of free flight, still seated
+    books = contact_bookkeeping(
+        SEATED_AT_SWITCH, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1e-16, 5e-14, 1e-16, 1.0, 2.0, 1e-13
+    )
+    assert books == (SEATED_AT_SWITCH, 1.0, 0.0, 1.0, 1.0, 5e-14)
+    # ... pressing back through the tolerance half-way: half a step free, then seated
+    books = contact_bookkeeping(
+        SEATED_AT_SWITCH, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2e-13, 2e-13, 2e-13, 1.0, 2.0, 1e-13
+    )
+    assert books[0] == SEATED and books[2] == 0.0 and abs(books[3] - 0.5) < 1e-12

@@ -145,55 +145,19 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     def step(
         j: int, k: int, lamrow: str, t: str, h: str, d1: str, r1: str, vrow: str, located: bool
     ) -> list[str]:
-        """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset
-        (δ crosses 0 upwards: located, its rate is δ̇⁻), separation, free flight, peak
-        penetration (on the step's Hermite interpolant, ``hermite_peak``; the peak force is
-        tracked with the joint forces: _peak_blocks)."""
+        """Bookkeeping of the step of length h that ended at time t with δ1, δ̇1: onset,
+        separation, free flight, peak penetration (:func:`mcchain.kernels.contact.
+        contact_bookkeeping`, which the generated module copies; the peak force is tracked
+        with the joint forces: _peak_blocks), then the re-seat dwell (:func:`reseat`)."""
         d0, r0 = at("pd", j), at("pr", j)
         seat = f"{SEAT_TOLERANCE!r} * {at('P', slots[f'cl{k}'])}"
+        names = ("vi", "ins", "nim", "tff", "tse", "pkd")
+        books = [at(name, j) for name in names]
+        arguments = ", ".join([*books, d0, r0, d1, r1, h, t, seat])
         return [
             f"if {at('fm', j)} == 1.0:",
-            # seated (vi < 0: from a start on the wall or the link): in contact, undamped,
-            # no onset, until the journal is off the wall by more than the seat tolerance
-            f"    if {at('vi', j)} < 0.0:",
-            f"        if {d1} < -{seat}:",
-            "            th = 0.0",
-            f"            if {d0} > 0.0 and {at('vi', j)} == {SEATED!r}:",
-            f"                th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
-            f"            {at('tff', j)} += (1.0 - th) * {h}",
-            f"            if {at('tse', j)} != {at('tse', j)}:",
-            f"                {at('tse', j)} = {t} - {h} + th * {h}",
-            f"            {at('vi', j)} = 0.0",
-            f"            {at('ins', j)} = 0.0",
-            "        else:",
-            f"            {at('ins', j)} = 1.0",
-            # from the switch of auto: free flight while within the tolerance of the wall
-            f"            if {at('vi', j)} == {SEATED_AT_SWITCH!r}:",
-            f"                if {d1} <= {seat}:",
-            f"                    {at('tff', j)} += {h}",
-            "                else:",
-            f"                    th, rate = contact_crossing({d0} - {seat}, {r0}, {d1} - {seat},"
-            f" {r1}, {h})",
-            f"                    {at('tff', j)} += th * {h}",
-            f"                    {at('vi', j)} = {SEATED!r}",
-            "    else:",
-            f"        if {d0} <= 0.0 and {d1} > 0.0:",
-            f"            th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
-            f"            {at('vi', j)} = rate",
-            f"            {at('nim', j)} += 1.0",
-            f"            {at('tff', j)} += th * {h}",
-            f"        elif {d0} > 0.0 and {d1} <= 0.0:",
-            f"            th, rate = contact_crossing({d0}, {r0}, {d1}, {r1}, {h})",
-            f"            {at('tff', j)} += (1.0 - th) * {h}",
-            f"            if {at('tse', j)} != {at('tse', j)}:",
-            f"                {at('tse', j)} = {t} - {h} + th * {h}",
-            f"        elif {d0} <= 0.0:",
-            f"            {at('tff', j)} += {h}",
-            f"        {at('ins', j)} = 1.0 if {d1} > 0.0 else 0.0",
-            # in contact: δ's peak inside the step, on its Hermite interpolant
-            f"    if {d0} > 0.0 or {d1} > 0.0:",
-            f"        {at('pkd', j)} = max({at('pkd', j)},"
-            f" hermite_peak({d0}, {r0}, {d1}, {r1}, {h}))",
+            f"    {', '.join('c' + n for n in names)} = contact_bookkeeping({arguments})",
+            *(f"    {row} = c{name}" for row, name in zip(books, names, strict=True)),
             *indent(reseat(j, k, lamrow, h, d1, r1, vrow, located)),
             f"{d0} = {d1}",
             f"{r0} = {r1}",

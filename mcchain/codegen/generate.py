@@ -460,10 +460,16 @@ def _contact_functions(adaptive: bool) -> str:
     """
     import inspect
 
+    from mcchain.contact import SEATED, SEATED_AT_SWITCH
     from mcchain.kernels import contact
 
-    parts = []
-    kernels = (contact._hermite, contact.contact_crossing, contact.hermite_peak)
+    parts = [f"SEATED = {SEATED!r}\nSEATED_AT_SWITCH = {SEATED_AT_SWITCH!r}"]
+    kernels = (
+        contact._hermite,
+        contact.contact_crossing,
+        contact.hermite_peak,
+        contact.contact_bookkeeping,
+    )
     located = (contact.quasi_static_slack, contact.dwell_start)
     for kernel in (*kernels, *located) if adaptive else kernels:
         source = inspect.getsource(kernel.py_func)

@@ -26,11 +26,10 @@ from mcchain.contact import (
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.contact import (
-    contact_crossing,
+    contact_bookkeeping,
     contact_law,
     contact_slip,
     friction_force,
-    hermite_peak,
     reseat_slack,
 )
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
@@ -239,51 +238,17 @@ def contact_step(km, s, cst, j, lam_r, t, h, d1, r1, kinetic):
     """Bookkeeping of the step of length ``h`` that ended at time ``t`` with δ1, δ̇1 and
     the kinetic energy ``kinetic`` (J): onset (δ crosses 0 upwards: located on the cubic
     Hermite interpolant, its rate is δ̇⁻), separation, free flight, peak penetration (the
-    interpolant's maximum in a step in contact, :func:`mcchain.kernels.contact.
-    hermite_peak`), and the re-seat criterion of model auto (:func:`reseat_ready`). Returns
-    True when the joint is marked for re-seating."""
+    interpolant's maximum: :func:`mcchain.kernels.contact.contact_bookkeeping`), and the
+    re-seat criterion of model auto (:func:`reseat_ready`). Returns True when the joint is
+    marked for re-seating."""
     k = contact_joint_index(km, j)
     marked = False
     if cst[j, FM] == 1.0:
-        d0 = cst[j, PD]
-        r0 = cst[j, PR]
-        if cst[j, VI] < 0.0:  # seated: in contact until off the wall by the tolerance
-            c = km.joint_clearance[s % km.joint_clearance.shape[0], k]
-            seat = SEAT_TOLERANCE * c
-            if d1 < -seat:
-                theta = 0.0
-                if d0 > 0.0 and cst[j, VI] == SEATED:
-                    theta, rate = contact_crossing(d0, r0, d1, r1, h)
-                cst[j, TFF] += (1.0 - theta) * h
-                if cst[j, TSE] != cst[j, TSE]:
-                    cst[j, TSE] = t - h + theta * h
-                cst[j, VI] = 0.0
-                cst[j, INS] = 0.0
-            else:
-                cst[j, INS] = 1.0
-                if cst[j, VI] == SEATED_AT_SWITCH:  # free flight from the switch ...
-                    if d1 <= seat:
-                        cst[j, TFF] += h
-                    else:  # ... until it presses back
-                        theta, rate = contact_crossing(d0 - seat, r0, d1 - seat, r1, h)
-                        cst[j, TFF] += theta * h
-                        cst[j, VI] = SEATED
-        else:
-            if d0 <= 0.0 and d1 > 0.0:
-                theta, rate = contact_crossing(d0, r0, d1, r1, h)
-                cst[j, VI] = rate
-                cst[j, NIM] += 1.0
-                cst[j, TFF] += theta * h
-            elif d0 > 0.0 and d1 <= 0.0:
-                theta, rate = contact_crossing(d0, r0, d1, r1, h)
-                cst[j, TFF] += (1.0 - theta) * h
-                if cst[j, TSE] != cst[j, TSE]:
-                    cst[j, TSE] = t - h + theta * h
-            elif d0 <= 0.0:
-                cst[j, TFF] += h
-            cst[j, INS] = 1.0 if d1 > 0.0 else 0.0
-        if d0 > 0.0 or d1 > 0.0:  # in contact: δ's peak inside the step, on its interpolant
-            cst[j, PKD] = max(cst[j, PKD], hermite_peak(d0, r0, d1, r1, h))
+        seat = SEAT_TOLERANCE * km.joint_clearance[s % km.joint_clearance.shape[0], k]
+        books = contact_bookkeeping(cst[j, VI], cst[j, INS], cst[j, NIM], cst[j, TFF],
+                                    cst[j, TSE], cst[j, PKD], cst[j, PD], cst[j, PR], d1, r1,
+                                    h, t, seat)  # fmt: skip
+        cst[j, VI], cst[j, INS], cst[j, NIM], cst[j, TFF], cst[j, TSE], cst[j, PKD] = books
         wj = cst[j, WJC]
         wn = math.sqrt(wj) if wj > 0.0 else 0.0
         if reseat_ready(km, s, k, lam_r, d1, r1, wn, kinetic):

@@ -38,6 +38,7 @@ from mcchain.contact import (
     HUNT_CROSSLEY,
     LANKARANI_NIKRAVESH,
     RESEAT_RATE,
+    SEATED,
     SEATED_AT_SWITCH,
 )
 from mcchain.kernels.config import JIT, njit
@@ -52,6 +53,7 @@ __all__ = [
     "HUNT_CROSSLEY",
     "HU_GUO",
     "LANKARANI_NIKRAVESH",
+    "contact_bookkeeping",
     "contact_crossing",
     "contact_law",
     "contact_mode",
@@ -314,6 +316,68 @@ def hermite_peak(d0, r0, d1, r1, h):
         value, _slope = _hermite(theta2, d0, r0, d1, r1, h)
         best = max(best, value)
     return best
+
+
+@njit(**JIT)
+def contact_bookkeeping(vi, ins, nim, tff, tse, pkd, d0, r0, d1, r1, h, t, seat):
+    """What a step tells of a joint under the law: the step of length ``h`` ended at ``t``
+    (s) with δ1, δ̇1 (m, m/s) and began with δ0, δ̇0; ``seat`` is its seat tolerance (m).
+
+    Onset (δ crosses 0 upwards: located on the step's cubic Hermite interpolant,
+    :func:`contact_crossing`; its rate is the approach speed δ̇⁻ and it counts an impact),
+    separation (the first one's time kept), free flight, peak penetration (over a step in
+    contact, δ0 > 0 or δ1 > 0: the largest value of its interpolant, :func:`hermite_peak`).
+    A seated journal (``vi`` < 0) is in contact, undamped and without an onset, until it is
+    off the wall by more than the tolerance; one seated by the switch of model auto
+    (SEATED_AT_SWITCH) flies free from the switch while within the tolerance, and becomes an
+    ordinary seated contact (SEATED) where δ rises above it (it presses back).
+
+    Args:
+        vi: the approach speed column δ̇⁻ (m/s; SEATED, SEATED_AT_SWITCH while seated).
+        ins: 1.0 if in contact at the step's start. nim: impacts so far. tff: free flight so
+            far (s). tse: the first separation's time (s; NaN before). pkd: peak δ so far (m).
+
+    Returns:
+        (vi, ins, nim, tff, tse, pkd) after the step. The loop kernels
+        (mcchain.kernels.clearance.contact_step) and the lanes (their module copies this
+        function) both book with it.
+    """
+    if vi < 0.0:  # seated
+        if d1 < -seat:
+            theta = 0.0
+            if d0 > 0.0 and vi == SEATED:
+                theta, rate = contact_crossing(d0, r0, d1, r1, h)
+            tff += (1.0 - theta) * h
+            if tse != tse:
+                tse = t - h + theta * h
+            vi = 0.0
+            ins = 0.0
+        else:
+            ins = 1.0
+            if vi == SEATED_AT_SWITCH:  # free flight from the switch ...
+                if d1 <= seat:
+                    tff += h
+                else:  # ... until it presses back
+                    theta, rate = contact_crossing(d0 - seat, r0, d1 - seat, r1, h)
+                    tff += theta * h
+                    vi = SEATED
+    else:
+        if d0 <= 0.0 and d1 > 0.0:
+            theta, rate = contact_crossing(d0, r0, d1, r1, h)
+            vi = rate
+            nim += 1.0
+            tff += theta * h
+        elif d0 > 0.0 and d1 <= 0.0:
+            theta, rate = contact_crossing(d0, r0, d1, r1, h)
+            tff += (1.0 - theta) * h
+            if tse != tse:
+                tse = t - h + theta * h
+        elif d0 <= 0.0:
+            tff += h
+        ins = 1.0 if d1 > 0.0 else 0.0
+    if d0 > 0.0 or d1 > 0.0:  # in contact: δ's peak inside the step, on its interpolant
+        pkd = max(pkd, hermite_peak(d0, r0, d1, r1, h))
+    return vi, ins, nim, tff, tse, pkd
 
 
 @njit(**JIT)
