@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "57b74981031d1649aca72fe96bc667ca13c462a516d461390580e0b0a48dc6bd",
-        "rk4": "e068f28b4b612058aa1c854a634cbeb859ab194daecc9cfea3c27c5d2be2f80d",
-        "rk4-projection": "d61c6269e09481fcdbb1d5e010b3b0008c0e53757425b89892fec8461eeea600",
-        "rk45": "6fa10b38470e15e7945db555d2a352e120236ab8c6297f3dcccf67d3ffb0210b",
+        "accel": "f487c7d3b796e2356e10ba14a7447c7a237b95b8636aa4f0daaaa9e84e4cc60f",
+        "rk4": "0639aa715ef70822c2b6d7e1c553392a7a8b6479284e84593034af02484ce39a",
+        "rk4-projection": "42c1586ac49fbb414dd9a3118f9a4c676b5d3ce9cb87ec577c342e1fd5af5941",
+        "rk45": "e6f3633a57ec1e8623f89712687ffa7979a58f25bdd77ef5d4745d2db97496c0",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",

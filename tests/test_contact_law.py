@@ -365,10 +365,17 @@ def test_hermite_peak__the_maximum_of_a_cubic(h, where, top, dip, skew):
 
 
 @settings(max_examples=300, deadline=None)
-@given(penetrations, rates, penetrations, rates, st.floats(1e-7, 1e-3))
+@given(
+    penetrations,
+    st.floats(0.0, 10.0, exclude_min=True),
+    penetrations,
+    st.floats(-10.0, 0.0),
+    st.floats(1e-7, 1e-3),
+)
 def test_hermite_peak__the_largest_value_of_the_interpolant(d0, r0, d1, r1, h):
-    """Any step: never below the ends or the interpolant on a fine grid, never above the
-    grid by more than the grid's resolution (|δ''| ≤ 6 Σ|terms| per unit θ², spacing 1e-4)."""
+    """A step where δ̇ turns from + to −: never below the ends or the interpolant on a fine
+    grid, never above the grid by more than the grid's resolution (|δ''| ≤ 6 Σ|terms| per
+    unit θ², spacing 1e-4)."""
     grid = np.linspace(0.0, 1.0, 10001)
     values = kc._hermite.py_func(grid, d0, r0, d1, r1, h)[0]
     scale = abs(d0) + abs(d1) + h * (abs(r0) + abs(r1))
@@ -376,6 +383,13 @@ def test_hermite_peak__the_largest_value_of_the_interpolant(d0, r0, d1, r1, h):
     assert peak >= max(d0, d1)
     assert peak >= max(values) - HERMITE_ROUNDING * scale
     assert peak <= max(values) + 6.0 * scale * 1e-8 / 8.0 + HERMITE_ROUNDING * scale
+
+
+@settings(max_examples=300, deadline=None)
+@given(penetrations, rates, penetrations, rates, st.floats(1e-7, 1e-3))
+def test_hermite_peak__an_end_where_the_rate_does_not_turn_down(d0, r0, d1, r1, h):
+    assume(not (r0 > 0.0 and r1 <= 0.0))
+    assert kc.hermite_peak(d0, r0, d1, r1, h) == max(d0, d1)
 
 
 def test_hermite_peak__monotone_steps_and_no_step_behind():

@@ -260,16 +260,19 @@ def contact_crossing(d0, r0, d1, r1, h):
 
 @njit(**JIT)
 def hermite_peak(d0, r0, d1, r1, h):
-    """The largest penetration in a step: the maximum of the cubic Hermite interpolant of δ
-    (:func:`contact_crossing`'s, through δ0, δ̇0 at the step's start and δ1, δ̇1 at its end)
-    over the step, its ends included.
+    """The largest penetration in a step: the larger of δ0 and δ1 or, where δ̇ turns from
+    + to − in the step (δ̇0 > 0 ≥ δ̇1), the maximum of the cubic Hermite interpolant of δ
+    (:func:`contact_crossing`'s, through δ0, δ̇0 at the step's start and δ1, δ̇1 at its end).
 
-    A contact's peak (δ̇ turning from + to −) lies inside a step; δ at the step ends misses
-    it by up to δ̈h²/8, the interpolant by O(h⁴), the order of the states' own error. With
-    θ the fraction of the step, the interpolant's derivative is the quadratic
-    a θ² + b θ + c, a = 3h(δ̇0 + δ̇1) − 6(δ1 − δ0), b = 6(δ1 − δ0) − h(4δ̇0 + 2δ̇1),
-    c = h δ̇0; its roots in (0, 1) are solved in closed form (the quadratic formula in its
-    cancellation-free form, as :func:`mcchain.kernels.peaks.cubic_peak`).
+    A contact's peak lies inside a step; δ at the step ends misses it by up to δ̈h²/8, the
+    interpolant by O(h⁴), the order of the states' own error. With θ the fraction of the
+    step, the interpolant's derivative is the quadratic a θ² + b θ + c,
+    a = 3h(δ̇0 + δ̇1) − 6(δ1 − δ0), b = 6(δ1 − δ0) − h(4δ̇0 + 2δ̇1), c = h δ̇0 (> 0 at θ = 0,
+    ≤ 0 at θ = 1: one maximum inside); its roots are solved in closed form (the quadratic
+    formula in its cancellation-free form, as :func:`mcchain.kernels.peaks.cubic_peak`).
+    Elsewhere the answer is an end, and costs two comparisons: the lanes call this at every
+    step in contact. (An interpolant that rises, falls and rises again inside one step
+    would be a step longer than the motion it resolves; its inner maximum is not sought.)
 
     Args:
         d0, r0: δ (m) and δ̇ (m/s) at the start of the step (NaN: no step behind, the
@@ -283,6 +286,8 @@ def hermite_peak(d0, r0, d1, r1, h):
     best = d1
     if d0 > best:
         best = d0
+    if not (r0 > 0.0 and r1 <= 0.0):
+        return best
     rise = d1 - d0
     slope0 = h * r0
     slope1 = h * r1
