@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
     },
     "fourbar-clearance-auto": {
-        "accel": "f487c7d3b796e2356e10ba14a7447c7a237b95b8636aa4f0daaaa9e84e4cc60f",
-        "rk4": "0639aa715ef70822c2b6d7e1c553392a7a8b6479284e84593034af02484ce39a",
-        "rk4-projection": "42c1586ac49fbb414dd9a3118f9a4c676b5d3ce9cb87ec577c342e1fd5af5941",
-        "rk45": "e6f3633a57ec1e8623f89712687ffa7979a58f25bdd77ef5d4745d2db97496c0",
+        "accel": "eae9d34c8b3f5a33ad04d57608cf5503f1a30d4154a840766c99a2fba99a9879",
+        "rk4": "ebdb349c93b504880cad4fd64b38e4324037c790b641f6d519d5deb815df971e",
+        "rk4-projection": "e5d2231fd6b7a5f64cfe0c18c5f8ac86f25705670668f381c2ed4745fa25bc39",
+        "rk45": "ed48325747e945e50e05f916193933cc3cafe1b5c10896506d41d2be2f0fba5c",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",

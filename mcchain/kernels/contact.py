@@ -268,8 +268,7 @@ def hermite_peak(d0, r0, d1, r1, h):
     interpolant by O(h⁴), the order of the states' own error. With θ the fraction of the
     step, the interpolant's derivative is the quadratic a θ² + b θ + c,
     a = 3h(δ̇0 + δ̇1) − 6(δ1 − δ0), b = 6(δ1 − δ0) − h(4δ̇0 + 2δ̇1), c = h δ̇0 (> 0 at θ = 0,
-    ≤ 0 at θ = 1: one maximum inside); its roots are solved in closed form (the quadratic
-    formula in its cancellation-free form, as :func:`mcchain.kernels.peaks.cubic_peak`).
+    ≤ 0 at θ = 1: one maximum inside, at the root of this quadratic in closed form).
     Elsewhere the answer is an end, and costs two comparisons: the lanes call this at every
     step in contact. (An interpolant that rises, falls and rises again inside one step
     would be a step longer than the motion it resolves; its inner maximum is not sought.)
@@ -294,31 +293,16 @@ def hermite_peak(d0, r0, d1, r1, h):
     qa = 3.0 * (slope0 + slope1) - 6.0 * rise
     qb = 6.0 * rise - 4.0 * slope0 - 2.0 * slope1
     qc = slope0
-    size = max(abs(qa), abs(qb), abs(qc))
-    if size > 0.0:  # a largest coefficient of 1: tiny slopes' discriminant does not underflow
-        qa = qa / size
-        qb = qb / size
-        qc = qc / size
-    theta1 = math.nan
-    theta2 = math.nan
-    if qa == 0.0:
-        if qb != 0.0:
-            theta1 = -qc / qb
-    else:
-        disc = qb * qb - 4.0 * qa * qc
-        if disc >= 0.0:
-            root = math.sqrt(disc)
-            qq = -0.5 * (qb + root) if qb >= 0.0 else -0.5 * (qb - root)
-            if qq != 0.0:
-                theta1 = qq / qa
-                theta2 = qc / qq
-            else:
-                theta1 = 0.0
-    if theta1 > 0.0 and theta1 < 1.0:
-        value, _slope = _hermite(theta1, d0, r0, d1, r1, h)
-        best = max(best, value)
-    if theta2 > 0.0 and theta2 < 1.0:
-        value, _slope = _hermite(theta2, d0, r0, d1, r1, h)
+    size = max(abs(qa), abs(qb), qc)
+    qa = qa / size  # a largest coefficient of 1: tiny slopes' discriminant does not underflow
+    qb = qb / size
+    qc = qc / size
+    # the root where the derivative turns from + (θ = 0) to − (θ = 1): the smaller positive
+    # one, in the form without cancellation (qb ≥ 0 needs qa < 0 here)
+    root = math.sqrt(max(qb * qb - 4.0 * qa * qc, 0.0))
+    theta = (qb + root) / (-2.0 * qa) if qb >= 0.0 else 2.0 * qc / (root - qb)
+    if theta > 0.0 and theta < 1.0:
+        value, _slope = _hermite(theta, d0, r0, d1, r1, h)
         best = max(best, value)
     return best
 
