@@ -292,8 +292,12 @@ class _Sample:
         k = int(self.joints[j])
         q = np.ascontiguousarray(y[: self.ndof])
         *_, dx, dy = joint_vectors(self.km, self.i, q, k)
-        clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
-        return math.hypot(dx, dy) - float(clearance)
+        return math.hypot(dx, dy) - self.clearance(j)
+
+    def clearance(self, j: int) -> float:
+        """The clearance c of contact-law joint ``j`` in this sample, m."""
+        k = int(self.joints[j])
+        return float(self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k])
 
     def events(self) -> tuple[list[Callable[..., float]], list[tuple[str, int]]]:
         """The events of the next segment (after the step hook) and what each watches."""
@@ -319,17 +323,13 @@ class _Sample:
         """Event: δ of contact-law joint ``j`` (seated, VI < 0: δ + the seat tolerance, so
         that its contact ends where the journal is that far off the wall)."""
         if self.cst[j, self.cl.VI] < 0.0:
-            k = int(self.joints[j])
-            clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
-            return self.penetration(j, y) + seat_tolerance(float(clearance))
+            return self.penetration(j, y) + seat_tolerance(self.clearance(j))
         return self.penetration(j, y)
 
     def pressed(self, j: int, t: float, y: np.ndarray) -> float:
         """Event: δ − the seat tolerance of contact-law joint ``j`` (seated by the switch of
         auto: the journal presses back where it rises through 0)."""
-        k = int(self.joints[j])
-        clearance = self.model.joint_clearance[self.i % self.model.joint_clearance.shape[0], k]
-        return self.penetration(j, y) - seat_tolerance(float(clearance))
+        return self.penetration(j, y) - seat_tolerance(self.clearance(j))
 
     def link_force(self, r: int, t: float, y: np.ndarray) -> float:
         """Event: λ of row ``r`` (a joint of model auto on the link)."""
@@ -340,14 +340,16 @@ class _Sample:
         """Event, rising through 0 where a re-seat dwell is complete: the largest
         (t − t_s) ω_c(t) − 2π RESEAT_PERIODS over the joints whose criterion holds since t_s
         (< 0 before t_s); −1 if none."""
-        watched = [j for j, since in enumerate(self.ready_since) if not math.isnan(since)]
-        if not watched:
+        if all(math.isnan(since) for since in self.ready_since):
             return -1.0
         self.accelerations(t, y)
-        return max(
-            (t - self.ready_since[j]) * self.pulsation(j) - 2.0 * math.pi * RESEAT_PERIODS
-            for j in watched
-        )
+        return max(self.dwells(t)) - 2.0 * math.pi * RESEAT_PERIODS
+
+    def dwells(self, t: float) -> list[float]:
+        """(t − t_s) ω_c of each contact-law joint whose re-seat criterion holds since t_s
+        (−inf for the others), ω_c from the last evaluation."""
+        return [(t - since) * self.pulsation(j) if not math.isnan(since) else -math.inf
+                for j, since in enumerate(self.ready_since)]  # fmt: skip
 
     def handle(self, kind: str, j: int, t: float, y: np.ndarray) -> np.ndarray:
         """Apply the event ``kind`` of contact-law joint ``j`` at (t, y); the state to go on
@@ -386,11 +388,8 @@ class _Sample:
                 cst[j, cl.TSE] = t
         else:  # re-seat of the joint whose dwell completed (the clock's largest)
             self.accelerations(t, y)
-            since = self.ready_since
-            dwell = [(t - s) * self.pulsation(j) if not math.isnan(s) else -math.inf
-                     for j, s in enumerate(since)]  # fmt: skip
-            done = int(np.argmax(dwell))
-            cst[done, cl.DWL], since[done] = -1.0, math.nan
+            done = int(np.argmax(self.dwells(t)))
+            cst[done, cl.DWL], self.ready_since[done] = -1.0, math.nan
             if not math.isnan(self.free_since[done]):  # still seated by its switch
                 cst[done, cl.TFF] += t - self.free_since[done]
                 self.free_since[done] = math.nan
