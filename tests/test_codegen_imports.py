@@ -10,10 +10,14 @@ CODEGEN_MODULES = (
     "mcchain.codegen.cache",
     "mcchain.codegen.contact_blocks",
     "mcchain.codegen.emitter",
+    "mcchain.codegen.kinematics",
+    "mcchain.codegen.lane_text",
+    "mcchain.codegen.sincos",
     "mcchain.codegen.generate",
     "mcchain.codegen.layout",
     "mcchain.codegen.schedule",
     "mcchain.codegen.templates",
+    "mcchain.codegen.tracking",
     "mcchain.codegen.topology",
 )
 

@@ -14,12 +14,19 @@ Modules, one job each:
 * ``topology``: :class:`~mcchain.codegen.topology.Topology` (the hashable structure of a
   model) and :func:`~mcchain.codegen.topology.pack_parameters` (``P``, one slot per
   parameter).
-* ``emitter``: straight-line code of one lane (index-1 acceleration through the Schur
-  complement and its sparse LDLᵀ, the constraint projection, the outputs, sin/cos).
+* ``lane_text``: the base of the lane's code: the lines being written, the parameter names,
+  the contact-law rows, the kernels' functions inlined as text (``inline``).
+* ``kinematics``: the constraint equations of one lane (points, B's non-zeros, Φ, Φ̇, γ).
+* ``sparse_ldl``: the Schur complement S = B M⁻¹ Bᵀ, its sparse LDLᵀ and the solves.
+* ``emitter``: the blocks of one lane built on those two (applied forces, the contact law's
+  rows, the index-1 acceleration, the constraint projection, the outputs).
+* ``sincos``: the branch-free sine/cosine the lanes inline.
 * ``layout``: the rows of the flat work array ``W`` and their length ``LMAX``.
 * ``contact_blocks``: the lanes' bookkeeping of contact-law joints (onsets, separations,
   the switches of model auto, re-seats, summaries), put into the templates' blocks.
 * ``templates``: the texts of the time loops the emitter's blocks are put into.
+* ``tracking``: per-step tracking in the lanes (the continuous peaks), at the templates'
+  ``@@track_*`` hooks.
 * ``schedule``: demand-order scheduling of the generated lane loops.
 * ``native``: the generated text translated to LLVM IR in one pass and compiled with numba's
   code generator (no type inference: seconds where ``@njit`` took minutes), called through

@@ -19,11 +19,15 @@ from mcchain.caches import mcchain_cache
 
 _GENERATOR_FILES = (
     "topology.py",
+    "lane_text.py",
+    "sincos.py",
+    "kinematics.py",
     "emitter.py",
     "sparse_ldl.py",
     "inline.py",
     "layout.py",
     "templates.py",
+    "tracking.py",
     "schedule.py",
     "generate.py",
 )

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 
-from mcchain.codegen.emitter import CONTACT_KERNELS, FORCE_KERNELS
 from mcchain.codegen.inline import inline
+from mcchain.codegen.lane_text import CONTACT_KERNELS, FORCE_KERNELS
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (

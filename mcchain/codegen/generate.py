@@ -22,11 +22,13 @@ import numpy as np
 from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.contact_blocks import contact_blocks
-from mcchain.codegen.emitter import FORCE_KERNELS, Emitter
+from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
+from mcchain.codegen.tracking import tracking_blocks, tracking_functions
 from mcchain.contact import (
     CONTACT_STEP_LIMIT,
     RESEAT_NEWTON,
@@ -36,12 +38,10 @@ from mcchain.kernels.tableaux import (
     DOPRI5,
     MAX_FACTOR,
     MIN_FACTOR,
-    PEAK_WIDTH,
     RK4,
     SAFETY,
     Tableau,
 )
-from mcchain.model import JOINT_IDEAL
 from mcchain.status import (
     CONTACT_LOST,
     CONTACT_STEP_TOO_LARGE,
@@ -285,71 +285,8 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         ]
     )
     b.update(contact_blocks(topo, lay, b["kill_lane"]))
-    b.update(_peak_blocks(topo, lay))
+    b.update(tracking_blocks(topo, lay))
     return b
-
-
-def _peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
-    """The continuous peaks of |joint force| and |driver torque| (mcchain.kernels.peaks):
-    each value fed at every accepted state (fixed step: each step's start, λ of the first
-    stage; adaptive: each accepted state, λ of the last stage, a rejected step's repeated
-    state skipped), and the peaks written at the end (NaN for a failed lane)."""
-    at = lay.at
-    cj = {k: j for j, k in enumerate(topo.contact_joints)}
-    npk = topo.njoint + topo.ndriver
-
-    def base(i: int) -> str:
-        return f"{(lay.rows['pk'] + PEAK_WIDTH * i) * lay.lmax} + l"
-
-    def feed(lamrow: str, t: str) -> str:
-        lines = [
-            f"cnt = {at('pkt', 4)}",
-            f"if cnt == 0.0 or {t} > {at('pkt', 3)}:",
-            *(f"    t{x} = {at('pkt', i + 1)}" for i, x in enumerate("bcd")),
-        ]
-        for k in range(topo.njoint):
-            r = topo.joint_row[k]
-            lam = at(lamrow, r)
-            if topo.joint_kind[k] == JOINT_IDEAL:
-                lam2 = at(lamrow, r + 1)
-                value = f"math.sqrt({lam} * {lam} + {lam2} * {lam2})"
-            elif k in cj:  # the link's |λ|, or F_n ≥ 0 under the law
-                value = f"abs({lam}) if {at('fm', cj[k])} == 0.0 else max({lam}, 0.0)"
-            else:  # prismatic (the normal force) or a clearance joint on the link
-                value = f"abs({lam})"
-            lines.append(f"    peak_feed(W, {base(k)}, {lay.lmax}, cnt, tb, tc, td, {t}, {value})")
-        for d in range(topo.ndriver):
-            value = f"abs({at(lamrow, topo.driver_row[d])})"
-            lines.append(
-                f"    peak_feed(W, {base(topo.njoint + d)}, {lay.lmax}, cnt, tb, tc, td, "
-                f"{t}, {value})"
-            )
-        lines += [
-            f"    {at('pkt', 0)} = tb",
-            f"    {at('pkt', 1)} = tc",
-            f"    {at('pkt', 2)} = td",
-            f"    {at('pkt', 3)} = {t}",
-            f"    {at('pkt', 4)} = min(cnt + 1.0, 4.0)",
-        ]
-        return "\n".join(lines)
-
-    finish = [
-        "for l in range(nl):",
-        "    dead = (st[l] & FAILBITS) != 0",
-        f"    cnt = {at('pkt', 4)}",
-        *(f"    t{x} = {at('pkt', i)}" for i, x in enumerate("abcd")),
-    ]
-    for i in range(npk):
-        peak = f"W[{base(i)} + {(PEAK_WIDTH - 1) * lay.lmax}]"
-        finish += [
-            f"    {peak} = peak_last(W, {base(i)}, {lay.lmax}, cnt, ta, tb, tc, td)",
-            f"    out_pk[s0 + l, {i}] = np.nan if dead or cnt == 0.0 else {peak}",
-        ]
-    return {
-        "peaks_c": feed("lamc", "ts"),
-        "peaks": feed("lam", at("tl")),
-        "peaks_finish": "\n".join(finish),
-    }
 
 
 def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
@@ -430,7 +367,7 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions(adaptive=variant == "rk45"))
     if tableau is not None:
-        parts.append(_peak_functions())
+        parts.append(tracking_functions())
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:
@@ -472,21 +409,6 @@ def _contact_functions(adaptive: bool) -> str:
     )
     located = (contact.quasi_static_slack, contact.dwell_start)
     for kernel in (*kernels, *located) if adaptive else kernels:
-        source = inspect.getsource(kernel.py_func)
-        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
-    return "\n\n".join(parts)
-
-
-def _peak_functions() -> str:
-    """The source of :mod:`mcchain.kernels.peaks`' ``cubic_peak``, ``peak_feed`` and
-    ``peak_last``, copied into the generated module (for the reason of
-    :func:`_contact_functions`)."""
-    import inspect
-
-    from mcchain.kernels import peaks
-
-    parts = []
-    for kernel in (peaks.cubic_peak, peaks.peak_feed, peaks.peak_last):
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)

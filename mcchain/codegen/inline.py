@@ -11,7 +11,7 @@ lanes and the loop kernels round alike.
 
 The kernels' ``hypot(x, y)`` (libm's, robust to overflow) is written √(x² + y²) in the lanes,
 which vectorises; the two differ by at most an ulp, as the lanes' own sine and cosine
-(:func:`mcchain.codegen.emitter.sincos_code`) differ from libm's.
+(:func:`mcchain.codegen.sincos.sincos_code`) differ from libm's.
 
 The functions it takes are the straight-line subset both targets share: a docstring,
 assignments to plain names (one name or a tuple of names from an inlined call), and a

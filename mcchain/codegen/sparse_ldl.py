@@ -4,7 +4,8 @@
 Emitter`: from the non-zeros of B (:meth:`rows`, coefficients as :data:`Coef`) it emits
 M⁻¹Bᵀ, S in a bandwidth-reducing row order, its LDLᵀ with the fill-in found symbolically,
 the two triangular solves and the product by M⁻¹Bᵀ. Structure only: the physics (Φ, B's
-values, γ, forces) is the emitter's, inlined from the kernels.
+values, γ: :mod:`mcchain.codegen.kinematics`; forces: the emitter's) is inlined from the
+kernels.
 """
 
 from __future__ import annotations

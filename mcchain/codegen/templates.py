@@ -94,7 +94,7 @@ _GROUP_FINISH = """
             t_div[s0 + l] = tdv[l]
             t_sing[s0 + l] = tsg[l]
             t_cl[s0 + l] = tcl[l]
-        @@peaks_finish
+        @@track_finish
         @@contact_finish
 """
 
@@ -160,7 +160,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                     @@contact_step_c
-                    @@peaks_c
+                    @@track_step
                 if n == nstep or n % out_every == 0:
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
@@ -246,7 +246,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                     ts = @[tl]
                     @@contact_check
                 @@contact_switch
-                @@peaks
+                @@track_accepted
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
                     group_outputs_SUFFIX(
                         W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,

@@ -1,6 +1,6 @@
 """The branch-free sine/cosine of generated kernels, as a numba function (tests and tools).
 
-Built from :func:`mcchain.codegen.emitter.sincos_code`, the very lines generated kernels
+Built from :func:`mcchain.codegen.sincos.sincos_code`, the very lines generated kernels
 inline.
 """
 
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from mcchain.codegen.emitter import sincos_code
+from mcchain.codegen.sincos import sincos_code
 from mcchain.kernels.config import JIT, njit
 
 

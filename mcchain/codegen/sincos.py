@@ -1,0 +1,51 @@
+"""The branch-free sine and cosine that generated lane code inlines, as text.
+
+fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free (the
+quadrant chosen by exact 0/1 and ±1 factors), so the lane loop vectorises, and free of
+function calls: rounding to an integer is (y + 1.5·2⁵²) − 1.5·2⁵², exact for |y| < 2⁵¹ (so
+for |x| < 3.5e15 rad; the reduction itself stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such
+as np.floor cost numba's type inference more than anything else in generated code.
+"""
+
+from __future__ import annotations
+
+import math
+
+TWO_PI = 2.0 * math.pi
+_ROUND = "6755399441055744.0"  # 1.5 · 2⁵²: adding and subtracting it rounds to an integer
+
+_SINCOS_TEMPLATE = "\n".join(
+    [
+        f"{{k}} = ({{x}} * 0.6366197723675814 + {_ROUND}) - {_ROUND}",
+        "{r} = (({x} - {k} * 1.5707963267341256) - {k} * 6.077100506303966e-11)"
+        " - {k} * 2.0222662487111665e-21",
+        "{z} = {r} * {r}",
+        "{ps} = {r} + ({z} * {r}) * (-0.16666666666666632 + {z} * (0.008333333333322489"
+        " + {z} * (-0.00019841269829857949 + {z} * (2.755731370707007e-06"
+        " + {z} * (-2.5050760253406863e-08 + {z} * 1.5896909952115501e-10)))))",
+        "{hz} = 0.5 * {z}",
+        "{w} = 1.0 - {hz}",
+        "{pc} = {w} + (((1.0 - {w}) - {hz}) + {z} * ({z} * (0.0416666666666666"
+        " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
+        " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
+        " + {z} * -1.1359647557788195e-11)))))))",
+        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3}; floor(k / 4) and h = floor(j / 2) are roundings
+        # of k/4 − 3/8 and j/2 − 1/4 (never a tie). h: j ≥ 2; sw: odd j (sine and cosine swap);
+        # the sine's sign is 1 − 2h, the cosine's (1 − 2h)(1 − 2 sw).
+        f"{{j}} = {{k}} - 4.0 * ((({{k}} * 0.25 - 0.375) + {_ROUND}) - {_ROUND})",
+        f"{{h}} = (({{j}} * 0.5 - 0.25) + {_ROUND}) - {_ROUND}",
+        "{sw} = {j} - 2.0 * {h}",
+        "{ss} = 1.0 - 2.0 * {h}",
+        "{sa} = {sw} * {pc} + (1.0 - {sw}) * {ps}",
+        "{ca} = {sw} * {ps} + (1.0 - {sw}) * {pc}",
+        "{sin} = {ss} * {sa}",
+        "{cos} = ({ss} * (1.0 - 2.0 * {sw})) * {ca}",
+    ]
+)
+
+
+def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
+    """Lines computing ``sin``/``cos`` of the expression ``x`` (temporaries suffixed ``tag``)."""
+    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "h", "sw", "ss", "sa", "ca")
+    names = {n: f"_{n}{tag}" for n in temps}
+    return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
