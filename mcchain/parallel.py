@@ -105,6 +105,23 @@ def warm_model(model: Model) -> Model:
     return model.select(0, min(WARM_SAMPLES, model.nsample))
 
 
+WARM_STEPS = 4
+"""Steps of ``dt`` a warm-up integrates (:func:`warm_scene`)."""
+
+
+def warm_scene(scene: Any) -> Any:
+    """``scene`` with its ``[simulate]`` cut to :data:`WARM_STEPS` steps of ``dt``: a warm-up
+    loads or compiles the kernels, and the whole history of its samples was compute thrown
+    away (a warm ``radau`` run of the Flores slider-crank spent 3 s on it). A kernel that only
+    a later time reaches (an event's handler) loads when the first chunk reaches it."""
+    sim = getattr(scene, "simulate", None)
+    if sim is None or sim.t_end <= WARM_STEPS * sim.dt:
+        return scene
+    return scene.model_copy(
+        update={"simulate": sim.model_copy(update={"t_end": WARM_STEPS * sim.dt})}
+    )
+
+
 def default_solve() -> SolveFn:
     """The real solver, ``mcchain.solvers.solve_chunk`` (imported lazily)."""
     from mcchain.solvers import solve_chunk
@@ -284,7 +301,7 @@ def run_local(
         if compile_ahead is not None:
             compile_ahead.compile_beside(model, scene)
             compile_ahead.wait()
-        solve(warm_model(model), scene)  # compile or load the cached kernels
+        solve(warm_model(model), warm_scene(scene))  # compile or load the cached kernels
     stats.warmup = time.perf_counter() - t0
     log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)
 
@@ -453,7 +470,7 @@ def run_dask(
         for worker, n in nthreads.items():
             if n != 1:
                 log.warning("worker %s has %d threads; mcchain expects 1 per process", worker, n)
-        setup = client.run(_worker_setup, solve, warm_model(model), scene)
+        setup = client.run(_worker_setup, solve, warm_model(model), warm_scene(scene))
         stats.worker_info = [{"worker": w, **d} for w, d in setup.items()]
         for entry in stats.worker_info:
             log.info("worker %(worker)s warmed in %(warmup).2f s", entry)

@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats as _stats
 
 PASS = "pass"
 FAIL = "fail"
@@ -52,6 +51,9 @@ def clopper_pearson(failures: int, samples: int, confidence: float) -> tuple[flo
         raise ValueError(f"failures: must be in [0, samples], got {k} of {n}")
     if n == 0:
         return 0.0, 1.0
+    from scipy import stats as _stats  # lazily: 1-3 s to import; a run without
+    # requirements never needs it
+
     lower = 0.0 if k == 0 else float(_stats.beta.ppf(alpha / 2, k, n - k + 1))
     upper = 1.0 if k == n else float(_stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
     return lower, upper
@@ -64,6 +66,8 @@ def clopper_pearson_arrays(
     alpha = _alpha(confidence)
     k = np.asarray(failures, dtype=np.float64)
     n = np.asarray(samples, dtype=np.float64)
+    from scipy import stats as _stats  # lazily (see clopper_pearson)
+
     with np.errstate(invalid="ignore"):
         lower = np.where(k > 0, _stats.beta.ppf(alpha / 2, np.maximum(k, 1), n - k + 1), 0.0)
         upper = np.where(k < n, _stats.beta.ppf(1 - alpha / 2, k + 1, np.maximum(n - k, 1)), 1.0)
@@ -182,6 +186,8 @@ def quantile_interval(
     if n == 0:
         return QuantileInterval(q, math.nan, math.nan, math.nan, needed)
     value = float(x[max(math.ceil(n * q) - 1, 0)])
+    from scipy import stats as _stats  # lazily (see clopper_pearson)
+
     cdf = _stats.binom.cdf(np.arange(n + 1), n, q)  # cdf[j] = P(Bin(n, q) <= j)
     # lower end x_(r): P(x_(r) > ξ_q) = P(Bin <= r - 1) <= tail; largest such r >= 1
     ok_lower = np.flatnonzero(cdf[:n] <= tail)  # index j = r - 1
