@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "4ad99df1961cea05c65fe9ec5babf7f0f64b99deba91ed4c4c50d25378c28193",
         "rk4": "4c30e2e3e05dfc14510516fa2ad7d0759a8498737f919c8186fb810ab82de5fa",
         "rk4-projection": "64f07d536b1e4fca6c4a208c692c820bcc4ba0229b693a8adcde347ef69718c8",
-        "rk45": "d74225210309f8b83ef0ac3e9c4ba75b809734007a9599a5173b038ae3ccab18",
+        "rk45": "8ba152bb4282f4ef7ec61bebf96ab294c5537d9d7a855386cb46dc94da090eb7",
     },
     "fourbar-clearance": {
         "accel": "ea24d2a29ea8272d76dd4172106ca88d596b1af8de51adbbeb3acd31218a0ccd",
         "rk4": "8f261a84c3e43a06f03724c67f4d2ec9fac781165b48db6e35526994234e3e1a",
         "rk4-projection": "870afc6bbb97d320d4f4833298846acbaf2dadfaca5beb77dd5d892c649bfd7a",
-        "rk45": "bc3d65c7effcbf330aea5736b5916c22a58a9dc960fa4cde9feb380967cae7c2",
+        "rk45": "3a289147e83ee07d6027e30651d9283798e629c753849ba6a314d94d4684e052",
     },
     "fourbar-clearance-auto": {
         "accel": "eae9d34c8b3f5a33ad04d57608cf5503f1a30d4154a840766c99a2fba99a9879",
         "rk4": "ebdb349c93b504880cad4fd64b38e4324037c790b641f6d519d5deb815df971e",
         "rk4-projection": "e5d2231fd6b7a5f64cfe0c18c5f8ac86f25705670668f381c2ed4745fa25bc39",
-        "rk45": "ed48325747e945e50e05f916193933cc3cafe1b5c10896506d41d2be2f0fba5c",
+        "rk45": "4bd4992962d99350fff5d864009053eda047eb2e5c113e06229d84c20ede5d27",
     },
     "chain4-mixed-spring": {
         "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",
         "rk4": "f3033d3730ba2198f598793d5edfe7f953b77db61e5cff881148a11d7fab5f1c",
         "rk4-projection": "54595bda750fb7c11eac47381a6473e4bbd506731a3d1cc7e328dc8c905340fa",
-        "rk45": "a4ee149aeb153f24b196b6b38f8f72e1651a939782af6c9627287d1ebdf88a77",
+        "rk45": "ccd79a5895d4e6744e3d355d9ac30ed41f5a5471be6cda47d2da157e9b6756db",
     },
 }
 
@@ -91,7 +91,7 @@ FUNCTIONS = {
     },
     "rk45": {
         "adaptive_run",
-        "group_outputs_dp",
+        "group_outputs_landed_dp",
         "group_first_stage_dp",
         "group_stage_dp",
         *PEAK_FUNCTIONS,

@@ -95,10 +95,12 @@ def test_simulate__history_dtype(dtype):
 
 @pytest.mark.parametrize("lanes", [0, 1000])
 def test_simulate__lane_count_outside_the_work_rows_is_refused(lanes):
-    from mcchain.codegen.layout import LMAX
+    from mcchain.codegen.generate import lane_rows
+    from mcchain.codegen.topology import Topology
 
     model = scene_model("clearance_bar")
-    with pytest.raises(ValueError, match=rf"^lanes: must be in 1\.\.{LMAX} .* got {lanes}$"):
+    rows = lane_rows(Topology.from_model(model), "rk4")
+    with pytest.raises(ValueError, match=rf"^lanes: must be in 1\.\.{rows} .* got {lanes}$"):
         simulate(model, dict(t_end=1e-3, dt=1e-4), lanes=lanes)
 
 

@@ -24,9 +24,16 @@ from mcchain.codegen.cache import load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.lane_text import FORCE_KERNELS
-from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.layout import (
+    ADAPTIVE_ROW_MEANINGS,
+    CONTACT_ROW_MEANINGS,
+    LMAX,
+    ROW_MEANINGS,
+    Layout,
+    row_length,
+)
 from mcchain.codegen.native import NativeModule, array_layout_ok
-from mcchain.codegen.schedule import schedule_lane_loops
+from mcchain.codegen.schedule import INTERLEAVE_CONSTANT, schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.codegen.tracking import tracking_blocks, tracking_functions
 from mcchain.contact import (
@@ -254,25 +261,37 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("scale_velocity")
 
     # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
-    # summed over q0, v0, q1, v1, ... Loops over the rows, not unrolled: numba's compile time
-    # grows faster than a function's length (the values are the same expressions).
+    # summed over q0, v0, q1, v1, ..., of every lane at once (a vectorised lane loop: per
+    # lane the same operations in the same order as one lane alone).
     stride = 2 * ndof
-    new = " + ".join(f"bw[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
-    err = " + ".join(f"be[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
-    b["error_norm"] = "\n".join(
-        [
-            "en = 0.0",
-            f"for i in range({2 * ndof}):",
-            f"    r = (i % 2) * {ndof} + i // 2",
-            f"    y = {elem('q', 'r')}",
-            f"    yn = y + hh * ({new})",
-            f"    {elem('qn', 'r')} = yn",
-            f"    e_ = hh * ({err}) / (atol + rtol * max(abs(y), abs(yn)))",
-            "    en += e_ * e_",
+    for name in ("error_coefs", "error_norm", "copy_stage"):
+        b[name] = ""
+    if "en" in lay.rows:  # the adaptive kernel's layout
+        em.emit(
+            *(f"bw{j} = bw[{j}]" for j in range(nstage)),
+            *(f"be{j} = be[{j}]" for j in range(nstage)),
+        )
+        block("error_coefs")
+        em.emit(f"hh = {at('hs')}", "en = 0.0")
+        for i in range(2 * ndof):
+            r = (i % 2) * ndof + i // 2
+            rows = [at("kq0", r + stride * j) for j in range(nstage)]
+            new = " + ".join(f"bw{j} * {row}" for j, row in enumerate(rows))
+            err = " + ".join(f"be{j} * {row}" for j, row in enumerate(rows))
+            em.emit(
+                f"y{i} = {at('q', r)}",
+                f"yn{i} = y{i} + hh * ({new})",
+                f"{at('qn', r)} = yn{i}",
+                f"e{i} = hh * ({err}) / (atol + rtol * max(abs(y{i}), abs(yn{i})))",
+                f"en = en + e{i} * e{i}",
+            )
+        em.emit(
             f"en = math.sqrt(en / {2 * ndof})",
-            "en = en if en == en else np.inf",
-        ]
-    )
+            f"{at('en')} = en if en == en else np.inf",
+        )
+        block("error_norm")
+        em.emit(*(f"W[(ks + {i}) * {lay.lmax} + l] = {at('kqc', i)}" for i in range(2 * ndof)))
+        block("copy_stage")
     b["accept"] = "\n".join(
         [
             f"for r in range({2 * ndof}):",
@@ -342,7 +361,7 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
         "dp",
         (
             templates.ADAPTIVE_KERNEL,
-            templates.OUTPUT_HELPER,
+            templates.OUTPUT_LANDED_HELPER,
             templates.FIRST_STAGE_HELPER,
             templates.STAGE_HELPER,
         ),
@@ -352,16 +371,20 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
 entry points call, so a scene run with ``rk4`` compiles no projection or adaptive code."""
 
 
-def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
+def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> str:
     """Source of the lane-kernel module of ``topo`` for ``variant`` (a key of
-    :data:`VARIANTS`), for work rows ``lmax`` doubles long (default: this CPU's SIMD
-    register)."""
+    :data:`VARIANTS`), for work rows ``lmax`` doubles long (default :func:`lane_rows`)."""
     users, tableau, suffix, parts_of = VARIANTS[variant]
     parts = [templates.HEADER, f"# topology: {topo!r}\n# variant: {variant}\n"]
     nstage = RK4.nstage if tableau is None else tableau.nstage
+    lmax = lane_rows(topo, variant) if lmax is None else lmax
     lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45")
+    if lmax > LMAX:
+        parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
+        if variant == "rk45":
+            parts.append(ADAPTIVE_ROW_MEANINGS)
     if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
@@ -383,6 +406,14 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)
+
+
+def lane_rows(topo: Topology, variant: str) -> int:
+    """The row length (the largest lane group) of ``topo``'s lane kernels for ``variant``:
+    :func:`mcchain.codegen.layout.row_length` of its work array."""
+    tableau = VARIANTS[variant][1]
+    nstage = RK4.nstage if tableau is None else tableau.nstage
+    return row_length(Layout(topo, nstage, LMAX, adaptive=variant == "rk45").size)
 
 
 def _contact_functions(adaptive: bool) -> str:

@@ -37,15 +37,35 @@ def simd_doubles(features: str) -> int:
 
 
 LMAX = simd_doubles(target_cpu()[1])
-"""Largest lane count of a lane group, and the row length of the work array: one SIMD
-register of doubles, so W is contiguous and a lane loop touches each element once. Measured
-here (AVX2, rk4, ns per instance-step, side by side): rows of 64 doubles, 512 bytes apart,
-all fell into an eighth of the L1 sets and long chains thrashed the cache (16-bar chain,
-1 thread: 1,518 ns; rows of 72 doubles: 1,231; rows of 8: 1,139; of 4: 1,166), and the
-32-bar chain's work rows (~830 of them) fit in L1 only with rows of 4 (1 thread: 3,218 ns
-with rows of 8, 2,704 with 4). The clearance double pendulum and four-bar (2 threads) are as
-fast or faster: 51.7 / 48.6 / 48.3 ns and 122.1 / 107.4 / 108.8 ns with rows of 72 (32
-lanes), 8 and 4."""
+"""Lanes of one SIMD register of doubles (this CPU's, or the target's): the shortest row of the
+work array, and the row length of large mechanisms. Measured here (AVX2, rk4, ns per
+instance-step, side by side): rows of 64 doubles, 512 bytes apart, all fell into an eighth of
+the L1 sets and long chains thrashed the cache (16-bar chain, 1 thread: 1,518 ns; rows of 72
+doubles: 1,231; rows of 8: 1,139; of 4: 1,166), and the 32-bar chain's work rows (~830 of them)
+fit in L1 only with rows of 4 (1 thread: 3,218 ns with rows of 8, 2,704 with 4)."""
+
+GROUP_BYTES = 32 << 10
+"""Largest work array of a lane group whose rows take several SIMD registers of lanes
+(:func:`row_length`): it stays in the L1 data cache (48 KiB here) beside the stack."""
+
+MAX_REGISTERS = 4
+"""Most SIMD registers of lanes in one row (:func:`row_length`)."""
+
+
+def row_length(nrow: int) -> int:
+    """Doubles per row of a work array of ``nrow`` rows: :data:`LMAX` × k lanes, k (1, 2 or
+    4, at most :data:`MAX_REGISTERS`) the most registers whose rows keep the array within
+    :data:`GROUP_BYTES`.
+
+    Why more than one register: a lane group's stage is one long chain of dependent
+    operations (sin/cos, the joints, the Schur solve) that one register of lanes runs at the
+    latency of each instruction, not at the machine's throughput; the generated lane loops
+    then run k registers interleaved (:data:`mcchain.codegen.schedule.INTERLEAVE_CONSTANT`),
+    whose independent chains fill the gaps."""
+    k = MAX_REGISTERS
+    while k > 1 and nrow * LMAX * k * 8 > GROUP_BYTES:
+        k //= 2
+    return LMAX * k
 
 
 ROW_MEANINGS = """\
@@ -76,6 +96,13 @@ CONTACT_ROW_MEANINGS = """\
 # re-seat.
 """
 """Legend of the contact rows, written only into modules that have them."""
+
+ADAPTIVE_ROW_MEANINGS = """\
+# Adaptive kernel only: en the error norm of the lane's attempted step; lnd 1 where the lane
+# is on an output time (its outputs are written after the lanes' checks), itw that output's
+# index.
+"""
+"""Legend of the rows only the adaptive kernel has."""
 
 
 class Layout:
@@ -119,6 +146,10 @@ class Layout:
             self.add("e0", 1)
             if adaptive:
                 self.add("pw", ncj)
+        if adaptive:
+            self.add("en", 1)
+            self.add("lnd", 1)
+            self.add("itw", 1)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -45,7 +45,7 @@ from mcchain.codegen.native_expressions import (
     _unify,
     _Widen,
 )
-from mcchain.codegen.schedule import INDEPENDENT_MARK
+from mcchain.codegen.schedule import INDEPENDENT_MARK, INTERLEAVE_CONSTANT
 
 
 class FunctionTranslator(FunctionLowering):
@@ -291,7 +291,17 @@ class FunctionTranslator(FunctionLowering):
         parallel = module.add_metadata(
             [ir.MetaDataString(module, "llvm.loop.parallel_accesses"), group]
         )
-        back.set_metadata("llvm.loop", _DistinctNode(module, [parallel], self_reference=True))
+        hints = [parallel]
+        interleave = self.module.scalars.get(INTERLEAVE_CONSTANT, 1)
+        if isinstance(interleave, int) and interleave > 1:
+            # Lane loops over several SIMD registers of lanes: their vector bodies run
+            # interleaved (independent instructions of two registers side by side: a lane
+            # group's stage is a long dependent chain, and one register of lanes waited on
+            # its latency).
+            count = ir.Constant(ir.IntType(32), interleave)
+            key = ir.MetaDataString(module, "llvm.loop.interleave.count")
+            hints.append(module.add_metadata([key, count]))
+        back.set_metadata("llvm.loop", _DistinctNode(module, hints, self_reference=True))
 
     def _for(self, stmt: ast.For) -> None:
         call = stmt.iter

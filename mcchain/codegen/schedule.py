@@ -14,6 +14,10 @@ INDEPENDENT_MARK = "# lanes: independent"
 memory: a lane loop whose lane ``l`` touches only ``W[row * LMAX + l]`` and its own
 sample's elements. :mod:`mcchain.codegen.native` tells LLVM so."""
 
+INTERLEAVE_CONSTANT = "INTERLEAVE"
+"""The generated module's constant naming how many SIMD registers of lanes a lane loop's
+vector body takes at once (:mod:`mcchain.codegen.native` asks LLVM to interleave that many)."""
+
 
 def schedule_lane_loops(text: str) -> str:
     """Reorder the body of every lane loop marked ``# lanes: schedule`` so that each value is

@@ -226,9 +226,12 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
         group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, 0.0)
         @@contact_start
         while True:
-            # Failures, contact and outputs at each lane's current (accepted) state.
+            # Failures, contact and outputs at each lane's current (accepted) state; the
+            # outputs of the lanes on an output time (flag row lnd) all at once, after.
             nrun = 0
+            nland = 0
             for l in range(nl):
+                @[lnd] = 0.0
                 if not run[l]:
                     continue
                 alive = (st[l] & FAILBITS) == 0
@@ -248,10 +251,9 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 @@contact_switch
                 @@track_accepted
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
-                    group_outputs_SUFFIX(
-                        W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,
-                        out_dtq, out_cerr, out_en@CT,
-                    )
+                    @[lnd] = 1.0
+                    @[itw] = iout[l]
+                    nland += 1
                     iout[l] += 1
                 if iout[l] >= nout or not alive:
                     # Finished or dead: the rest of a dead lane's history is NaN.
@@ -270,6 +272,10 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                     nevals_out[s0 + l] = nev[l]
                 else:
                     nrun += 1
+            if nland > 0:
+                group_outputs_landed_SUFFIX(
+                    W, nl, s0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT
+                )
             if nrun == 0:
                 break
             @@contact_reseat
@@ -286,17 +292,18 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                     @[sga] = @[sga] * keep + @[sgc]
                     @@contact_stage_max
                     nev[l] += 1 if run[l] else 0
-                for i in range(2 * NDOF):
-                    src = (KCROW + i) * LMAXV
-                    dst = (K0ROW + 2 * NDOF * s + i) * LMAXV
-                    for l in range(nl):
-                        W[dst + l] = W[src + l]
-            # Error estimate, acceptance, next step.
+                ks = K0ROW + 2 * NDOF * s  # the stage's rows: the current stage copied there
+                for l in range(nl):  # lanes: independent
+                    @@copy_stage
+            # Error estimate of every lane at once, then acceptance and next step per lane.
+            @@error_coefs
+            for l in range(nl):  # lanes: schedule
+                @@error_norm
             for l in range(nl):
                 if not run[l]:
                     continue
                 hh = @[hs]
-                @@error_norm
+                en = @[en]
                 nstp[l] += 1
                 ok = en <= 1.0
                 fac = SAFETY * en**expo if en > 0.0 else MAX_FACTOR
@@ -333,6 +340,24 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@load_lam_dyn
         @@outputs
         @@store_outputs
+'''
+
+OUTPUT_LANDED_HELPER = '''
+@njit(**JIT)
+def group_outputs_landed_SUFFIX(W, nl, s0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
+                                out_en@CT):
+    """Outputs of the lanes flagged ``lnd`` (1.0), each at its own time (row ``tl``) into its
+    history index (row ``itw``): every lane computed at once (a vectorised loop), the flagged
+    ones stored."""
+    for l in range(nl):  # lanes: independent
+        t_now = @[tl]
+        @@load_params
+        @@load_state
+        @@load_lam
+        @@outputs
+        if @[lnd] > 0.0:
+            it = int(@[itw])
+            @@store_outputs
 '''
 
 PROJECT_HELPER = '''

@@ -140,7 +140,7 @@ class _Run:
     steps: np.ndarray  # (nsample,) int64 diagnostics, see simulate()
     rejected_steps: np.ndarray
     evaluations: np.ndarray
-    lanes: int = 1
+    lanes: int | None = None  # None: the lane kernels' row length (set by _lane_setup)
     # Contact-law joints (lane kernels' extra outputs): per output time δ and the mode of
     # each (sample, time, 2 ncj); per sample the summaries (sample, 5 ncj), see
     # mcchain.codegen.generate.CONTACT_SUMMARY. Empty without such joints.
@@ -153,6 +153,7 @@ class _Run:
     @property
     def groups(self) -> int:
         """Lane groups of the lane kernels: ``lanes`` samples each, the last one short."""
+        assert self.lanes is not None, "the lane kernels set the lane count"
         return -(-self.model.nsample // self.lanes)
 
     def contact_args(self) -> tuple[np.ndarray, ...]:
@@ -165,10 +166,16 @@ class _Run:
 def _lane_setup(run: _Run, variant: str) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
     """The lane kernels of ``variant`` (see ``mcchain.codegen.generate.VARIANTS``), the packed
     parameters and the start state as (ndof, nsample) columns."""
-    from mcchain.codegen.generate import lane_kernels
+    from mcchain.codegen.generate import lane_kernels, lane_rows
     from mcchain.codegen.topology import Topology, pack_parameters
 
     topo = Topology.from_model(run.model)
+    rows = lane_rows(topo, variant)
+    if run.lanes is not None and not 1 <= run.lanes <= rows:
+        raise ValueError(
+            f"lanes: must be in 1..{rows} (the lane kernels' work rows), got {run.lanes}"
+        )
+    run.lanes = rows if run.lanes is None else run.lanes
     module = lane_kernels(topo, variant)
     P = pack_parameters(run.model, topo)
     Q0 = np.ascontiguousarray(run.q.T)
@@ -398,8 +405,9 @@ def simulate(
         history_dtype: dtype of the histories (float32 or float64).
         status: (nsample,) incoming status bits (e.g. from assembly); failed samples are
             not integrated.
-        lanes: instances per lane group of the lane kernels (1..LMAX; default LMAX, one
-            SIMD register of doubles: see ``mcchain.codegen.layout.LMAX``).
+        lanes: instances per lane group of the lane kernels (1 up to the row length of the
+            scene's lane kernels, :func:`mcchain.codegen.generate.lane_rows`, which is also
+            the default: one to four SIMD registers of doubles).
         diagnostics: also return, per sample, int64 (nsample,): ``steps`` (accepted
             steps), ``rejected_steps`` and ``evaluations`` (right-hand-side evaluations).
             rk4, rk4-projection: ``steps`` = the steps to t_end (``OutputGrid.nstep``:
@@ -426,11 +434,6 @@ def simulate(
     if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.job)
         choice = choose_kernels(settings, model.ndof, model.nsample)
         settings = settings.model_copy(update={"kernels": choice.kernels})
-    from mcchain.codegen.layout import LMAX
-
-    lanes = LMAX if lanes is None else lanes
-    if not 1 <= int(lanes) <= LMAX:
-        raise ValueError(f"lanes: must be in 1..{LMAX} (the lane kernels' work rows), got {lanes}")
     grid = output_times(settings)
     time, every = grid.time, grid.every
     q, v, status = start_state(model, settings, q_start, v_start, status)
@@ -457,7 +460,7 @@ def simulate(
         steps=np.zeros(n, np.int64),
         rejected_steps=np.zeros(n, np.int64),
         evaluations=np.zeros(n, np.int64),
-        lanes=int(lanes),
+        lanes=None if lanes is None else int(lanes),
     )
     if ncj:
         run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
