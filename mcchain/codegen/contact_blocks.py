@@ -165,27 +165,26 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
 
     b: dict[str, str] = {}
-    setup = ["for l in range(nl):"]
+    # Per lane l (sample sl): its start values, and its summaries at its end (dead: failed).
+    setup = []
     for j, k in enumerate(joints):
         # the mode it starts in (Model.joint_start: link, law, or law seated on the wall); a
         # contact present at t = 0 has no onset: undamped (vi 0, or < 0 while seated)
         first_mode = at("P", slots[f"fs{k}"])
-        setup += indent(
-            [
-                f"{at('fm', j)} = 1.0 if {first_mode} != {START_LINK!r}.0 else 0.0",
-                f"{at('ins', j)} = {at('fm', j)}",
-                f"{at('vi', j)} = {SEATED!r} if {first_mode} == {START_SEATED!r}.0 else 0.0",
-            ]
-        )
-        setup += indent([f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")])
+        setup += [
+            f"{at('fm', j)} = 1.0 if {first_mode} != {START_LINK!r}.0 else 0.0",
+            f"{at('ins', j)} = {at('fm', j)}",
+            f"{at('vi', j)} = {SEATED!r} if {first_mode} == {START_SEATED!r}.0 else 0.0",
+        ]
+        setup += [f"{at(x, j)} = np.nan" for x in ("pd", "pr", "tse")]
     b["contact_setup"] = "\n".join(setup)
-    finish = ["for l in range(nl):", "    dead = (st[l] & FAILBITS) != 0"]
+    finish = []
     for j, k in enumerate(joints):
         for m, name in enumerate(CONTACT_SUMMARY):
             col = len(CONTACT_SUMMARY) * j + m
-            # the peak contact force: the joint's continuous peak (pk rows, _peak_blocks)
+            # the peak contact force: the joint's continuous peak (pk rows, tracking.py)
             value = at("pk", PEAK_WIDTH * k + PEAK_WIDTH - 1) if name == "pkf" else at(name, j)
-            finish.append(f"    sum_ct[s0 + l, {col}] = np.nan if dead else {value}")
+            finish.append(f"sum_ct[sl, {col}] = np.nan if dead else {value}")
     b["contact_finish"] = "\n".join(finish)
 
     # Fixed step: at each step's start (stage 0 evaluated there), after the failure checks;
@@ -207,19 +206,17 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
     )
 
-    # Adaptive: the state after the first stage; the switch at each accepted state (top of
-    # the loop); onsets and separations at each accepted step.
-    start = ["for l in range(nl):"]
+    # Adaptive: the state after a sample's first stage (per lane); the switch at each
+    # accepted state (top of the loop); onsets and separations at each accepted step.
+    start = []
     for j in range(len(joints)):
-        start += indent(
-            [
-                f"{at('pd', j)} = {at('pdc', j)}",
-                f"{at('pr', j)} = {at('prc', j)}",
-                *([f"{at('pw', j)} = {at('wjc', j)}"] if adaptive else []),
-                f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 or {at('vi', j)} < 0.0"
-                " else 0.0",
-            ]
-        )
+        start += [
+            f"{at('pd', j)} = {at('pdc', j)}",
+            f"{at('pr', j)} = {at('prc', j)}",
+            *([f"{at('pw', j)} = {at('wjc', j)}"] if adaptive else []),
+            f"{at('ins', j)} = {at('fm', j)} if {at('pdc', j)} > 0.0 or {at('vi', j)} < 0.0"
+            " else 0.0",
+        ]
     b["contact_start"] = "\n".join(start)
     top = []
     for j, k in enumerate(joints):
@@ -275,7 +272,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
     event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
     b["contact_event"] = "\n".join(event)
-    b["contact_dead"] = "out_ct[s0 + l, it, :] = np.nan"
+    b["contact_dead"] = "out_ct[sl, it, :] = np.nan"
     marks = []
     for j in range(len(joints)):
         marks += [

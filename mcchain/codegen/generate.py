@@ -202,20 +202,20 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("outputs")
     store = []
     for i in range(ndof):
-        store += [f"out_q[s0 + l, it, {i}] = q{i}", f"out_v[s0 + l, it, {i}] = v{i}"]
+        store += [f"out_q[sl, it, {i}] = q{i}", f"out_v[sl, it, {i}] = v{i}"]
     for k in range(topo.njoint):
         store += [
-            f"out_jf[s0 + l, it, {2 * k}] = jfx{k}",
-            f"out_jf[s0 + l, it, {2 * k + 1}] = jfy{k}",
-            f"out_cf[s0 + l, it, {k}] = cf{k}",
+            f"out_jf[sl, it, {2 * k}] = jfx{k}",
+            f"out_jf[sl, it, {2 * k + 1}] = jfy{k}",
+            f"out_cf[sl, it, {k}] = cf{k}",
         ]
-    store += [f"out_dtq[s0 + l, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
+    store += [f"out_dtq[sl, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
     # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
-    store += ["out_cerr[s0 + l, it] = phimax + energy * 0.0", "out_en[s0 + l, it] = energy"]
+    store += ["out_cerr[sl, it] = phimax + energy * 0.0", "out_en[sl, it] = energy"]
     for k, j in cj.items():
         store += [
-            f"out_ct[s0 + l, it, {2 * j}] = pen{k}",
-            f"out_ct[s0 + l, it, {2 * j + 1}] = mode{k}",
+            f"out_ct[sl, it, {2 * j}] = pen{k}",
+            f"out_ct[sl, it, {2 * j + 1}] = mode{k}",
         ]
     em.emit(*store)
     block("store_outputs")
@@ -401,8 +401,6 @@ def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> st
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
         parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))
-    if not topo.contact_joints:
-        parts_of = tuple(p.replace(templates.FIRST_STAGE_RESEATED, "") for p in parts_of)
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)

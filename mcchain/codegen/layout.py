@@ -44,18 +44,21 @@ the L1 sets and long chains thrashed the cache (16-bar chain, 1 thread: 1,518 ns
 doubles: 1,231; rows of 8: 1,139; of 4: 1,166), and the 32-bar chain's work rows (~830 of them)
 fit in L1 only with rows of 4 (1 thread: 3,218 ns with rows of 8, 2,704 with 4)."""
 
-GROUP_BYTES = 32 << 10
+GROUP_BYTES = 44 << 10
 """Largest work array of a lane group whose rows take several SIMD registers of lanes
-(:func:`row_length`): it stays in the L1 data cache (48 KiB here) beside the stack."""
+(:func:`row_length`): it stays in the L1 data cache (48 KiB here)."""
 
-MAX_REGISTERS = 4
-"""Most SIMD registers of lanes in one row (:func:`row_length`)."""
+MAX_REGISTERS = 2
+"""Most SIMD registers of lanes in one row (:func:`row_length`). Measured (AVX-512, 1 thread,
+best CPU time of 12 runs alternating, ns per instance-step, rows of 8 / 16 / 32 doubles):
+clearance double pendulum rk4 94.8 / 78.7 / 81.4, Flores slider-crank rk4 232.6 / 217.1 /
+252.4, rk45 704.1 / 708.0 / 911.5: four registers gained nothing over two."""
 
 
 def row_length(nrow: int) -> int:
-    """Doubles per row of a work array of ``nrow`` rows: :data:`LMAX` × k lanes, k (1, 2 or
-    4, at most :data:`MAX_REGISTERS`) the most registers whose rows keep the array within
-    :data:`GROUP_BYTES`.
+    """Doubles per row of a work array of ``nrow`` rows: :data:`LMAX` × k lanes, k (a power
+    of two, at most :data:`MAX_REGISTERS`) the most registers whose rows keep the array
+    within :data:`GROUP_BYTES`.
 
     Why more than one register: a lane group's stage is one long chain of dependent
     operations (sin/cos, the joints, the Schur solve) that one register of lanes runs at the
@@ -75,7 +78,8 @@ ROW_MEANINGS = """\
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
 # tl the lane's time; pk five rows per |joint force| then per |driver torque|: its last four
-# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count.
+# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count;
+# pkf the cubic checks the last point fed asks for (1 interior, 2 first step, 3 both).
 """
 """Legend of the row map written into the header of a generated module."""
 
@@ -100,7 +104,8 @@ CONTACT_ROW_MEANINGS = """\
 ADAPTIVE_ROW_MEANINGS = """\
 # Adaptive kernel only: en the error norm of the lane's attempted step; lnd 1 where the lane
 # is on an output time (its outputs are written after the lanes' checks), itw that output's
-# index.
+# index; smp the sample in the lane; fsm 1 where its first stage is to compute (a fresh
+# sample, a re-seat); dne 1 where its sample is finished (the lane takes the next one).
 """
 """Legend of the rows only the adaptive kernel has."""
 
@@ -136,6 +141,7 @@ class Layout:
             self.add(name, 1)
         self.add("pk", PEAK_WIDTH * (topo.njoint + topo.ndriver))
         self.add("pkt", PEAK_CLOCK)
+        self.add("pkf", topo.njoint + topo.ndriver)
         ncj = len(topo.contact_joints)
         if ncj:
             for name in CONTACT_ROWS:
@@ -147,9 +153,8 @@ class Layout:
             if adaptive:
                 self.add("pw", ncj)
         if adaptive:
-            self.add("en", 1)
-            self.add("lnd", 1)
-            self.add("itw", 1)
+            for name in ("en", "lnd", "itw", "smp", "fsm", "dne"):
+                self.add(name, 1)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -66,37 +66,68 @@ def outputs(P, Q, V, LAM, t_now, jf_out, cf_out, dtq_out, cerr_out, en_out):
         @@store_outputs_py
 '''
 
-_GROUP_SETUP = """
-        s0 = g * lanes
-        nl = min(lanes, nsample - s0)
+_LANE_SETUP = """
+for k in range(NSLOT):
+    W[(PROW + k) * LMAXV + l] = P[k, sl]
+st[l] = status[sl]
+tdv[l] = t_div[sl]
+tsg[l] = t_sing[sl]
+tcl[l] = t_cl[sl]
+dead = (st[l] & FAILBITS) != 0
+for i in range(NDOF):
+    W[(QROW + i) * LMAXV + l] = np.nan if dead else Q0[i, sl]
+    W[(VROW + i) * LMAXV + l] = np.nan if dead else V0[i, sl]
+@@contact_setup
+"""
+"""Lane ``l`` takes sample ``sl``: its parameters, status and start state into W (whose
+column is all zeros before)."""
+
+_LANE_FINISH = """
+status[sl] = st[l]
+t_div[sl] = tdv[l]
+t_sing[sl] = tsg[l]
+t_cl[sl] = tcl[l]
+dead = (st[l] & FAILBITS) != 0
+@@track_finish
+@@contact_finish
+"""
+"""Lane ``l``'s sample ``sl`` is finished: its status and per-sample results out."""
+
+
+def _lanes(body: str, indent: int) -> str:
+    """``body`` (a per-lane text of this module) indented by ``indent`` spaces."""
+    pad = " " * indent
+    return "\n".join(pad + line if line else "" for line in body.strip("\n").splitlines())
+
+
+_WORK_ARRAYS = """
         W = np.zeros(NROW * LMAXV)
         st = np.zeros(LMAXV, np.uint32)
         tdv = np.full(LMAXV, np.nan)
         tsg = np.full(LMAXV, np.nan)
-        tcl = np.full(LMAXV, np.nan)
-        for l in range(nl):
-            for k in range(NSLOT):
-                W[(PROW + k) * LMAXV + l] = P[k, s0 + l]
-            st[l] = status[s0 + l]
-            tdv[l] = t_div[s0 + l]
-            tsg[l] = t_sing[s0 + l]
-            tcl[l] = t_cl[s0 + l]
-            dead = (st[l] & FAILBITS) != 0
-            for i in range(NDOF):
-                W[(QROW + i) * LMAXV + l] = np.nan if dead else Q0[i, s0 + l]
-                W[(VROW + i) * LMAXV + l] = np.nan if dead else V0[i, s0 + l]
-        @@contact_setup
-"""
+        tcl = np.full(LMAXV, np.nan)"""
 
-_GROUP_FINISH = """
+_GROUP_SETUP = (
+    """
+        s0 = g * lanes
+        nl = min(lanes, nsample - s0)"""
+    + _WORK_ARRAYS
+    + """
         for l in range(nl):
-            status[s0 + l] = st[l]
-            t_div[s0 + l] = tdv[l]
-            t_sing[s0 + l] = tsg[l]
-            t_cl[s0 + l] = tcl[l]
-        @@track_finish
-        @@contact_finish
+            sl = s0 + l
 """
+    + _lanes(_LANE_SETUP, 12)
+    + "\n"
+)
+
+_GROUP_FINISH = (
+    """
+        for l in range(nl):
+            sl = s0 + l
+"""
+    + _lanes(_LANE_FINISH, 12)
+    + "\n"
+)
 
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
@@ -160,7 +191,11 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                     @@contact_step_c
+                # Per-step tracking: every lane at once, then the rare work lane by lane.
+                for l in range(nl):  # lanes: independent
                     @@track_step
+                for l in range(nl):
+                    @@track_fixup
                 if n == nstep or n % out_every == 0:
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
@@ -190,142 +225,205 @@ _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, at
                  out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
                  status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
+_ADAPTIVE_LANE_START = """
+@[smp] = sl
+@[fsm] = 1.0
+@[tl] = t0
+iout[l] = 0
+nstp[l] = 0
+nrej[l] = 0
+hl[l] = h0
+run[l] = True
+nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
+"""
+"""... and, in the adaptive kernel, its clocks: the first stage (FSAL) is still to compute
+(row ``fsm``)."""
+
 ADAPTIVE_KERNEL = (
     f'''
 @njit(**JIT)
 def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
-    """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control, on the lane
-    groups g_start:g_stop (``lanes`` samples each; threads run blocks of groups).
+    """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control, on the
+    samples of lane groups g_start:g_stop (``lanes`` samples each; threads run blocks of
+    groups).
 
     Every lane has its own time and step; a step never crosses the lane's next output time
     and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
     ``max_steps`` attempts is flagged DIVERGED. Per sample: accepted steps, rejected steps
     and stage evaluations (the first stage, then NSTAGE - 1 per attempt: FSAL) into
     ``nsteps_out``, ``nrejected_out``, ``nevals_out``.
+
+    A lane whose sample is finished takes the block's next sample (row ``smp``), so the
+    lanes do not wait for the slowest sample of a group: samples take their own numbers
+    of steps. A sample's numbers do not depend on the lane it runs in or beside whom.
     """
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
     expo = -1.0 / (order_err + 1.0)
     lanes = max(1, min(lanes, LMAXV))
-    for g in range(g_start, g_stop):'''
-    + _GROUP_SETUP
+    nxt = g_start * lanes  # the next sample to take
+    stop = min(g_stop * lanes, nsample)
+    nl = min(lanes, stop - nxt)
+    if nl <= 0:
+        return'''
+    + _WORK_ARRAYS.replace("\n        ", "\n    ")
     + """
-        iout = np.zeros(LMAXV, np.int64)
-        nstp = np.zeros(LMAXV, np.int64)
-        nrej = np.zeros(LMAXV, np.int64)
-        nev = np.zeros(LMAXV, np.int64)
-        run = np.zeros(LMAXV, np.bool_)
-        hl = np.zeros(LMAXV)
+    iout = np.zeros(LMAXV, np.int64)
+    nstp = np.zeros(LMAXV, np.int64)
+    nrej = np.zeros(LMAXV, np.int64)
+    nev = np.zeros(LMAXV, np.int64)
+    run = np.zeros(LMAXV, np.bool_)
+    hl = np.zeros(LMAXV)
+    for l in range(nl):
+        sl = nxt
+        nxt += 1
+"""
+    + _lanes(_LANE_SETUP, 8)
+    + "\n"
+    + _lanes(_ADAPTIVE_LANE_START, 8)
+    + """
+    nfresh = nl
+    while True:
+        if nfresh > 0:
+            # First stage at the fresh lanes' start; later steps reuse the last stage (FSAL).
+            group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
+            for l in range(nl):
+                if @[fsm] > 0.0:
+                    @@contact_start
+                    @[fsm] = 0.0
+        nfresh = 0
+        # Failures, contact and outputs at each lane's current (accepted) state (a lane's
+        # state met again after a rejected step, or beside fresh lanes, changes nothing);
+        # the outputs of the lanes on an output time (row lnd) all at once, after.
+        nrun = 0
+        nland = 0
+        ndone = 0
         for l in range(nl):
-            @[tl] = t0
-            @[hs] = 0.0
-            hl[l] = h0
-            run[l] = True
-            nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
-        # First stage at the start; later steps reuse the last stage (FSAL).
-        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, 0.0)
-        @@contact_start
-        while True:
-            # Failures, contact and outputs at each lane's current (accepted) state; the
-            # outputs of the lanes on an output time (flag row lnd) all at once, after.
-            nrun = 0
-            nland = 0
+            @[lnd] = 0.0
+            if not run[l]:
+                continue
+            alive = (st[l] & FAILBITS) == 0
+            if alive and not (@[chk] <= ctol):
+                st[l] |= DIVERGED_BIT
+                tdv[l] = @[tl]
+                alive = False
+            if alive and @[sg] > 0.0:
+                st[l] |= SINGULAR_BIT
+                tsg[l] = @[tl]
+                alive = False
+            if not alive:
+                @@kill_lane
+            elif (st[l] & CONTACT_BIT) == 0:
+                ts = @[tl]
+                @@contact_check
+            @@contact_switch
+            if iout[l] < nout and @[tl] == t_out[iout[l]]:
+                @[lnd] = 1.0
+                @[itw] = iout[l]
+                nland += 1
+                iout[l] += 1
+            if iout[l] >= nout or not alive:
+                @[dne] = 1.0
+                ndone += 1
+            else:
+                nrun += 1
+        # Tracking at each lane's state (one met again is skipped), every lane at once.
+        for l in range(nl):  # lanes: independent
+            @@track_accepted
+        for l in range(nl):
+            @@track_fixup
+        if nland > 0:
+            group_outputs_landed_SUFFIX(
+                W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT
+            )
+        if ndone > 0:
+            # Finished or dead: the rest of a dead lane's history is NaN; the lane takes
+            # the next sample, if any.
             for l in range(nl):
-                @[lnd] = 0.0
-                if not run[l]:
+                if @[dne] == 0.0:
                     continue
-                alive = (st[l] & FAILBITS) == 0
-                if alive and not (@[chk] <= ctol):
-                    st[l] |= DIVERGED_BIT
-                    tdv[l] = @[tl]
-                    alive = False
-                if alive and @[sg] > 0.0:
-                    st[l] |= SINGULAR_BIT
-                    tsg[l] = @[tl]
-                    alive = False
-                if not alive:
-                    @@kill_lane
-                elif (st[l] & CONTACT_BIT) == 0:
-                    ts = @[tl]
-                    @@contact_check
-                @@contact_switch
-                @@track_accepted
-                if iout[l] < nout and @[tl] == t_out[iout[l]]:
-                    @[lnd] = 1.0
-                    @[itw] = iout[l]
-                    nland += 1
-                    iout[l] += 1
-                if iout[l] >= nout or not alive:
-                    # Finished or dead: the rest of a dead lane's history is NaN.
-                    for it in range(iout[l], nout):
-                        out_q[s0 + l, it, :] = np.nan
-                        out_v[s0 + l, it, :] = np.nan
-                        out_jf[s0 + l, it, :] = np.nan
-                        out_cf[s0 + l, it, :] = np.nan
-                        out_dtq[s0 + l, it, :] = np.nan
-                        out_cerr[s0 + l, it] = np.nan
-                        out_en[s0 + l, it] = np.nan
-                        @@contact_dead
-                    run[l] = False
-                    nsteps_out[s0 + l] = nstp[l] - nrej[l]
-                    nrejected_out[s0 + l] = nrej[l]
-                    nevals_out[s0 + l] = nev[l]
-                else:
+                sl = int(@[smp])
+                for it in range(iout[l], nout):
+                    out_q[sl, it, :] = np.nan
+                    out_v[sl, it, :] = np.nan
+                    out_jf[sl, it, :] = np.nan
+                    out_cf[sl, it, :] = np.nan
+                    out_dtq[sl, it, :] = np.nan
+                    out_cerr[sl, it] = np.nan
+                    out_en[sl, it] = np.nan
+                    @@contact_dead
+                nsteps_out[sl] = nstp[l] - nrej[l]
+                nrejected_out[sl] = nrej[l]
+                nevals_out[sl] = nev[l]
+"""
+    + _lanes(_LANE_FINISH, 16)
+    + """
+                if nxt < stop:
+                    sl = nxt
+                    nxt += 1
+                    for r in range(NROW):
+                        W[r * LMAXV + l] = 0.0
+"""
+    + _lanes(_LANE_SETUP, 20)
+    + "\n"
+    + _lanes(_ADAPTIVE_LANE_START, 20)
+    + """
+                    nfresh += 1
                     nrun += 1
-            if nland > 0:
-                group_outputs_landed_SUFFIX(
-                    W, nl, s0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT
-                )
-            if nrun == 0:
-                break
-            @@contact_reseat
-            # One attempted step on every running lane: stages 1 .. NSTAGE-1.
-            for l in range(nl):
-                if run[l]:
-                    @[hs] = min(hl[l], t_out[iout[l]] - @[tl])
                 else:
-                    @[hs] = 0.0
-            for s in range(1, NSTAGE):
-                group_stage_SUFFIX(W, nl, s, A, cc[s], balpha2, bbeta2, tau)
-                keep = 0.0 if s == 1 else 1.0
-                for l in range(nl):
-                    @[sga] = @[sga] * keep + @[sgc]
-                    @@contact_stage_max
-                    nev[l] += 1 if run[l] else 0
-                ks = K0ROW + 2 * NDOF * s  # the stage's rows: the current stage copied there
-                for l in range(nl):  # lanes: independent
-                    @@copy_stage
-            # Error estimate of every lane at once, then acceptance and next step per lane.
-            @@error_coefs
-            for l in range(nl):  # lanes: schedule
-                @@error_norm
+                    run[l] = False
+                    @[dne] = 0.0
+        if nfresh > 0:
+            continue  # the fresh lanes' start: its checks and outputs first
+        if nrun == 0:
+            break
+        @@contact_reseat
+        # One attempted step on every running lane: stages 1 .. NSTAGE-1.
+        for l in range(nl):
+            if run[l]:
+                @[hs] = min(hl[l], t_out[iout[l]] - @[tl])
+            else:
+                @[hs] = 0.0
+        for s in range(1, NSTAGE):
+            group_stage_SUFFIX(W, nl, s, A, cc[s], balpha2, bbeta2, tau)
+            keep = 0.0 if s == 1 else 1.0
             for l in range(nl):
-                if not run[l]:
-                    continue
-                hh = @[hs]
-                en = @[en]
-                nstp[l] += 1
-                ok = en <= 1.0
-                fac = SAFETY * en**expo if en > 0.0 else MAX_FACTOR
-                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
-                if not ok:
-                    fac = min(fac, 1.0)
-                @@contact_event
-                target = t_out[iout[l]]
-                landed = hh == target - @[tl]
-                cut = hh < hl[l]
-                if ok:
-                    @@contact_accept
-                    @@accept
-                    @[tl] = target if landed else @[tl] + hh
-                    # A step cut short to land on an output time keeps the controller's step.
-                    hl[l] = max(hl[l], hh * fac) if cut else hh * fac
-                else:
-                    hl[l] = hh * fac
-                    nrej[l] += 1
-                if (not (hl[l] >= hmin)) or nstp[l] > max_steps:
-                    @[chk] = np.inf"""
-    + _GROUP_FINISH
+                @[sga] = @[sga] * keep + @[sgc]
+                @@contact_stage_max
+                nev[l] += 1 if run[l] else 0
+            ks = K0ROW + 2 * NDOF * s  # the stage's rows: the current stage copied there
+            for l in range(nl):  # lanes: independent
+                @@copy_stage
+        # Error estimate of every lane at once, then acceptance and next step per lane.
+        @@error_coefs
+        for l in range(nl):  # lanes: schedule
+            @@error_norm
+        for l in range(nl):
+            if not run[l]:
+                continue
+            hh = @[hs]
+            en = @[en]
+            nstp[l] += 1
+            ok = en <= 1.0
+            fac = SAFETY * en**expo if en > 0.0 else MAX_FACTOR
+            fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+            if not ok:
+                fac = min(fac, 1.0)
+            @@contact_event
+            target = t_out[iout[l]]
+            landed = hh == target - @[tl]
+            cut = hh < hl[l]
+            if ok:
+                @@contact_accept
+                @@accept
+                @[tl] = target if landed else @[tl] + hh
+                # A step cut short to land on an output time keeps the controller's step.
+                hl[l] = max(hl[l], hh * fac) if cut else hh * fac
+            else:
+                hl[l] = hh * fac
+                nrej[l] += 1
+            if (not (hl[l] >= hmin)) or nstp[l] > max_steps:
+                @[chk] = np.inf"""
 )
 
 
@@ -333,8 +431,9 @@ OUTPUT_HELPER = '''
 @njit(**JIT)
 def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
                          out_dtq, out_cerr, out_en@CT):
-    """Outputs of lanes lo..hi-1 at time t_now into history index ``it``."""
+    """Outputs of lanes lo..hi-1 (samples s0 + l) at time t_now into history index ``it``."""
     for l in range(lo, hi):  # lanes: independent
+        sl = s0 + l
         @@load_params
         @@load_state
         @@load_lam_dyn
@@ -344,13 +443,14 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
 
 OUTPUT_LANDED_HELPER = '''
 @njit(**JIT)
-def group_outputs_landed_SUFFIX(W, nl, s0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
+def group_outputs_landed_SUFFIX(W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
                                 out_en@CT):
     """Outputs of the lanes flagged ``lnd`` (1.0), each at its own time (row ``tl``) into its
-    history index (row ``itw``): every lane computed at once (a vectorised loop), the flagged
-    ones stored."""
+    sample's (row ``smp``) history index (row ``itw``): every lane computed at once (a
+    vectorised loop), the flagged ones stored."""
     for l in range(nl):  # lanes: independent
         t_now = @[tl]
+        sl = int(@[smp])
         @@load_params
         @@load_state
         @@load_lam
@@ -448,14 +548,12 @@ def lane_energy_SUFFIX(W, lane, t_now):
     return energy
 '''
 
-FIRST_STAGE_RESEATED = """        if reseated > 0.0 and @[rsw] == 0.0:
-            continue
-"""
-"""The first stage's lane filter, in topologies with contact joints only (the others have no
-re-seat flags)."""
-
 RESEAT_REFRESH = """    if refresh:  # the re-seated lanes' first stage (FSAL) at their new state
-        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, 1.0)
+        for l in range(nl):
+            @[fsm] = @[rsw]
+        group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
+        for l in range(nl):
+            @[fsm] = 0.0
 """
 """The re-seat's call of the first stage, in the adaptive variant only (the fixed-step ones
 have no first-stage helper)."""
@@ -480,17 +578,15 @@ def group_stage_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau):
 
 FIRST_STAGE_HELPER = '''
 @njit(**JIT)
-def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau, reseated):
-    """Stage 0 at each lane's state (adaptive methods: later steps reuse their last stage);
-    with ``reseated`` = 1.0, kept only at the lanes flagged ``rsw`` (just re-seated): the
-    others' step and current-stage rows, which it also writes, are written again before
-    they are read. A float, not a bool: numba would compile a literal True and a literal
-    False apart."""
+def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
+    """Stage 0 at the state of the lanes flagged ``fsm`` (later steps reuse their last
+    stage): a fresh sample's start, or a just re-seated state. The other lanes' step and
+    current-stage rows, which it also writes, are written again before they are read."""
     for l in range(nl):
         @[hs] = 0.0
     group_stage_SUFFIX(W, nl, np.int64(0), A, 0.0, balpha2, bbeta2, tau)
     for l in range(nl):
-        if reseated > 0.0 and @[rsw] == 0.0:
+        if @[fsm] == 0.0:
             continue
         @@accept_zero
         @@contact_stage_max

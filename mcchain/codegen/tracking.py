@@ -13,18 +13,25 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from mcchain.codegen.inline import inline
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.topology import Topology
 from mcchain.kernels.tableaux import PEAK_WIDTH
 from mcchain.model import JOINT_IDEAL
 
+PEAK_KERNELS = "mcchain.kernels.peaks"
+"""The module whose straight-line functions the peak tracking inlines."""
+
 TRACKING_HOOKS = {
     "track_step": "fixed step: each step's start (time ts, λ of its first stage in row lamc), "
-    "every lane l of the group once per step (a failed lane's values are NaN)",
-    "track_accepted": "adaptive: each accepted state of running lane l (time tl, λ in row "
-    "lam); a rejected step's repeated state comes back with the same time",
-    "track_finish": "the end of a lane group: a loop over its lanes writes the results "
-    "(s0 + l the sample; st[l] & FAILBITS its failure)",
+    "every lane l of the group once per step (a failed lane's values are NaN), all lanes in "
+    "one vectorised loop: straight-line code on lane l's rows of W only",
+    "track_accepted": "adaptive: each lane's accepted state (time in row tl, λ in row lam), "
+    "all lanes in one vectorised loop as track_step; a lane's state comes back unchanged "
+    "(a rejected step, a lane not running), with the same time",
+    "track_fixup": "after track_step or track_accepted, lane by lane (scalar: branches and "
+    "calls allowed): the rare work the vectorised feed flagged",
+    "track_finish": "the end of lane l's sample sl (``dead``: it failed): its results out",
 }
 """The templates' tracking hooks (``@@<hook>``) and where each stands."""
 
@@ -33,75 +40,94 @@ def peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
     """The continuous peaks of |joint force| and |driver torque| (mcchain.kernels.peaks):
     each value fed at every accepted state (fixed step: each step's start, λ of the first
     stage; adaptive: each accepted state, λ of the last stage, a rejected step's repeated
-    state skipped), and the peaks written at the end (NaN for a failed lane)."""
+    state skipped), and the peaks written at the end (NaN for a failed lane).
+
+    A feed is :func:`mcchain.kernels.peaks.peak_feed` split in two: every lane at once, the
+    new point shifted in, the running maximum taken and :func:`~mcchain.kernels.peaks.
+    peak_checks`' flags kept (row ``pkf``); then, lane by lane, the cubic of a flagged step
+    (rare: a local maximum of the data) on the four points now kept. The maxima are taken
+    in peak_feed's order."""
     at = lay.at
     cj = {k: j for j, k in enumerate(topo.contact_joints)}
     npk = topo.njoint + topo.ndriver
 
-    def base(i: int) -> str:
-        return f"{(lay.rows['pk'] + PEAK_WIDTH * i) * lay.lmax} + l"
+    def row(i: int, m: int) -> str:
+        """Number m (f_a, f_b, f_c, f_d, peak) of quantity i."""
+        return at("pk", PEAK_WIDTH * i + m)
 
-    def feed(lamrow: str, t: str) -> str:
-        lines = [
-            f"cnt = {at('pkt', 4)}",
-            f"if cnt == 0.0 or {t} > {at('pkt', 3)}:",
-            *(f"    t{x} = {at('pkt', i + 1)}" for i, x in enumerate("bcd")),
-        ]
+    def values(lamrow: str) -> list[str]:
+        out = []
         for k in range(topo.njoint):
             r = topo.joint_row[k]
             lam = at(lamrow, r)
             if topo.joint_kind[k] == JOINT_IDEAL:
                 lam2 = at(lamrow, r + 1)
-                value = f"math.sqrt({lam} * {lam} + {lam2} * {lam2})"
+                out.append(f"math.sqrt({lam} * {lam} + {lam2} * {lam2})")
             elif k in cj:  # the link's |λ|, or F_n ≥ 0 under the law
-                value = f"abs({lam}) if {at('fm', cj[k])} == 0.0 else max({lam}, 0.0)"
+                out.append(f"abs({lam}) if {at('fm', cj[k])} == 0.0 else max({lam}, 0.0)")
             else:  # prismatic (the normal force) or a clearance joint on the link
-                value = f"abs({lam})"
-            lines.append(f"    peak_feed(W, {base(k)}, {lay.lmax}, cnt, tb, tc, td, {t}, {value})")
-        for d in range(topo.ndriver):
-            value = f"abs({at(lamrow, topo.driver_row[d])})"
-            lines.append(
-                f"    peak_feed(W, {base(topo.njoint + d)}, {lay.lmax}, cnt, tb, tc, td, "
-                f"{t}, {value})"
-            )
-        lines += [
-            f"    {at('pkt', 0)} = tb",
-            f"    {at('pkt', 1)} = tc",
-            f"    {at('pkt', 2)} = td",
-            f"    {at('pkt', 3)} = {t}",
-            f"    {at('pkt', 4)} = min(cnt + 1.0, 4.0)",
+                out.append(f"abs({lam})")
+        out += [f"abs({at(lamrow, topo.driver_row[d])})" for d in range(topo.ndriver)]
+        return out
+
+    def feed(lamrow: str, t: str) -> str:
+        lines = [
+            f"cnt = {at('pkt', 4)}",
+            f"tfeed = {t}",
+            # a time not after the last one fed (a rejected step's repeated state) is skipped
+            f"fresh = cnt == 0.0 or tfeed > {at('pkt', 3)}",
         ]
+        for i, value in enumerate(values(lamrow)):
+            lines.append(f"f{i} = {value}")
+            lines += [f"f{x}{i} = {row(i, m)}" for m, x in ((1, "b"), (2, "c"), (3, "d"))]
+            arguments = ["cnt", f"fb{i}", f"fc{i}", f"fd{i}", f"f{i}"]
+            checks, (interior, first) = inline(PEAK_KERNELS, "peak_checks", arguments, f"_pk{i}")
+            lines += checks
+            shifted = [f"fb{i}", f"fc{i}", f"fd{i}", f"f{i}", f"max({row(i, 4)}, f{i})"]
+            lines += [f"{row(i, m)} = {v} if fresh else {row(i, m)}" for m, v in enumerate(shifted)]
+            lines.append(f"{at('pkf', i)} = ({interior} + 2.0 * {first}) if fresh else 0.0")
+        times = [at("pkt", 1), at("pkt", 2), at("pkt", 3), "tfeed", "min(cnt + 1.0, 4.0)"]
+        lines += [f"{at('pkt', m)} = {v} if fresh else {at('pkt', m)}" for m, v in enumerate(times)]
         return "\n".join(lines)
 
-    finish = [
-        "for l in range(nl):",
-        "    dead = (st[l] & FAILBITS) != 0",
-        f"    cnt = {at('pkt', 4)}",
-        *(f"    t{x} = {at('pkt', i)}" for i, x in enumerate("abcd")),
-    ]
+    fixup = []
     for i in range(npk):
-        peak = f"W[{base(i)} + {(PEAK_WIDTH - 1) * lay.lmax}]"
+        points = ", ".join(f"{at('pkt', m)}, {row(i, m)}" for m in range(4))
+        fixup += [
+            f"if {at('pkf', i)} > 0.0:",
+            f"    flag = {at('pkf', i)}",
+            f"    peak = {row(i, 4)}",
+            "    if flag != 2.0:",
+            f"        peak = max(peak, cubic_peak({points}, 1))",
+            "    if flag >= 2.0:",
+            f"        peak = max(peak, cubic_peak({points}, 0))",
+            f"    {row(i, 4)} = peak",
+        ]
+    finish = [f"cnt = {at('pkt', 4)}", *(f"t{x} = {at('pkt', i)}" for i, x in enumerate("abcd"))]
+    for i in range(npk):
+        base = f"{(lay.rows['pk'] + PEAK_WIDTH * i) * lay.lmax} + l"
         finish += [
-            f"    {peak} = peak_last(W, {base(i)}, {lay.lmax}, cnt, ta, tb, tc, td)",
-            f"    out_pk[s0 + l, {i}] = np.nan if dead or cnt == 0.0 else {peak}",
+            f"{row(i, 4)} = peak_last(W, {base}, {lay.lmax}, cnt, ta, tb, tc, td)",
+            f"out_pk[sl, {i}] = np.nan if dead or cnt == 0.0 else {row(i, 4)}",
         ]
     return {
         "track_step": feed("lamc", "ts"),
         "track_accepted": feed("lam", at("tl")),
+        "track_fixup": "\n".join(fixup),
         "track_finish": "\n".join(finish),
     }
 
 
 def peak_functions() -> str:
-    """The source of :mod:`mcchain.kernels.peaks`' ``cubic_peak``, ``peak_feed`` and
-    ``peak_last``, copied into the generated module (for the reason of
+    """The source of :mod:`mcchain.kernels.peaks`' ``cubic_peak`` and ``peak_last``, copied
+    into the generated module (for the reason of
     :func:`mcchain.codegen.generate._contact_functions`)."""
     import inspect
 
     from mcchain.kernels import peaks
 
     parts = []
-    for kernel in (peaks.cubic_peak, peaks.peak_feed, peaks.peak_last):
+    for kernel in (peaks.cubic_peak, peaks.peak_last):
         source = inspect.getsource(kernel.py_func)
         parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
     return "\n\n".join(parts)

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 
 from mcchain.codes import JOINT_IDEAL, JOINT_PRISMATIC
-from mcchain.kernels.config import JIT, hypot, njit
+from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 
 __all__ = ["PEAK_CLOCK", "PEAK_WIDTH"]
@@ -88,6 +88,18 @@ def cubic_peak(ta, fa, tb, fb, tc, fc, td, fd, interval):
     return min(best, top + (top - low))
 
 
+@njit(**INLINE)
+def peak_checks(count, fb, fc, fd, f):
+    """Which steps the point ``f`` just fed (after f_b, f_c, f_d; ``count`` points before it)
+    has the cubic (:func:`cubic_peak`) checked: ``interior`` 1.0 when, with three earlier
+    points, the data rise into the step [tc, td] and fall out of it (f_c ≥ f_b, f_d ≥ f, not
+    both equal), else 0.0; ``first`` 1.0 when exactly three points came before (the first
+    step [tb, tc], once), else 0.0. Straight-line: the generated lanes inline it."""
+    interior = 1.0 if count >= 3.0 and fc >= fb and fd >= f and (fc > fb or fd > f) else 0.0
+    first = 1.0 if count == 3.0 else 0.0
+    return interior, first
+
+
 @njit(**JIT)
 def peak_feed(W, base, stride, count, tb, tc, td, t, f):
     """Feed the value ``f`` at time ``t`` (> ``td``) to the quantity stored at ``W[base]``,
@@ -104,11 +116,11 @@ def peak_feed(W, base, stride, count, tb, tc, td, t, f):
     fd = W[base + 3 * stride]
     peak = W[base + 4 * stride]
     peak = max(peak, f)
-    if count >= 3.0:
-        if fc >= fb and fd >= f and (fc > fb or fd > f):
-            peak = max(peak, cubic_peak(tb, fb, tc, fc, td, fd, t, f, 1))
-        if count == 3.0:
-            peak = max(peak, cubic_peak(tb, fb, tc, fc, td, fd, t, f, 0))
+    interior, first = peak_checks(count, fb, fc, fd, f)
+    if interior > 0.0:
+        peak = max(peak, cubic_peak(tb, fb, tc, fc, td, fd, t, f, 1))
+    if first > 0.0:
+        peak = max(peak, cubic_peak(tb, fb, tc, fc, td, fd, t, f, 0))
     W[base] = fb
     W[base + stride] = fc
     W[base + 2 * stride] = fd
