@@ -28,28 +28,28 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 
 GOLDEN = {
     "double-pendulum-clearance": {
-        "accel": "4ad99df1961cea05c65fe9ec5babf7f0f64b99deba91ed4c4c50d25378c28193",
-        "rk4": "9f156c65ffc3ab0946b9bd9270ed4d8ebadc4da5c200442f18e1c99201441771",
-        "rk4-projection": "98a6783df78cd2847cbb08838bba7377bf5aafec7e9997253d3006384d925e32",
-        "rk45": "58de507d27c547c6f81c62a647291a6966bfc546bb950923a29c743a25b5c10a",
+        "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
+        "rk4": "278908960a79bc8cd63053035b5c57c8a4187633e543642b1e6909f8b9bf0c0a",
+        "rk4-projection": "952522d00d2b685691688abb625ee58ec6928c9d844b48ae56c148c477d657f2",
+        "rk45": "052bab8a2a9c2c43ee68196a7ace57bc574572df39c93eaa9acf6003d9d7fc11",
     },
     "fourbar-clearance": {
-        "accel": "ea24d2a29ea8272d76dd4172106ca88d596b1af8de51adbbeb3acd31218a0ccd",
-        "rk4": "f374ac03fbe044704a38d30590eeab26d89523b1ab296b33186972f7e01768f5",
-        "rk4-projection": "564dbd11f08a825da2ffac9150f899a0933ff8d780bcfc59715a3df8f493e215",
-        "rk45": "7cfdf883dc1b5ede191b4b78d10d295c3e1545c8b87211f0da3ea4e5d888dc44",
+        "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
+        "rk4": "9ccfc34ed3328869e6f88ae9ed5470652575c1b4a2eea5bfa0414337991ed31a",
+        "rk4-projection": "33e0544f2ac578ae8cdbaf0964e848bd8ae7aac25f9c8347ad4d08f276d16761",
+        "rk45": "2f0aee60b70aee6f83b3859eb0cafd0d39108784586ad930c675edbb8d6cdd42",
     },
     "fourbar-clearance-auto": {
-        "accel": "9e998cbf8cab1466aebb82c786e72ab9cf119cb6744a33e46b5e8ca5541bcebb",
-        "rk4": "6b3150d77bcb8c9ab1e1637f5b6247d842259e5571b7863b9331c04806c77d5a",
-        "rk4-projection": "ae0c084b1b9528f2318faee48f6352d2c0e0ad337e0aa71e74131f2b5e5f2ea1",
-        "rk45": "a13ac221a384c4c06ae91c30aefc8c1a43e4352609f8536cc1e7c669d1b2da33",
+        "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
+        "rk4": "431c24d140b5b8cb85b36b0d5eac4d5a36a9cd92c27a575b52f7b70e6c7f2940",
+        "rk4-projection": "b7d626a6daa9150fa1a89f5aa641c2a5eafd840e20932e23fe0fd74921bdc963",
+        "rk45": "3dcb05d5fbfa4d1465bfcdde1360678d0efe96b357ae8cfd612b5b782ae356e2",
     },
     "chain4-mixed-spring": {
-        "accel": "105998c4aa9ba3f47261e2b8863082059c91f9411f0f49b2357f76e72a25c167",
-        "rk4": "038b7d7ccb1b29f28eaeb3827b8017b23496bafaf73a4758dba08bb78e616168",
-        "rk4-projection": "bb44252d9160f3653a2f48d7038bbb3f413eb2e2b78c727abd0659bedae95ace",
-        "rk45": "faaa738f95b3d7639fb95a2de21954ea41ad531ebb0df59ef66784023c016cc7",
+        "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
+        "rk4": "337161d0db01ed086e8abdeca9b7d626b7e58c3e1eb09c82b49878e1ecfa6783",
+        "rk4-projection": "4e05a0046813ee16b12c3aaec1d21c06f55b00309802c24dd8252fff2cbb61b7",
+        "rk45": "89273b16df346ebd3bae2239872d69d3262830945d6199e0396d1f0f815daa9c",
     },
 }
 

@@ -1,10 +1,17 @@
 """The branch-free sine and cosine that generated lane code inlines, as text.
 
 fdlibm kernels on [-π/4, π/4] after a three-part Cody–Waite reduction. Branch-free (the
-quadrant chosen by exact 0/1 and ±1 factors), so the lane loop vectorises, and free of
-function calls: rounding to an integer is (y + 1.5·2⁵²) − 1.5·2⁵², exact for |y| < 2⁵¹ (so
-for |x| < 3.5e15 rad; the reduction itself stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such
-as np.floor cost numba's type inference more than anything else in generated code.
+quadrant's swap and signs exact 0/1 and ±1 factors), so the lane loop vectorises, and free of
+function calls: rounding to an integer is
+(y + 1.5·2⁵²) − 1.5·2⁵², exact for |y| < 2⁵¹ (so for |x| < 3.5e15 rad; the reduction itself
+stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such as np.floor cost numba's type inference more
+than anything else in generated code.
+
+The quadrant is the integer k mod 4 (it was taken with the rounding trick: 12 more flops
+per sine-cosine pair, on the lane group's critical path). Its swap and signs stay the factors
+sw·p_c + (1 − sw)·p_s and 1 − 2h: as selects (9 flops fewer again) they gave the same sine
+and cosine, but LLVM then fused the other product of a·sin θ + b·cos θ into its multiply-add
+(selects of ±x are not multiplies), which moved the lanes' results by an ulp.
 """
 
 from __future__ import annotations
@@ -29,12 +36,12 @@ _SINCOS_TEMPLATE = "\n".join(
         " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
         " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
         " + {z} * -1.1359647557788195e-11)))))))",
-        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3}; floor(k / 4) and h = floor(j / 2) are roundings
-        # of k/4 − 3/8 and j/2 − 1/4 (never a tie). h: j ≥ 2; sw: odd j (sine and cosine swap);
+        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3} (k is a whole number: exact as an int; & 3 is
+        # mod 4 for negative k too); h = j // 2: j ≥ 2; sw: odd j (sine and cosine swap);
         # the sine's sign is 1 − 2h, the cosine's (1 − 2h)(1 − 2 sw).
-        f"{{j}} = {{k}} - 4.0 * ((({{k}} * 0.25 - 0.375) + {_ROUND}) - {_ROUND})",
-        f"{{h}} = (({{j}} * 0.5 - 0.25) + {_ROUND}) - {_ROUND}",
-        "{sw} = {j} - 2.0 * {h}",
+        "{j} = int({k}) & 3",
+        "{h} = float({j} // 2)",
+        "{sw} = float({j} & 1)",
         "{ss} = 1.0 - 2.0 * {h}",
         "{sa} = {sw} * {pc} + (1.0 - {sw}) * {ps}",
         "{ca} = {sw} * {ps} + (1.0 - {sw}) * {pc}",
