@@ -29,27 +29,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "278908960a79bc8cd63053035b5c57c8a4187633e543642b1e6909f8b9bf0c0a",
-        "rk4-projection": "952522d00d2b685691688abb625ee58ec6928c9d844b48ae56c148c477d657f2",
-        "rk45": "052bab8a2a9c2c43ee68196a7ace57bc574572df39c93eaa9acf6003d9d7fc11",
+        "rk4": "cf9caef9c1e24beaae949cc30cbd8f9ae5f853fee2615e16f49ec9cf465c820b",
+        "rk4-projection": "b41fa620a3d1299b2ad3136bc037f5b1725e444adf9bdbe3337a414281bb7ce7",
+        "rk45": "131450fc6e1b3fa7a96b4f0d7bafac7adceac501707257c71404c625e777c804",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "9ccfc34ed3328869e6f88ae9ed5470652575c1b4a2eea5bfa0414337991ed31a",
-        "rk4-projection": "33e0544f2ac578ae8cdbaf0964e848bd8ae7aac25f9c8347ad4d08f276d16761",
-        "rk45": "2f0aee60b70aee6f83b3859eb0cafd0d39108784586ad930c675edbb8d6cdd42",
+        "rk4": "f0580999bc5d885ad1a4ac163f48a6c76ae4e6063f97dba36ee86de7fb98da72",
+        "rk4-projection": "7f82216fa75ee752e532e36c85c7ba197d03c315a861e740af3845f6a9190f79",
+        "rk45": "e8bedd665aa3a79ae7579be7b118157c344a903c44f08c954ba01bef3d7c54c0",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "431c24d140b5b8cb85b36b0d5eac4d5a36a9cd92c27a575b52f7b70e6c7f2940",
-        "rk4-projection": "b7d626a6daa9150fa1a89f5aa641c2a5eafd840e20932e23fe0fd74921bdc963",
-        "rk45": "3dcb05d5fbfa4d1465bfcdde1360678d0efe96b357ae8cfd612b5b782ae356e2",
+        "rk4": "268f9360dbc54ee3e8e2ff30a19d72c0827a2d881a1dbf6bdc79287755e8a93a",
+        "rk4-projection": "5db67614beeb4df64a1c523b8ef950289fa0a11657c2943bedd9c1ad2a253ef2",
+        "rk45": "a822de433d97f557e7938a3a7b192b1a00d63c56548283300cb59acc2b84e325",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "337161d0db01ed086e8abdeca9b7d626b7e58c3e1eb09c82b49878e1ecfa6783",
-        "rk4-projection": "4e05a0046813ee16b12c3aaec1d21c06f55b00309802c24dd8252fff2cbb61b7",
-        "rk45": "89273b16df346ebd3bae2239872d69d3262830945d6199e0396d1f0f815daa9c",
+        "rk4": "975da64197cb3a5959ad01fee57ae59277c2657083673d5c14d66905547bc5ee",
+        "rk4-projection": "f00c8d7785f9613567b6e2a0409a6e9fe2f133c5fdb3221bc286f1c93262da0a",
+        "rk45": "0c01eb552e3668ec0ae4e276e21cc80cb3b3a87837072a6b3ec18f2d5df02d6c",
     },
 }
 

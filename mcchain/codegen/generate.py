@@ -27,6 +27,7 @@ from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
     CONTACT_ROW_MEANINGS,
+    FIXED_STEP_ROW_MEANINGS,
     LMAX,
     ROW_MEANINGS,
     Layout,
@@ -185,6 +186,27 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
             f"    {elem('lamc', 'r')} = np.nan",
         ]
     )
+    # Fixed step: the status as rows (alv: no failure bit; ncl: no contact_lost bit), and
+    # which lanes' status the step's checks may change (row att): a failure (max |Φ|
+    # past ctol, NaN included; a dropped pivot unless robust), or a link's λ ≤ 0 at a
+    # clearance joint; with contact-law joints every lane (their bookkeeping runs each step).
+    b["status_rows"] = b["check_flag"] = ""
+    if "att" in lay.rows:
+        law_rows = {topo.joint_row[k] for k in topo.contact_joints}
+        lost = [f"{at('lamc', r)} <= 0.0" for r in topo.clearance_rows if r not in law_rows]
+        em.emit(
+            f"bad = not ({at('chkc')} <= ctol) or ((not robust) and {at('sga')} > 0.0)",
+            f"lost = {' or '.join(lost) if lost else 'False'}",
+            f"watch = bad or ({at('ncl')} > 0.0 and lost)",
+            f"{at('att')} = 1.0 if {bool(law_rows)} or ({at('alv')} > 0.0 and watch) else 0.0",
+            f"{at('sga')} = {at('sga')} if {at('att')} > 0.0 else 0.0",
+        )
+        block("check_flag")
+        em.emit(
+            f"{at('alv')} = 1.0 if (st[l] & FAILBITS) == 0 else 0.0",
+            f"{at('ncl')} = 1.0 if (st[l] & CONTACT_BIT) == 0 else 0.0",
+        )
+        block("status_rows")
     for row, name in (("lam", "contact_check"), ("lamc", "contact_check_c")):
         lines = []
         law_rows = {topo.joint_row[k] for k in topo.contact_joints}
@@ -292,17 +314,17 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         block("error_norm")
         em.emit(*(f"W[(ks + {i}) * {lay.lmax} + l] = {at('kqc', i)}" for i in range(2 * ndof)))
         block("copy_stage")
-    b["accept"] = "\n".join(
-        [
-            f"for r in range({2 * ndof}):",
-            f"    {elem('q', 'r')} = {elem('qn', 'r')}",
-            f"    {elem('kq0', 'r')} = {elem('kq0', 'r', stride * (nstage - 1))}",
-            f"for r in range({ncon}):",
-            f"    {elem('lam', 'r')} = {elem('lamc', 'r')}",
-            f"{at('chk')} = {at('chkc')}",
-            f"{at('sg')} = {at('sga')}",
-        ]
-    )
+    # An accepted step: its checks at once; its new state, last stage (FSAL) and λ copied
+    # afterwards, every lane at once (row acc: accepted).
+    b["accept"] = "\n".join([f"{at('chk')} = {at('chkc')}", f"{at('sg')} = {at('sga')}"])
+    b["accept_copy"] = ""
+    if "acc" in lay.rows:
+        copies = [(at("q", r), at("qn", r)) for r in range(2 * ndof)]
+        copies += [(at("kq0", r), at("kq0", r + stride * (nstage - 1))) for r in range(2 * ndof)]
+        copies += [(at("lam", r), at("lamc", r)) for r in range(ncon)]
+        em.emit(f"done = {at('acc')} > 0.0", *(f"{a} = {b_} if done else {a}" for a, b_ in copies))
+        em.emit(f"{at('acc')} = 0.0")
+        block("accept_copy")
     b.update(contact_blocks(topo, lay, b["kill_lane"]))
     b.update(tracking_blocks(topo, lay))
     return b
@@ -383,8 +405,7 @@ def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> st
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
-        if variant == "rk45":
-            parts.append(ADAPTIVE_ROW_MEANINGS)
+        parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
     if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)

@@ -101,11 +101,18 @@ CONTACT_ROW_MEANINGS = """\
 """
 """Legend of the contact rows, written only into modules that have them."""
 
+FIXED_STEP_ROW_MEANINGS = """\
+# Fixed-step kernels only: alv 1 while the lane's sample has no failure bit, ncl 1 while it
+# has no contact_lost bit; att 1 where the step's checks may change its status.
+"""
+"""Legend of the rows only the fixed-step kernels have."""
+
 ADAPTIVE_ROW_MEANINGS = """\
 # Adaptive kernel only: en the error norm of the lane's attempted step; lnd 1 where the lane
 # is on an output time (its outputs are written after the lanes' checks), itw that output's
 # index; smp the sample in the lane; fsm 1 where its first stage is to compute (a fresh
-# sample, a re-seat); dne 1 where its sample is finished (the lane takes the next one).
+# sample, a re-seat); dne 1 where its sample is finished (the lane takes the next one); acc 1
+# where its step was accepted (its new state is copied in after the lanes' acceptance).
 """
 """Legend of the rows only the adaptive kernel has."""
 
@@ -153,7 +160,10 @@ class Layout:
             if adaptive:
                 self.add("pw", ncj)
         if adaptive:
-            for name in ("en", "lnd", "itw", "smp", "fsm", "dne"):
+            for name in ("en", "lnd", "itw", "smp", "fsm", "dne", "acc"):
+                self.add(name, 1)
+        else:
+            for name in ("alv", "ncl", "att"):
                 self.add(name, 1)
 
     def row_map(self, title: str) -> str:

@@ -150,6 +150,8 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
     for g in range(g_start, g_stop):'''
     + _GROUP_SETUP
     + """
+        for l in range(nl):
+            @@status_rows
         t = t_out[0]
         hb = h  # the step that ended at t (at the start: none, h)
         for n in range(nstep + 1):
@@ -172,10 +174,15 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     @[sga] = @[sga] + sing
                 if s > 0:
                     continue
-                # Failures, once per step at its start (scalar; cheap): max |Φ| of the state,
-                # and rank loss in any stage since the last check (so a singular stage is
-                # flagged at the end of its step).
+                # Failures, once per step at its start: max |Φ| of the state, and rank loss in
+                # any stage since the last check (so a singular stage is flagged at the end of
+                # its step). Every lane's checks at once (row att: a lane whose status may
+                # change), then the flagged lanes' status, lane by lane.
+                for l in range(nl):  # lanes: independent
+                    @@check_flag
                 for l in range(nl):
+                    if @[att] == 0.0:
+                        continue
                     alive = (st[l] & FAILBITS) == 0
                     bad_div = alive and not (@[chkc] <= ctol)
                     bad_sing = alive and (not robust) and @[sga] > 0.0
@@ -191,6 +198,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     elif alive and (st[l] & CONTACT_BIT) == 0:
                         @@contact_check_c
                     @@contact_step_c
+                    @@status_rows
                 # Per-step tracking: every lane at once, then the rare work lane by lane.
                 for l in range(nl):  # lanes: independent
                     @@track_step
@@ -416,6 +424,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
             if ok:
                 @@contact_accept
                 @@accept
+                @[acc] = 1.0
                 @[tl] = target if landed else @[tl] + hh
                 # A step cut short to land on an output time keeps the controller's step.
                 hl[l] = max(hl[l], hh * fac) if cut else hh * fac
@@ -423,7 +432,9 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 hl[l] = hh * fac
                 nrej[l] += 1
             if (not (hl[l] >= hmin)) or nstp[l] > max_steps:
-                @[chk] = np.inf"""
+                @[chk] = np.inf
+        for l in range(nl):  # lanes: independent
+            @@accept_copy"""
 )
 
 

@@ -23,10 +23,12 @@ MIN_BLOCK = 16
 """Fewest samples in a block of a static kernel, so a small batch stays on one thread."""
 
 
-def item_blocks(count: int, threads: int, min_block: int = 1) -> list[tuple[int, int]]:
-    """Contiguous ``(start, stop)`` blocks covering ``0:count`` for ``threads`` threads, each
-    at least ``min_block`` long (but one)."""
-    nblock = max(1, min(threads * BLOCKS_PER_THREAD, count // min_block))
+def item_blocks(
+    count: int, threads: int, min_block: int = 1, per_thread: int = BLOCKS_PER_THREAD
+) -> list[tuple[int, int]]:
+    """Contiguous ``(start, stop)`` blocks covering ``0:count`` for ``threads`` threads
+    (``per_thread`` blocks each), each at least ``min_block`` long (but one)."""
+    nblock = max(1, min(threads * per_thread, count // min_block))
     edges = [count * k // nblock for k in range(nblock + 1)]
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
@@ -38,14 +40,19 @@ def _numba_threads() -> int:
 
 
 def over_samples(
-    kernel: Callable[..., Any], count: int, *args: Any, min_block: int = MIN_BLOCK
+    kernel: Callable[..., Any],
+    count: int,
+    *args: Any,
+    min_block: int = MIN_BLOCK,
+    per_thread: int = BLOCKS_PER_THREAD,
 ) -> None:
     """Call ``kernel(start, stop, *args)`` on blocks covering ``0:count`` (samples, or lane
     groups with ``min_block=1``), on as many threads as numba may use
     (``numba.get_num_threads()``, which ``--threads`` sets; one where the kernels run
-    interpreted, :func:`mcchain.kernels.config.interpret_kernels`)."""
+    interpreted, :func:`mcchain.kernels.config.interpret_kernels`); ``per_thread`` blocks
+    per thread."""
     threads = 1 if config.INTERPRETED else _numba_threads()
-    blocks = item_blocks(count, threads, min_block)
+    blocks = item_blocks(count, threads, min_block, per_thread)
     if threads == 1 or len(blocks) == 1:
         for start, stop in blocks:
             kernel(start, stop, *args)
