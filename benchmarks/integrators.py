@@ -391,9 +391,10 @@ def chains(out: Path, quick: bool, nsample: int = 10_000, threads: int = 2) -> s
     return table + f"\n\nmcchain cost ∝ N^{slope:.2f} (fit over N = {sizes[0]}…{sizes[-1]})."
 
 
-def _mujoco_chain(lengths, masses, dt, nstep, nsample, threads) -> float:
+def _mujoco_chain(lengths, masses, dt, nstep, nsample, threads, cpu=False) -> float:
     """ns per instance-step of ``mujoco.rollout`` on the same chain (hinges, RK4); NaN if
-    mujoco is not installed (``pip install mujoco``)."""
+    mujoco is not installed (``pip install mujoco``). ``cpu``: this process's CPU time
+    instead of wall time (one thread: not stretched by other jobs on a shared machine)."""
     try:
         import mujoco
         from mujoco import rollout
@@ -427,8 +428,10 @@ def _mujoco_chain(lengths, masses, dt, nstep, nsample, threads) -> float:
     mujoco.mj_getState(model, data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
     initial = np.tile(state0, (nsample, 1))
     rollout.rollout(model, datas, initial[:8], nstep=2)
-    wall, _, _ = _timed(lambda: rollout.rollout(model, datas, initial, nstep=nstep), repeat=2)
-    return wall / (nsample * nstep) * 1e9
+    wall, cpu_time, _ = _timed(
+        lambda: rollout.rollout(model, datas, initial, nstep=nstep), repeat=2
+    )
+    return (cpu_time if cpu else wall) / (nsample * nstep) * 1e9
 
 
 def _scipy_chain(model: Model, dt: float, nstep: int = 20) -> float:
