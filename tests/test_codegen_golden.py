@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "cf9caef9c1e24beaae949cc30cbd8f9ae5f853fee2615e16f49ec9cf465c820b",
         "rk4-projection": "b41fa620a3d1299b2ad3136bc037f5b1725e444adf9bdbe3337a414281bb7ce7",
-        "rk45": "131450fc6e1b3fa7a96b4f0d7bafac7adceac501707257c71404c625e777c804",
+        "rk45": "a41e6853e8fe0a0955900502fc3794a79115a6cd5f7fd15c42746aeb9853cd72",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "f0580999bc5d885ad1a4ac163f48a6c76ae4e6063f97dba36ee86de7fb98da72",
         "rk4-projection": "7f82216fa75ee752e532e36c85c7ba197d03c315a861e740af3845f6a9190f79",
-        "rk45": "e8bedd665aa3a79ae7579be7b118157c344a903c44f08c954ba01bef3d7c54c0",
+        "rk45": "81518a07385fd3b8b4c19f8bcd3b24e0107dd1cf24a2c629221c3a52be318ee6",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
         "rk4": "268f9360dbc54ee3e8e2ff30a19d72c0827a2d881a1dbf6bdc79287755e8a93a",
         "rk4-projection": "5db67614beeb4df64a1c523b8ef950289fa0a11657c2943bedd9c1ad2a253ef2",
-        "rk45": "a822de433d97f557e7938a3a7b192b1a00d63c56548283300cb59acc2b84e325",
+        "rk45": "c1191d58bccf793ced10232ec139f145cd2793cfd6171eb50e2708249cbe52a7",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "975da64197cb3a5959ad01fee57ae59277c2657083673d5c14d66905547bc5ee",
         "rk4-projection": "f00c8d7785f9613567b6e2a0409a6e9fe2f133c5fdb3221bc286f1c93262da0a",
-        "rk45": "0c01eb552e3668ec0ae4e276e21cc80cb3b3a87837072a6b3ec18f2d5df02d6c",
+        "rk45": "3a47af4fa29652d7ad7d260e0c4533cee21f66b88f6f7846723dbb093f734ad2",
     },
 }
 
@@ -92,6 +92,7 @@ FUNCTIONS = {
     "rk45": {
         "adaptive_run",
         "group_outputs_landed_dp",
+        "nan_history",
         "group_first_stage_dp",
         "group_stage_dp",
         *PEAK_FUNCTIONS,

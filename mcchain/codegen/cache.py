@@ -14,6 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 from mcchain.caches import mcchain_cache
 
@@ -40,6 +41,23 @@ def generator_hash() -> str:
     for name in _GENERATOR_FILES:
         h.update((here / name).read_bytes())
     return h.hexdigest()[:16]
+
+
+def copied_functions(*kernels: Any) -> str:
+    """The source of numba kernels (their ``py_func``), each decorated ``@njit(**JIT)``, to
+    paste into a generated module that calls them.
+
+    Copied, not imported: numba's cache of a generated module is keyed by the module's own
+    file, so a change of a function it imported would not reach the cached machine code;
+    with the source in the text, such a change makes a new module (its name is the text's
+    hash), and the native compiler sees one module."""
+    import inspect
+
+    parts = []
+    for kernel in kernels:
+        source = inspect.getsource(kernel.py_func)
+        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
+    return "\n\n".join(parts)
 
 
 def cache_dir() -> Path:

@@ -20,7 +20,7 @@ from types import ModuleType
 import numpy as np
 
 from mcchain.codegen import templates
-from mcchain.codegen.cache import load_module
+from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.lane_text import FORCE_KERNELS
@@ -412,6 +412,10 @@ def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> st
         parts.append(_contact_functions(adaptive=variant == "rk45"))
     if tableau is not None:
         parts.append(tracking_functions())
+    if variant == "rk45":  # a finished sample's history from its last output on
+        from mcchain.kernels.explicit import nan_history
+
+        parts.append(copied_functions(nan_history))
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:
@@ -437,16 +441,10 @@ def lane_rows(topo: Topology, variant: str) -> int:
 
 def _contact_functions(adaptive: bool) -> str:
     """The source of the contact kernels the lane kernels call, copied into the generated
-    module from :mod:`mcchain.kernels.contact`.
-
-    Copied, not imported: numba's cache of a generated module is keyed by the module's own
-    file, so a change of a function it imported would not reach the cached machine code;
-    with the source in the text, such a change makes a new module (its name is the text's
-    hash). ``adaptive``: with ``dwell_start`` (the located start of a re-seat dwell) and the
-    ``quasi_static_slack`` it calls.
+    module from :mod:`mcchain.kernels.contact` (:func:`mcchain.codegen.cache.
+    copied_functions`). ``adaptive``: with ``dwell_start`` (the located start of a re-seat
+    dwell) and the ``quasi_static_slack`` it calls.
     """
-    import inspect
-
     from mcchain.contact import SEATED, SEATED_AT_SWITCH
     from mcchain.kernels import contact
 
@@ -458,19 +456,15 @@ def _contact_functions(adaptive: bool) -> str:
         contact.contact_bookkeeping,
     )
     located = (contact.quasi_static_slack, contact.dwell_start)
-    for kernel in (*kernels, *located) if adaptive else kernels:
-        source = inspect.getsource(kernel.py_func)
-        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
+    parts.append(copied_functions(*kernels, *(located if adaptive else ())))
     return "\n\n".join(parts)
 
 
 def _table_constants(topo: Topology) -> str:
     """The table laws' splines as module constants (``TK{d}``/``TC{d}`` of drivers,
     ``FK{f}``/``FC{f}`` of loads: knots and ascending coefficients), and a copy of
-    :func:`mcchain.kernels.tables.spline_at` (copied for the reason of
-    :func:`_contact_functions`)."""
-    import inspect
-
+    :func:`mcchain.kernels.tables.spline_at` (:func:`mcchain.codegen.cache.
+    copied_functions`)."""
     from mcchain.kernels import tables
 
     lines = ["# table laws: knots and ascending cubic coefficients per segment"]
@@ -479,8 +473,7 @@ def _table_constants(topo: Topology) -> str:
             if table:
                 lines.append(f"{prefix}K{i} = {table[0]!r}")
                 lines.append(f"{prefix}C{i} = {table[1]!r}")
-    source = inspect.getsource(tables.spline_at.py_func)
-    lines.append("\n@njit(**JIT)\n" + source[source.index("def ") :])
+    lines.append("\n" + copied_functions(tables.spline_at))
     return "\n".join(lines)
 
 

@@ -351,15 +351,8 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 if @[dne] == 0.0:
                     continue
                 sl = int(@[smp])
-                for it in range(iout[l], nout):
-                    out_q[sl, it, :] = np.nan
-                    out_v[sl, it, :] = np.nan
-                    out_jf[sl, it, :] = np.nan
-                    out_cf[sl, it, :] = np.nan
-                    out_dtq[sl, it, :] = np.nan
-                    out_cerr[sl, it] = np.nan
-                    out_en[sl, it] = np.nan
-                    @@contact_dead
+                nan_history(sl, iout[l], out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+                @@contact_dead
                 nsteps_out[sl] = nstp[l] - nrej[l]
                 nrejected_out[sl] = nrej[l]
                 nevals_out[sl] = nev[l]

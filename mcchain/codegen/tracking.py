@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from mcchain.codegen.cache import copied_functions
 from mcchain.codegen.inline import inline
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.topology import Topology
@@ -120,17 +121,10 @@ def peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
 
 def peak_functions() -> str:
     """The source of :mod:`mcchain.kernels.peaks`' ``cubic_peak`` and ``peak_last``, copied
-    into the generated module (for the reason of
-    :func:`mcchain.codegen.generate._contact_functions`)."""
-    import inspect
-
+    into the generated module (:func:`mcchain.codegen.cache.copied_functions`)."""
     from mcchain.kernels import peaks
 
-    parts = []
-    for kernel in (peaks.cubic_peak, peaks.peak_last):
-        source = inspect.getsource(kernel.py_func)
-        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
-    return "\n\n".join(parts)
+    return copied_functions(peaks.cubic_peak, peaks.peak_last)
 
 
 TRACKERS: tuple[Callable[[Topology, Layout], dict[str, str]], ...] = (peak_blocks,)
