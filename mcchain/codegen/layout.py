@@ -11,6 +11,7 @@ run-time value, so the loop is vectorised rather than unrolled.
 from __future__ import annotations
 
 from mcchain.codegen.topology import Topology
+from mcchain.codes import OUTPUT_WIDTH
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 
 
@@ -55,7 +56,8 @@ ROW_MEANINGS = """\
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
 # tl the lane's time; pk five rows per |joint force| then per |driver torque|: its last four
-# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count.
+# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count;
+# with [[output]]s, ot their running reductions and otk their clock (mcchain.kernels.outputs).
 """
 """Legend of the row map written into the header of a generated module."""
 
@@ -83,10 +85,17 @@ class Layout:
     lane group."""
 
     def __init__(
-        self, topo: Topology, nstage: int, lmax: int | None = None, adaptive: bool = False
+        self,
+        topo: Topology,
+        nstage: int,
+        lmax: int | None = None,
+        adaptive: bool = False,
+        outputs: int = 0,
     ):
         """``adaptive``: with the rows only the adaptive kernel uses (``pw``: ω_c² at the
-        accepted state, per contact-law joint, for the located re-seat dwell)."""
+        accepted state, per contact-law joint, for the located re-seat dwell); ``outputs``:
+        the number of ``[[output]]``s (rows ``ot``, OUTPUT_WIDTH each, and their clock
+        ``otk``: mcchain.kernels.outputs), last."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -119,6 +128,9 @@ class Layout:
             self.add("e0", 1)
             if adaptive:
                 self.add("pw", ncj)
+        if outputs:
+            self.add("ot", OUTPUT_WIDTH * outputs)
+            self.add("otk", PEAK_CLOCK)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -244,6 +244,7 @@ def check_run(
     (see the module docstring). ``solve``: the chunk solver (default the real one)."""
     from mcchain.decision.requirements import job_requirements
     from mcchain.decision.summary import write_csv
+    from mcchain.ensemble.outputs import model_output_variables
     from mcchain.ensemble.registry import coerce_outputs
     from mcchain.parallel import default_solve
     from mcchain.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
@@ -260,7 +261,7 @@ def check_run(
     scene, changed = tightened_scene(job.scene, float(tighten))
     index = spread_indices(job.nsample, samples)
     outputs = (solve or default_solve())(job.model.take(index), scene)
-    outputs = coerce_outputs(outputs, job.history_dtype)
+    outputs = coerce_outputs(outputs, job.history_dtype, model_output_variables(job.model))
     requirements = job_requirements(job)
     if requirements is not None:
         outputs = requirements.add_to(outputs)

@@ -384,6 +384,12 @@ COORDINATES: dict[str, dict[str, str]] = {
 """Attributes of the coordinate variables."""
 
 
+def reserved_names() -> frozenset[str]:
+    """The names an ``[[output]]`` may not take: every built-in variable's, coordinate's and
+    axis output's (an output is stored beside them)."""
+    return frozenset({*VARIABLES, *COORDINATES, *AXIS_OUTPUTS, STEPS_TAKEN, "diverged_time"})
+
+
 def by_analysis(analysis: str) -> list[VariableSpec]:
     """The variables one analysis produces, in registry order."""
     if analysis not in ANALYSES:
@@ -423,10 +429,13 @@ stored (:func:`coerce_outputs` leaves it out)."""
 
 
 def coerce_outputs(
-    outputs: Mapping[str, Any], history_dtype: str = "float32"
+    outputs: Mapping[str, Any],
+    history_dtype: str = "float32",
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> dict[str, np.ndarray]:
     """Cast a solver's arrays to their storage dtypes (the axis outputs, ``time`` and
-    ``cycle_phase``, stay float64; :data:`STEPS_TAKEN` is left out).
+    ``cycle_phase``, stay float64; :data:`STEPS_TAKEN` is left out). ``extra``: the scene's
+    own variables (its ``[[output]]``s, :mod:`mcchain.ensemble.outputs`).
 
     Raises ``ValueError`` for an undeclared name or an array whose kind cannot be stored
     under its rule (a float for ``status``, a non-integer count).
@@ -441,7 +450,7 @@ def coerce_outputs(
         if name in AXIS_OUTPUTS:
             result[name] = np.asarray(arr, dtype=np.float64)
             continue
-        spec = VARIABLES.get(name)
+        spec = VARIABLES.get(name) or (extra or {}).get(name)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         target = spec.storage_dtype(history_dtype)
@@ -523,6 +532,7 @@ def build_dataset(
     attrs: Mapping[str, Any] | None = None,
     labels: Mapping[str, Sequence[str]] | None = None,
     variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> xr.Dataset:
     """The Dataset of one chunk of samples from a solver's output dict: the variables of
     :func:`chunk_variables` (same arguments, same errors) as an :class:`xarray.Dataset`."""
@@ -534,6 +544,7 @@ def build_dataset(
         attrs=attrs,
         labels=labels,
         variable_attrs=variable_attrs,
+        extra=extra,
     ).to_dataset()
 
 
@@ -546,6 +557,7 @@ def chunk_variables(
     attrs: Mapping[str, Any] | None = None,
     labels: Mapping[str, Sequence[str]] | None = None,
     variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> ChunkVariables:
     """The variables of one chunk of samples from a solver's output dict.
 
@@ -561,18 +573,24 @@ def chunk_variables(
             requirements' names).
         variable_attrs: attributes added to a variable's registry ones, by name (the
             requirements' limits on ``requirement_met``).
+        extra: the scene's own variables (default: the ``[[output]]``s the model carries,
+            :mod:`mcchain.ensemble.outputs`), written after the registry's.
 
     Raises:
         ValueError: an undeclared name, a wrong rank, shape or dtype kind, or no ``status``.
     """
     outputs = dict(outputs)
+    if extra is None:
+        from mcchain.ensemble.outputs import model_output_variables
+
+        extra = model_output_variables(model)
     if "parameters" not in outputs:
         outputs["parameters"] = np.asarray(model.parameters, dtype=np.float64).reshape(
             model.nsample, len(model.param_paths)
         )
     if "status" not in outputs:
         raise ValueError("status: missing from the solver output")
-    arrays = coerce_outputs(outputs, history_dtype)
+    arrays = coerce_outputs(outputs, history_dtype, extra)
     names = model_coordinates(model)
     for dim, given in (labels or {}).items():
         names[dim] = np.array(list(given), dtype=object)
@@ -586,7 +604,7 @@ def chunk_variables(
 
     data_vars: dict[str, Variable] = {}
     used: set[str] = set()
-    for name, spec in VARIABLES.items():
+    for name, spec in {**VARIABLES, **extra}.items():
         if name not in arrays:
             continue
         arr = arrays[name]
@@ -599,8 +617,9 @@ def chunk_variables(
             if n != expected:
                 raise ValueError(f"{name}: dim {dim} has size {n}, expected {expected}")
         used.update(spec.dims)
-        extra = dict((variable_attrs or {}).get(name, {}))
-        data_vars[name] = (spec.dims, arr, variable_attributes(name) | extra)
+        added = dict((variable_attrs or {}).get(name, {}))
+        attrs = variable_attributes(name) if name in VARIABLES else spec.attributes()
+        data_vars[name] = (spec.dims, arr, attrs | added)
 
     coords: dict[str, Variable] = {
         "sample": (
@@ -640,8 +659,15 @@ def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
     """
     if "status" not in ds.data_vars:
         raise ValueError("status: missing")
+    from mcchain.ensemble.outputs import OUTPUT_ATTRIBUTE
+
     for name, var in ds.data_vars.items():
         spec = VARIABLES.get(str(name))
+        if spec is None and OUTPUT_ATTRIBUTE in var.attrs:  # a scene's [[output]]
+            spec = VariableSpec(
+                str(name), ("sample",), str(var.attrs.get("units")),
+                str(var.attrs.get("long_name")), "float64", "simulate",
+            )  # fmt: skip
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         if tuple(var.dims) != spec.dims:
