@@ -6,8 +6,9 @@ only place its formulas are written. The loop kernels call it; the lane generato
 from its module's source file (parsed, not imported: the generator never imports numba),
 its parameters replaced by the lane's expressions, its locals renamed with the joint's
 suffix, module constants written as literals, and calls of the module's other functions
-(and of functions it imports from another kernel module) inlined in turn. The text is the function's arithmetic operation for operation, so the
-lanes and the loop kernels round alike.
+(and of functions it imports from another kernel module) inlined in turn. The text is the
+function's arithmetic operation for operation, so the lanes and the loop kernels round
+alike.
 
 The kernels' ``hypot(x, y)`` (libm's, robust to overflow) is written √(x² + y²) in the lanes,
 which vectorises; the two differ by at most an ulp, as the lanes' own sine and cosine

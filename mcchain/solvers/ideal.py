@@ -98,7 +98,7 @@ def with_ideal_copy(model: Model, ideal: Model) -> Model:
     ``q0``/``v0`` are the two start states side by side (the copy's from ``ideal``)."""
     nb = model.nbody
     changes: dict[str, Any] = {}
-    for kind, names in _ITEMS.items():
+    for names in _ITEMS.values():
         for name in names:
             a = np.asarray(getattr(model, name))
             b = np.asarray(getattr(ideal, name))
@@ -106,7 +106,7 @@ def with_ideal_copy(model: Model, ideal: Model) -> Model:
             a = np.broadcast_to(a, (n, *a.shape[1:]))
             b = np.broadcast_to(b, (n, *b.shape[1:]))
             changes[name] = np.ascontiguousarray(np.concatenate([a, b], axis=1))
-    for kind, names in _TOPOLOGY.items():
+    for names in _TOPOLOGY.values():
         for name in names:
             changes[name] = np.concatenate(
                 [np.asarray(getattr(model, name)), np.asarray(getattr(ideal, name))], axis=0
