@@ -75,7 +75,7 @@ class ClearanceMotion:
     mechanism: SliderCrank
     dense: Callable[[float], np.ndarray]
     t_end: float
-    rhs: Callable[[float, np.ndarray], np.ndarray]
+    rhs: Callable[[float, np.ndarray], np.ndarray]  # (t, [α, α̇]) -> [α̇, α̈]
     slider_acceleration: Callable[[float, float, float, float], float]
 
     def alpha(self, t: float) -> float:
