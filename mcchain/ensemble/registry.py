@@ -618,8 +618,8 @@ def chunk_variables(
                 raise ValueError(f"{name}: dim {dim} has size {n}, expected {expected}")
         used.update(spec.dims)
         added = dict((variable_attrs or {}).get(name, {}))
-        attrs = variable_attributes(name) if name in VARIABLES else spec.attributes()
-        data_vars[name] = (spec.dims, arr, attrs | added)
+        own = variable_attributes(name) if name in VARIABLES else spec.attributes()
+        data_vars[name] = (spec.dims, arr, own | added)
 
     coords: dict[str, Variable] = {
         "sample": (

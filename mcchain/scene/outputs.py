@@ -60,6 +60,9 @@ REDUCTIONS = (
     "first_time_below",
 )
 CROSSINGS = ("first_time_above", "first_time_below")
+STORED_PREFIX = "max_stored_"
+"""The prefix of ``mcchain export``'s columns of stored maxima
+(:data:`mcchain.ensemble.export.STORED_PREFIX`), which an output name may not take."""
 
 
 def _check_output_name(value: str) -> str:
@@ -205,6 +208,10 @@ def check_outputs(scene: Scene) -> None:
         where = _where(output, i)
         if output.name in reserved:
             raise SceneError(f"{where}.name: {output.name!r} is a built-in ensemble variable")
+        if output.name.startswith(STORED_PREFIX):
+            raise SceneError(
+                f"{where}.name: {STORED_PREFIX}* names the CSV columns of stored maxima"
+            )
         if output.name in seen:
             raise SceneError(
                 f"output[{i}].name: duplicate output name {output.name!r} "

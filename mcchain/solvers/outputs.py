@@ -167,23 +167,30 @@ def equilibrium_outputs(
     sample (velocities and accelerations 0), minus the ideal mechanism's at its own
     equilibrium ``ideal`` = (model, q, λ) for ``relative_to = "ideal"``. NaN where an
     equilibrium failed."""
-    from mcchain.kernels.outputs import equilibrium_values
-
     static = [o for o in outputs if o.at is not None]
-    if not static:
-        return {}
     out: dict[str, np.ndarray] = {}
     for output in static:
-        plan = output_plan([output.model_copy(update={"at": None, "reduce": "max"})], model, 1.0)
-        spec = plan.spec.copy()
-        spec[:, 3] = -1
-        values = np.full(model.nsample, np.nan)
-        equilibrium_values(model.kernel_model(), spec, plan.data, q, lam, values)
-        if output.relative_to == "ideal":
-            assert ideal is not None
-            ideal_model_, qi, lami = ideal
-            reference = np.full(model.nsample, np.nan)
-            equilibrium_values(ideal_model_.kernel_model(), spec, plan.data, qi, lami, reference)
-            values = values - reference
-        out[output.name] = values
+        if output.relative_to != "ideal":
+            out[output.name] = _static_values(output, model, q, lam)
+            continue
+        assert ideal is not None
+        # the component of the difference: for the magnitude, |r − r_ideal|
+        parts = ("x", "y") if output.component == "magnitude" else (output.component,)
+        differences = []
+        for part in parts:
+            single = output.model_copy(update={"component": part, "relative_to": None})
+            own = _static_values(single, model, q, lam)
+            differences.append(own - _static_values(single, *ideal))
+        out[output.name] = np.hypot(*differences) if len(differences) == 2 else differences[0]
     return out
+
+
+def _static_values(output: Any, model: Model, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """One output's quantity (no reference) at each sample's equilibrium (q, λ)."""
+    from mcchain.kernels.outputs import equilibrium_values
+
+    timed = output.model_copy(update={"at": None, "reduce": "max"})
+    plan = output_plan([timed], model, 1.0)
+    values = np.full(model.nsample, np.nan)
+    equilibrium_values(model.kernel_model(), plan.spec, plan.data, q, lam, values)
+    return values
