@@ -23,7 +23,13 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import FORCE_KERNELS, Emitter
-from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.layout import (
+    CONTACT_ROW_MEANINGS,
+    LMAX,
+    OUTPUT_ROW_MEANINGS,
+    ROW_MEANINGS,
+    Layout,
+)
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import schedule_lane_loops
@@ -442,7 +448,7 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX, outputs: Sig
     if tableau is not None:
         parts.append(_peak_functions())
     if outputs:
-        parts.append(output_functions(with_hermite=not topo.contact_joints))
+        parts += [OUTPUT_ROW_MEANINGS, output_functions(with_hermite=not topo.contact_joints)]
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:

@@ -56,10 +56,15 @@ ROW_MEANINGS = """\
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
 # tl the lane's time; pk five rows per |joint force| then per |driver torque|: its last four
-# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count;
-# with [[output]]s, ot their running reductions and otk their clock (mcchain.kernels.outputs).
+# values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count.
 """
 """Legend of the row map written into the header of a generated module."""
+
+OUTPUT_ROW_MEANINGS = """\
+# [[output]]s: ot OUTPUT_WIDTH rows each, their running reductions; otk their four times and
+# the count fed (mcchain.kernels.outputs).
+"""
+"""Legend of the output rows, written only into modules that have them."""
 
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
