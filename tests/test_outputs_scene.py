@@ -118,7 +118,9 @@ def test_output__cycles_ending_after_the_run_in_one_sample_is_refused() -> None:
         keys=SLIDER_X + 'reduce = "max"\ncycles = [0, 1]'
     )
     compile_model(load_scene_text(text))  # 1 turn = 41.9 ms at 150 rad/s: inside
-    text += '[sample]\ncount = 64\n[sample.vary]\n"driver.crank.omega" = { uniform = [100.0, 200.0] }\n'
+    text += (
+        '[sample]\ncount = 64\n[sample.vary]\n"driver.crank.omega" = { uniform = [100.0, 200.0] }\n'
+    )
     with pytest.raises(SceneError, match=r"output\.e\.cycles: turn 1\.0 of driver\.crank ends at "
                                          r"t = .* s in sample \d+ \(omega .* rad/s\), after "
                                          r"simulate\.t_end \(0\.05 s\)"):  # fmt: skip
@@ -128,8 +130,7 @@ def test_output__cycles_ending_after_the_run_in_one_sample_is_refused() -> None:
 OUTPUTS = (
     OUT.format(keys=SLIDER_X + 'reduce = "max_abs"\nrelative_to = "ideal"')
     + OUT.replace('"e"', '"t_fast"').format(
-        keys='of = "angular_velocity"\nbody = "rod"\nreduce = "first_time_above"\n'
-        "threshold = 80.0"
+        keys='of = "angular_velocity"\nbody = "rod"\nreduce = "first_time_above"\nthreshold = 80.0'
     )
     + OUT.replace('"e"', '"sag"').format(keys=SLIDER_X + 'at = "equilibrium"')
     + "\n[equilibrium]\n"

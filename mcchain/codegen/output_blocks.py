@@ -54,7 +54,7 @@ def output_blocks(topo: Topology, lay: Layout, outputs: Signature) -> dict[str, 
         window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4]"
         finish += [
             f"    output_last(W, {base[k]}, {lay.lmax}, cnt, ta, tb, tc, td, {float(rate)!r}, "
-            f"{window}, {_sense(reduce)!r})",
+            f"{window}, {reduce})",
             f"    out_ot[s0 + l, {k}] = np.nan if dead else output_value(W, {base[k]}, "
             f"{lay.lmax}, {reduce})",
         ]
@@ -64,11 +64,6 @@ def output_blocks(topo: Topology, lay: Layout, outputs: Signature) -> dict[str, 
         "outputs_feed": _feed(topo, lay, outputs, base, at("tl"), "kv0", "lam"),
         "outputs_finish": "\n".join(finish),
     }
-
-
-def _sense(reduce: int) -> float:
-    """:func:`mcchain.kernels.outputs.output_sense`, at generation time."""
-    return 1.0 if reduce == 6 else (-1.0 if reduce == 7 else 0.0)
 
 
 def _feed(
@@ -119,7 +114,7 @@ def _feed(
     lines = em.take(0).splitlines()
     feeds = []
     for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
-        window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4], {_sense(reduce)!r}"
+        window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4], {reduce}"
         if rate:
             feeds.append(
                 f"hermite_feed(W, {base[k]}, {lay.lmax}, cnt, td, tf, of{k}, or{k}, {window})"

@@ -214,14 +214,15 @@ def _crossing(t0, h, lo, hi, f0, r0, f1, r1, threshold, sense):
 
 
 @njit(**JIT)
-def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, sense,
+def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, reduce,
                    gate_hi, gate_lo, cap_lo, cap_hi):  # fmt: skip
     """Reduce the step [t0, t1] of the cubic Hermite interpolant through (f0, ḟ0), (f1, ḟ1)
-    over its part inside the window [w0, w1] into the output state at ``W[base]``.
-
-    ``sense`` +1 / −1: locate the first time the interpolant is ≥ / ≤ ``threshold`` (0: no
-    crossing sought). ``gate_hi`` / ``gate_lo`` 1.0: an interior maximum / minimum is sought
-    (else only the clipped ends count), capped to [``cap_lo``, ``cap_hi``]."""
+    over its part inside the window [w0, w1] into the output state at ``W[base]``, for the
+    reduction ``reduce`` (mcchain.codes.OUTPUT_REDUCTIONS): the extremes for max, min,
+    max_abs and range, the integrals for rms and mean, the first time the interpolant is ≥
+    (first_time_above) or ≤ (first_time_below) ``threshold`` (only what it needs: the feed
+    runs at every step). ``gate_hi`` / ``gate_lo`` 1.0: an interior maximum / minimum is
+    sought (else only the clipped ends count), capped to [``cap_lo``, ``cap_hi``]."""
     h = t1 - t0
     lo_t = max(t0, w0)
     hi_t = min(t1, w1)
@@ -237,8 +238,25 @@ def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, s
     fb = f1
     if tb < 1.0:
         fb, _slope = _hermite(tb, f0, r0, f1, r1, h)
-    hi = max(W[base + HI * stride], max(fa, fb))
-    lo = min(W[base + LO * stride], min(fa, fb))
+    W[base + SPAN * stride] += hi_t - lo_t
+    if reduce == 3 or reduce == 4:  # rms, mean: ∫ f and ∫ f² on [ta, tb]
+        mid = 0.5 * (ta + tb)
+        half = 0.5 * (tb - ta)
+        g1, _slope = _hermite(mid - half * GL_X1, f0, r0, f1, r1, h)
+        g2, _slope = _hermite(mid - half * GL_X0, f0, r0, f1, r1, h)
+        g3, _slope = _hermite(mid + half * GL_X0, f0, r0, f1, r1, h)
+        g4, _slope = _hermite(mid + half * GL_X1, f0, r0, f1, r1, h)
+        s1 = GL_W1 * (g1 + g4) + GL_W0 * (g2 + g3)
+        s2 = GL_W1 * (g1 * g1 + g4 * g4) + GL_W0 * (g2 * g2 + g3 * g3)
+        W[base + S1 * stride] += h * half * s1
+        W[base + S2 * stride] += h * half * s2
+        return
+    sense = 1.0 if reduce == 6 else -1.0
+    if reduce >= 6 and not W[base + CROSS * stride] == np.inf:
+        return  # the crossing is found
+    if reduce >= 6 and sense * (fa - threshold) >= 0.0:
+        W[base + CROSS * stride] = lo_t
+        return
     # p'(θ) ∝ qa θ² + qb θ + qc (contact.hermite_peak's quadratic), its roots in (ta, tb)
     rise = f1 - f0
     qa = 3.0 * h * (r0 + r1) - 6.0 * rise
@@ -259,62 +277,50 @@ def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, s
                 u2 = qc / qq
     if u2 < u1:  # ascending (a NaN stays second)
         u1, u2 = u2, u1
-    if u1 > ta and u1 < tb:
-        v1, _slope = _hermite(u1, f0, r0, f1, r1, h)
-        if gate_hi == 1.0:
-            hi = max(hi, min(v1, cap_hi))
-        if gate_lo == 1.0:
-            lo = min(lo, max(v1, cap_lo))
-    if u2 > ta and u2 < tb:
-        v2, _slope = _hermite(u2, f0, r0, f1, r1, h)
-        if gate_hi == 1.0:
-            hi = max(hi, min(v2, cap_hi))
-        if gate_lo == 1.0:
-            lo = min(lo, max(v2, cap_lo))
-    W[base + HI * stride] = hi
-    W[base + LO * stride] = lo
-    # ∫ f and ∫ f² on [ta, tb]: Gauss–Legendre, 4 points (nodes ±x0, ±x1)
-    mid = 0.5 * (ta + tb)
-    half = 0.5 * (tb - ta)
-    g1, _slope = _hermite(mid - half * GL_X1, f0, r0, f1, r1, h)
-    g2, _slope = _hermite(mid - half * GL_X0, f0, r0, f1, r1, h)
-    g3, _slope = _hermite(mid + half * GL_X0, f0, r0, f1, r1, h)
-    g4, _slope = _hermite(mid + half * GL_X1, f0, r0, f1, r1, h)
-    s1 = GL_W1 * (g1 + g4) + GL_W0 * (g2 + g3)
-    s2 = GL_W1 * (g1 * g1 + g4 * g4) + GL_W0 * (g2 * g2 + g3 * g3)
-    W[base + S1 * stride] += h * half * s1
-    W[base + S2 * stride] += h * half * s2
-    W[base + SPAN * stride] += hi_t - lo_t
-    if sense != 0.0 and W[base + CROSS * stride] == np.inf:
-        if sense * (fa - threshold) >= 0.0:
-            W[base + CROSS * stride] = lo_t
+    if reduce < 6:  # the extremes: the clipped ends and the critical points inside
+        hi = max(W[base + HI * stride], max(fa, fb))
+        lo = min(W[base + LO * stride], min(fa, fb))
+        if u1 > ta and u1 < tb:
+            v1, _slope = _hermite(u1, f0, r0, f1, r1, h)
+            if gate_hi == 1.0:
+                hi = max(hi, min(v1, cap_hi))
+            if gate_lo == 1.0:
+                lo = min(lo, max(v1, cap_lo))
+        if u2 > ta and u2 < tb:
+            v2, _slope = _hermite(u2, f0, r0, f1, r1, h)
+            if gate_hi == 1.0:
+                hi = max(hi, min(v2, cap_hi))
+            if gate_lo == 1.0:
+                lo = min(lo, max(v2, cap_lo))
+        W[base + HI * stride] = hi
+        W[base + LO * stride] = lo
+        return
+    # monotone pieces [ta, u1], [u1, u2], [u2, tb] (those inside): the first whose end
+    # reaches the threshold holds the crossing
+    start = ta
+    for piece in range(3):
+        end = tb if piece == 2 else (u1 if piece == 0 else u2)
+        if not (end > start and end <= tb):
+            continue
+        value = fb
+        if end < tb:
+            value, _slope = _hermite(end, f0, r0, f1, r1, h)
+        if sense * (value - threshold) >= 0.0:
+            found = _crossing(t0, h, start, end, f0, r0, f1, r1, threshold, sense)
+            W[base + CROSS * stride] = min(max(found, lo_t), hi_t)
             return
-        # monotone pieces [ta, u1], [u1, u2], [u2, tb] (those inside): the first whose end
-        # reaches the threshold holds the crossing
-        start = ta
-        for piece in range(3):
-            end = tb if piece == 2 else (u1 if piece == 0 else u2)
-            if not (end > start and end <= tb):
-                continue
-            value = fb
-            if end < tb:
-                value, _slope = _hermite(end, f0, r0, f1, r1, h)
-            if sense * (value - threshold) >= 0.0:
-                found = _crossing(t0, h, start, end, f0, r0, f1, r1, threshold, sense)
-                W[base + CROSS * stride] = min(max(found, lo_t), hi_t)
-                return
-            start = end
+        start = end
 
 
 @njit(**JIT)
-def hermite_feed(W, base, stride, count, td, t, f, r, w0, w1, threshold, sense):
+def hermite_feed(W, base, stride, count, td, t, f, r, w0, w1, threshold, reduce):
     """Feed an output whose rate the state gives: the value ``f`` and rate ``r`` at time
     ``t`` (after ``td``, the last time fed; ``count`` values fed so far) close the step
     [td, t], reduced on its cubic Hermite interpolant (:func:`hermite_window`)."""
     if count >= 1.0:
         hermite_window(
             W, base, stride, td, W[base + FD * stride], W[base + RD * stride], t, f, r, w0, w1,
-            threshold, sense, 1.0, 1.0, -np.inf, np.inf,
+            threshold, reduce, 1.0, 1.0, -np.inf, np.inf,
         )  # fmt: skip
     W[base + FD * stride] = f
     W[base + RD * stride] = r
@@ -337,7 +343,7 @@ def _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, at):
 
 @njit(**JIT)
 def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, w1,
-                 threshold, sense):  # fmt: skip
+                 threshold, reduce):  # fmt: skip
     """Reduce step ``interval`` (0 [ta, tb], 1 [tb, tc], 2 [tc, td]) of the cubic through
     the four points: it is that step's Hermite interpolant with the cubic's slopes at its
     ends. On the middle step an interior maximum is sought only where the data rise into
@@ -358,13 +364,13 @@ def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, 
     low = min(min(fa, fb), min(fc, fd))
     spread = top - low
     hermite_window(
-        W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, sense, gate_hi, gate_lo,
+        W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, reduce, gate_hi, gate_lo,
         low - spread, top + spread,
     )  # fmt: skip
 
 
 @njit(**JIT)
-def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, sense):
+def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, reduce):
     """Feed an output known by its values only: with three earlier values, the step [tc, td]
     is reduced on the cubic through (tb, tc, td, t) (and the first step [tb, tc] once, when
     exactly three came before); the last step waits for :func:`output_last`."""
@@ -374,9 +380,9 @@ def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, sens
     if count >= 3.0:
         if count == 3.0:
             cubic_window(W, base, stride, tb, fb, tc, fc, td, fd, t, f, 0, w0, w1, threshold,
-                         sense)  # fmt: skip
+                         reduce)  # fmt: skip
         cubic_window(W, base, stride, tb, fb, tc, fc, td, fd, t, f, 1, w0, w1, threshold,
-                     sense)  # fmt: skip
+                     reduce)  # fmt: skip
     W[base] = fb
     W[base + FB * stride] = fc
     W[base + FC * stride] = fd
@@ -384,7 +390,7 @@ def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, sens
 
 
 @njit(**JIT)
-def output_last(W, base, stride, count, ta, tb, tc, td, hermite, w0, w1, threshold, sense):
+def output_last(W, base, stride, count, ta, tb, tc, td, hermite, w0, w1, threshold, reduce):
     """The steps an output known by its values only still holds at the end of the run
     (``hermite`` 0.0): the last one on the cubic through the last four values, or, in a run
     of two or three steps, the steps on the line or parabola through the values fed."""
@@ -396,7 +402,7 @@ def output_last(W, base, stride, count, ta, tb, tc, td, hermite, w0, w1, thresho
     fd = W[base + FD * stride]
     if count >= 4.0:
         cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, 2, w0, w1, threshold,
-                     sense)  # fmt: skip
+                     reduce)  # fmt: skip
     elif count == 3.0:  # the parabola through (tb, tc, td): slopes of its Newton form
         d1 = (fc - fb) / (tc - tb)
         d2 = (fd - fc) / (td - tc)
@@ -404,14 +410,14 @@ def output_last(W, base, stride, count, ta, tb, tc, td, hermite, w0, w1, thresho
         rb = d1 - e * (tc - tb)
         rc = d1 + e * (tc - tb)
         rd = d2 + e * (td - tc)
-        hermite_window(W, base, stride, tb, fb, rb, tc, fc, rc, w0, w1, threshold, sense, 1.0,
-                       1.0, -np.inf, np.inf)  # fmt: skip
-        hermite_window(W, base, stride, tc, fc, rc, td, fd, rd, w0, w1, threshold, sense, 1.0,
-                       1.0, -np.inf, np.inf)  # fmt: skip
+        hermite_window(W, base, stride, tb, fb, rb, tc, fc, rc, w0, w1, threshold, reduce,
+                       1.0, 1.0, -np.inf, np.inf)  # fmt: skip
+        hermite_window(W, base, stride, tc, fc, rc, td, fd, rd, w0, w1, threshold, reduce,
+                       1.0, 1.0, -np.inf, np.inf)  # fmt: skip
     else:
         slope = (fd - fc) / (td - tc)
-        hermite_window(W, base, stride, tc, fc, slope, td, fd, slope, w0, w1, threshold, sense,
-                       1.0, 1.0, -np.inf, np.inf)  # fmt: skip
+        hermite_window(W, base, stride, tc, fc, slope, td, fd, slope, w0, w1, threshold,
+                       reduce, 1.0, 1.0, -np.inf, np.inf)  # fmt: skip
 
 
 @njit(**JIT)
@@ -482,24 +488,18 @@ def outputs_feed(s, ot, spec, data, t, f, r):
     row = s % data.shape[0]
     for k in range(nout):
         w0, w1, threshold = data[row, k, 2], data[row, k, 3], data[row, k, 4]
-        sense = output_sense(spec[k, 4])
+        reduce = spec[k, 4]
         if spec[k, 5] == 1:
             hermite_feed(ot, OUTPUT_WIDTH * k, 1, count, td, t, f[k], r[k], w0, w1, threshold,
-                         sense)  # fmt: skip
+                         reduce)  # fmt: skip
         else:
             cubic_feed(ot, OUTPUT_WIDTH * k, 1, count, tb, tc, td, t, f[k], w0, w1, threshold,
-                       sense)  # fmt: skip
+                       reduce)  # fmt: skip
     ot[clock] = tb
     ot[clock + 1] = tc
     ot[clock + 2] = td
     ot[clock + 3] = t
     ot[clock + 4] = min(count + 1.0, 4.0)
-
-
-@njit(**JIT)
-def output_sense(reduce):
-    """+1 for ``first_time_above``, −1 for ``first_time_below``, 0 for the others."""
-    return 1.0 if reduce == 6 else (-1.0 if reduce == 7 else 0.0)
 
 
 @njit(**JIT)
@@ -513,7 +513,7 @@ def outputs_finish(s, failed, ot, spec, data, values_out):
     for k in range(nout):
         output_last(
             ot, OUTPUT_WIDTH * k, 1, count, ta, tb, tc, td, 1.0 if spec[k, 5] == 1 else 0.0,
-            data[row, k, 2], data[row, k, 3], data[row, k, 4], output_sense(spec[k, 4]),
+            data[row, k, 2], data[row, k, 3], data[row, k, 4], spec[k, 4],
         )  # fmt: skip
         value = output_value(ot, OUTPUT_WIDTH * k, 1, spec[k, 4])
         values_out[s, k] = math.nan if failed else value
