@@ -108,8 +108,9 @@ def main() -> None:
             best, median = min(values), statistics.median(values)
             rows.append((label, samples, name, best, median, best / base_best,
                          median / base_median))  # fmt: skip
+            ratios = f"ratio {best / base_best:5.2f} / {median / base_median:5.2f}"
             print(f"{label:40s} {name:18s} best {best:7.2f} s  median {median:7.2f} s  "
-                  f"ratio {best / base_best:5.2f} / {median / base_median:5.2f}", flush=True)  # fmt: skip
+                  f"{ratios}", flush=True)  # fmt: skip
     write(rows, args)
 
 
