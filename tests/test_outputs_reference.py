@@ -182,3 +182,53 @@ def test_ideal_copy__the_difference_of_two_separate_runs(method):
     # every step stored: the continuous max |x − x_ideal| is the stored one to the
     # interpolant's error inside a 1e-6 s step
     assert 0.0 <= both["output_values"][0, 0] - np.max(np.abs(separate)) < 1e-12
+
+
+PEAKS = """
+[[output]]
+name = "pin_peak"
+of = "joint_force"
+joint = "B"
+component = "magnitude"
+reduce = "max"
+[[output]]
+name = "pin_penetration"
+of = "penetration"
+joint = "B"
+reduce = "max"
+[[output]]
+name = "torque_late"
+of = "driver_torque"
+driver = "crank"
+reduce = "max_abs"
+window = [0.008, 0.012]
+"""
+
+
+@pytest.mark.parametrize(
+    "method", ['method = "rk45"\nrtol = 1e-9\natol = 1e-12', 'method = "rk4"',
+               'method = "rk4"\nkernels = "loop"'], ids=["rk45", "rk4", "rk4-loop"],
+)  # fmt: skip
+def test_force_outputs__the_peaks_over_the_whole_run_and_a_window(method):
+    """Under the contact law (the Flores slider-crank's pin lets go at 9.9 ms and impacts):
+    a force's max over the whole run is its continuous peak (``peak_joint_force``, the same
+    interpolant and rules), the penetration's max is ``max_penetration`` (the same Hermite
+    interpolant), and a windowed max |driver torque| is never below the stored points in it
+    nor above the whole run's peak."""
+    from mcchain.testing.scenes import flores_pin_text
+
+    text = flores_pin_text(t_end=0.012, method="rk45", rtol=1e-9, atol=1e-12, output_dt=1e-5)
+    text = text.replace('method = "rk45"\nrtol = 1e-09\natol = 1e-12', method)
+    text = text.replace("[simulate]", "[storage]\nhistory_dtype = \"float64\"\n[simulate]")
+    scene = load_scene_text(text + PEAKS)
+    assert scene.simulate.method in method
+    out = solve_chunk(compile_model(scene), scene)
+    assert out["status"][0] == 0
+    b = 2  # joint B
+    assert out["pin_peak"][0] == pytest.approx(out["peak_joint_force"][0, b], rel=1e-12)
+    assert out["pin_penetration"][0] == pytest.approx(out["max_penetration"][0, b], rel=1e-9)
+    assert out["max_penetration"][0] > 0.0  # it impacts
+    t = out["time"]
+    inside = (t >= 0.008) & (t <= 0.012)
+    stored = np.max(np.abs(out["driver_torque"][0, inside, 0]))
+    assert stored <= out["torque_late"][0] <= out["peak_driver_torque"][0, 0]

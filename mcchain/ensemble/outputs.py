@@ -46,7 +46,8 @@ def output_variables(outputs: Sequence[Any]) -> dict[str, VariableSpec]:
 def model_outputs(model: Model) -> tuple[Any, ...]:
     """The ``[[output]]`` tables a compiled model carries (none for a model built
     without a scene)."""
-    return tuple(model.meta.get("outputs", ()))
+    outputs: Any = model.meta.get("outputs", ())
+    return tuple(outputs)
 
 
 def model_output_variables(model: Model) -> dict[str, VariableSpec]:

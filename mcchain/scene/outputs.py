@@ -27,6 +27,7 @@ from mcchain.scene.fields import BodyRef, Num, Section, Vec2
 
 if TYPE_CHECKING:
     from mcchain.model import Model
+    from mcchain.scene.mechanism import Driver
     from mcchain.scene.models import Scene
 
 OUTPUT_NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -347,7 +348,7 @@ def _check_analysis(scene: Scene, where: str, output: Output) -> None:
             )
 
 
-def cycle_driver(scene: Scene, output: Output, where: str) -> object:
+def cycle_driver(scene: Scene, output: Output, where: str) -> Driver:
     """The driver whose turns ``cycles`` counts: the output's own driver (a driver
     quantity), else the scene's only driver of a body's angle."""
     turning = [d for d in scene.driver if not d.slides]

@@ -64,7 +64,7 @@ def solve_chunk(
         if static:
             from mcchain.solvers.outputs import equilibrium_outputs
 
-            reference = None
+            reference: tuple[Model, np.ndarray, np.ndarray] | None = None
             if any(o.relative_to for o in static):
                 assert ideal is not None
                 status |= ideal.equilibrium().status
@@ -113,13 +113,13 @@ def solve_chunk(
         if timed:
             from mcchain.solvers.outputs import simulate_outputs
 
-            reference = None
+            start: tuple[np.ndarray, np.ndarray] | None = None
             if any(o.relative_to for o in timed):
                 assert ideal is not None
-                reference = ideal.start(at_equilibrium)
+                start = ideal.start(at_equilibrium)
                 status |= ideal.status(at_equilibrium)
             history = simulate_outputs(
-                model, timed, scene.simulate, q_start, v_start, reference, status,
+                model, timed, scene.simulate, q_start, v_start, start, status,
                 history_dtype=storage, diagnostics=True,
             )  # fmt: skip
         else:

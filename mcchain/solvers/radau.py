@@ -268,7 +268,9 @@ class _Sample:
                 )  # fmt: skip
         return 1.0
 
-    def signals(self, t: float, y: np.ndarray, evaluate: bool = True) -> tuple[np.ndarray, ...]:
+    def signals(
+        self, t: float, y: np.ndarray, evaluate: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The ``[[output]]``s' signals and rates at (t, y) (``evaluate`` False: from the last
         evaluation, there), in the present modes."""
         from mcchain.kernels.outputs import output_values_at
