@@ -352,6 +352,11 @@ def test_summary__until_counts_from_the_sequential_interval() -> None:
     text = "\n".join(requirement_lines(s, "random"))
     assert f"{int(s.success_run)} failure-free samples pass at 95 %" in text
     assert "sequential bounds (each one-sided, valid at every look)" in text
+    # a caller that does not pass the sequential settings (the report) still says so
+    from mcchain.decision.summary import summary_lines
+
+    words = "\n".join(summary_lines([s], [], "random"))
+    assert "intervals: sequential" in words and "Clopper" not in words
 
 
 def test_family_line__bonferroni_beside_several_requirements() -> None:

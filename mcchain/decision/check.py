@@ -287,13 +287,12 @@ class CheckResult:
         return [head, *text, *[line for c in self.checks for line in self._words(c)]]
 
     def _words(self, c: RequirementCheck) -> list[str]:
-        from mcchain.decision.summary import interval_name
-
         def said(s: RequirementSummary) -> str:
             return f"{s.decision.upper()} [{s.p_lower:.4g}, {s.p_upper:.4g}]"
 
         unchecked = self.nsample - c.resolved
         conf = f"{100 * c.run.confidence:.3g} %"
+        kind = ", sequential" if c.tightened.sequential else ""
         if unchecked:
             bound = (
                 f"the {unchecked} samples not re-solved flip with probability <= "
@@ -304,7 +303,8 @@ class CheckResult:
             bound = "every sample re-solved: no flip left unseen"
         lines = [
             f"{c.run.name}: run {said(c.run)} -> tightened {said(c.tightened)} "
-            f"({interval_name(c.tightened)}); {c.flips} of {c.resolved} re-solved flipped; " + bound
+            f"({conf} one-sided bounds{kind}); {c.flips} of {c.resolved} re-solved flipped; "
+            + bound
         ]
         advice = self._advice(c)
         if advice:

@@ -440,6 +440,8 @@ def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
         f"{c} bounds [{format_quantity(s.quantile_lower, s.units)}, "
         f"{format_quantity(s.quantile_upper, s.units)}]"
     )
+    if s.undefined:
+        q_text += f" (the {s.undefined} undefined counted beyond the limit)"
     if math.isnan(s.quantile_lower) or math.isnan(s.quantile_upper):
         q_text += (
             f" (too few samples for its {bound if math.isnan(s.quantile_upper) else 'other'} "
@@ -541,6 +543,8 @@ def validity_lines(
     together = family_line(summaries)
     if together is not None:
         lines.append(together)
+    if sequential is None and any(s.sequential for s in summaries):
+        sequential = {"method": "confidence sequence", "batch": "a batch"}  # a caller without it
     if summaries and sequential is not None:
         lines.append(
             f"intervals: sequential ({sequential['method']}), samples added {sequential['batch']} "
