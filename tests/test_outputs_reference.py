@@ -14,7 +14,7 @@ import pytest
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers import solve_chunk
 from mcchain.solvers.ideal import ideal_model, with_ideal_copy
-from mcchain.solvers.outputs import output_plan
+from mcchain.solvers.output_plan import output_plan
 from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
 from mcchain.testing.slider_crank import (
@@ -221,7 +221,7 @@ def test_force_outputs__the_peaks_over_the_whole_run_and_a_window(method):
 
     text = flores_pin_text(t_end=0.012, method="rk45", rtol=1e-9, atol=1e-12, output_dt=1e-5)
     text = text.replace('method = "rk45"\nrtol = 1e-09\natol = 1e-12', method)
-    text = text.replace("[simulate]", "[storage]\nhistory_dtype = \"float64\"\n[simulate]")
+    text = text.replace("[simulate]", '[storage]\nhistory_dtype = "float64"\n[simulate]')
     scene = load_scene_text(text + PEAKS)
     assert scene.simulate.method in method
     out = solve_chunk(compile_model(scene), scene)

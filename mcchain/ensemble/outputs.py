@@ -12,10 +12,10 @@ carries the scene's outputs (``Model.meta["outputs"]``, set by
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from mcchain.ensemble.registry import VariableSpec
+from mcchain.ensemble.spec import VariableSpec
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -58,3 +58,12 @@ def model_output_variables(model: Model) -> dict[str, VariableSpec]:
 def dataset_outputs(ds: xr.Dataset) -> list[str]:
     """The output variables of a Dataset (those with :data:`OUTPUT_ATTRIBUTE`)."""
     return [str(name) for name, var in ds.data_vars.items() if OUTPUT_ATTRIBUTE in var.attrs]
+
+
+def stored_output(name: str, attrs: Mapping[str, Any]) -> VariableSpec | None:
+    """The declaration of an output variable read back from a file (by its
+    :data:`OUTPUT_ATTRIBUTE`), None for any other variable."""
+    if OUTPUT_ATTRIBUTE not in attrs:
+        return None
+    units, long_name = str(attrs.get("units")), str(attrs.get("long_name"))
+    return VariableSpec(name, ("sample",), units, long_name, "float64", "simulate")

@@ -20,11 +20,12 @@ Dims whose size comes from the model: ``body``, ``dof`` (3), ``joint``, ``xy`` (
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.spec import VariableSpec
 from mcchain.parameters import param_units
 from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
 
@@ -41,45 +42,6 @@ ANALYSES = ("sample", "equilibrium", "modes", "simulate", "requirement", "always
 ``[[requirement]]`` tables, or every run."""
 
 DTYPE_RULES = ("float64", "history", "uint32", "int32", "int8", "bool")
-
-
-@dataclass(frozen=True)
-class VariableSpec:
-    """Declaration of one ensemble variable.
-
-    Attributes:
-        name: netCDF variable name (a contract with users: never renamed).
-        dims: dimension names, ``sample`` first.
-        units: CF units string.
-        long_name: CF long_name.
-        dtype: dtype rule, one of :data:`DTYPE_RULES`.
-        analysis: producing analysis, one of :data:`ANALYSES`.
-        attrs: further CF attributes (flag masks, comments).
-        event_time: the time of an event, NaN on a sample where the event never happened:
-            a requirement reads that NaN as "never" (+inf) when the sample has no failure
-            bit (:func:`mcchain.decision.requirements.decision_values`).
-    """
-
-    name: str
-    dims: tuple[str, ...]
-    units: str
-    long_name: str
-    dtype: str
-    analysis: str
-    attrs: Mapping[str, Any] = field(default_factory=dict)
-    event_time: bool = False
-
-    def storage_dtype(self, history_dtype: str = "float32") -> np.dtype:
-        """The numpy dtype the variable is stored with."""
-        if self.dtype == "history":
-            return np.dtype(history_dtype)
-        if self.dtype == "uint32":
-            return np.dtype(STATUS_DTYPE)
-        return np.dtype(self.dtype)
-
-    def attributes(self) -> dict[str, Any]:
-        """CF attributes: ``units``, ``long_name`` and the extras."""
-        return {"units": self.units, "long_name": self.long_name, **self.attrs}
 
 
 def _v(
@@ -395,12 +357,6 @@ COORDINATES: dict[str, dict[str, str]] = {
 """Attributes of the coordinate variables."""
 
 
-def reserved_names() -> frozenset[str]:
-    """The names an ``[[output]]`` may not take: every built-in variable's, coordinate's and
-    axis output's (an output is stored beside them)."""
-    return frozenset({*VARIABLES, *COORDINATES, *AXIS_OUTPUTS, STEPS_TAKEN, "diverged_time"})
-
-
 def by_analysis(analysis: str) -> list[VariableSpec]:
     """The variables one analysis produces, in registry order."""
     if analysis not in ANALYSES:
@@ -670,15 +626,10 @@ def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
     """
     if "status" not in ds.data_vars:
         raise ValueError("status: missing")
-    from mcchain.ensemble.outputs import OUTPUT_ATTRIBUTE
+    from mcchain.ensemble.outputs import stored_output
 
     for name, var in ds.data_vars.items():
-        spec = VARIABLES.get(str(name))
-        if spec is None and OUTPUT_ATTRIBUTE in var.attrs:  # a scene's [[output]]
-            spec = VariableSpec(
-                str(name), ("sample",), str(var.attrs.get("units")),
-                str(var.attrs.get("long_name")), "float64", "simulate",
-            )  # fmt: skip
+        spec = VARIABLES.get(str(name)) or stored_output(str(name), var.attrs)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         if tuple(var.dims) != spec.dims:

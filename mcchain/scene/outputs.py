@@ -201,9 +201,12 @@ def check_outputs(scene: Scene) -> None:
     inside the run, a threshold exactly with the crossings; ``relative_to`` where the scene
     has a clearance joint and the quantity exists on an ideal joint.
     """
-    from mcchain.ensemble.registry import reserved_names
+    if not scene.output:
+        return  # (and the registry not imported: a scene loads without it)
+    from mcchain.ensemble.registry import AXIS_OUTPUTS, COORDINATES, STEPS_TAKEN, VARIABLES
 
-    reserved = reserved_names()
+    # an output is stored beside every built-in variable, coordinate and axis output
+    reserved = {*VARIABLES, *COORDINATES, *AXIS_OUTPUTS, STEPS_TAKEN}
     seen: dict[str, int] = {}
     for i, output in enumerate(scene.output):
         where = _where(output, i)

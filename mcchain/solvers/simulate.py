@@ -149,7 +149,7 @@ class _Run:
     # Continuous peaks per sample (sample, njoint + ndriver): |joint force| of each joint, then
     # |λ| of each driver (mcchain.kernels.peaks), every method; NaN for a failed sample.
     peaks: np.ndarray | None = None
-    # [[output]]s (mcchain.solvers.outputs.OutputPlan; an empty one without) and their
+    # [[output]]s (mcchain.solvers.output_plan.OutputPlan; an empty one without) and their
     # values (sample, nout), every method.
     plan: Any = None
     output_values: np.ndarray | None = None
@@ -432,7 +432,7 @@ def simulate(
             (the start's index-1 solve) + one residual per Newton iteration (+ 1: the
             index-1 solve after a last step shortened to land on t_end). Samples failed
             on entry: all 0 (radau's ``rejected_steps`` -1).
-        outputs: the ``[[output]]``s to track (:class:`mcchain.solvers.outputs.OutputPlan`,
+        outputs: the ``[[output]]``s to track (:class:`mcchain.solvers.output_plan.OutputPlan`,
             for this model: with a relative one, the model carries its ideal copy); their
             values are returned as ``output_values`` (sample, nout), NaN for a failed sample.
 
@@ -481,7 +481,7 @@ def simulate(
         run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
         run.contact_summary = np.full((n, len(CONTACT_SUMMARY) * ncj), np.nan)
     run.peaks = np.full((n, model.njoint + model.ndriver), np.nan)
-    from mcchain.solvers.outputs import empty_plan
+    from mcchain.solvers.output_plan import empty_plan
 
     run.plan = empty_plan(n) if outputs is None else outputs
     run.output_values = np.full((n, len(run.plan.names)), np.nan)
