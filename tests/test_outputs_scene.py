@@ -180,6 +180,16 @@ def test_output__requirement_on_an_output_and_the_csv_column(
         assert 1e-4 < float(ds["e"].values[0]) < 1e-3  # of the size of the clearance
         assert np.isinf(ds["t_fast"].values[0]) or ds["t_fast"].values[0] < 0.004
         assert ds.attrs["scene_name"] == "slider-crank-link"  # global attributes kept
+    # mcchain check re-solves the output, tighter, and compares it
+    assert mcchain("check", "run", "--tighten", "2", "--samples", "1", cwd=tmp_path).returncode in (
+        0,
+        1,
+    )
+    with xr.open_dataset(tmp_path / "run" / "check" / "tighten-2.nc") as tight:
+        assert "e" in tight.data_vars
+        with xr.open_dataset(tmp_path / "run" / "ensemble.nc") as ds:
+            run_value = float(ds["e"].values[0])
+        assert float(tight["e"].values[0]) == pytest.approx(run_value, abs=1e-9)  # dt / 2
 
 
 def test_output__a_requirement_on_an_output_the_scene_lacks_is_refused(
