@@ -142,7 +142,7 @@ def test_output__variables_units_and_definition() -> None:
     specs = output_variables(scene.output)
     assert [s.units for s in specs.values()] == ["m", "s", "m"]
     assert specs["e"].long_name == (
-        "max_abs of the x of the position of the centre of slider minus the ideal "
+        "max_abs of the x of the position of the centre of mass of slider minus the ideal "
         "mechanism's over the run, continuous"
     )
     assert specs["sag"].analysis == "equilibrium"

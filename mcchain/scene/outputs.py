@@ -163,7 +163,7 @@ class Output(Section):
         item = self.body or self.joint or self.driver
         what = self.of.replace("_", " ")
         if self.of in POINT_QUANTITIES:
-            where = f"point {list(self.point)} of " if self.point is not None else "centre of "
+            where = f"point {list(self.point)} m of " if self.point is not None else "centre of mass of "
             what = f"{what} of the {where}{item}"
         else:
             what = f"{what} of {item}"
