@@ -163,7 +163,9 @@ class Output(Section):
         item = self.body or self.joint or self.driver
         what = self.of.replace("_", " ")
         if self.of in POINT_QUANTITIES:
-            where = f"point {list(self.point)} m of " if self.point is not None else "centre of mass of "
+            where = "centre of mass of "
+            if self.point is not None:
+                where = f"point {list(self.point)} m of "
             what = f"{what} of the {where}{item}"
         else:
             what = f"{what} of {item}"
