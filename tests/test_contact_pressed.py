@@ -185,7 +185,8 @@ def slider_crank_pressed() -> tuple[np.ndarray, np.ndarray, float]:
     φ with L sin φ + (c + δ₀) u_y = 0 (the slider on its guide y = 0), the slider at
     B + (c + δ₀) u; velocities from the loop with ḋ = 0 (the slider's v_y = 0).
     """
-    f = np.array([SLIDER_MASS * (-CRANK * OMEGA**2 - CRANK**2 * OMEGA**2 / ROD), -ROD_MASS * GRAVITY / 2])
+    slider_acceleration = -CRANK * OMEGA**2 - CRANK**2 * OMEGA**2 / ROD
+    f = np.array([SLIDER_MASS * slider_acceleration, -ROD_MASS * GRAVITY / 2])
     u = -f / np.hypot(*f)
     K = internal_cylinder_stiffness(PIN_RADIUS, PIN_CLEARANCE, 2.07e11, 0.3)
     delta0 = (np.hypot(*f) / K) ** (1.0 / 1.5)
@@ -198,9 +199,8 @@ def slider_crank_pressed() -> tuple[np.ndarray, np.ndarray, float]:
     phidot = -OMEGA * CRANK / (ROD * math.cos(phi))
     va = np.array([0.0, OMEGA * CRANK])
     rod_turn = phidot * np.array([-math.sin(phi), math.cos(phi)])
-    v = np.array(
-        [0.0, OMEGA * CRANK / 2, OMEGA, *(va + rod_turn * ROD / 2), phidot, *(va + rod_turn * ROD), 0.0]
-    )
+    rod = [*(va + rod_turn * ROD / 2), phidot]
+    v = np.array([0.0, OMEGA * CRANK / 2, OMEGA, *rod, *(va + rod_turn * ROD), 0.0])
     return q, v, float(delta0)
 
 
@@ -354,7 +354,7 @@ def test_start__a_written_journal_stays_as_written(written, start):
         with pytest.raises(SceneError, match=f"joint.O.contact.start: '{start}' contradicts"):
             compile_model(load_scene_text(text))
         return
-    model, q, v, status = start_of(text)
+    model, q, _, status = start_of(text)
     assert status[0] == 0
     np.testing.assert_array_equal(q, np.asarray(model.q0))
 
@@ -365,4 +365,5 @@ def test_validate__prints_the_pressed_start(tmp_path, capsys):
     delta0 = (MASS * GRAVITY / STIFFNESS) ** (1.0 / 1.5)
     assert main(["validate", str(write_scene(tmp_path, bar_text()))]) == 0
     out = capsys.readouterr().out
-    assert f"|d| - c {delta0:.6g} m; starts on the contact law, pressed in: contact force 19.62 N" in out
+    start = "starts on the contact law, pressed in: contact force 19.62 N"
+    assert f"|d| - c {delta0:.6g} m; {start}" in out

@@ -127,7 +127,9 @@ def describe_initial_state(model: Any, assembled: Any) -> list[str]:
     if int(assembled.status[0]) != 0:
         return ["initial state: cannot be assembled"]
     one = model.select(0, 1)
-    placed = contact_start(one, assembled.q[:1].copy(), assembled.v[:1].copy(), assembled.status[:1].copy())
+    placed = contact_start(
+        one, assembled.q[:1].copy(), assembled.v[:1].copy(), assembled.status[:1].copy()
+    )
     if int(placed[2][0]) != 0:
         return ["initial state: the contact start cannot be closed around its journals"]
     q, v = placed[0][0], placed[1][0]

@@ -77,13 +77,14 @@ def start_state(
 def contact_start(
     model: Model, q: np.ndarray, v: np.ndarray, status: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The state (q, v: (nsample, 3 nbody), status (nsample,) uint32) with each contact-law journal that the scene does not write
-    (``Model.joint_written`` 0) placed where its ``[joint.contact] start``
-    (``Model.joint_contact_start``) says: pressed along the ideal mechanism's joint force at
-    t = 0 by the δ₀ whose force K δ₀^m balances it, centred (d = 0), or seated (as assembled);
-    the rest of the mechanism closed again around it, every held journal at rest in its
-    bearing (:mod:`mcchain.kernels.start`). Unchanged, without calling a kernel, where every
-    such journal starts seated (model auto by default, and every scene without a law).
+    """The state (q, v: (nsample, 3 nbody), status (nsample,) uint32) with each contact-law
+    journal that the scene does not write (``Model.joint_written`` 0) placed where its
+    ``[joint.contact] start`` (``Model.joint_contact_start``) says: pressed along the ideal
+    mechanism's joint force at t = 0 by the δ₀ whose force K δ₀^m balances it, centred
+    (d = 0), or seated (as assembled); the rest of the mechanism closed again around it,
+    every held journal at rest in its bearing (:mod:`mcchain.kernels.start`). Unchanged,
+    without calling a kernel, where every such journal starts seated (model auto by default,
+    and every scene without a law).
     """
     from mcchain.contact import LINK, PLACE_CODES, PLACE_SEATED
 
@@ -102,9 +103,7 @@ def contact_start(
     # C order: numba compiles per layout, and a copy of a broadcast start is F-ordered
     q, v = np.ascontiguousarray(q), np.ascontiguousarray(v)
     status = np.ascontiguousarray(status, dtype=np.uint32)
-    over_samples(
-        place_journals_batch, model.nsample, model.kernel_model(), place, q, v, status
-    )
+    over_samples(place_journals_batch, model.nsample, model.kernel_model(), place, q, v, status)
     return q, v, status
 
 
