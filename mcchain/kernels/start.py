@@ -8,8 +8,9 @@ code (:data:`mcchain.contact.PLACE_CODES`) names:
 * pressed: d = (c + δ₀) u, u the assembled d's direction, δ₀ = (f/K)^(1/m) with f = λ·u the
   ideal mechanism's joint force at t = 0 (:func:`~mcchain.kernels.assembly.ideal_joint_multipliers`:
   its KKT solve at the start state, inertia included) along u, so that the law's force at
-  t = 0, K δ₀^m (δ̇ = 0: no damping; at rest on the wall: no friction), balances it; δ₀ = 0
-  (stays seated) where f ≤ 0 or the ideal mechanism cannot be solved;
+  t = 0, K δ₀^m (δ̇ = 0: its damping term is 0), balances it; δ₀ = 0 (stays seated) where
+  f ≤ 0 or the ideal mechanism cannot be solved. Friction is not part of the balance: where
+  the surfaces slip at t = 0 (the bodies turn) it acts from the start;
 * centred: d = 0, the journal in the middle of its bearing;
 * seated: where assembly put it.
 
