@@ -23,9 +23,9 @@ import pytest
 from mcchain.contact import MODE_CONTACT, MODE_FREE, internal_cylinder_stiffness
 from mcchain.errors import SceneError
 from mcchain.scene import compile_model, load_scene_text
-from mcchain.solvers.simulate import simulate
 from mcchain.solvers.start import contact_start
 from mcchain.solvers.statics import assemble, start_multipliers
+from mcchain.testing.comparisons import simulate_scene as run
 from mcchain.testing.contact import Law, journal_in_bearing
 from mcchain.testing.factory import write_scene
 from mcchain.testing.scenes import flores_pin_text
@@ -90,20 +90,6 @@ def start_of(text: str) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
     assembled = assemble(model)
     q, v, status = contact_start(model, assembled.q.copy(), assembled.v.copy(), assembled.status)
     return model, q, v, status
-
-
-def run(text: str, **settings):
-    scene = load_scene_text(text)
-    model = compile_model(scene)
-    start = assemble(model)
-    return simulate(
-        model,
-        scene.simulate.model_copy(update=settings),
-        q_start=start.q,
-        v_start=start.v,
-        status=start.status,
-        history_dtype=np.float64,
-    )
 
 
 def hanging(delta0: float, clearance: float = CLEARANCE) -> np.ndarray:
