@@ -89,6 +89,7 @@ def ideal_model(model: Model) -> Model:
         joint_contact_law=zeros.copy(),
         joint_written=zeros.copy(),
         joint_start=start,
+        joint_contact_start=("seated",) * model.njoint,  # no contact law: as assembled
         joint_eccentricity=np.full_like(np.asarray(model.joint_eccentricity), np.nan),
         reference=np.zeros(0, dtype=np.int64),
         meta=dict(model.meta),
@@ -134,6 +135,9 @@ def with_ideal_copy(model: Model, ideal: Model) -> Model:
         changes[name] = np.concatenate(
             [np.broadcast_to(a, (n, a.shape[1])), np.broadcast_to(b, (n, b.shape[1]))], axis=1
         )
+    # the two start states are placed before the copy is made (simulate_outputs): the
+    # journals stay where they are
+    changes["joint_contact_start"] = ("seated",) * (2 * model.njoint)
     own_rows = int(np.sum([JointKind(int(k)).rows for k in model.joint_kind]))
     changes["reference"] = np.array(
         [nb, model.njoint, model.ndriver, model.nforce, model.nspring, own_rows], dtype=np.int64
