@@ -229,7 +229,7 @@ def test_force_outputs__the_peaks_over_the_whole_run_and_a_window(method):
     b = 2  # joint B
     assert out["pin_peak"][0] == pytest.approx(out["peak_joint_force"][0, b], rel=1e-12)
     assert out["pin_penetration"][0] == pytest.approx(out["max_penetration"][0, b], rel=1e-9)
-    assert out["max_penetration"][0] > 0.0  # it impacts
+    assert out["max_penetration"][0, b] > 0.0  # it impacts
     t = out["time"]
     inside = (t >= 0.008) & (t <= 0.012)
     stored = np.max(np.abs(out["driver_torque"][0, inside, 0]))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import AfterValidator, Field, Strict, field_validator
@@ -32,6 +32,18 @@ if TYPE_CHECKING:
 
 OUTPUT_NAME_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 
+Quantity = Literal[
+    "position",
+    "velocity",
+    "acceleration",
+    "angle",
+    "angular_velocity",
+    "joint_force",
+    "contact_force",
+    "penetration",
+    "driver_torque",
+    "driver_force",
+]
 BODY_QUANTITIES = ("position", "velocity", "acceleration", "angle", "angular_velocity")
 JOINT_QUANTITIES = ("joint_force", "contact_force", "penetration")
 DRIVER_QUANTITIES = ("driver_torque", "driver_force")
@@ -50,7 +62,7 @@ QUANTITY_UNITS = {
     "driver_force": "N",
 }
 """CF units of each quantity (and of its reductions, but for the crossing times: s)."""
-REDUCTIONS = (
+Reduction = Literal[
     "max",
     "min",
     "max_abs",
@@ -59,7 +71,8 @@ REDUCTIONS = (
     "range",
     "first_time_above",
     "first_time_below",
-)
+]
+REDUCTIONS = get_args(Reduction)
 CROSSINGS = ("first_time_above", "first_time_below")
 STORED_PREFIX = "max_stored_"
 """The prefix of ``mcchain export``'s columns of stored maxima
@@ -83,18 +96,7 @@ class Output(Section):
         description="the ensemble variable's name: ``[a-z][a-z0-9_]*``, not a built-in "
         "variable's; required."
     )
-    of: Literal[
-        "position",
-        "velocity",
-        "acceleration",
-        "angle",
-        "angular_velocity",
-        "joint_force",
-        "contact_force",
-        "penetration",
-        "driver_torque",
-        "driver_force",
-    ] = Field(description="the quantity; required.")
+    of: Quantity = Field(description="the quantity; required.")
     body: BodyRef | None = Field(
         default=None, description="the body of a body quantity (position ... angular_velocity)."
     )
@@ -118,19 +120,9 @@ class Output(Section):
         description='"ideal": minus the same quantity of the same instance with every '
         "clearance joint ideal; default none.",
     )
-    reduce: (
-        Literal[
-            "max",
-            "min",
-            "max_abs",
-            "rms",
-            "mean",
-            "range",
-            "first_time_above",
-            "first_time_below",
-        ]
-        | None
-    ) = Field(default=None, description="the reduction over the window (with [simulate]).")
+    reduce: Reduction | None = Field(
+        default=None, description="the reduction over the window (with [simulate])."
+    )
     threshold: Num | None = Field(
         default=None, description="the level of first_time_above / first_time_below."
     )
