@@ -124,6 +124,13 @@ def write(rows: list[tuple], args: argparse.Namespace) -> None:
         f" ({time.strftime('%Y-%m-%d')}, 2 shared cores; one chunk solved in-process, kernels "
         "warm, the variants alternating; ratio = time / the same run without outputs).",
         "",
+        "Variants: `none`, the scene as shipped; `force + position`, a joint force's windowed",
+        "max (values only: the four-point cubic) and a body point's max (the Hermite with its",
+        "rate); `relative_to ideal`, one position output relative to the ideal mechanism (its",
+        "copy integrated alongside: about the mechanism's own integration again). The outputs",
+        "are fed per lane in scalar code at every accepted state (their signal, then the",
+        "reduction), which is what the middle variant costs.",
+        "",
         "| case | samples | outputs | best, s | median, s | ratio (best) | ratio (median) |",
         "|---|---|---|---|---|---|---|",
     ]
