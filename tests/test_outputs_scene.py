@@ -200,3 +200,40 @@ def test_output__a_requirement_on_an_output_the_scene_lacks_is_refused(
         mcchain, tmp_path, BASE + OUTPUTS + requirement,
         "requirement.a.output: 'slider_error' is not a per-sample variable this scene produces",
     )  # fmt: skip
+
+
+def test_output__an_ideal_mechanism_that_cannot_be_built_is_refused(
+    mcchain: Callable[..., Ran], tmp_path: Path
+) -> None:
+    """A bar between two ground pins holds only thanks to the play of one of them: ideal,
+    its four rows over-constrain three coordinates."""
+    text = """
+[[body]]
+name = "bar"
+mass = 1.0
+inertia = 0.08
+position = [0.5, 0.0]
+[[joint]]
+name = "O"
+bodies = ["ground", "bar"]
+points = [[0.0, 0.0], [-0.5, 0.0]]
+[[joint]]
+name = "B"
+bodies = ["ground", "bar"]
+points = [[1.0, 0.001], [0.5, 0.0]]
+clearance = 1e-3
+[simulate]
+t_end = 0.01
+dt = 1e-4
+[[output]]
+name = "e"
+of = "angle"
+body = "bar"
+relative_to = "ideal"
+reduce = "max"
+"""
+    assert_scene_refused(
+        mcchain, tmp_path, text,
+        "output.e.relative_to: the ideal mechanism (every clearance joint ideal) cannot be "
+        "built: joint: negative degrees of freedom",
+    )  # fmt: skip

@@ -19,6 +19,26 @@ from mcchain.model import Model
 from mcchain.solvers.output_plan import OutputPlan, output_plan
 
 
+def check_ideal(scene: Any, model: Model) -> None:
+    """A scene with a ``relative_to = "ideal"`` output: its ideal mechanism (every clearance
+    joint ideal) must assemble with independent constraints too (a mechanism that closes
+    only thanks to its play has none); else one :class:`SceneError` line naming the output."""
+    from mcchain.errors import SceneError
+    from mcchain.solvers.ideal import ideal_model
+    from mcchain.solvers.statics import check_scene
+
+    relative = [o for o in scene.output if o.relative_to == "ideal"]
+    if not relative:
+        return
+    try:
+        check_scene(ideal_model(model.select(0, 1)))
+    except SceneError as exc:
+        raise SceneError(
+            f"output.{relative[0].name}.relative_to: the ideal mechanism (every clearance "
+            f"joint ideal) cannot be built: {exc}"
+        ) from None
+
+
 def simulate_outputs(
     model: Model,
     outputs: Sequence[Any],
