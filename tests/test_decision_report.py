@@ -116,7 +116,7 @@ def test_binned_failure__pinned_bar_bins_against_exact() -> None:
     rng = np.random.default_rng(5)
     J = rng.uniform(J_LOW, J_HIGH, 24_000)
     failed = bar_pulsation(M, J, A) > LIMIT
-    _, p, lo, hi, edges = binned_failure(J, failed, 0.95)
+    _, p, lo, hi, edges, _ = binned_failure(J, failed, 0.95)
     J_star = J_LOW + float(pinned_bar_exceedance(LIMIT, M, A, J_LOW, J_HIGH)) * (J_HIGH - J_LOW)
     exact = np.clip((J_star - edges[:-1]) / (edges[1:] - edges[:-1]), 0.0, 1.0)
     assert np.sum((lo <= exact) & (exact <= hi)) >= len(exact) - 1

@@ -138,7 +138,7 @@ def test_param_axis__key_item_and_display_units() -> None:
         1.0,
     )
     assert scatter.param_axis("body.bar.mass", large) == ("mass bar [kg]", 1.0)
-    assert scatter.param_axis("scene.gravity[1]", large) == ("gravity[1] [m s-2]", 1.0)
+    assert scatter.param_axis("scene.gravity[1]", large) == ("gravity[1] [m/s²]", 1.0)
     assert scatter.param_axis("joint.B.points[1][0]", large)[0] == "points[1][0] B [m]"
 
 
