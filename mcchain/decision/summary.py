@@ -93,6 +93,8 @@ class RequirementSummary:
             NaN if the rate equals the target).
         success_run: the one-sided success-run figure ln(1 − C)/ln(1 − target).
         output: the output and its selection, as text (``omega[mode=0]``).
+        interval: the name of the P(fail) interval, as a reader reads it (the report
+            quotes it, never names the interval itself).
     """
 
     name: str
@@ -116,6 +118,7 @@ class RequirementSummary:
     samples_needed: float
     success_run: float
     output: str
+    interval: str = ""
 
     @property
     def verdict(self) -> str:
@@ -231,6 +234,11 @@ def summarize_requirement(
         samples_needed=samples_to_decide(failures, n, requirement.target, requirement.confidence),
         success_run=success_run_samples(requirement.target, requirement.confidence),
         output=output_label(requirement),
+        interval=(
+            "exact Clopper–Pearson"
+            if design in EXACT_DESIGNS
+            else "Clopper–Pearson, approximate for this design"
+        ),
     )
 
 
@@ -253,7 +261,11 @@ def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
                 met == 0, int(sequential["batch"]), requirement.confidence, requirement.target
             )
             summary = replace(
-                summary, p_lower=lo, p_upper=hi, decision=verdict(lo, hi, requirement.target)
+                summary,
+                p_lower=lo,
+                p_upper=hi,
+                decision=verdict(lo, hi, requirement.target),
+                interval=f"sequential: {sequential['method']}",
             )
         out.append(summary)
     return out

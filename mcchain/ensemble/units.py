@@ -99,11 +99,14 @@ def with_units(
         digits, si_digits: significant digits of the reading and the SI value.
     """
     value = float(value)
+    if not math.isfinite(value):
+        return _number(value, digits)  # NaN has no unit to read
     unit, scale = reading_unit(units, abs(value) if magnitude is None else magnitude)
     si = pretty_units(units)
-    if scale == 1.0 and unit == si or not math.isfinite(value):
-        return _joined(_number(value, si_digits if scale == 1.0 else digits), si)
-    return f"{_joined(_number(scale * value, digits), unit)} ({_joined(_number(value, si_digits), si)})"
+    if scale == 1.0 and unit == si:
+        return _joined(_number(value, si_digits), si)
+    reading = _joined(_number(scale * value, digits), unit)
+    return f"{reading} ({_joined(_number(value, si_digits), si)})"
 
 
 def units_of(attrs: Mapping[Hashable, Any], name: str) -> str | None:

@@ -26,7 +26,7 @@ from mcchain.decision.stats import clopper_pearson_arrays
 from mcchain.decision.summary import allocations, met_of, output_label, quantile_side
 from mcchain.ensemble.units import reading_unit, units_of
 from mcchain.viz.figures import figure, panel_title, suptitle
-from mcchain.viz.scatter import param_axis
+from mcchain.viz.scatter import param_reading
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -64,27 +64,31 @@ def exceedance(
     return grid, beyond / n, lo, hi
 
 
-def output_axis(ds: xr.Dataset, requirement: Requirement, values: np.ndarray) -> tuple[str, float]:
-    """Axis label (``peak_contact_force[joint=B] [kN]``) and scale of a requirement's output
-    in the reading unit of its largest finite value (:mod:`mcchain.ensemble.units`)."""
+def output_axis(
+    ds: xr.Dataset, requirement: Requirement, values: np.ndarray
+) -> tuple[str, str, float]:
+    """(axis label ``peak_contact_force[joint=B] [kN]``, reading unit, scale) of a
+    requirement's output, in the reading unit of its largest finite value
+    (:mod:`mcchain.ensemble.units`)."""
     units = units_of(ds[requirement.output].attrs, requirement.output) or ""
     finite = np.abs(values[np.isfinite(values)])
     unit, scale = reading_unit(units, float(finite.max()) if finite.size else 0.0)
-    return f"{output_label(requirement)} [{unit or '-'}]", scale
+    return f"{output_label(requirement)} [{unit or '-'}]", unit, scale
 
 
 def _exceedance_panel(
-    ax: Axes, requirement: Requirement, values: np.ndarray, axis: tuple[str, float]
+    ax: Axes, requirement: Requirement, values: np.ndarray, axis: tuple[str, str, float]
 ) -> None:
     side = quantile_side(requirement, values)
     x, share, lo, hi = exceedance(values, side, requirement.confidence)
     floor = 0.5 / max(values.size, 1)  # zero cannot be drawn on a log axis
     label = "P(output > x)" if side == "max" else "P(output < x)"
-    xlabel, scale = axis
+    xlabel, unit, scale = axis
     ax.fill_between(scale * x, np.maximum(lo, floor), hi, color="C0", alpha=0.25, linewidth=0)
     # where no sample is beyond x the share is 0: not drawn (the band's top bounds it)
     ax.step(scale * x, np.where(share > 0, share, np.nan), where="post", color="C0", label=label)
     limit = requirement.max if side == "max" else requirement.min
+    assert limit is not None  # quantile_side picks a side the requirement has
     for value in (requirement.min, requirement.max):
         if value is not None:
             ax.axvline(scale * value, color="C3", linestyle="--", linewidth=1.0)
@@ -93,7 +97,6 @@ def _exceedance_panel(
     ax.set_ylim(floor, 1.05)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(label)
-    unit = xlabel.rsplit("[", 1)[-1].rstrip("]").replace("-", "")
     panel_title(
         ax,
         f"{requirement.name}: exceedance, {100 * requirement.confidence:g} % band; limit "
@@ -136,7 +139,7 @@ def _parameter_panel(
     """P(fail) in bins of one parameter on a log axis: bins with failures as points with
     their two-sided interval, bins without as their one-sided upper bound (a hollow ▽:
     zero cannot be drawn on a log axis, and "≤ bound" is what such a bin shows)."""
-    label, scale = param_axis(path, x)
+    name, unit, scale = param_reading(path, x)
     centres, p, lo, hi, edges, count = binned_failure(x, failed, requirement.confidence)
     some = p > 0
     ax.errorbar(
@@ -156,7 +159,7 @@ def _parameter_panel(
             label=f"no failure: one-sided {100 * requirement.confidence:g} % upper bound",
         )  # fmt: skip
     ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
-    title = f"P(fail) by {label.split(' [')[0]}, {100 * requirement.confidence:g} % bounds"
+    title = f"P(fail) by {name}, {100 * requirement.confidence:g} % bounds"
     if allocation is not None and np.isfinite(allocation.bound):
         b = scale * allocation.bound
         ax.axvline(b, color="C2", linewidth=1.5)
@@ -166,14 +169,13 @@ def _parameter_panel(
         else:
             ax.axvspan(low, b, color="0.85", zorder=0)
         op = "≤" if allocation.side == "upper" else "≥"
-        unit = label.rsplit("[", 1)[-1].rstrip("]").replace("-", "")
         title += f"; allocated {op} {b:.4g}{' ' + unit if unit else ''} (green)"
     elif allocation is not None:
         title += "; no one-sided range meets the target"
     drawn = np.concatenate([lo[some & (lo > 0)], bound, [requirement.target]])
     ax.set_yscale("log")
     ax.set_ylim(max(float(drawn.min()) / 3.0, 1e-12), 1.5)
-    ax.set_xlabel(label)
+    ax.set_xlabel(f"{name} [{unit or '-'}]")
     ax.set_ylabel("P(fail)")
     ax.legend(fontsize=6, frameon=False, loc="lower left")
     panel_title(ax, title)
@@ -196,9 +198,7 @@ def requirements_figure(ds: xr.Dataset) -> Figure | str:
     for i, requirement in enumerate(requirements):
         values = requirement_values(ds, requirement)
         failed = met_of(ds, requirement, values) == 0
-        _exceedance_panel(
-            axes[i, 0], requirement, values, output_axis(ds, requirement, values)
-        )
+        _exceedance_panel(axes[i, 0], requirement, values, output_axis(ds, requirement, values))
         for j, path in enumerate(paths):
             allocation = rows.get((requirement.name, path))
             _parameter_panel(axes[i, 1 + j], requirement, path, params[:, j], failed, allocation)

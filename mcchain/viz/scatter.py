@@ -34,21 +34,28 @@ MAX_SCATTER_POINTS = 4000
 """Points drawn per panel (a fixed random subset; the trend and ρ use every sample)."""
 
 
-def param_axis(path: str, values: np.ndarray) -> tuple[str, float]:
-    """Axis label and scale of a sampled parameter, in the reading unit of its largest
-    value (:func:`mcchain.ensemble.units.reading_unit`): ``joint.B.clearance`` with values
-    of 0.1 mm -> ``("clearance B [mm]", 1e3)`` (plot ``scale * values``);
-    ``joint.B.contact.restitution`` -> ``("restitution B [-]", 1.0)``."""
+def param_reading(path: str, values: np.ndarray) -> tuple[str, str, float]:
+    """(name, reading unit, scale) of a sampled parameter, in the reading unit of its
+    largest value (:func:`mcchain.ensemble.units.reading_unit`): ``joint.B.clearance``
+    with values of 0.1 mm -> ``("clearance B", "mm", 1e3)`` (read ``scale * values``);
+    ``joint.B.contact.restitution`` -> ``("restitution B", "", 1.0)``."""
     base, bracket, index = path.partition("[")
     parts = [part.strip('"') for part in base.split(".")]
     if parts[0] == "scene" or len(parts) < 3:
-        label = parts[-1] + bracket + index
+        name = parts[-1] + bracket + index
     else:
-        label = f"{parts[-1]}{bracket}{index} {parts[1]}"
+        name = f"{parts[-1]}{bracket}{index} {parts[1]}"
     finite = np.abs(np.asarray(values, dtype=np.float64))
     finite = finite[np.isfinite(finite)]
-    units, scale = reading_unit(param_units(path), float(finite.max()) if len(finite) else 0.0)
-    return f"{label} [{units or '-'}]", scale
+    unit, scale = reading_unit(param_units(path), float(finite.max()) if len(finite) else 0.0)
+    return name, unit, scale
+
+
+def param_axis(path: str, values: np.ndarray) -> tuple[str, float]:
+    """Axis label and scale of a sampled parameter (:func:`param_reading`):
+    ``("clearance B [mm]", 1e3)``, ``("restitution B [-]", 1.0)``."""
+    name, unit, scale = param_reading(path, values)
+    return f"{name} [{unit or '-'}]", scale
 
 
 def binned_quantiles(
