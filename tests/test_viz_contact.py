@@ -199,7 +199,8 @@ def test_report__contact_run_writes_the_contact_figures(contact_run: Any, tmp_pa
         "reaction_envelopes.png",
     } <= written
     for path in result.written:
-        assert_real_picture(path)
+        if path.suffix == ".png":
+            assert_real_picture(path)
 
 
 def test_peak_force_figure__unit_axes_and_no_straight_line(contact_run: Any) -> None:

@@ -9,6 +9,7 @@ the stored SI value beside it, so the number a CSV holds can always be found aga
   (one choice per column or axis, so that every value of one quantity reads alike);
 * :func:`with_units` — ``"24 µm (2.39912e-05 m)"``, ``"5 kN (5000 N)"``,
   ``"10 Hz (62.83 rad/s)"``; a value already in its reading unit is written once;
+* :func:`interval_with_units` — a value and its interval in one unit;
 * :func:`pretty_units` — a CF string as text (``rad s-1`` -> ``rad/s``, ``1`` -> ``""``).
 
 Rules (documented here only): lengths below 0.1 m read in mm, below 0.1 mm in µm; forces,
@@ -107,6 +108,27 @@ def with_units(
         return _joined(_number(value, si_digits), si)
     reading = _joined(_number(scale * value, digits), unit)
     return f"{reading} ({_joined(_number(value, si_digits), si)})"
+
+
+def interval_with_units(
+    value: float, lower: float, upper: float, units: str, magnitude: float | None = None
+) -> str:
+    """A value and its interval in one reading unit, the SI values beside:
+    ``"16.3 kN [13.3, 19.01] (16302.9 [13304.7, 19014.3] N)"``; an end that is NaN (too
+    few samples for it) reads ``—``."""
+    size = abs(float(value)) if magnitude is None else magnitude
+    unit, scale = reading_unit(units, size if math.isfinite(size) else 0.0)
+    si = pretty_units(units)
+
+    def numbers(factor: float, digits: int) -> str:
+        ends = ", ".join(
+            "—" if math.isnan(x) else _number(factor * x, digits) for x in (lower, upper)
+        )
+        return f"{_number(factor * value, digits)} [{ends}]"
+
+    if scale == 1.0 and unit == si:
+        return _joined(numbers(1.0, 6), si)
+    return f"{_joined(numbers(scale, 4), unit)} ({_joined(numbers(1.0, 6), si)})"
 
 
 def units_of(attrs: Mapping[Hashable, Any], name: str) -> str | None:

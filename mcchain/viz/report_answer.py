@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names
-from mcchain.ensemble.units import units_of, with_units
+from mcchain.ensemble.units import interval_with_units, units_of, with_units
 from mcchain.viz.page import esc, table
 from mcchain.viz.scatter import param_reading
 
@@ -157,11 +157,14 @@ def requirement_tables(
         unit = units.output(s.output.split("[", 1)[0])
         size = abs(s.limit) if math.isfinite(s.limit) else abs(s.quantile)
 
-        def value(x: float, unit: str = unit, size: float = size, s: RequirementSummary = s) -> str:
-            if math.isnan(x):
-                return f"— (from {s.quantile_samples_needed} samples)"
+        def value(x: float, unit: str = unit, size: float = size) -> str:
             return esc(with_units(x, unit, magnitude=size))
 
+        quantile = esc(
+            interval_with_units(s.quantile, s.quantile_lower, s.quantile_upper, unit, size)
+        )
+        if math.isnan(s.quantile_lower) or math.isnan(s.quantile_upper):
+            quantile += f" (— : needs {s.quantile_samples_needed} samples)"
         body.append(
             [
                 esc(s.name),
@@ -171,7 +174,7 @@ def requirement_tables(
                 f"{percent(s.p_fail)} [{percent(s.p_lower)}, {percent(s.p_upper)}]",
                 esc(s.interval),
                 f"{percent(s.target)} at {percent(s.confidence)}",
-                f"{value(s.quantile)}<br>[{value(s.quantile_lower)}, {value(s.quantile_upper)}]",
+                f"{100 * s.level:.3g} %: {quantile}",
             ]
         )
     header = [

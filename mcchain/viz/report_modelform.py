@@ -222,8 +222,10 @@ def joint_note(ds: xr.Dataset, k: int, model: str) -> str:
         first = np.asarray(ds["first_separation_time"].isel(joint=k).values, np.float64)
         left = np.isfinite(first)
         if left.any():
-            span = f"{with_units(float(first[left].min()), 's')} – "
-            span += with_units(float(first[left].max()), "s")
+            earliest, latest = float(first[left].min()), float(first[left].max())
+            span = with_units(earliest, "s")
+            if latest > earliest:
+                span += f" – {with_units(latest, 's')}"
             text += f". {int(left.sum())} samples left the link, first at {esc(span)}"
     if "impact_count" in ds.data_vars:
         impacts = np.asarray(ds["impact_count"].isel(joint=k).values)

@@ -77,8 +77,7 @@ h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #cc
 .sub { color: #555; margin-top: 0; }
 nav { font-size: 0.9em; margin: 0.5em 0 1em; } nav a { margin-right: 1em; }
 table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.92em; }
-th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; vertical-align: top; }
-th:first-child, td:first-child { text-align: left; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: left; vertical-align: top; }
 table.facts th { text-align: left; background: #f4f4f4; } table.facts td { text-align: left; }
 .pass { color: #176117; } .fail { color: #a01010; } .undecided { color: #8a5a00; }
 p.answer { color: #111; font-size: 1.1em; border-left: 6px solid #888; padding: 0.4em 0.8em;

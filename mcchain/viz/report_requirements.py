@@ -142,16 +142,17 @@ def _parameter_panel(
     name, unit, scale = param_reading(path, x)
     centres, p, lo, hi, edges, count = binned_failure(x, failed, requirement.confidence)
     some = p > 0
-    ax.errorbar(
-        scale * centres[some],
-        p[some],
-        yerr=[p[some] - lo[some], hi[some] - p[some]],
-        fmt="o",
-        color="C0",
-        markersize=3,
-        capsize=2,
-        label="P(fail), two-sided interval",
-    )
+    if some.any():
+        ax.errorbar(
+            scale * centres[some],
+            p[some],
+            yerr=[p[some] - lo[some], hi[some] - p[some]],
+            fmt="o",
+            color="C0",
+            markersize=3,
+            capsize=2,
+            label="P(fail), two-sided interval",
+        )
     bound = zero_failure_bound(count[~some], requirement.confidence)
     if bound.size:
         ax.plot(
