@@ -1,4 +1,5 @@
-"""Plots of an ensemble as PNG files (``mcchain report RUN [--out DIR]``).
+"""Plots of an ensemble as PNG files (``mcchain report RUN [--out DIR]``; the command and
+its page are :mod:`mcchain.viz.report_page`, which imports this module, never the reverse).
 
 Each figure is drawn only when the run holds what it needs; otherwise it is skipped and the
 reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, default
@@ -34,15 +35,15 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
 ``contact_loss.png``            which samples lost contact, and when
                                 (``contact_lost_time``): the fraction lost by time t, and
                                 the time of loss against each sampled parameter
-``status_counts.png``           how many samples carry each status flag
-``requirements.png``           per ``[[requirement]]``: the output's exceedance curve with
+``status_counts.png/.svg``      how many samples carry each status flag
+``requirements.png/.svg``       per ``[[requirement]]``: the output's exceedance curve with
                                 its band, limit and target; P(fail) against each sampled
-                                parameter with the allocated bound
+                                parameter on a log axis (zero-failure bins as upper
+                                bounds) with the allocated bound
                                 (:mod:`mcchain.viz.report_requirements`)
-``index.html``                  one plain page of the run: scene, sampled parameters, status
-                                counts, each requirement's answer, the numerical check and
-                                every figure (:mod:`mcchain.viz.report_page`; ``mcchain
-                                report RUN`` only)
+``index.html``                  the page that carries every figure: the answer first, then
+                                the evidence, model form, ensemble and provenance
+                                (:mod:`mcchain.viz.report_page`; ``mcchain report RUN`` only)
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
                                 contact force (an output constant over the samples is named
                                 with its value instead of zero bars), for a ``design =
@@ -56,7 +57,9 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
 ==============================  ==========================================================
 
 Figures are made with :class:`matplotlib.figure.Figure` and the Agg canvas (no pyplot, no
-global backend switch). A lazy ensemble is read in blocks, never whole.
+global backend switch); the few read closely are also written as SVG
+(:data:`mcchain.viz.figures.VECTOR_FIGURES`). A lazy ensemble is read in blocks, never
+whole.
 """
 
 from __future__ import annotations
