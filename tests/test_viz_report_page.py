@@ -29,7 +29,7 @@ from mcchain.ensemble.units import interval_with_units, reading_unit, with_units
 from mcchain.runs import open_run
 from mcchain.scene.study import Requirement
 from mcchain.testing import browser
-from mcchain.viz import report_modelform
+from mcchain.viz import report_modelform, report_outputs
 from mcchain.viz.report import Report
 from mcchain.viz.report_page import index_html
 
@@ -240,6 +240,32 @@ def test_page__an_until_run_names_its_sequential_interval(until_run: Path) -> No
     assert s.interval in page.answers[0]
     assert "exact Clopper" not in text
     assert "until decided: batches of 500" in text
+
+
+def test_outputs_table__any_per_sample_variable_with_its_own_units() -> None:
+    """A variable the registry does not know (a scene's ``[[output]]``) is shown from its own
+    attributes; −1 of an integer output is "not applicable"; histories are not outputs."""
+    n = 101
+    gap = np.linspace(0.0, 5e-5, n)  # m, below 0.1 mm: read in µm
+    gap_attrs = {"units": "m", "long_name": "largest pin gap"}
+    ds = xr.Dataset(
+        {
+            "pin_gap": (("sample", "joint"), np.column_stack([gap, np.full(n, np.nan)]), gap_attrs),
+            "impact_count": (("sample", "joint"), np.tile([[3, -1]], (n, 1)).astype(np.int32)),
+            "energy": (("sample", "time"), np.ones((n, 2))),
+            "status": (("sample",), np.zeros(n, dtype=np.uint32)),
+        },
+        coords={"sample": np.arange(n), "joint": ["B", "C"], "time": [0.0, 1.0]},
+    )
+    assert report_outputs.per_sample_outputs(ds) == ["pin_gap", "impact_count"]
+    page = Page()
+    page.feed(report_outputs.outputs_table(ds))
+    text = " ".join(page.text)
+    median = with_units(2.5e-5, "m", magnitude=5e-5)
+    assert median == "25 µm (2.5e-05 m)"
+    assert f"pin_gap[B] largest pin gap m {median}" in text
+    assert "pin_gap[C]" not in text and "impact_count[C]" not in text  # no value left
+    assert "impact_count[B]" in text and f"3 of {n}" not in text and f"{n} of {n}" in text
 
 
 # -- model form -----------------------------------------------------------------------------------

@@ -9,8 +9,9 @@ never split). It reads top to bottom as a review does:
 2. **Requirements** — the numbers behind it, the tolerance allocation, ``requirements`` figure;
 3. **Model form** — which joint model the results rest on, start-up peaks
    (:mod:`mcchain.viz.report_modelform`);
-4. **Ensemble** — sampled parameters (in reading units), status counts, every other figure
-   with a line on what it shows;
+4. **Ensemble** — sampled parameters (in reading units), every per-sample output
+   (:mod:`mcchain.viz.report_outputs`), status counts, every other figure with a line on
+   what it shows;
 5. **Provenance** — version, commit, date, host, method and tolerances, design and count,
    what the run printed, the numerical check, the scene file
    (:mod:`mcchain.viz.report_provenance`).
@@ -27,6 +28,7 @@ import numpy as np
 
 from mcchain.decision.requirements import requirement_values, stored_requirements
 from mcchain.decision.summary import allocations, met_of, summarize
+from mcchain.ensemble.describe import stored_settings
 from mcchain.ensemble.io import write_text_atomic
 from mcchain.ensemble.units import pretty_units, with_units
 from mcchain.viz.figures import VECTOR_FIGURES
@@ -34,7 +36,8 @@ from mcchain.viz.page import embedded, esc, table
 from mcchain.viz.report import Report, make_report
 from mcchain.viz.report_answer import Units, answer_section, percent, requirement_tables
 from mcchain.viz.report_modelform import modelform_section
-from mcchain.viz.report_provenance import provenance_section, read_record, settings_of
+from mcchain.viz.report_outputs import outputs_table
+from mcchain.viz.report_provenance import provenance_section, read_record
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -90,7 +93,7 @@ figure { margin: 1em 0; break-inside: avoid; page-break-inside: avoid; }
 img, .svg svg { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #333; }
 pre { background: #f6f6f6; padding: 0.5em; overflow-x: auto; font-size: 0.85em; }
-code { font-size: 0.92em; }
+code { font-size: 0.92em; } td small { color: #444; }
 @media print {
   @page { size: A4; margin: 14mm; }
   body { max-width: none; margin: 0; padding: 0; font-size: 9.5pt; }
@@ -134,7 +137,7 @@ def question(ds: xr.Dataset, summaries: list[RequirementSummary]) -> str:
 
 
 def _analyses(ds: xr.Dataset) -> list[str]:
-    scene = settings_of(ds).get("scene") or {}
+    scene = stored_settings(ds).get("scene") or {}
     return [a for a in ("equilibrium", "modes", "simulate") if scene.get(a) is not None]
 
 
@@ -155,7 +158,7 @@ def ensemble_section(ds: xr.Dataset) -> str:
     """Sampled parameters (in reading units) and status counts."""
     from mcchain.status import counts
 
-    scene = settings_of(ds).get("scene") or {}
+    scene = stored_settings(ds).get("scene") or {}
     vary = (scene.get("sample") or {}).get("vary") or {}
     units = Units(ds)
     parts = ['<section id="ensemble"><h2>Ensemble</h2>']
@@ -178,6 +181,7 @@ def ensemble_section(ds: xr.Dataset) -> str:
         ]
     else:
         parts.append("<p>No sampled parameters.</p>")
+    parts.append(outputs_table(ds))
     if "status" in ds.data_vars:
         found = counts(np.asarray(ds["status"].values))
         rows = [[esc(k), esc(v)] for k, v in found.items() if v or k == "ok"]

@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from mcchain.ensemble.describe import stored_settings
 from mcchain.ensemble.units import with_units
 from mcchain.viz.page import esc, facts, table
 
@@ -37,20 +38,14 @@ SIMULATE_KEYS = (
 """``[simulate]`` settings the page lists (key, CF units; "" for a number or a name)."""
 
 
-def settings_of(ds: xr.Dataset) -> dict[str, Any]:
-    """The ensemble's resolved settings (``{}`` when absent or unreadable)."""
-    try:
-        found = json.loads(str(ds.attrs.get("settings", "{}")))
-    except ValueError:
-        return {}
-    return found if isinstance(found, dict) else {}
-
-
 def read_record(folder: Path) -> dict[str, Any]:
     """``run.json`` of the run (``{}`` when it is missing or unreadable: the page says so)."""
+    from mcchain.errors import RunError
+    from mcchain.runs import read_record as run_record
+
     try:
-        found = json.loads((Path(folder) / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        found = run_record(folder)
+    except RunError:
         return {}
     return found if isinstance(found, dict) else {}
 
@@ -100,7 +95,7 @@ def _design(ds: xr.Dataset, settings: dict[str, Any], record: dict[str, Any]) ->
 def provenance_section(folder: Path, ds: xr.Dataset) -> str:
     """The page's provenance section (HTML)."""
     record = read_record(folder)
-    settings = settings_of(ds)
+    settings = stored_settings(ds)
     scene = settings.get("scene") or {}
     git = record.get("git") or {}
     host = record.get("host") or {}
