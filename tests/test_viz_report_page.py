@@ -25,7 +25,12 @@ from PIL import Image
 from test_decision_closed_form import pinned_bar_text, run_pinned_bar
 
 from mcchain.decision.summary import allocations, summarize
-from mcchain.ensemble.units import interval_with_units, reading_unit, with_units
+from mcchain.ensemble.units import (
+    in_reading_unit,
+    interval_with_units,
+    reading_unit,
+    with_units,
+)
 from mcchain.runs import open_run
 from mcchain.scene.study import Requirement
 from mcchain.testing import browser
@@ -64,6 +69,7 @@ def test_with_units__reading_value_with_si_beside() -> None:
     assert with_units(12.0, "N") == "12 N"  # already in its reading unit: once
     assert with_units(0.9, "1") == "0.9"
     assert with_units(math.nan, "N") == "NaN"
+    assert in_reading_unit(5000.0, "N") == "5 kN" and in_reading_unit(0.9, "1") == "0.9"
     assert interval_with_units(16302.9, 13304.7, 19014.3, "N") == (
         "16.3 [13.3, 19.01] kN (16302.9 [13304.7, 19014.3] N)"
     )
@@ -173,7 +179,7 @@ def test_page__carries_every_figure_and_needs_nothing_else(reported_run: Path) -
 def test_page__titled_after_the_scene_and_its_question(reported_run: Path) -> None:
     page = parse(reported_run / "report" / "index.html")
     ds = open_run(reported_run)
-    limit = with_units(summarize(ds)[0].limit, "rad s-1").split(" (")[0]
+    limit = in_reading_unit(summarize(ds)[0].limit, "rad s-1")
     expected = f"{ds.attrs['scene_name']}: omega[mode=0] ≤ {limit} in 99 % of instances?"
     assert page.title == expected and page.headings[0] == expected
     assert reported_run.name not in page.title

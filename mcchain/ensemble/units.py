@@ -9,6 +9,7 @@ the stored SI value beside it, so the number a CSV holds can always be found aga
   (one choice per column or axis, so that every value of one quantity reads alike);
 * :func:`with_units` — ``"24 µm (2.39912e-05 m)"``, ``"5 kN (5000 N)"``,
   ``"10 Hz (62.83 rad/s)"``; a value already in its reading unit is written once;
+* :func:`in_reading_unit` — the reading value alone (``"5 kN"``), for titles;
 * :func:`interval_with_units` — a value and its interval in one unit;
 * :func:`pretty_units` — a CF string as text (``rad s-1`` -> ``rad/s``, ``1`` -> ``""``).
 
@@ -108,6 +109,18 @@ def with_units(
         return _joined(_number(value, si_digits), si)
     reading = _joined(_number(scale * value, digits), unit)
     return f"{reading} ({_joined(_number(value, si_digits), si)})"
+
+
+def in_reading_unit(
+    value: float, units: str, magnitude: float | None = None, digits: int = 4
+) -> str:
+    """``value`` in its reading unit only (``"5 kN"``), for a title or a label where the SI
+    value is given elsewhere."""
+    value = float(value)
+    if not math.isfinite(value):
+        return _number(value, digits)
+    unit, scale = reading_unit(units, abs(value) if magnitude is None else magnitude)
+    return _joined(_number(scale * value, digits), unit)
 
 
 def interval_with_units(

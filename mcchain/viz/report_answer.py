@@ -22,8 +22,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mcchain.decision.requirements import stored_requirements
 from mcchain.ensemble.queries import dim_names
-from mcchain.ensemble.units import interval_with_units, units_of, with_units
+from mcchain.ensemble.units import in_reading_unit, interval_with_units, units_of, with_units
 from mcchain.viz.page import esc, table
 from mcchain.viz.scatter import param_reading
 
@@ -53,6 +54,25 @@ class Units:
         )
         units = ds["param_units"].values if "param_units" in ds.coords else ["1"] * len(self.paths)
         self.param_units = {p: str(u) for p, u in zip(self.paths, units, strict=True)}
+        self.requirements = {r.name: r for r in stored_requirements(ds)}
+
+    def limits(self, s: RequirementSummary, reading_only: bool = False) -> str:
+        """A requirement's band as text, both limits when it has both:
+        ``"0.5 Hz (3.142 rad/s) ≤ omega[mode=0] ≤ 2 Hz (12.57 rad/s)"``, ``"x ≤ 5 kN"``."""
+        r = self.requirements.get(s.name)
+        if r is not None:
+            low, high = r.min, r.max
+        else:  # a summary without its stored requirement: the side it was judged on
+            low, high = (None, s.limit) if s.side == "max" else (s.limit, None)
+        unit = self.output(s.output.split("[", 1)[0])
+        size = max(abs(v) for v in (low, high) if v is not None)
+        shown = in_reading_unit if reading_only else with_units
+        text = s.output
+        if low is not None:
+            text = f"{shown(low, unit, magnitude=size)} ≤ {text}"
+        if high is not None:
+            text = f"{text} ≤ {shown(high, unit, magnitude=size)}"
+        return text
 
     def output(self, name: str) -> str:
         """CF units of an output variable ("" when unknown)."""
@@ -96,16 +116,13 @@ def _range(units: Units, r: AllocationRow) -> str:
 
 def sentence(s: RequirementSummary, rows: list[AllocationRow], units: Units) -> str:
     """The answer for one requirement, as HTML (one paragraph)."""
-    unit = units.output(s.output.split("[", 1)[0])
-    op = "≤" if s.side == "max" else "≥"
-    limit = with_units(s.limit, unit)
     interval = (
         f"{percent(s.confidence)} interval {percent(s.p_lower)}–{percent(s.p_upper)}, {s.interval}"
     )
     compare = {"pass": "within", "fail": "beyond", "undecided": "undecided against"}[s.decision]
     text = (
         f'<b class="{s.decision}">{esc(s.name)}: {VERDICT_WORDS[s.decision]}.</b> '
-        f"{esc(s.output)} {op} {esc(limit)} fails in {s.failures} of {s.samples} samples"
+        f"{esc(units.limits(s))} fails in {s.failures} of {s.samples} samples"
         + (f" ({s.undefined} undefined: failed instances)" if s.undefined else "")
         + f": P(fail) = {percent(s.p_fail)} ({esc(interval)}), {compare} the target "
         f"{percent(s.target)}."
@@ -168,7 +185,7 @@ def requirement_tables(
         body.append(
             [
                 esc(s.name),
-                esc(s.output) + (" ≤ " if s.side == "max" else " ≥ ") + value(s.limit),
+                esc(units.limits(s)),
                 f'<span class="{s.decision}">{esc(s.verdict)}</span>',
                 f"{s.failures} / {s.samples} ({s.undefined} undefined)",
                 f"{percent(s.p_fail)} [{percent(s.p_lower)}, {percent(s.p_upper)}]",

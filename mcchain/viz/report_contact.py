@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names, largest, peak_abs_over_time, sample_ids
-from mcchain.ensemble.units import reading_unit, with_units
+from mcchain.ensemble.units import in_reading_unit, reading_unit
 from mcchain.viz import contact
 from mcchain.viz.figures import block, figure, panel_title, suptitle
 from mcchain.viz.scatter import param_axis, parameter_scatter
@@ -183,7 +183,7 @@ def orbit_figure(
             assert orbit is not None  # q present and joint k is a clearance joint
             at = int(np.flatnonzero(orbit.joints == k)[0])
             drawn |= _draw_orbit(ax, orbit.offset[:, at], orbit.state[:, at])
-            force = with_units(float(peaks[pos, i]), "N").split(" (")[0]  # reading unit
+            force = in_reading_unit(float(peaks[pos, i]), "N")
             lines = [f"sample {ids[pos]}: {labels[i]} = {force}"]
             if params is not None:
                 named = [param_axis(p, params[:, c]) for c, p in enumerate(paths)]

@@ -129,10 +129,9 @@ def question(ds: xr.Dataset, summaries: list[RequirementSummary]) -> str:
     units = Units(ds)
     asked = []
     for s in summaries:
-        unit = units.output(s.output.split("[", 1)[0])
-        limit = with_units(s.limit, unit).split(" (", 1)[0]  # the reading value only
-        op = "≤" if s.side == "max" else "≥"
-        asked.append(f"{s.output} {op} {limit} in {percent(1.0 - s.target)} of instances?")
+        asked.append(
+            f"{units.limits(s, reading_only=True)} in {percent(1.0 - s.target)} of instances?"
+        )
     return f"{scene}: " + "; ".join(asked)
 
 
