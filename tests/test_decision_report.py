@@ -36,10 +36,13 @@ def test_requirements_png__zero_failure_bins_are_upper_bounds_on_a_log_axis(
     upper bound 1 − (1 − C)^(1/n), not as a point at 0; the bound is the success-run figure
     turned around (299 failure-free samples show P(fail) <= 1 % at 95 %: 298.07 rounded up)."""
     from mcchain.runs import open_run
-    from mcchain.viz.report_requirements import requirements_figure, zero_failure_bound
+    from mcchain.viz.report_requirements import requirements_figure
 
-    assert zero_failure_bound(np.array([299]), 0.95)[0] <= 0.01  # ln 0.05 / ln 0.99 = 298.07
-    assert zero_failure_bound(np.array([298]), 0.95)[0] > 0.01
+    x = np.arange(600.0)
+    _, _, _, hi, _, count = binned_failure(x, np.zeros(600, dtype=bool), 0.95)
+    np.testing.assert_allclose(hi, 1.0 - 0.05 ** (1.0 / count))  # the closed form at k = 0
+    _, _, _, hi, _, _ = binned_failure(np.arange(299.0), np.zeros(299, dtype=bool), 0.95)
+    assert hi[0] > 0.01  # 12 bins of ~25: each bound is far above the 1 % of 299 together
     fig = requirements_figure(open_run(reported_run))
     assert not isinstance(fig, str)
     exceedance_ax, inertia_ax = fig.axes[:2]

@@ -24,7 +24,7 @@ import xarray as xr
 from PIL import Image
 from test_decision_closed_form import pinned_bar_text, run_pinned_bar
 
-from mcchain.decision.summary import allocations, summarize
+from mcchain.decision.summary import allocations, interval_name, summarize
 from mcchain.ensemble.units import (
     in_reading_unit,
     interval_with_units,
@@ -46,7 +46,8 @@ VERDICT_BORDERS = {(0x2C, 0x8A, 0x2C), (0xC0, 0x20, 0x20), (0xC0, 0x80, 0x00)}
 # -- units ----------------------------------------------------------------------------------------
 def test_reading_unit__the_documented_rules() -> None:
     assert reading_unit("m", 2.4e-4) == ("mm", 1e3)
-    assert reading_unit("m", 5e-5) == ("µm", 1e6)
+    assert reading_unit("m", 5e-5) == ("mm", 1e3)  # clearances read in mm
+    assert reading_unit("m", 5e-7) == ("nm", 1e9)
     assert reading_unit("m", 0.2) == ("m", 1.0)
     assert reading_unit("N", 5000.0) == ("kN", 1e-3)
     assert reading_unit("N", 2e6) == ("MN", 1e-6)
@@ -64,7 +65,7 @@ def test_reading_unit__the_documented_rules() -> None:
 def test_with_units__reading_value_with_si_beside() -> None:
     assert with_units(5000.0, "N") == "5 kN (5000 N)"
     assert with_units(2.39912e-05, "m", magnitude=4e-4) == "0.02399 mm (2.39912e-05 m)"
-    assert with_units(2.39912e-05, "m") == "23.99 µm (2.39912e-05 m)"
+    assert with_units(2.39912e-05, "m") == "0.02399 mm (2.39912e-05 m)"
     assert with_units(2 * math.pi * 10.0, "rad s-1") == "10 Hz (62.8319 rad/s)"
     assert with_units(12.0, "N") == "12 N"  # already in its reading unit: once
     assert with_units(0.9, "1") == "0.9"
@@ -195,9 +196,10 @@ def test_page__the_answer_comes_first_in_one_sentence_with_units(reported_run: P
     assert answer.startswith("pulsation: FAIL.")
     limit = with_units(s.limit, "rad s-1")
     assert f"omega[mode=0] ≤ {limit} fails in {s.failures} of {SAMPLES} samples" in answer
-    p = f"P(fail) = {100 * s.p_fail:.3g} % (95 % interval {100 * s.p_lower:.3g} %–"
-    assert p + f"{100 * s.p_upper:.3g} %, exact Clopper–Pearson)" in answer
-    assert s.interval == "exact Clopper–Pearson"
+    name = interval_name(s)  # the decision layer's name, quoted, never written here
+    assert name == "95 % bounds (each one-sided; together a 90 % interval)"
+    p = f"P(fail) = {100 * s.p_fail:.3g} % ({name}: {100 * s.p_lower:.3g} %–"
+    assert p + f"{100 * s.p_upper:.3g} %), beyond the target 1 %." in answer
     (row,) = allocations(ds)  # J cut from below: large J lowers p
     bound = with_units(row.bound, "kg m2", magnitude=0.5)
     assert f"Binding parameter: inertia bar ≥ {bound} keeps" in answer
@@ -242,9 +244,9 @@ def test_page__an_until_run_names_its_sequential_interval(until_run: Path) -> No
     page = parse(until_run / "report" / "index.html")
     text = " ".join(page.text)
     (s,) = summarize(open_run(until_run))
-    assert s.interval.startswith("sequential: confidence sequence")
-    assert s.interval in page.answers[0]
-    assert "exact Clopper" not in text
+    assert s.sequential and interval_name(s).startswith("95 % sequential bounds")
+    assert f"({interval_name(s)}: " in page.answers[0]
+    assert "Clopper" not in text  # neither in the answer nor in the tables
     assert "until decided: batches of 500" in text
 
 
@@ -252,7 +254,7 @@ def test_outputs_table__any_per_sample_variable_with_its_own_units() -> None:
     """A variable the registry does not know (a scene's ``[[output]]``) is shown from its own
     attributes; −1 of an integer output is "not applicable"; histories are not outputs."""
     n = 101
-    gap = np.linspace(0.0, 5e-5, n)  # m, below 0.1 mm: read in µm
+    gap = np.linspace(0.0, 5e-5, n)  # m, below 0.1 m: read in mm
     gap_attrs = {"units": "m", "long_name": "largest pin gap"}
     ds = xr.Dataset(
         {
@@ -268,7 +270,7 @@ def test_outputs_table__any_per_sample_variable_with_its_own_units() -> None:
     page.feed(report_outputs.outputs_table(ds))
     text = " ".join(page.text)
     median = with_units(2.5e-5, "m", magnitude=5e-5)
-    assert median == "25 µm (2.5e-05 m)"
+    assert median == "0.025 mm (2.5e-05 m)"
     assert f"pin_gap[B] largest pin gap m {median}" in text
     assert "pin_gap[C]" not in text and "impact_count[C]" not in text  # no value left
     assert "impact_count[B]" in text and f"3 of {n}" not in text and f"{n} of {n}" in text

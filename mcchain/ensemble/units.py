@@ -7,13 +7,13 @@ the stored SI value beside it, so the number a CSV holds can always be found aga
 
 * :func:`reading_unit` — the reading unit and its scale for values of a given magnitude
   (one choice per column or axis, so that every value of one quantity reads alike);
-* :func:`with_units` — ``"24 µm (2.39912e-05 m)"``, ``"5 kN (5000 N)"``,
+* :func:`with_units` — ``"0.02399 mm (2.39912e-05 m)"``, ``"5 kN (5000 N)"``,
   ``"10 Hz (62.83 rad/s)"``; a value already in its reading unit is written once;
 * :func:`in_reading_unit` — the reading value alone (``"5 kN"``), for titles;
 * :func:`interval_with_units` — a value and its interval in one unit;
 * :func:`pretty_units` — a CF string as text (``rad s-1`` -> ``rad/s``, ``1`` -> ``""``).
 
-Rules (documented here only): lengths below 0.1 m read in mm, below 0.1 mm in µm; forces,
+Rules (documented here only): lengths below 0.1 m read in mm, below 1 µm in nm; forces,
 moments, pressures and energies of 1000 and more in k..., of 10⁶ and more in M... (and G
 for pressures); times below 1 s in ms, below 1 ms in µs; pulsations (rad/s) in Hz
 (f = ω/2π); angles in degrees. Any other unit is kept as it is.
@@ -40,8 +40,9 @@ PRETTY = {
 
 SMALL_LENGTH = 0.1
 """Lengths (m) whose magnitude stays below this read in mm."""
-TINY_LENGTH = 1e-4
-"""Lengths (m) whose magnitude stays below this read in µm."""
+TINY_LENGTH = 1e-6
+"""Lengths (m) whose magnitude stays below this read in nm (from 1 µm up, mm: engineers
+write clearances and penetrations in mm, 0.024 mm, as :mod:`mcchain.decision.units` does)."""
 
 _PREFIXED = {"N": ("kN", "MN"), "N m": ("kN m", "MN m"), "J": ("kJ", "MJ"), "Pa": ("kPa", "MPa")}
 """Units read with a k or M prefix from 10³ and 10⁶ on (pressures: G from 10⁹)."""
@@ -60,7 +61,7 @@ def reading_unit(units: str, magnitude: float) -> tuple[str, float]:
     units = units.strip()
     size = abs(float(magnitude)) if math.isfinite(magnitude) else 0.0
     if units == "m" and 0.0 < size < SMALL_LENGTH:
-        return ("µm", 1e6) if size < TINY_LENGTH else ("mm", 1e3)
+        return ("nm", 1e9) if size < TINY_LENGTH else ("mm", 1e3)
     if units == "s" and 0.0 < size < 1.0:
         return ("µs", 1e6) if size < 1e-3 else ("ms", 1e3)
     if units == "rad s-1":

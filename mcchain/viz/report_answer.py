@@ -1,7 +1,7 @@
 """The answer of the report page: one sentence per requirement, then the tables behind it.
 
 Each sentence says the verdict, P(fail) with its interval (named as the decision layer names
-it: :attr:`mcchain.decision.summary.RequirementSummary.interval`) and confidence, and the
+it: :func:`mcchain.decision.summary.interval_name`) and confidence, and the
 binding parameter with its allocated range, every value in its reading unit with SI beside
 it (:func:`mcchain.ensemble.units.with_units`).
 
@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mcchain.decision.requirements import stored_requirements
+from mcchain.decision.summary import interval_name
 from mcchain.ensemble.queries import dim_names
 from mcchain.ensemble.units import in_reading_unit, interval_with_units, units_of, with_units
 from mcchain.viz.page import esc, table
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
     from mcchain.decision.summary import AllocationRow, RequirementSummary
 
-VERDICT_WORDS = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED"}
+VERDICT_WORDS = {"pass": "PASS", "fail": "FAIL", "undecided": "UNDECIDED", "empty": "NO VERDICT"}
 
 
 def percent(p: float) -> str:
@@ -54,17 +54,25 @@ class Units:
         )
         units = ds["param_units"].values if "param_units" in ds.coords else ["1"] * len(self.paths)
         self.param_units = {p: str(u) for p, u in zip(self.paths, units, strict=True)}
-        self.requirements = {r.name: r for r in stored_requirements(ds)}
+
+    def output(self, name: str) -> str:
+        """CF units of an output variable ("" when unknown)."""
+        attrs = self.ds[name].attrs if name in self.ds.variables else {}
+        return units_of(attrs, name) or ""
+
+    def of(self, s: RequirementSummary) -> str:
+        """CF units of a requirement's output: the variable's, or, for a mixed unit (``q_eq``:
+        ``m (x, y), rad (theta)``), the one the decision layer resolved from the selection."""
+        units = self.output(s.output.split("[", 1)[0])
+        return s.units if "(" in units else units
 
     def limits(self, s: RequirementSummary, reading_only: bool = False) -> str:
         """A requirement's band as text, both limits when it has both:
         ``"0.5 Hz (3.142 rad/s) ≤ omega[mode=0] ≤ 2 Hz (12.57 rad/s)"``, ``"x ≤ 5 kN"``."""
-        r = self.requirements.get(s.name)
-        if r is not None:
-            low, high = r.min, r.max
-        else:  # a summary without its stored requirement: the side it was judged on
+        low, high = (None if math.isnan(v) else v for v in (s.minimum, s.maximum))
+        if low is None and high is None:  # a summary without its limits: the side judged
             low, high = (None, s.limit) if s.side == "max" else (s.limit, None)
-        unit = self.output(s.output.split("[", 1)[0])
+        unit = self.of(s)
         size = max(abs(v) for v in (low, high) if v is not None)
         shown = in_reading_unit if reading_only else with_units
         text = s.output
@@ -73,11 +81,6 @@ class Units:
         if high is not None:
             text = f"{text} ≤ {shown(high, unit, magnitude=size)}"
         return text
-
-    def output(self, name: str) -> str:
-        """CF units of an output variable ("" when unknown)."""
-        attrs = self.ds[name].attrs if name in self.ds.variables else {}
-        return units_of(attrs, name) or ""
 
     def param(self, path: str) -> tuple[str, str, float]:
         """(name as an axis reads it, CF units, largest |value| sampled) of a parameter."""
@@ -116,10 +119,13 @@ def _range(units: Units, r: AllocationRow) -> str:
 
 def sentence(s: RequirementSummary, rows: list[AllocationRow], units: Units) -> str:
     """The answer for one requirement, as HTML (one paragraph)."""
-    interval = (
-        f"{percent(s.confidence)} interval {percent(s.p_lower)}–{percent(s.p_upper)}, {s.interval}"
-    )
-    compare = {"pass": "within", "fail": "beyond", "undecided": "undecided against"}[s.decision]
+    interval = f"{interval_name(s)}: {percent(s.p_lower)}–{percent(s.p_upper)}"
+    compare = {
+        "pass": "within",
+        "fail": "beyond",
+        "undecided": "undecided against",
+        "empty": "not comparable (the sequential bounds crossed) with",
+    }[s.decision]
     text = (
         f'<b class="{s.decision}">{esc(s.name)}: {VERDICT_WORDS[s.decision]}.</b> '
         f"{esc(units.limits(s))} fails in {s.failures} of {s.samples} samples"
@@ -143,8 +149,8 @@ def sentence(s: RequirementSummary, rows: list[AllocationRow], units: Units) -> 
             f"<b>{esc(name)}</b> (its best one-sided cut, from the {row.side} side, keeps "
             f"{row.samples_kept} samples and P(fail) ≤ {percent(row.p_upper)})."
         )
-    if not s.exact and "sequential" not in s.interval:
-        text += " The interval is approximate: the design's samples are not independent draws."
+    if not s.exact:
+        text += " The bounds are approximate: the design's samples are not independent draws."
     return f'<p class="answer {s.decision}">{text}</p>'
 
 
@@ -171,7 +177,7 @@ def requirement_tables(
     units = Units(ds)
     body = []
     for s in summaries:
-        unit = units.output(s.output.split("[", 1)[0])
+        unit = units.of(s)
         size = abs(s.limit) if math.isfinite(s.limit) else abs(s.quantile)
 
         def value(x: float, unit: str = unit, size: float = size) -> str:
@@ -189,7 +195,7 @@ def requirement_tables(
                 f'<span class="{s.decision}">{esc(s.verdict)}</span>',
                 f"{s.failures} / {s.samples} ({s.undefined} undefined)",
                 f"{percent(s.p_fail)} [{percent(s.p_lower)}, {percent(s.p_upper)}]",
-                esc(s.interval),
+                esc(interval_name(s)),
                 f"{percent(s.target)} at {percent(s.confidence)}",
                 f"{100 * s.level:.3g} %: {quantile}",
             ]
@@ -199,8 +205,8 @@ def requirement_tables(
         "limit",
         "verdict",
         "failures / samples",
-        "P(fail) [interval]",
-        "interval",
+        "P(fail) [bounds]",
+        "bounds",
         "target at confidence",
         "quantile at the target [interval]",
     ]

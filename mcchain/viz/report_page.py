@@ -52,9 +52,9 @@ CAPTIONS = {
     "requirements": "Per requirement: the exceedance curve of the output (share of samples "
     "beyond x, log scale) with its confidence band, the limit (dashed) and the target "
     "(dotted); then P(fail) against each sampled parameter in equal-count bins on a log axis: "
-    "bins with failures with their two-sided Clopper–Pearson interval, bins without a failure "
-    "as their one-sided upper bound (▽), and the allocated bound (green; the kept side "
-    "unshaded).",
+    "bins with failures between their exact one-sided bounds at the requirement's confidence, "
+    "bins without a failure as their upper bound (▽), and the allocated bound (green; the kept "
+    "side unshaded).",
     "omega_histogram": "Histogram of each eigenpulsation, in rad/s and Hz.",
     "modes_along_cycle": "Natural frequencies along one turn of the driver, against the "
     "drive's harmonics.",

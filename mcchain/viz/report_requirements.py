@@ -4,12 +4,13 @@ One row per requirement:
 
 * first panel: the exceedance curve of the output on a log scale — P(output > x) for a
   ``max`` (P(output < x) for a ``min``), the share of samples beyond x — with its pointwise
-  Clopper–Pearson band, the limit (vertical) and the target (horizontal). The curve crosses
-  the limit at the failure probability; it crosses the target at the quantile of
-  ``requirements.csv``.
+  band between the one-sided bounds at the requirement's confidence, the limit (vertical)
+  and the target (horizontal). The curve crosses the limit at the failure probability; it
+  crosses the target at the quantile of ``requirements.csv``.
 * one panel per sampled parameter: P(fail) in equal-count bins of the parameter on a log
-  axis, each bin with failures with its two-sided Clopper–Pearson interval, each bin
-  without a failure as its one-sided upper bound (hollow ▽), the target, and the allocated
+  axis, each bin with failures between its exact one-sided bounds at the requirement's
+  confidence (as the verdict reads P(fail)), each bin without a failure as its upper bound
+  (hollow ▽), the target, and the allocated
   bound of ``allocation.csv`` (the kept side unshaded).
 
 Axes are in reading units (kN, mm: :mod:`mcchain.ensemble.units`).
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.decision.requirements import requirement_values, stored_requirements
-from mcchain.decision.stats import clopper_pearson_arrays
+from mcchain.decision.stats import one_sided_bounds_arrays
 from mcchain.decision.summary import allocations, met_of, output_label, quantile_side
 from mcchain.ensemble.units import reading_unit, units_of
 from mcchain.viz.figures import figure, panel_title, suptitle
@@ -60,7 +61,7 @@ def exceedance(
         beyond = finite.size - np.searchsorted(finite, grid, side="right") + undefined
     else:
         beyond = np.searchsorted(finite, grid, side="left") + undefined
-    lo, hi = clopper_pearson_arrays(beyond, np.full(beyond.shape, n), confidence)
+    lo, hi = one_sided_bounds_arrays(beyond, np.full(beyond.shape, n), confidence)
     return grid, beyond / n, lo, hi
 
 
@@ -105,17 +106,13 @@ def _exceedance_panel(
     )
 
 
-def zero_failure_bound(samples: np.ndarray, confidence: float) -> np.ndarray:
-    """The one-sided upper confidence bound of P(fail) for bins of ``samples`` without a
-    failure: 1 − (1 − C)^(1/n) (Clopper–Pearson's one-sided bound at k = 0)."""
-    return 1.0 - (1.0 - confidence) ** (1.0 / np.asarray(samples, dtype=np.float64))
-
-
 def binned_failure(
     x: np.ndarray, failed: np.ndarray, confidence: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(bin centres, P(fail), interval low, high, bin edges, samples per bin) in
-    equal-count bins of ``x`` (two-sided Clopper–Pearson intervals at ``confidence``)."""
+    """(bin centres, P(fail), lower bound, upper bound, bin edges, samples per bin) in
+    equal-count bins of ``x``; the bounds are the exact one-sided bounds at ``confidence``
+    each, as the verdict reads them (:func:`mcchain.decision.stats.one_sided_bounds`; with
+    no failure the upper one is 1 − (1 − C)^(1/n))."""
     n = x.size
     nbins = int(max(1, min(MAX_BINS, n // MIN_PER_BIN)))
     edges = np.unique(np.quantile(x, np.linspace(0.0, 1.0, nbins + 1)))
@@ -123,7 +120,7 @@ def binned_failure(
     count = np.bincount(which, minlength=max(edges.size - 1, 1))
     fails = np.bincount(which, weights=failed.astype(float), minlength=count.size)
     keep = count > 0
-    lo, hi = clopper_pearson_arrays(fails[keep], count[keep], confidence)
+    lo, hi = one_sided_bounds_arrays(fails[keep], count[keep], confidence)
     centres = 0.5 * (edges[:-1] + edges[1:]) if edges.size > 1 else edges
     return centres[keep], fails[keep] / count[keep], lo, hi, edges, count[keep]
 
@@ -136,11 +133,11 @@ def _parameter_panel(
     failed: np.ndarray,
     allocation: AllocationRow | None,
 ) -> None:
-    """P(fail) in bins of one parameter on a log axis: bins with failures as points with
-    their two-sided interval, bins without as their one-sided upper bound (a hollow ▽:
-    zero cannot be drawn on a log axis, and "≤ bound" is what such a bin shows)."""
+    """P(fail) in bins of one parameter on a log axis: bins with failures as points between
+    their one-sided bounds, bins without as their upper bound (a hollow ▽: zero cannot be
+    drawn on a log axis, and "≤ bound" is what such a bin shows)."""
     name, unit, scale = param_reading(path, x)
-    centres, p, lo, hi, edges, count = binned_failure(x, failed, requirement.confidence)
+    centres, p, lo, hi, edges, _ = binned_failure(x, failed, requirement.confidence)
     some = p > 0
     if some.any():
         ax.errorbar(
@@ -151,9 +148,9 @@ def _parameter_panel(
             color="C0",
             markersize=3,
             capsize=2,
-            label="P(fail), two-sided interval",
+            label="P(fail), one-sided bounds",
         )
-    bound = zero_failure_bound(count[~some], requirement.confidence)
+    bound = hi[~some]  # no failure: its one-sided upper bound, 1 − (1 − C)^(1/n)
     if bound.size:
         ax.plot(
             scale * centres[~some], bound, "v", color="C0", markerfacecolor="none", markersize=5,
