@@ -208,7 +208,7 @@ def requirement_tables(
         "P(fail) [bounds]",
         "bounds",
         "target at confidence",
-        "quantile at the target [interval]",
+        "quantile at the target [bounds]",
     ]
     parts = ['<section id="requirements"><h2>Requirements</h2>', table(header, body)]
     if rows:
