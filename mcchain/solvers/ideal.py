@@ -20,8 +20,9 @@ This was chosen over a position analysis of the ideal mechanism at each step end
 where the ideal mechanism is fully driven, zero degrees of freedom, and cheaper there: a
 Newton solve per step end instead of the copy's stages): the copy works for every
 mechanism (a pendulum, a four-bar with a free rocker) and every method by construction,
-is as accurate as the mechanism's own integration (1e-14 m against the closed-form ideal
-slider-crank at rk45's rtol 1e-13), and costs about the mechanism's own integration again
+is as accurate as the mechanism's own integration (4e-15 m against the closed-form ideal
+slider-crank at rk45's rtol 1e-13), and costs about the mechanism's own integration again:
+1.9–2.5× the run without it on the shipped slider-crank and four-bar
 (benchmarks/results/outputs).
 """
 
