@@ -6,7 +6,10 @@ Files written into ``RUN/export/``:
 
 * ``requirements.csv`` — :data:`REQUIREMENT_COLUMNS`, one row per requirement;
 * ``allocation.csv`` — :data:`ALLOCATION_COLUMNS`, one row per requirement and sampled
-  parameter;
+  parameter; ``allocation-box.csv`` — :data:`BOX_COLUMNS`, the box over all the parameters
+  (:mod:`mcchain.decision.allocation_table`);
+* ``whatif.csv`` and ``whatif.png`` — P(fail) for narrowed parameter ranges, reweighted
+  from the same samples (:mod:`mcchain.decision.whatif`);
 * ``requirements.txt`` — :func:`summary_lines`: verdicts in words, samples needed, the
   success-run figure, and which interval the design gets.
 
@@ -28,9 +31,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.decision.allocation_table import (
+    ALLOCATION_COLUMNS,
+    BOX_COLUMNS,
+    AllocationRow,
+    BoxRow,
+    allocation_lines,
+    allocations,
+    box_allocations,
+)
 from mcchain.decision.requirements import (
     VARIABLE,
-    allocate,
     requirement_met,
     requirement_values,
     stored_requirements,
@@ -67,8 +78,6 @@ REQUIREMENT_COLUMNS = (
     "quantile_upper",
 )
 """Columns of ``requirements.csv``, exactly (a contract)."""
-ALLOCATION_COLUMNS = ("requirement", "parameter", "side", "bound", "samples_kept", "p_upper")
-"""Columns of ``allocation.csv``, exactly (a contract)."""
 EXACT_DESIGNS = ("random",)
 """Designs whose samples are independent draws: the binomial interval is exact."""
 APPROXIMATE = " (approximate)"
@@ -139,21 +148,6 @@ class RequirementSummary:
             "quantile_lower": self.quantile_lower,
             "quantile_upper": self.quantile_upper,
         }
-
-
-@dataclass(frozen=True)
-class AllocationRow:
-    """One row of ``allocation.csv``."""
-
-    requirement: str
-    parameter: str
-    side: str
-    bound: float
-    samples_kept: int
-    p_upper: float
-
-    def row(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in ALLOCATION_COLUMNS}
 
 
 def design_of(ds: xr.Dataset) -> str | None:
@@ -259,24 +253,6 @@ def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
     return out
 
 
-def allocations(ds: xr.Dataset) -> list[AllocationRow]:
-    """The tolerance allocation of every requirement over every sampled parameter."""
-    requirements = stored_requirements(ds)
-    if not requirements or "parameters" not in ds.data_vars or "param" not in ds.dims:
-        return []
-    params = np.asarray(ds["parameters"].transpose("sample", "param").values, dtype=np.float64)
-    paths = [str(p) for p in ds["param"].values]
-    rows = []
-    for requirement in requirements:
-        met = met_of(ds, requirement, requirement_values(ds, requirement))
-        for j, path in enumerate(paths):
-            a = allocate(params[:, j], met, requirement.target, requirement.confidence)
-            rows.append(
-                AllocationRow(requirement.name, path, a.side, a.bound, a.samples_kept, a.p_upper)
-            )
-    return rows
-
-
 # -- words ---------------------------------------------------------------------------------
 def _g(x: float, digits: int = 4) -> str:
     return "NaN" if isinstance(x, float) and math.isnan(x) else f"{x:.{digits}g}"
@@ -336,40 +312,25 @@ def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
     return lines
 
 
-def allocation_lines(rows: list[AllocationRow], requirement: str) -> list[str]:
-    """The allocation of one requirement in words."""
-    lines = []
-    for r in rows:
-        if r.requirement != requirement:
-            continue
-        if math.isnan(r.bound):
-            lines.append(
-                f"  {r.parameter}: no one-sided range reaches the target (best: p_upper "
-                f"{_g(r.p_upper)} keeping {r.samples_kept} samples, cut from the {r.side} side)"
-            )
-        else:
-            op = "<=" if r.side == "upper" else ">="
-            lines.append(
-                f"  {r.parameter} {op} {_g(r.bound, 6)} keeps p_upper {_g(r.p_upper)} "
-                f"({r.samples_kept} samples kept)"
-            )
-    return lines
-
-
 def summary_lines(
     summaries: list[RequirementSummary],
     rows: list[AllocationRow],
     design: str | None,
     sequential: Mapping[str, Any] | None = None,
+    boxes: list[BoxRow] | None = None,
 ) -> list[str]:
     """``requirements.txt`` (and the end of ``mcchain run``): every requirement in words,
-    its allocation, and the interval's validity for the design."""
+    its allocation (``boxes``: the box over the parameters too), and the interval's
+    validity for the design."""
     lines = []
     for s in summaries:
         lines += requirement_lines(s, design)
-        alloc = allocation_lines(rows, s.name)
+        alloc = allocation_lines(rows, s.name, boxes)
         if alloc:
-            lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
+            lines.append(
+                "  tolerance allocation (each parameter alone, the others as sampled; bounds "
+                "valid over every cut tried):"
+            )
             lines += alloc
     if summaries and sequential is not None:
         lines.append(
@@ -417,21 +378,25 @@ def write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) 
 
 
 def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
-    """``requirements.csv``, ``allocation.csv`` and ``requirements.txt`` into ``folder``."""
+    """``requirements.csv``, ``allocation.csv``, ``allocation-box.csv`` (two or more sampled
+    parameters), ``requirements.txt``, ``whatif.csv`` and ``whatif.png`` into ``folder``."""
+    from mcchain.decision.whatif import write_whatif
     from mcchain.ensemble.io import write_text_atomic
 
     summaries = summarize(ds)
     rows = allocations(ds)
+    boxes = box_allocations(ds)
     folder.mkdir(parents=True, exist_ok=True)
-    paths = [folder / "requirements.csv", folder / "allocation.csv", folder / "requirements.txt"]
+    paths = [folder / "requirements.csv", folder / "allocation.csv"]
     write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
     write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
-    write_text_atomic(
-        paths[2],
-        "\n".join(summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs)))
-        + "\n",
-    )
-    return paths
+    if boxes:
+        paths.append(folder / "allocation-box.csv")
+        write_csv(paths[-1], BOX_COLUMNS, [b.row() for b in boxes])
+    paths.append(folder / "requirements.txt")
+    lines = summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs), boxes)
+    write_text_atomic(paths[-1], "\n".join(lines) + "\n")
+    return paths + write_whatif(ds, folder)
 
 
 def export_requirements(run: str | Path) -> list[Path]:
