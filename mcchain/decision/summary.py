@@ -409,11 +409,11 @@ def export_requirements(run: str | Path) -> list[Path]:
     from mcchain.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
-    ds = open_run(folder)
-    if not stored_requirements(ds):
-        raise RunError(
-            f"{run}: the run has no [[requirement]]: nothing to export with --requirements"
-        )
-    target = folder / "export"
-    writable_folder(target, "--requirements")
-    return write_requirements(ds, target)
+    with open_run(folder) as ds:  # closed after: xarray shares the file with later opens
+        if not stored_requirements(ds):
+            raise RunError(
+                f"{run}: the run has no [[requirement]]: nothing to export with --requirements"
+            )
+        target = folder / "export"
+        writable_folder(target, "--requirements")
+        return write_requirements(ds, target)
