@@ -275,8 +275,8 @@ def combine_modes(results: list[SubsetResult], last_margins: list[np.ndarray]) -
     combined.cov_levels = combined.cov_lineage = combined.cov
     if total == 0.0:
         combined.p_upper = math.fsum(r.p_upper for r in results)
-    for j, r in enumerate(results):
-        combined.warnings += [f"mode {j + 1}: {w}" for w in r.warnings]
+    for j, mode in enumerate(results):
+        combined.warnings += [f"mode {j + 1}: {w}" for w in mode.warnings]
     return combined
 
 

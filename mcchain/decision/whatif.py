@@ -132,7 +132,7 @@ class WhatIf:
 
 
 # -- statistics ------------------------------------------------------------------------------
-def kl_bernoulli(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+def kl_bernoulli(p: float | np.ndarray, q: float | np.ndarray) -> np.ndarray:
     """KL(Bernoulli(p) ‖ Bernoulli(q)), element by element (0 log 0 = 0)."""
     p, q = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
