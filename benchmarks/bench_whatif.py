@@ -94,8 +94,8 @@ def main() -> int:
         "",
         f"`python benchmarks/bench_whatif.py --samples {args.samples} --fresh {fresh_count}`: "
         f"limit {limit:.1f} N (median of a 256-sample pilot); base ensemble {args.samples} "
-        f"samples, seed 3 ({base_s:.0f} s); each fresh run {fresh_count} samples, seed 4. Bounds: each end "
-        "one-sided 95 %.",
+        f"samples, seed 3 ({base_s:.0f} s); each fresh run {fresh_count} samples, seed 4. "
+        "Bounds: each end one-sided 95 %.",
         "",
         "| parameter | change | share | distribution | reweighted P(fail) [bounds] | samples "
         "(n_eff) | fresh P(fail) [its own bounds] | fresh inside reweighted |",
