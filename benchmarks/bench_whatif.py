@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from mcchain import execution, open_run
-from mcchain.decision.stats import clopper_pearson
+from mcchain.decision.stats import one_sided_bounds
 from mcchain.decision.whatif import whatifs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -123,7 +123,7 @@ def main() -> int:
         with open_run(fresh) as ds:
             failed = ds["requirement_met"].values[:, 0] == 0
         k, n = int(failed.sum()), failed.size
-        lo, hi = clopper_pearson(k, n, 0.9)  # each end one-sided 95 %
+        lo, hi = one_sided_bounds(k, n, 0.95)
         held = [
             r.p_lower <= k / n <= r.p_upper for r in (pick(b, path, change, share) for b in bases)
         ]

@@ -249,9 +249,9 @@ def default_count(failures: int, kept: int, target: float, confidence: float) ->
     passes with no failure); else the smallest count at which the run passes with
     probability :data:`CONFIRM_POWER` if the rate seen inside is the true one (a planning
     figure: the rate of a range chosen on the same samples is, if anything, optimistic)."""
-    from mcchain.decision.stats import success_run_samples
+    from mcchain.decision.stats import success_run_count
 
-    success = math.ceil(success_run_samples(target, confidence))
+    success = success_run_count(target, confidence)
     if failures == 0 or kept == 0:
         return success, f"the success-run figure ln(1 - C)/ln(1 - {target:g})"
     rate = failures / kept

@@ -44,7 +44,7 @@ from scipy import stats
 from mcchain.decision.allocation_table import failed_samples
 from mcchain.decision.requirements import stored_requirements
 from mcchain.decision.sampled import SampledParameter, sampled_parameters
-from mcchain.decision.stats import clopper_pearson_arrays
+from mcchain.decision.stats import one_sided_bounds
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -171,8 +171,8 @@ def range_estimate(
     k = int(np.sum(failed & inside))
     if n == 0:
         return 0, 0, math.nan, 0.0, 1.0
-    lo, hi = clopper_pearson_arrays(np.array([k]), np.array([n]), 2 * confidence - 1)
-    return n, k, k / n, float(lo[0]), float(hi[0])
+    lo, hi = one_sided_bounds(k, n, confidence)
+    return n, k, k / n, lo, hi
 
 
 def weighted_estimate(
