@@ -206,15 +206,3 @@ def test_margin__two_limits_are_two_failure_modes() -> None:
     np.testing.assert_array_equal(m[:3], [[-2.0, -1.0], [3.0, -6.0], [-7.0, 4.0]])
     assert np.isnan(m[3]).all()
     assert margin(values, None, 2.0).shape == (4,)
-
-
-def test_requirement_input__failed_instances_and_never() -> None:
-    from mcchain.decision.rare import requirement_input
-    from mcchain.status import CONTACT_LOST, DIVERGED
-
-    values = np.array([[0.1, np.nan], [np.nan, 0.2], [0.3, 0.4]])
-    status = np.array([0, 0, DIVERGED])
-    x = requirement_input(values, status, "first_separation_time")  # NaN if never
-    assert x[0, 1] == np.inf and x[1, 0] == np.inf and np.isnan(x[2]).all()
-    y = requirement_input(np.array([np.nan, 1.0]), np.array([CONTACT_LOST, 0]), "omega")
-    assert np.isnan(y[0]) and y[1] == 1.0  # a warning bit is no failure; NaN stays NaN

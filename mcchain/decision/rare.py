@@ -75,25 +75,6 @@ def margin(values: np.ndarray, minimum: float | None, maximum: float | None) -> 
     return sides[0] if len(sides) == 1 else np.stack(sides, axis=-1)
 
 
-def requirement_input(values: np.ndarray, status: np.ndarray, output: str) -> np.ndarray:
-    """A requirement's values as the decision reads them: NaN on a sample with a failure
-    bit (a failed instance), +inf for an event time that is NaN without one ("never").
-
-    TODO(h-verdict): the decision layer's own function for this rule replaces this one.
-    """
-    from mcchain.ensemble.registry import VARIABLES
-    from mcchain.status import FAILURE_BITS
-
-    x = np.asarray(values, dtype=np.float64)
-    failed = (np.asarray(status).astype(np.int64) & FAILURE_BITS) != 0
-    failed = failed.reshape(failed.shape + (1,) * (x.ndim - failed.ndim))
-    x = np.where(failed, np.nan, x)
-    spec = VARIABLES.get(output)
-    if spec is not None and "NaN if never" in spec.long_name:
-        x = np.where(np.isnan(x) & ~failed, np.inf, x)
-    return x
-
-
 @dataclass(frozen=True)
 class RareResult:
     """What :func:`rare_run` wrote: the folder, the estimate and the CSV paths."""
@@ -253,7 +234,11 @@ def rare_run(
 
 def _response(scene: Any, requirement: Any, distributions: list[Any], parameters_of: Any) -> Any:
     """The batch response of a requirement: margins at standard-normal points."""
-    from mcchain.decision.requirements import check_requirements
+    from mcchain.decision.requirements import (
+        check_requirements,
+        decision_values,
+        defined_samples,
+    )
     from mcchain.scene import compile_model
     from mcchain.solvers import solve_chunk
 
@@ -268,7 +253,7 @@ def _response(scene: Any, requirement: Any, distributions: list[Any], parameters
             index = tuple(check_requirements(scene, model)[position].index)
         outputs = solve_chunk(model, scene)
         values = np.asarray(outputs[requirement.output])[(slice(None), *index)]
-        values = requirement_input(values, outputs["status"], requirement.output)
+        values = decision_values(values, defined_samples(outputs["status"]), requirement.output)
         return margin(values, requirement.min, requirement.max)
 
     return respond
