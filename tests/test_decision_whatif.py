@@ -142,3 +142,41 @@ def test_whatif_csv__cut_ranges_against_the_exact_conditional(whatif_run: Path) 
         held += float(r["p_lower"]) <= exact <= float(r["p_upper"])
         assert r["meets_target"] == str(float(r["p_upper"]) <= float(r["target"]))
     assert held >= len(cut) - 3
+
+
+def test_whatif_figure__every_change_drawn_without_layout_warnings() -> None:
+    """Two parameters (a uniform and a normal, so the four changes), one with no failure
+    left at small shares: the figure draws with its layout applied."""
+    import warnings
+    from types import SimpleNamespace
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from mcchain.decision.sampled import SampledParameter
+    from mcchain.decision.whatif import whatif_rows
+    from mcchain.viz.report_whatif import whatif_figure
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 1.0, 2000)
+    y = rng.normal(0.0, 1.0, 2000)
+    failed = (x > 0.8) | (np.abs(y) > 2.5)
+    requirement = SimpleNamespace(name="r", confidence=0.95, target=0.05)
+    rows = [
+        *whatif_rows(
+            requirement,
+            SampledParameter("a", x, Distribution.model_validate({"uniform": [0.0, 1.0]}), "m"),
+            failed,
+            True,
+        ),
+        *whatif_rows(
+            requirement,
+            SampledParameter("b", y, Distribution.model_validate({"normal": [0.0, 1.0]}), "N"),
+            failed,
+            True,
+        ),
+    ]
+    assert {r.change for r in rows} == {"central", "lower", "upper", "sigma"}
+    assert any(r.p_fail == 0 for r in rows)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        FigureCanvasAgg(whatif_figure(rows)).draw()

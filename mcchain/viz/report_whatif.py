@@ -57,16 +57,10 @@ def _panel(ax: Axes, rows: list[WhatIf]) -> None:
             label=label,
         )
         zero = p == 0  # no failure left: a hollow marker on the axis floor
-        ax.plot(
-            s[zero],
-            np.full(int(zero.sum()), floor),
-            "v",
-            color=colour,
-            markersize=4,
-            markerfacecolor="none",
-            clip_on=False,
-        )
-    ax.axhline(first.target, color="k", linestyle=":", linewidth=1.0, label="target")
+        if zero.any():  # (an empty unclipped line collapses the constrained layout)
+            ax.plot(s[zero], np.full(int(zero.sum()), floor), "v", color=colour, markersize=4,
+                    markerfacecolor="none", clip_on=False)  # fmt: skip
+    ax.axhline(first.target, color="k", linestyle=":", linewidth=1.0)
     ax.set_yscale("log")
     ax.set_ylim(floor, 1.5)
     ax.set_xlim(1.02, 0.0)  # tighter to the right
@@ -89,7 +83,13 @@ def whatif_figure(rows: list[WhatIf]) -> Figure:
                 _panel(axes[i, j], mine)
             else:
                 axes[i, j].set_axis_off()
-    axes[0, 0].legend(fontsize=7, loc="lower left")
+    from matplotlib.lines import Line2D
+
+    present = {r.change for r in rows}
+    handles = [Line2D([], [], color=c, marker="o", markersize=3, label=label)
+               for change, (c, label) in STYLES.items() if change in present]  # fmt: skip
+    handles.append(Line2D([], [], color="k", linestyle=":", label="target"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=7)
     suptitle(
         fig,
         "What if one parameter were tighter: P(fail) reweighted from the same samples, the "
