@@ -159,7 +159,7 @@ def test_whatif_figure__every_change_drawn_without_layout_warnings() -> None:
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 1.0, 2000)
     y = rng.normal(0.0, 1.0, 2000)
-    failed = (x > 0.8) | (np.abs(y) > 2.5)
+    failed = (x > 0.8) | ((np.abs(y) > 2.5) & (x > 0.5))  # none below x = 0.5
     requirement = SimpleNamespace(name="r", confidence=0.95, target=0.05)
     rows = [
         *whatif_rows(
