@@ -207,7 +207,8 @@ def _quantile_range(dist: Distribution, change: str, share: float) -> tuple[floa
 
 
 def _toml_number(x: float) -> str:
-    return repr(float(x))
+    """A TOML number with 12 significant digits (a quantile's last bits are noise)."""
+    return format(float(x), ".12g")
 
 
 def range_distribution(dist: Distribution, low: float, high: float) -> str:
