@@ -207,8 +207,13 @@ def _quantile_range(dist: Distribution, change: str, share: float) -> tuple[floa
 
 
 def _toml_number(x: float) -> str:
-    """A TOML number with 12 significant digits (a quantile's last bits are noise)."""
+    """A computed TOML number with 12 significant digits (a quantile's last bits are
+    noise); :func:`_written` for a number as the scene wrote it."""
     return format(float(x), ".12g")
+
+
+def _written(x: float) -> str:
+    return repr(float(x))
 
 
 def range_distribution(dist: Distribution, low: float, high: float) -> str:
@@ -216,7 +221,7 @@ def range_distribution(dist: Distribution, low: float, high: float) -> str:
     for a uniform, else the distribution with ``within``."""
     if dist.kind == "uniform" and dist.within is None:
         return f"{{ uniform = [{_toml_number(low)}, {_toml_number(high)}] }}"
-    args = ", ".join(_toml_number(a) for a in dist.args)
+    args = ", ".join(_written(a) for a in dist.args)
     if math.isinf(low) and math.isinf(high):
         within = dist.within
     else:
@@ -313,12 +318,10 @@ def whatif_rows(
         for s in SHARES:
             w, w_max, new = sigma_weights(dist, x, s)
             p, lo, hi, n_eff = weighted_estimate(failed, w, w_max, c)
-            args = ", ".join(_toml_number(a) for a in new)
+            args = ", ".join(_written(a) for a in new)
             within = ""
             if dist.within is not None:
-                within = (
-                    f", within = [{_toml_number(dist.within[0])}, {_toml_number(dist.within[1])}]"
-                )
+                within = f", within = [{_written(dist.within[0])}, {_written(dist.within[1])}]"
             add(
                 SIGMA,
                 s,
