@@ -38,36 +38,35 @@ def test_log_evidence__the_mixture_of_likelihood_ratios_integrated(
     s: int, k: int, p: float
 ) -> None:
     """W_k(p) = ∫₀ᵖ π(q) (q/p)^S ((1 − q)/(1 − p))^(k − S) dq / ∫₀ᵖ π(q) dq, π the Beta
-    prior of the target (here 0.01), against scipy's quad."""
-    a, b = prior(0.01)
+    prior of mean p, against scipy's quad."""
+    a, b = prior(p)
 
     def integrand(q: float) -> float:
         return float(stats.beta.pdf(q, a, b) * (q / p) ** s * ((1 - q) / (1 - p)) ** (k - s))
 
     numerator = integrate.quad(integrand, 0, p, limit=200, epsabs=0, epsrel=1e-11)[0]
     expected = math.log(numerator / stats.beta.cdf(p, a, b))
-    assert float(log_evidence(s, k, p, 0.01)) == pytest.approx(expected, rel=1e-7, abs=1e-9)
+    assert float(log_evidence(s, k, p)) == pytest.approx(expected, rel=1e-7, abs=1e-9)
 
 
 def test_upper_bound__the_evidence_reaches_the_level_there_and_beyond() -> None:
     level = pass_level(CONFIDENCE, 3)
-    for s, k in [(0, 800), (5, 1000), (100, 4096), (10, 10)]:
-        bound = upper_bound(s, k, CONFIDENCE, 0.01, 3)
+    for s, k in [(0, 800), (5, 1000), (100, 4096), (93, 128), (10, 10)]:
+        bound = upper_bound(s, k, CONFIDENCE, 3)
         if s == k:
             assert bound == 1.0
             continue
-        assert float(log_evidence(s, k, bound, 0.01)) == pytest.approx(level, abs=1e-6)
-        above = np.linspace(bound, min(1.0, 3 * bound), 50)[1:]
-        assert np.all(log_evidence(s, k, above, 0.01) >= level)
-        assert s / k < bound
+        assert float(log_evidence(s, k, bound)) == pytest.approx(level, abs=1e-6)
+        above = np.linspace(bound, min(0.999, 3 * bound), 50)[1:]
+        assert np.all(log_evidence(s, k, above) >= level)
+        # above S/k and above the one-sided bound of one fixed test (the price of every cut)
+        assert max(s / k, stats.beta.ppf(CONFIDENCE, s + 1, k - s)) < bound
 
 
 def test_upper_bound__zero_failures_need_more_than_the_success_run_figure() -> None:
     """The price of holding over every cut: with no failure, 643 samples pass at target
     0.01 over three chains (the success-run figure of one fixed test is 299)."""
-    assert (
-        upper_bound(0, 642, CONFIDENCE, 0.01, 3) > 0.01 >= upper_bound(0, 643, CONFIDENCE, 0.01, 3)
-    )
+    assert upper_bound(0, 642, CONFIDENCE, 3) > 0.01 >= upper_bound(0, 643, CONFIDENCE, 3)
 
 
 def _claim_rate(p_of_x, target: float, n: int, seeds: int) -> tuple[float, float]:  # type: ignore[no-untyped-def]
@@ -123,7 +122,7 @@ def test_allocate__zero_and_all_failures_and_no_samples() -> None:
     clean = allocate(x, np.zeros(1000, bool), 0.01, CONFIDENCE, (0.0, 1.0))
     assert clean.side == ALL and clean.passes and (clean.low, clean.high) == (0.0, 1.0)
     assert clean.samples_kept == 1000 and math.isnan(clean.bound)
-    assert clean.p_upper == pytest.approx(upper_bound(0, 1000, CONFIDENCE, 0.01, 3))
+    assert clean.p_upper == pytest.approx(upper_bound(0, 1000, CONFIDENCE, 3))
     dirty = allocate(x, np.ones(1000, bool), 0.01, CONFIDENCE)
     assert not dirty.passes and dirty.p_upper == 1.0
     empty = allocate(np.array([]), np.array([], bool), 0.01, CONFIDENCE, (0.0, 1.0))

@@ -169,11 +169,11 @@ def test_allocate__failures_at_high_values_cut_from_above() -> None:
     assert result.samples_kept == kept.sum()
     assert result.failures == int(failed[kept].sum()) > 0  # it keeps some failures
     assert result.p_upper == pytest.approx(
-        min(upper_bound(result.failures, result.samples_kept, 0.95, 0.01, 3), 0.01)
+        min(upper_bound(result.failures, result.samples_kept, 0.95, 3), 0.01)
     )
     assert result.p_upper <= 0.01
     more = int(kept.sum()) + 1
-    assert upper_bound(int(failed[:more].sum()), more, 0.95, 0.01, 3) > 0.01
+    assert upper_bound(int(failed[:more].sum()), more, 0.95, 3) > 0.01
 
 
 def test_allocate__failures_at_low_values_cut_from_below_and_both_ends() -> None:
