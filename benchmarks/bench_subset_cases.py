@@ -96,7 +96,7 @@ def table_row(engine: str, case: RareCase, runs: list[tuple[float, float, int]],
         within = np.abs(p - case.exact) <= 3 * cov * p
     finite = cov[np.isfinite(cov)]
     return (
-        f"| {engine} | {case.name} | {case.exact:.4g} | {p.mean() / case.exact:.3f} | "
+        f"| {engine} | {case.name} | {case.exact:.4g} | {p.mean() / case.exact:.3g} | "
         f"{p.std(ddof=1) / case.exact:.3f} | {np.median(finite) if finite.size else np.inf:.3f} "
         f"| {int(within.sum())} % | {int(np.sum(p == 0))} | "
         f"{np.mean([r[2] for r in runs]):,.0f} | {s:.1f} |"
