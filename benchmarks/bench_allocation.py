@@ -25,14 +25,13 @@ import argparse
 import contextlib
 import io
 import math
-import subprocess
 import sys
 import tempfile
-import types
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from at_commit import module_at
 
 from mcchain.decision.allocation import allocate, allocate_box
 from mcchain.decision.stats import clopper_pearson
@@ -50,13 +49,7 @@ Claim = Callable[[np.ndarray, np.ndarray, float], tuple[bool, float, float]]
 
 
 def before(commit: str) -> Claim:
-    source = subprocess.run(
-        ["git", "show", f"{commit}:mcchain/decision/requirements.py"],
-        cwd=REPO, capture_output=True, text=True, check=True,
-    ).stdout  # fmt: skip
-    module = types.ModuleType("requirements_before")
-    sys.modules[module.__name__] = module
-    exec(compile(source, f"{commit}:requirements.py", "exec"), module.__dict__)
+    module = module_at(commit, "mcchain/decision/requirements.py")
 
     def claim(x: np.ndarray, failed: np.ndarray, target: float) -> tuple[bool, float, float]:
         a = module.allocate(x, (~failed).astype(float), target, CONFIDENCE)

@@ -20,14 +20,13 @@ openturns``, the ``bench`` extra) is skipped when absent. Writes
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import time
-import types
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from at_commit import module_at
 
 from mcchain.decision.subset import subset_simulation
 from mcchain.testing.rare_events import CASES, RareCase
@@ -46,13 +45,7 @@ def ours(case: RareCase, seed: int, per_level: int) -> tuple[float, float, int]:
 
 def before(commit: str) -> Engine:
     """The subset simulation of ``commit`` (one margin only)."""
-    source = subprocess.run(
-        ["git", "show", f"{commit}:mcchain/decision/subset.py"],
-        cwd=REPO, capture_output=True, text=True, check=True,
-    ).stdout  # fmt: skip
-    module = types.ModuleType("subset_before")
-    sys.modules[module.__name__] = module  # dataclasses look their module up
-    exec(compile(source, f"{commit}:subset.py", "exec"), module.__dict__)
+    module = module_at(commit, "mcchain/decision/subset.py")
 
     def run(case: RareCase, seed: int, per_level: int) -> tuple[float, float, int]:
         r = module.subset_simulation(case.response, case.ndim, per_level=per_level, seed=seed)
