@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from mcchain.errors import RunError
+from mcchain.errors import McchainError, RunError
 
 RANGE_SYNTAX = "PATH=LOW:HIGH (an empty end is not cut, e.g. joint.B.clearance=:1e-4)"
 
@@ -359,16 +359,22 @@ def confirm_run(
     export = folder / "export"
     writable_folder(export, "confirm")
     scene_path = export / f"confirm-{req.name}.toml"
+    existed = scene_path.exists()
     write_text_atomic(scene_path, text)
-    result = execution.start_run(
-        scene_path,
-        samples=samples,
-        seed=seed,
-        out=out,
-        run_dir=run_dir,
-        argv=argv,
-        progress=progress,
-    )
+    try:
+        result = execution.start_run(
+            scene_path,
+            samples=samples,
+            seed=seed,
+            out=out,
+            run_dir=run_dir,
+            argv=argv,
+            progress=progress,
+        )
+    except McchainError:
+        if not existed:  # refused before anything ran: leave nothing behind
+            scene_path.unlink(missing_ok=True)
+        raise
     new = read_record(result.folder)
     new["confirm"] = {
         "run": str(folder.resolve()),
