@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mcchain.decision.allocation import ALL, BOTH, LOWER, UPPER, allocate, allocate_box
-from mcchain.decision.requirements import requirement_values, stored_requirements
+from mcchain.decision.requirements import dataset_requirement_met, stored_requirements
 from mcchain.decision.sampled import sampled_parameters
 
 if TYPE_CHECKING:
@@ -102,10 +102,9 @@ class BoxRow:
 
 
 def failed_samples(ds: xr.Dataset, requirement: Any) -> np.ndarray:
-    """(nsample,) bool: the samples that fail a requirement (``requirement_met`` = 0)."""
-    from mcchain.decision.summary import met_of
-
-    return met_of(ds, requirement, requirement_values(ds, requirement)) == 0
+    """(nsample,) bool: the samples that fail a requirement (``requirement_met`` = 0,
+    recomputed from the values and ``status``: a failure bit fails)."""
+    return dataset_requirement_met(ds, requirement) == 0
 
 
 def allocations(ds: xr.Dataset) -> list[AllocationRow]:

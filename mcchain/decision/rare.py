@@ -151,7 +151,7 @@ def rare_run(
     """Estimate P(fail) of one requirement of a scene by subset simulation (module
     docstring); every check happens before the run folder is made."""
     from mcchain.decision.subset import METHOD, parameters_of, subset_simulation
-    from mcchain.decision.summary import write_csv
+    from mcchain.decision.tables import write_csv
     from mcchain.job import check_positive, prepare_job
     from mcchain.provenance import software_versions
     from mcchain.runs import (

@@ -1,5 +1,6 @@
-"""What a stored ensemble sampled: each parameter's values, distribution, units and range
-(for the allocation, the what-if tolerances and ``mcchain confirm``)."""
+"""What a stored ensemble sampled: its design, and each parameter's values, distribution,
+units and range (for the verdicts, the allocation, the what-if tolerances and ``mcchain
+confirm``)."""
 
 from __future__ import annotations
 
@@ -62,3 +63,15 @@ def sampled_parameters(ds: xr.Dataset) -> list[SampledParameter]:
         dist = Distribution.model_validate(data) if data is not None else None
         out.append(SampledParameter(path, values[:, j], dist, units[j]))
     return out
+
+
+EXACT_DESIGNS = ("random",)
+"""Designs whose samples are independent draws: the binomial interval is exact."""
+
+
+def design_of(ds: xr.Dataset) -> str | None:
+    """The sampling design of a stored ensemble (``[sample] design``), None without
+    ``[sample]``."""
+    settings = json.loads(str(ds.attrs.get("settings", "{}")))
+    sample = (settings.get("scene") or {}).get("sample")
+    return None if not sample else str(sample.get("design", "random"))

@@ -21,8 +21,6 @@ independent; the same interval is reported labelled *approximate* (``verdict`` r
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -49,6 +47,7 @@ from mcchain.decision.requirements import (
     requirement_values,
     stored_requirements,
 )
+from mcchain.decision.sampled import EXACT_DESIGNS, design_of
 from mcchain.decision.sequential import confidence_sequence, sequential_bounds
 from mcchain.decision.stats import (
     EMPTY,
@@ -60,6 +59,7 @@ from mcchain.decision.stats import (
     samples_to_decide,
     verdict,
 )
+from mcchain.decision.tables import write_csv
 from mcchain.decision.units import format_quantity, output_units
 from mcchain.decision.until import sequential_settings
 
@@ -84,8 +84,6 @@ REQUIREMENT_COLUMNS = (
     "quantile_upper",
 )
 """Columns of ``requirements.csv``, exactly (a contract)."""
-EXACT_DESIGNS = ("random",)
-"""Designs whose samples are independent draws: the binomial interval is exact."""
 APPROXIMATE = " (approximate)"
 """Appended to a verdict whose interval is not exact for the design."""
 
@@ -169,14 +167,6 @@ class RequirementSummary:
             "quantile_lower": self.quantile_lower,
             "quantile_upper": self.quantile_upper,
         }
-
-
-def design_of(ds: xr.Dataset) -> str | None:
-    """The sampling design of a stored ensemble (``[sample] design``), None without
-    ``[sample]``."""
-    settings = json.loads(str(ds.attrs.get("settings", "{}")))
-    sample = (settings.get("scene") or {}).get("sample")
-    return None if not sample else str(sample.get("design", "random"))
 
 
 def output_label(requirement: Requirement) -> str:
@@ -534,29 +524,10 @@ def validity_lines(
 
 
 # -- files ---------------------------------------------------------------------------------
-def _csv_value(value: Any) -> Any:
-    if isinstance(value, float):
-        return "NaN" if math.isnan(value) else repr(value)
-    return value
-
-
-def write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
-    """A CSV of ``rows`` under ``columns``, written atomically (floats exactly, NaN as NaN)."""
-    import io
-
-    from mcchain.ensemble.io import write_text_atomic
-
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(columns), lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: _csv_value(v) for k, v in row.items()})
-    write_text_atomic(path, buffer.getvalue())
-
-
 def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
-    """``requirements.csv``, ``allocation.csv``, ``allocation-box.csv`` (two or more sampled
-    parameters), ``requirements.txt``, ``whatif.csv`` and ``whatif.png`` into ``folder``."""
+    """``requirements.csv``, ``allocation.csv``, ``requirements.txt``, then
+    ``allocation-box.csv`` (two or more sampled parameters), ``whatif.csv`` and
+    ``whatif.png`` into ``folder``; returns their paths in that order."""
     from mcchain.decision.whatif import write_whatif
     from mcchain.ensemble.io import write_text_atomic
 
@@ -564,20 +535,20 @@ def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
     rows = allocations(ds)
     boxes = box_allocations(ds)
     folder.mkdir(parents=True, exist_ok=True)
-    paths = [folder / "requirements.csv", folder / "allocation.csv"]
+    paths = [folder / "requirements.csv", folder / "allocation.csv", folder / "requirements.txt"]
     write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
     write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
+    lines = summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs), boxes)
+    write_text_atomic(paths[2], "\n".join(lines) + "\n")
     if boxes:
         paths.append(folder / "allocation-box.csv")
         write_csv(paths[-1], BOX_COLUMNS, [b.row() for b in boxes])
-    paths.append(folder / "requirements.txt")
-    lines = summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs), boxes)
-    write_text_atomic(paths[-1], "\n".join(lines) + "\n")
     return paths + write_whatif(ds, folder)
 
 
 def export_requirements(run: str | Path) -> list[Path]:
-    """``mcchain export RUN --requirements``: the three files into ``RUN/export/``.
+    """``mcchain export RUN --requirements``: the files of :func:`write_requirements` into
+    ``RUN/export/``.
 
     Raises:
         RunError: the run has no requirements.

@@ -335,7 +335,7 @@ def whatif_rows(
 
 def whatifs(ds: xr.Dataset) -> list[WhatIf]:
     """Every requirement's what-if rows over every sampled parameter."""
-    from mcchain.decision.summary import EXACT_DESIGNS, design_of
+    from mcchain.decision.sampled import EXACT_DESIGNS, design_of
 
     exact = design_of(ds) in EXACT_DESIGNS
     params = sampled_parameters(ds)
@@ -350,7 +350,7 @@ def whatifs(ds: xr.Dataset) -> list[WhatIf]:
 def write_whatif(ds: xr.Dataset, folder: Path) -> list[Path]:
     """``whatif.csv`` and ``whatif.png`` into ``folder`` (nothing without sampled
     parameters)."""
-    from mcchain.decision.summary import write_csv
+    from mcchain.decision.tables import write_csv
 
     rows = whatifs(ds)
     if not rows:
