@@ -97,6 +97,10 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
+    if scene.output:
+        from mcchain.solvers.outputs import check_ideal
+
+        check_ideal(scene, model)
     if scene.requirement:
         from mcchain.decision.requirements import check_requirements
 
@@ -172,6 +176,9 @@ def prepare_job(
     path = Path(scene_path)
     scene, model = (loader or default_loader)(path, samples, seed)
     scene, kernels_note = resolve_kernels(scene, model, int(model.nsample))
+    from mcchain.decision.tolerance import requirement_tolerance
+
+    scene, tolerance_note = requirement_tolerance(scene)
     from mcchain.scene.models import Storage
 
     # A scene without ``[storage]`` (a fake) gets the schema's defaults.
@@ -203,7 +210,7 @@ def prepare_job(
         disk=estimate_disk(scene, model, nsample, int(chunk)),
         settings=resolved_settings(scene, nsample, effective_seed),
         warnings=_warnings(model),
-        notes=[] if kernels_note is None else [kernels_note],
+        notes=[note for note in (kernels_note, tolerance_note) if note is not None],
     )
 
 

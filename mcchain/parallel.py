@@ -151,6 +151,7 @@ def solve_coerced(
 ) -> tuple[dict[str, np.ndarray], float, int | None]:
     """Solve one chunk and cast its arrays to storage dtypes; returns (outputs, seconds,
     the integration steps its samples took, summed: None when the solver counts none)."""
+    from mcchain.ensemble.outputs import model_output_variables
     from mcchain.ensemble.registry import STEPS_TAKEN, coerce_outputs
 
     t0 = time.perf_counter()
@@ -158,7 +159,7 @@ def solve_coerced(
     seconds = time.perf_counter() - t0
     taken = outputs.get(STEPS_TAKEN)
     steps = None if taken is None else int(np.sum(taken, dtype=np.int64))
-    return coerce_outputs(outputs, history_dtype), seconds, steps
+    return coerce_outputs(outputs, history_dtype, model_output_variables(model)), seconds, steps
 
 
 # -- progress ------------------------------------------------------------------------------

@@ -2,14 +2,15 @@
 
 Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcchain.runs`),
 ``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
-(:func:`mcchain.viz.report.write_report`); the benchmarks are scripts in ``benchmarks/``.
+(:func:`mcchain.viz.report_page.write_report`); the benchmarks are scripts in ``benchmarks/``.
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
 written nothing; usage errors of ``show`` and ``report`` name the command
 (``mcchain show: ...``). A run that fails once started (a full disk, its folder removed,
 ``RunFailed``) prints one such line and exits with 1, keeping its finished chunks; a run
 that completes with every sample failed prints its folder, then one such line with the
-status counts, and exits with 3.
+status counts, and exits with 3. ``verdict`` (:mod:`mcchain.decision.verdict`) exits 0 when
+every requirement passes, 1 when one fails, 4 when none fails but one is undecided.
 
 The package: :mod:`~mcchain.cli.parser` (the arguments), :mod:`~mcchain.cli.commands` (a
 handler per command), :mod:`~mcchain.cli.describe` (what ``validate`` prints). It imports only

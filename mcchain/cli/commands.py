@@ -290,7 +290,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from mcchain.viz.report import write_report
+    from mcchain.viz.report_page import write_report
 
     report = write_report(args.run, args.out)
     for name, reason in report.skipped.items():
@@ -328,6 +328,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_verdict(args: argparse.Namespace) -> int:
+    from mcchain.decision.verdict import run_verdict
+
+    table = run_verdict(args.run)
+    for line in table.lines():
+        print(line)
+    return table.exit_code
+
+
 def _cmd_rare(args: argparse.Namespace) -> int:
     from mcchain.decision.rare import rare_run
 
@@ -348,6 +357,34 @@ def _cmd_rare(args: argparse.Namespace) -> int:
     return 0
 
 
+EXIT_UNDECIDED = 4
+"""``mcchain confirm``: the requirement is undecided inside the range (1: it fails)."""
+
+
+def _cmd_confirm(args: argparse.Namespace) -> int:
+    from mcchain.decision.confirm import confirm_run
+
+    if args.out is not None and args.run_dir is not None:
+        return fail("--run-dir: cannot be combined with --out")
+    result = confirm_run(
+        args.run,
+        args.requirement,
+        parameter=args.parameter,
+        box=args.box,
+        ranges=args.range,
+        samples=args.samples,
+        seed=args.seed,
+        out=args.out or "runs",
+        run_dir=args.run_dir,
+        argv=["mcchain", *sys.argv[1:]],
+        progress=False if args.quiet else None,
+    )
+    for line in result.lines():
+        print(line)
+    print(result.folder)
+    return {"pass": 0, "fail": EXIT_FAILED}.get(result.decision, EXIT_UNDECIDED)
+
+
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "validate": _cmd_validate,
@@ -356,7 +393,9 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "report": _cmd_report,
     "export": _cmd_export,
     "check": _cmd_check,
+    "verdict": _cmd_verdict,
     "rare": _cmd_rare,
+    "confirm": _cmd_confirm,
     "cache": _cmd_cache,
 }
 """The handler of each command."""

@@ -188,23 +188,41 @@ def build_parser() -> argparse.ArgumentParser:
 
     check = sub.add_parser(
         "check",
-        help="re-solve a subset of a run with a tighter integration and count flipped verdicts",
-        description="re-solve a subset of a run's samples with rtol/atol (or dt) TIGHTEN times "
-        "tighter; per requirement, how many verdicts flip and how far the outputs move "
-        "(RUN/export/check.csv); the run's ensemble is not touched",
+        help="re-solve the samples a numerical error could flip, tighter, and give the verdicts "
+        "again",
+        description="re-solve a run's samples with rtol/atol (or dt) TIGHTEN times tighter: "
+        "samples spread evenly over the run, then every sample near a limit (or undefined); per "
+        "requirement the verdict on the run's values and on the tightened ones, the flips, a "
+        "bound on the flips not seen, and which tolerance to use (RUN/export/check.csv); the "
+        "run's ensemble is not touched",
         named_errors=True,
     )
     check.add_argument("run", help="run folder (or its id under runs/)")
     check.add_argument(
-        "--tighten", type=float, required=True, metavar="F", help="tightening factor (e.g. 10)"
+        "--tighten",
+        type=float,
+        default=10.0,
+        metavar="F",
+        help="tightening factor (default 10)",
     )
     check.add_argument(
         "--samples",
         type=positive,
-        default=64,
+        default=None,
         metavar="M",
-        help="samples re-solved, spread evenly over the run (default 64)",
+        help="samples re-solved spread evenly over the run, before those near a limit (default: "
+        "enough to bound the unseen flips by a tenth of the narrowest interval, at least 64)",
     )
+
+    verdict = sub.add_parser(
+        "verdict",
+        help="the requirements' verdict table; exit 0 all pass, 1 one fails, 4 one undecided",
+        description="print every requirement's verdict with its bounds and units; exit 0 when "
+        "every requirement passes, 1 when one fails, 4 when none fails but one is undecided (2: "
+        "a bad run or a run without requirements)",
+        named_errors=True,
+    )
+    verdict.add_argument("run", help="run folder (or its id under runs/)")
 
     rare = sub.add_parser(
         "rare",
@@ -226,8 +244,48 @@ def build_parser() -> argparse.ArgumentParser:
     rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
     rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
 
+    add_confirm_parser(sub)
     add_cache_parser(sub)
     return parser
+
+
+def add_confirm_parser(sub: Any) -> None:
+    """``mcchain confirm RUN --requirement NAME``: a new run inside an allocated range."""
+    confirm = sub.add_parser(
+        "confirm",
+        help="decide an allocated range on fresh samples: a new run of the scene with the "
+        "range cut into its distribution",
+        description="run the scene of RUN again with a fresh seed and one parameter's "
+        "distribution cut to the range allocated for requirement NAME (or --box, or --range), "
+        "and give that requirement's verdict there; exit 0 pass, 1 fail, 4 undecided",
+        named_errors=True,
+    )
+    confirm.add_argument("run", help="run folder (or its id under runs/)")
+    confirm.add_argument("--requirement", required=True, metavar="NAME", help="the requirement")
+    confirm.add_argument(
+        "--parameter", metavar="PATH", help="confirm this parameter's allocated range"
+    )
+    confirm.add_argument(
+        "--box", action="store_true", help="confirm the box over all sampled parameters"
+    )
+    confirm.add_argument(
+        "--range",
+        action="append",
+        default=[],
+        metavar="PATH=LOW:HIGH",
+        help="confirm this range (repeatable; an empty end is not cut)",
+    )
+    confirm.add_argument(
+        "--samples",
+        type=positive,
+        metavar="N",
+        help="samples of the new run (default: from the success-run figure, or what the rate "
+        "seen inside the range needs to decide)",
+    )
+    confirm.add_argument("--seed", type=seed, metavar="S", help="seed (default: the run's + 1)")
+    confirm.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
+    confirm.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
+    confirm.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def add_cache_parser(sub: Any) -> None:

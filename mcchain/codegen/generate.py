@@ -29,11 +29,13 @@ from mcchain.codegen.layout import (
     CONTACT_ROW_MEANINGS,
     FIXED_STEP_ROW_MEANINGS,
     LMAX,
+    OUTPUT_ROW_MEANINGS,
     ROW_MEANINGS,
     Layout,
     row_length,
 )
 from mcchain.codegen.native import NativeModule, array_layout_ok
+from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import INTERLEAVE_CONSTANT, schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.codegen.tracking import tracking_blocks, tracking_functions
@@ -79,7 +81,7 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
     return text
 
 
-def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
+def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -> dict[str, str]:
     em = Emitter(topo)
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
@@ -273,13 +275,13 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("apply_projection")
     # Kinetic energy of the lane and the velocities scaled by ``scale`` (re-seat).
     em.emit("ke = 0.0")
-    for body in range(topo.nbody):
+    for body in range(topo.own_bodies):  # not an ideal copy's (Topology.reference)
         rates = [f"v{3 * body + i}" for i in range(3)]
         arguments = [f"p_m{body}", f"p_J{body}", *rates]
         (kinetic,) = em.kernel(FORCE_KERNELS, "body_kinetic_energy", arguments)
         em.emit(f"ke += {kinetic}")
     block("kinetic")
-    em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(ndof)))
+    em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(3 * topo.own_bodies)))
     block("scale_velocity")
 
     # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
@@ -294,21 +296,25 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
             *(f"be{j} = be[{j}]" for j in range(nstage)),
         )
         block("error_coefs")
+        # An ideal copy (Topology.reference) follows the mechanism's steps: its rows are not
+        # in the norm (its terms would be exact zeros of the sum), so the mechanism steps as
+        # it would alone.
+        own = 3 * topo.own_bodies
         em.emit(f"hh = {at('hs')}", "en = 0.0")
         for i in range(2 * ndof):
             r = (i % 2) * ndof + i // 2
             rows = [at("kq0", r + stride * j) for j in range(nstage)]
             new = " + ".join(f"bw{j} * {row}" for j, row in enumerate(rows))
             err = " + ".join(f"be{j} * {row}" for j, row in enumerate(rows))
-            em.emit(
-                f"y{i} = {at('q', r)}",
-                f"yn{i} = y{i} + hh * ({new})",
-                f"{at('qn', r)} = yn{i}",
-                f"e{i} = hh * ({err}) / (atol + rtol * max(abs(y{i}), abs(yn{i})))",
-                f"en = en + e{i} * e{i}",
-            )
+            em.emit(f"y{i} = {at('q', r)}", f"yn{i} = y{i} + hh * ({new})")
+            em.emit(f"{at('qn', r)} = yn{i}")
+            if i < 2 * own:
+                em.emit(
+                    f"e{i} = hh * ({err}) / (atol + rtol * max(abs(y{i}), abs(yn{i})))",
+                    f"en = en + e{i} * e{i}",
+                )
         em.emit(
-            f"en = math.sqrt(en / {2 * ndof})",
+            f"en = math.sqrt(en / {2 * own})",
             f"{at('en')} = en if en == en else np.inf",
         )
         block("error_norm")
@@ -327,6 +333,7 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         block("accept_copy")
     b.update(contact_blocks(topo, lay, b["kill_lane"]))
     b.update(tracking_blocks(topo, lay))
+    b.update(output_blocks(topo, lay, outputs))
     return b
 
 
@@ -393,14 +400,22 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
 entry points call, so a scene run with ``rk4`` compiles no projection or adaptive code."""
 
 
-def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> str:
+def generate_source(
+    topo: Topology, variant: str, lmax: int | None = None, outputs: Signature = ()
+) -> str:
     """Source of the lane-kernel module of ``topo`` for ``variant`` (a key of
-    :data:`VARIANTS`), for work rows ``lmax`` doubles long (default :func:`lane_rows`)."""
+    :data:`VARIANTS`), for work rows ``lmax`` doubles long (default :func:`lane_rows`),
+    tracking the ``[[output]]``s ``outputs`` (their structure:
+    :mod:`mcchain.codegen.output_blocks`; none: the text of a scene without)."""
     users, tableau, suffix, parts_of = VARIANTS[variant]
+    if tableau is None:
+        outputs = ()  # the radau right-hand side tracks nothing
     parts = [templates.HEADER, f"# topology: {topo!r}\n# variant: {variant}\n"]
+    if outputs:
+        parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
-    lmax = lane_rows(topo, variant) if lmax is None else lmax
-    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45")
+    lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
+    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45", outputs=len(outputs))
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
@@ -416,27 +431,33 @@ def generate_source(topo: Topology, variant: str, lmax: int | None = None) -> st
         from mcchain.kernels.explicit import nan_history
 
         parts.append(copied_functions(nan_history))
+    if outputs:
+        parts += [OUTPUT_ROW_MEANINGS, output_functions(with_hermite=not topo.contact_joints)]
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    blocks = _blocks(topo, nstage, lay)
+    blocks = _blocks(topo, nstage, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
         parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
+    text = text.replace("@OT", ", ot_in, out_ot" if outputs else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)
 
 
-def lane_rows(topo: Topology, variant: str) -> int:
-    """The row length (the largest lane group) of ``topo``'s lane kernels for ``variant``:
-    :func:`mcchain.codegen.layout.row_length` of its work array."""
+def lane_rows(topo: Topology, variant: str, outputs: Signature = ()) -> int:
+    """The row length (the largest lane group) of ``topo``'s lane kernels for ``variant``
+    (tracking ``outputs``): :func:`mcchain.codegen.layout.row_length` of its work array."""
     tableau = VARIANTS[variant][1]
     nstage = RK4.nstage if tableau is None else tableau.nstage
-    return row_length(Layout(topo, nstage, LMAX, adaptive=variant == "rk45").size)
+    if tableau is None:
+        outputs = ()
+    layout = Layout(topo, nstage, LMAX, adaptive=variant == "rk45", outputs=len(outputs))
+    return row_length(layout.size)
 
 
 def _contact_functions(adaptive: bool) -> str:
@@ -480,7 +501,7 @@ def _table_constants(topo: Topology) -> str:
 LaneKernels = ModuleType | NativeModule
 """A topology's lane kernels: entry points called with numpy arrays and scalars."""
 
-_MODULES: dict[tuple[Topology, str], LaneKernels] = {}
+_MODULES: dict[tuple[Topology, str, Signature], LaneKernels] = {}
 
 
 @functools.cache
@@ -499,7 +520,7 @@ def _native_usable() -> bool:
     return False
 
 
-def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
+def lane_kernels(topo: Topology, variant: str, outputs: Signature = ()) -> LaneKernels:
     """The compiled lane kernels of a topology for one :data:`VARIANTS` key (``accel`` and
     ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``).
 
@@ -509,11 +530,12 @@ def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
     named after the variant. ``MCCHAIN_LANE_COMPILER=numba`` compiles the same text with
     ``@njit`` instead (the reference of the tests and ``benchmarks/bench_native.py``; the
     same numbers; also where this NumPy's array layout is not the one the native entries
-    read, with a warning)."""
-    module = _MODULES.get((topo, variant))
+    read, with a warning). ``outputs``: the ``[[output]]``s they track (their structure,
+    :mod:`mcchain.codegen.output_blocks`)."""
+    module = _MODULES.get((topo, variant, outputs))
     if module is None:
         prefix = "mcchain_gen_" + variant.replace("-", "_")
-        source = generate_source(topo, variant)
+        source = generate_source(topo, variant, outputs=outputs)
         if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba" or not _native_usable():
             from mcchain.kernels.config import numba_cache
 
@@ -522,5 +544,5 @@ def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
         else:
             digest = hashlib.sha256(source.encode()).hexdigest()[:20]
             module = NativeModule(source, f"{prefix}_{digest}")
-        _MODULES[(topo, variant)] = module
+        _MODULES[(topo, variant, outputs)] = module
     return module

@@ -229,7 +229,7 @@ class ConstraintKinematics(LaneText):
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
         terms = []
-        for r in range(topo.ncon):
+        for r in (r for r in range(topo.ncon) if topo.own_row(r)):  # not an ideal copy's
             law = self._row_law(r)
             terms.append(
                 f"abs(phi{r})" if law is None else f"(abs(phi{r}) if {law} == 0.0 else 0.0)"

@@ -78,6 +78,7 @@ for i in range(NDOF):
     W[(QROW + i) * LMAXV + l] = np.nan if dead else Q0[i, sl]
     W[(VROW + i) * LMAXV + l] = np.nan if dead else V0[i, sl]
 @@contact_setup
+@@outputs_setup
 """
 """Lane ``l`` takes sample ``sl``: its parameters, status and start state into W (whose
 column is all zeros before)."""
@@ -89,6 +90,7 @@ t_sing[sl] = tsg[l]
 t_cl[sl] = tcl[l]
 dead = (st[l] & FAILBITS) != 0
 @@track_finish
+@@outputs_finish
 @@contact_finish
 """
 """Lane ``l``'s sample ``sl`` is finished: its status and per-sample results out."""
@@ -131,7 +133,7 @@ _GROUP_FINISH = (
 
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
-            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
+            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
             status, t_div, t_sing, t_cl"""
 
 ERK_KERNEL = (
@@ -204,6 +206,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     @@track_step
                 for l in range(nl):
                     @@track_fixup
+                @@outputs_c
                 if n == nstep or n % out_every == 0:
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
@@ -230,7 +233,7 @@ PROJECT_CALL = """
 
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
-                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
+                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
                  status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
 _ADAPTIVE_LANE_START = """
@@ -340,6 +343,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
             @@track_accepted
         for l in range(nl):
             @@track_fixup
+        @@outputs_feed
         if nland > 0:
             group_outputs_landed_SUFFIX(
                 W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT

@@ -59,6 +59,7 @@ class Until:
     max_count: int
 
     def __call__(self, folder: Path, record: dict[str, Any], nsample: int) -> int | None:
+        from mcchain.decision.stats import EMPTY, UNDECIDED
         from mcchain.ensemble.io import list_parts, open_parts
         from mcchain.runs import PARTS
 
@@ -68,8 +69,12 @@ class Until:
         looks = [item for item in entry.setdefault("looks", []) if item["samples"] != nsample]
         entry["looks"] = [*looks, look]
         undecided = [name for name, r in look["requirements"].items() if r["verdict"] == UNDECIDED]
+        # an empty running intersection never fills again: no more samples decide it
+        empty = [name for name, r in look["requirements"].items() if r["verdict"] == EMPTY]
         if not undecided:
-            entry["stopped"] = f"decided after {nsample} samples"
+            entry["stopped"] = f"decided after {nsample} samples" + (
+                f"; no verdict (empty running intersection): {', '.join(empty)}" if empty else ""
+            )
             log.info("until: every requirement decided after %d samples", nsample)
             return None
         if nsample >= self.max_count:
@@ -84,9 +89,6 @@ class Until:
     def describe(self) -> dict[str, Any]:
         """The ``sequential`` settings entry (and the start of ``run.json["until"]``)."""
         return {"method": METHOD, "batch": self.batch, "max_count": self.max_count}
-
-
-UNDECIDED = "undecided"
 
 
 def look_at(ds: xr.Dataset, nsample: int, batch: int) -> dict[str, Any]:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mcchain.contact import (
+    DEFAULT_START,
     LAW_CODES,
     LINK,
     MODEL_CODES,
@@ -26,6 +27,7 @@ from mcchain.parameters import PARAMETERS, TABLE
 from mcchain.resources import check_memory
 from mcchain.scene.fields import GROUND_NAME
 from mcchain.scene.models import Scene
+from mcchain.scene.outputs import check_output_windows
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
 from mcchain.scene.study import MAX_SEED, saltelli_count_error
@@ -63,7 +65,8 @@ def compile_model(
     Returns:
         The model; ``parameters`` (nsample, nparam) holds the sampled values in the order of
         ``[sample.vary]`` and ``param_paths`` their paths as written. ``meta`` carries
-        ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``.
+        ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``, and
+        with ``[[output]]`` tables, ``outputs`` (them, :mod:`mcchain.ensemble.outputs`).
 
     Raises:
         SceneError: a bad ``nsample``/``seed`` (for design ``"saltelli"``, a count that is not
@@ -143,11 +146,17 @@ def compile_model(
     index[GROUND_NAME] = GROUND
     written = _written_state(scene, paths)
     joint_written = _written_journals(scene, written, joint_model, index)
+    joint_contact_start = tuple(
+        (j.contact.start or DEFAULT_START[j.resolved_model])
+        if j.contact is not None and joint_model[k] != LINK
+        else "seated"
+        for k, j in enumerate(scene.joint)
+    )
 
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
 
-    return Model(
+    model = Model(
         body_names=tuple(scene.body_names),
         joint_names=tuple(scene.joint_names),
         driver_names=tuple(scene.driver_names),
@@ -163,6 +172,7 @@ def compile_model(
         joint_model=joint_model,
         joint_contact_law=joint_law,
         joint_written=joint_written,
+        joint_contact_start=joint_contact_start,
         driver_body=topo([GROUND_NAME if d.slides else str(d.body) for d in scene.driver]),
         driver_joint=np.array(
             [scene.joint_names.index(str(d.joint)) if d.slides else -1 for d in scene.driver],
@@ -181,9 +191,12 @@ def compile_model(
             "design": sample.design if sample is not None else None,
             "nsample": nsample,
             "written": written,
+            **({"outputs": tuple(scene.output)} if scene.output else {}),
         },
         **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
     )
+    check_output_windows(scene, model)
+    return model
 
 
 def _written_state(scene: Scene, paths: list[str]) -> dict[str, tuple[bool, ...]]:
@@ -233,7 +246,31 @@ def _written_journals(
         )
         delta = float(np.hypot(d[0, 0], d[0, 1])) - clearance
         codes[k] = 2 if abs(delta) <= seat_tolerance(clearance) else 1
+        _check_written_start(joint, delta, clearance)
     return codes
+
+
+def _check_written_start(joint: Any, delta: float, clearance: float) -> None:
+    """Refuse a ``[joint.contact] start`` given with a journal the file writes elsewhere:
+    the written state is kept whatever ``start`` says, so a start that names another place
+    (seated: on its wall; pressed: δ > 0; centred: d = 0, each within
+    :func:`mcchain.contact.seat_tolerance`) contradicts it."""
+    start = joint.contact.start
+    tolerance = seat_tolerance(clearance)
+    if start is None:
+        return
+    place = "seated" if abs(delta) <= tolerance else "pressed" if delta > 0.0 else "free"
+    agrees = {
+        "seated": place == "seated",
+        "pressed": place == "pressed",
+        "centred": abs(delta + clearance) <= tolerance,
+    }[start]
+    if not agrees:
+        raise SceneError(
+            f"joint.{joint.name}.contact.start: {start!r} contradicts the journal the file "
+            f"writes ({place}, |d| - c = {delta:.6g} m), which is kept as written; remove "
+            "start, or the bodies' positions to have the journal placed"
+        )
 
 
 def _items(scene: Scene, kind: str) -> list[Any]:

@@ -42,6 +42,10 @@ class Distribution(Section):
     * ``truncnormal = [mean, std, low, high]``: normal(mean, std) restricted to [low, high],
       std > 0, low < high, low <= mean <= high;
     * ``choice = [v1, v2, ...]``: one of the values, each equally likely.
+
+    ``within = [low, high]`` beside any of them restricts it to [low, high] (the
+    distribution truncated there: values outside are never drawn, the others keep their
+    relative likelihood); ``mcchain confirm`` writes it for an allocated range.
     """
 
     uniform: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
@@ -49,6 +53,14 @@ class Distribution(Section):
     lognormal: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
     truncnormal: Annotated[list[Num], Field(min_length=4, max_length=4)] | None = None
     choice: Annotated[list[Num], Field(min_length=1)] | None = None
+    within: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
+
+    @field_validator("within")
+    @classmethod
+    def _within(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and not v[0] < v[1]:
+            raise ValueError(f"low must be below high, got [{v[0]!r}, {v[1]!r}]")
+        return v
 
     @field_validator("uniform")
     @classmethod
@@ -86,6 +98,16 @@ class Distribution(Section):
                 "a distribution is a table with exactly one of "
                 f"{', '.join(DISTRIBUTIONS)}; got " + (", ".join(given) if given else "none")
             )
+        if self.within is not None:
+            low, high = self.within
+            own = self._own_bounds()
+            if self.kind == "choice" and not any(low <= v <= high for v in self.args):
+                raise ValueError(f"within: no value of choice lies in [{low!r}, {high!r}]")
+            if own is not None and self.kind != "choice" and not (own[0] < high and low < own[1]):
+                raise ValueError(
+                    f"within: [{low!r}, {high!r}] does not overlap the {self.kind} range "
+                    f"[{own[0]!r}, {own[1]!r}]"
+                )
         return self
 
     @property
@@ -102,7 +124,20 @@ class Distribution(Section):
 
     def bounds(self) -> tuple[float, float] | None:
         """The closed interval of the values a bounded distribution can give (uniform,
-        truncnormal, choice); None for the unbounded ones (normal, lognormal)."""
+        truncnormal, choice, or any with ``within``); None for the unbounded ones (normal,
+        lognormal)."""
+        own = self._own_bounds()
+        if self.within is None:
+            return own
+        low, high = self.within
+        if self.kind == "choice":
+            inside = [v for v in self.args if low <= v <= high]
+            return min(inside), max(inside)
+        if own is None:
+            return low, high
+        return max(own[0], low), min(own[1], high)
+
+    def _own_bounds(self) -> tuple[float, float] | None:
         a = self.args
         kind = self.kind
         if kind == "uniform":
@@ -248,10 +283,11 @@ class Requirement(Section):
     probability of breaking it.
 
     A sample fails the requirement when its output lies outside [``min``, ``max``]; a
-    sample whose output is NaN (a failed instance) fails too, and is counted apart as
-    undefined. Every run stores ``requirement_met`` (sample, requirement); ``mcchain export
-    RUN --requirements`` gives the failure probability with its interval, the verdict, the
-    quantile at the target and the tolerance allocation (docs/scenes.md).
+    sample with a failure bit in ``status`` fails too, and is counted apart as undefined; a
+    NaN time of an event that never happened means "never". Every run stores
+    ``requirement_met`` (sample, requirement); ``mcchain export RUN --requirements`` gives
+    the failure probability with its bounds, the verdict, the quantile at the target and the
+    tolerance allocation (docs/scenes.md).
     """
 
     name: Annotated[str, Strict(), AfterValidator(_check_requirement_name)] = Field(
@@ -284,10 +320,11 @@ class Requirement(Section):
     )
     confidence: Num = Field(
         default=DEFAULT_REQUIREMENT_CONFIDENCE,
-        gt=0,
+        ge=0.5,
         lt=1,
-        description="two-sided confidence of every interval (and so of every verdict) of this "
-        f"requirement, in (0, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
+        description="C: each bound of this requirement is one-sided at C (P(fail) <= upper "
+        "with probability C, >= lower with C), so each verdict is wrong with probability at "
+        f"most 1 - C; in [0.5, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
     )
 
     @model_validator(mode="after")
