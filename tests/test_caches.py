@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from numba import config
 
-from mcchain import caches
 from mcchain.codegen.cache import cache_dir
+from mcchain.compiled import caches
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -198,7 +198,7 @@ def test_cache_warm__the_scenes_run_then_compiles_nothing(tmp_path: Path) -> Non
     from the cache (counted), none compiled. The run records what compiled its kernels."""
     import json
 
-    from mcchain.runs import read_record
+    from mcchain.runner.runs import read_record
 
     scene = REPO / "configs" / "double-pendulum.toml"
     env = {**os.environ, "PYTHONPATH": str(REPO), "MCCHAIN_CACHE_DIR": str(tmp_path / "cache")}

@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
 
-from mcchain import cli, execution
+from mcchain import cli
+from mcchain.runner import plan
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 
@@ -195,7 +196,7 @@ def test_cli_validate__four_bar_rows_and_driver(
 def test_cli_runs__lists_the_runs_of_a_folder(mcchain: Callable[..., Ran], tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
     made = [
-        execution.start_run(
+        plan.start_run(
             scene, out=tmp_path / "out", loader=fake_loader, solve=fake_solve, progress=False
         ).folder
         for _ in range(2)

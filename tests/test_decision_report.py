@@ -78,7 +78,7 @@ def test_report_page__sections_verdict_and_figures(reported_run: Path) -> None:
 
 
 def test_report_page__shows_the_check_table_when_present(reported_run: Path) -> None:
-    from mcchain.runs import open_run
+    from mcchain.runner.runs import open_run
     from mcchain.viz.report import Report
     from mcchain.viz.report_page import index_html
 

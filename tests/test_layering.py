@@ -15,7 +15,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "mcchain"
 
-PLAIN = {"mcchain.caches", "mcchain.codes", "mcchain.contact", "mcchain.status"}
+PLAIN = {"mcchain.compiled.caches", "mcchain.codes", "mcchain.contact", "mcchain.status"}
 """Modules of constants and helpers outside ``mcchain/kernels`` that the kernels may import:
 each imports nothing of mcchain (asserted), so no codegen, cache or I/O module either."""
 

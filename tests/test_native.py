@@ -231,10 +231,10 @@ def test_machine_code__an_unwritable_cache_compiles_into_a_temporary_one(
     tmp_path, monkeypatch, capsys
 ):
     """``MCCHAIN_CACHE_DIR`` under a regular file: the entry compiles and runs, its machine
-    code goes to ``<tmp>/mcchain-native-<uid>`` (mcchain.caches), at most one warning."""
+    code goes to ``<tmp>/mcchain-native-<uid>`` (mcchain.compiled.caches), at most one warning."""
     import tempfile
 
-    from mcchain import caches
+    from mcchain.compiled import caches
 
     (tmp_path / "a-file").write_text("")
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "a-file" / "cache"))

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from test_cli_commands import assert_usage_error, in_process
 
-from mcchain import resources
+from mcchain.runner import resources
 from mcchain.scene import load_scene
 from mcchain.testing.factory import write_scene
 
@@ -59,8 +59,8 @@ def test_disk_estimate__is_what_the_part_files_hold(tmp_path, config):
     within its uncompressed bound."""
     import netCDF4
 
-    from mcchain.execution import start_run
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
+    from mcchain.runner.plan import start_run
 
     path = REPO / "configs" / f"{config}.toml"
     result = start_run(path, samples=6, chunk_size=4, out=tmp_path, progress=False, keep_parts=True)

@@ -26,11 +26,11 @@ from test_runs_support import (
     write_fake_scene,
 )
 
-from mcchain import execution, runs
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.errors import RunError, SceneError
-from mcchain.parallel import Progress, compile_notice
+from mcchain.runner import plan, runs
+from mcchain.runner.executors import Progress, compile_notice
 
 RUN_JSON_FIELDS = {
     "id",
@@ -65,9 +65,9 @@ def env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
 
 
-def run(scene: Path, out: Path, **kwargs) -> execution.RunResult:  # type: ignore[no-untyped-def]
+def run(scene: Path, out: Path, **kwargs) -> plan.RunResult:  # type: ignore[no-untyped-def]
     kwargs.setdefault("progress", False)
-    return execution.start_run(scene, out=out, loader=fake_loader, solve=fake_solve, **kwargs)
+    return plan.start_run(scene, out=out, loader=fake_loader, solve=fake_solve, **kwargs)
 
 
 def test_start_run__folder_contents_and_run_json(tmp_path: Path) -> None:
@@ -178,7 +178,7 @@ def test_start_run__scene_error_writes_nothing(tmp_path: Path) -> None:
 
     scene = write_fake_scene(tmp_path / "s.toml")
     with pytest.raises(SceneError, match=r"body\.bar\.mass"):
-        execution.start_run(scene, out=tmp_path / "runs", loader=loader, solve=fake_solve)
+        plan.start_run(scene, out=tmp_path / "runs", loader=loader, solve=fake_solve)
     assert not (tmp_path / "runs").exists()
 
 
@@ -194,9 +194,7 @@ def test_start_run__failing_solver_marks_the_run_failed(tmp_path: Path) -> None:
 
     scene = write_fake_scene(tmp_path / "s.toml", count=30)
     with pytest.raises(FloatingPointError):
-        execution.start_run(
-            scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve
-        )
+        plan.start_run(scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve)
     (folder,) = (tmp_path / "runs").iterdir()
     record = runs.read_record(folder)
     assert record["status"] == "FAILED" and record["error"] == "boom in chunk 1"
@@ -205,7 +203,7 @@ def test_start_run__failing_solver_marks_the_run_failed(tmp_path: Path) -> None:
     (info,) = runs.list_runs(tmp_path / "runs")
     assert info.state == "FAILED"
     # The failed run completes on resume, computing only the missing chunks.
-    result = execution.resume_run(folder, loader=fake_loader, solve=fake_solve, progress=False)
+    result = plan.resume_run(folder, loader=fake_loader, solve=fake_solve, progress=False)
     assert result.record["status"] == "COMPLETED"
     assert result.record["sessions"][-1]["chunks_computed"] == 2
     reference = run(scene, tmp_path / "ref", chunk_size=10).folder
@@ -236,7 +234,7 @@ def test_resume__after_sigkill_equals_an_uninterrupted_run(tmp_path: Path) -> No
         assert list(partial.sample.values) == finished
         partial_data = partial.load()
 
-    result = execution.resume_run(target, loader=fake_loader, solve=fake_solve, argv=["resume"])
+    result = plan.resume_run(target, loader=fake_loader, solve=fake_solve, argv=["resume"])
     assert result.record["status"] == "COMPLETED"
     assert len(result.record["sessions"]) == 2
     assert result.record["sessions"][1]["chunks_computed"] == 8 - len(done)
@@ -254,19 +252,19 @@ def test_resume__refuses_completed_running_and_unknown_runs(tmp_path: Path) -> N
     scene = write_fake_scene(tmp_path / "s.toml", count=4)
     folder = run(scene, tmp_path / "runs").folder
     with pytest.raises(RunError, match="already completed"):
-        execution.resume_run(folder, loader=fake_loader, solve=fake_solve)
+        plan.resume_run(folder, loader=fake_loader, solve=fake_solve)
     with pytest.raises(RunError, match="no such run folder"):
-        execution.resume_run(tmp_path / "nope")
+        plan.resume_run(tmp_path / "nope")
     (tmp_path / "empty").mkdir()
     with pytest.raises(RunError, match="not a run folder"):
-        execution.resume_run(tmp_path / "empty")
+        plan.resume_run(tmp_path / "empty")
     record = runs.read_record(folder)
     record["status"] = "RUNNING"
     runs.write_record(folder, record)
     with runs.run_lock(folder):
         assert runs.is_locked(folder)
         with pytest.raises(RunError, match="being executed by another process"):
-            execution.resume_run(folder, loader=fake_loader, solve=fake_solve)
+            plan.resume_run(folder, loader=fake_loader, solve=fake_solve)
     assert not runs.is_locked(folder)
 
 

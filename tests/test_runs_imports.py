@@ -16,10 +16,10 @@ PACKAGE = REPO / "mcchain"
 
 LIGHT = (
     "mcchain.cli",
-    "mcchain.runs",
-    "mcchain.job",
-    "mcchain.execution",
-    "mcchain.provenance",
+    "mcchain.runner.runs",
+    "mcchain.runner.job",
+    "mcchain.runner.plan",
+    "mcchain.runner.provenance",
     "mcchain.viz.live",
 )
 """Modules that import only the standard library (and each other) at import time."""
@@ -116,7 +116,7 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 def test_import_graph__has_no_cycle() -> None:
     graph = import_graph()
-    assert "mcchain.execution" in graph and "mcchain.runs" in graph["mcchain.execution"]
+    assert "mcchain.runner.plan" in graph and "mcchain.runner.runs" in graph["mcchain.runner.plan"]
     assert find_cycle(graph) is None, " -> ".join(find_cycle(graph) or [])
 
 

@@ -26,11 +26,12 @@ from test_runs_support import REPO, TESTS, fake_loader, fake_model, fake_solve, 
 from test_viz_e2e import SCENE
 from test_viz_playback import read_rrd
 
-from mcchain import execution, open_run, runs
+from mcchain import open_run
 from mcchain.cli import main as cli
 from mcchain.ensemble.io import list_parts
 from mcchain.errors import RunError
-from mcchain.parallel import run_local
+from mcchain.runner import plan, runs
+from mcchain.runner.executors import run_local
 from mcchain.viz import live as viz_live
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
@@ -124,7 +125,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     """An interrupted run (chunks 2:4 and 6:8 missing) resumed with ``--rerun 0,3,6``: the
     default sink is ``<run>/live.rrd``; sample 0 was computed before and is named."""
     run = tmp_path / "resumed"
-    execution.start_run(swing, run_dir=run, chunk_size=2, progress=False, keep_parts=True)
+    plan.start_run(swing, run_dir=run, chunk_size=2, progress=False, keep_parts=True)
     for part in list_parts(run / "parts"):
         if part.start in (2, 6):
             part.path.unlink()
@@ -132,7 +133,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     record = runs.read_record(run)
     runs.write_record(run, {**record, "status": runs.FAILED})
 
-    result = execution.resume_run(run, progress=False, rerun=viz_live.LiveOptions((0, 3, 6)))
+    result = plan.resume_run(run, progress=False, rerun=viz_live.LiveOptions((0, 3, 6)))
     assert result.record["sessions"][-1]["chunks_computed"] == 2
     rrd = read_rrd(run / runs.LIVE_RRD)
     assert sample_paths(rrd) == {"3", "6"}
@@ -158,7 +159,7 @@ def test_rerun__dask_logs_the_chunks_as_they_reach_the_client(
     with LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
     ) as cluster:
-        execution.start_run(
+        plan.start_run(
             swing,
             run_dir=run,
             chunk_size=2,
@@ -215,11 +216,11 @@ def test_rerun__bad_flags_are_one_line_exit_2_and_write_nothing(
 def test_rerun__bad_sample_on_resume_writes_nothing(tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", count=10, steps=4)
     folder = tmp_path / "run"
-    execution.start_run(scene, run_dir=folder, loader=fake_loader, solve=fake_solve, progress=False)
+    plan.start_run(scene, run_dir=folder, loader=fake_loader, solve=fake_solve, progress=False)
     (folder / "ensemble.nc").unlink()
     before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
     with pytest.raises(RunError, match=r"^--rerun: sample 10 is not in the run \(10 samples"):
-        execution.resume_run(
+        plan.resume_run(
             folder, loader=fake_loader, solve=fake_solve, rerun=viz_live.LiveOptions((10,))
         )
     assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before
@@ -249,7 +250,7 @@ def test_rerun__spawn_opens_a_viewer_and_a_second_default_file_never_overwrites(
 
     monkeypatch.setattr(viz_live, "LiveStream", Recorder)
     scene = write_fake_scene(tmp_path / "s.toml", count=40, steps=4)
-    result = execution.start_run(
+    result = plan.start_run(
         scene,
         run_dir=tmp_path / "run",
         chunk_size=16,
@@ -276,11 +277,11 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
         raise OSError("No space left on device\nmore")
 
     scene = write_fake_scene(tmp_path / "s.toml", count=20, steps=4)
-    plain = execution.start_run(
+    plain = plan.start_run(
         scene, run_dir=tmp_path / "a", loader=fake_loader, solve=fake_solve, progress=False
     )
     monkeypatch.setattr(viz_live.LiveStream, "log_chunk", broken)
-    result = execution.start_run(
+    result = plan.start_run(
         scene,
         run_dir=tmp_path / "b",
         loader=fake_loader,
@@ -320,10 +321,10 @@ def test_rerun__is_imported_only_when_streaming(tmp_path: Path) -> None:
     """One process: a run without ``--rerun`` leaves rerun unimported, then one with it."""
     scene = write_fake_scene(tmp_path / "s.toml", count=8, steps=4)
     code = (
-        "import sys; from mcchain import execution; from mcchain.viz.live import LiveOptions\n"
+        "import sys; from mcchain.runner import plan; from mcchain.viz.live import LiveOptions\n"
         "from test_runs_support import *\n"
         "for name, live in (('no', None), ('yes', LiveOptions((1,)))):\n"
-        "    execution.start_run(sys.argv[1], run_dir=sys.argv[2] + name, loader=fake_loader,"
+        "    plan.start_run(sys.argv[1], run_dir=sys.argv[2] + name, loader=fake_loader,"
         " solve=fake_solve, progress=False, rerun=live)\n"
         "    print(name, 'rerun' in sys.modules)\n"
     )

@@ -1,6 +1,6 @@
 """``mcchain`` command line: a thin front end, and the one place that parses arguments.
 
-Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcchain.runs`),
+Commands: ``run`` (:mod:`mcchain.runner.plan`), ``validate``, ``runs`` (:mod:`mcchain.runner.runs`),
 ``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
 (:func:`mcchain.viz.report.write_report`); the benchmarks are scripts in ``benchmarks/``.
 A bad input (``SceneError``, ``RunError``, a bad
@@ -67,7 +67,7 @@ def console_main() -> NoReturn:
     written is lost. An exception :func:`main` does not handle exits the usual way.
 
     ``validate`` and ``run`` may run their kernels interpreted here
-    (:func:`mcchain.cli.commands._interpret_for`, :mod:`mcchain.first_run`), never when
+    (:func:`mcchain.cli.commands._interpret_for`, :mod:`mcchain.compiled.first_run`), never when
     :func:`main` is called in a process that may go on to solve.
     """
     commands._may_interpret = sys.argv[1:2] in (["validate"], ["run"])

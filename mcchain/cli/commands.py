@@ -27,14 +27,14 @@ def fail(message: str, code: int = EXIT_USAGE) -> int:
 
 
 def _cmd_cache(args: argparse.Namespace) -> int:
-    from mcchain import cache_report
+    from mcchain.compiled import report
 
     if args.cache_action == "status":
-        print("\n".join(cache_report.status_lines()))
+        print("\n".join(report.status_lines()))
     elif args.cache_action == "clear":
-        print("\n".join(cache_report.clear()))
+        print("\n".join(report.clear()))
     else:
-        from mcchain.compile_ahead import warm
+        from mcchain.compiled.ahead import warm
 
         for scene in args.scenes:
             print(warm(scene))
@@ -63,7 +63,7 @@ def _live_options(args: argparse.Namespace) -> Any:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from mcchain import execution, runs
+    from mcchain.runner import plan, runs
 
     progress = False if args.quiet else None
     live = _live_options(args)
@@ -86,7 +86,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return fail(f"--extend: cannot be combined with {', '.join(conflicting)}")
         if args.samples is None:
             return fail("--extend: give the number of samples to add: --samples N")
-        result = execution.extend_run(
+        result = plan.extend_run(
             args.extend,
             args.samples,
             dask=args.dask,
@@ -110,7 +110,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         ]
         if conflicting:
             return fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
-        result = execution.resume_run(
+        result = plan.resume_run(
             args.resume,
             remerge=args.remerge,
             dask=args.dask,
@@ -128,17 +128,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return fail("--run-dir: cannot be combined with --out")
         first_run = None
         if _may_interpret and args.dask is None:
-            from mcchain.first_run import choose
+            from mcchain.compiled.first_run import choose
 
             first_run = choose(args.scene, args.samples, args.seed)
         background_off = None
         if first_run is not None:
-            from mcchain.user_config import background_compile_off
+            from mcchain.cli.user_config import background_compile_off
 
             background_off = background_compile_off()
             if args.no_background_compile:
                 background_off = "--no-background-compile"
-        result = execution.start_run(
+        result = plan.start_run(
             args.scene,
             samples=args.samples,
             seed=args.seed,
@@ -171,7 +171,7 @@ VALIDATE_COMPILED = "MCCHAIN_VALIDATE_COMPILED"
 _may_interpret = False
 """Set by :func:`mcchain.cli.console_main`: this process only validates or runs one scene, so its
 kernels may run interpreted (``validate``: :func:`_interpret_for`; ``run``:
-:mod:`mcchain.first_run`)."""
+:mod:`mcchain.compiled.first_run`)."""
 
 
 def _interpret_for(scene_path: Any) -> bool:
@@ -216,7 +216,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _validation_lines(scene_path: Any) -> list[str]:
     """What ``mcchain validate`` prints for a scene that passes its checks."""
-    from mcchain.job import default_loader, written_state
+    from mcchain.runner.job import default_loader, written_state
 
     scene, model = default_loader(scene_path, None, None)
     name = getattr(getattr(scene, "scene", None), "name", scene_path)
@@ -239,7 +239,7 @@ def _disk_line(scene: Any, model: Any) -> str:
     """``validate``'s line on what a run of the scene writes (``mcchain run`` compares it
     with the free space; the free space is not printed here, so that the output depends on
     the scene only)."""
-    from mcchain.resources import estimate_disk
+    from mcchain.runner.resources import estimate_disk
 
     estimate = estimate_disk(scene, model, model.nsample, scene.storage.chunk_size)
     assert estimate is not None
@@ -247,7 +247,7 @@ def _disk_line(scene: Any, model: Any) -> str:
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
-    from mcchain.runs import format_runs, list_runs
+    from mcchain.runner.runs import format_runs, list_runs
 
     found = list_runs(args.out)
     if not found:

@@ -310,7 +310,7 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
 
 def resume_arguments(args: list[str]) -> list[str]:
     """The options of a ``mcchain run`` command line ``args`` that a resume takes too
-    (:func:`mcchain.first_run.run_compiled`)."""
+    (:func:`mcchain.compiled.first_run.run_compiled`)."""
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument("--threads")
     parser.add_argument("--quiet", action="store_true")

@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
-from mcchain.caches import mcchain_cache
+from mcchain.compiled.caches import mcchain_cache
 
 _GENERATOR_FILES = (
     "topology.py",
@@ -40,7 +40,7 @@ def generator_hash() -> str:
 
 def cache_dir() -> Path:
     """Folder of generated kernel modules: ``generated`` in mcchain's cache
-    (:func:`mcchain.caches.mcchain_cache`)."""
+    (:func:`mcchain.compiled.caches.mcchain_cache`)."""
     return mcchain_cache("generated")
 
 

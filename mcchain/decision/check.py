@@ -32,7 +32,7 @@ from mcchain.errors import RunError
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.job import Job
+    from mcchain.runner.job import Job
 
 DEFAULT_SAMPLES = 64
 """Samples re-solved by default."""
@@ -245,8 +245,8 @@ def check_run(
     from mcchain.decision.requirements import job_requirements
     from mcchain.decision.summary import write_csv
     from mcchain.ensemble.registry import coerce_outputs
-    from mcchain.parallel import default_solve
-    from mcchain.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
+    from mcchain.runner.executors import default_solve
+    from mcchain.runner.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
 
     if not (isinstance(tighten, (int, float)) and math.isfinite(tighten) and tighten >= 1):
         raise RunError(f"--tighten: must be a number >= 1, got {tighten!r}")
@@ -279,7 +279,7 @@ def check_run(
 
 def _run_job(folder: Path, record: Mapping[str, Any]) -> Job:
     """The run's job as it ran (scene copy, count, seed, kernels)."""
-    from mcchain.execution import keep_kernels, recorded_job
+    from mcchain.runner.plan import keep_kernels, recorded_job
 
     return keep_kernels(recorded_job(folder, record), record.get("kernels"))
 

@@ -441,7 +441,7 @@ def export_requirements(run: str | Path) -> list[Path]:
         RunError: the run has no requirements.
     """
     from mcchain.errors import RunError
-    from mcchain.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     ds = open_run(folder)

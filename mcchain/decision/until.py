@@ -26,7 +26,7 @@ from mcchain.errors import RunError, SceneError
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.job import Job, Loader
+    from mcchain.runner.job import Job, Loader
 
 log = logging.getLogger("mcchain")
 
@@ -53,14 +53,14 @@ def sequential_settings(attrs: Mapping[str, Any]) -> dict[str, Any] | None:
 
 @dataclass
 class Until:
-    """The ``grow`` of :func:`mcchain.chunk_execution.execute` for ``until = "decided"``."""
+    """The ``grow`` of :func:`mcchain.runner.pipeline.execute` for ``until = "decided"``."""
 
     batch: int
     max_count: int
 
     def __call__(self, folder: Path, record: dict[str, Any], nsample: int) -> int | None:
         from mcchain.ensemble.io import list_parts, open_parts
-        from mcchain.runs import PARTS
+        from mcchain.runner.runs import PARTS
 
         with open_parts(list_parts(Path(folder) / PARTS)) as ds:
             look = look_at(ds, nsample, self.batch)
@@ -154,7 +154,7 @@ def sequential_job(
     max_count = int(sample.until_max_count)
     if batch > max_count:
         raise RunError(f"--samples: {batch} is more than sample.max_count ({max_count})")
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
 
     until = Until(batch, max_count)
     full = prepare_job(

@@ -81,8 +81,8 @@ def njit(*args: Any, **options: Any) -> Any:
 
 @functools.cache
 def numba_cache() -> str:
-    """Where numba caches the kernels (made writable first; see :mod:`mcchain.caches`)."""
-    from mcchain.caches import ensure_numba_cache
+    """Where numba caches the kernels (made writable first; see :mod:`mcchain.compiled.caches`)."""
+    from mcchain.compiled.caches import ensure_numba_cache
 
     try:
         return ensure_numba_cache()

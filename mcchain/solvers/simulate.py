@@ -423,7 +423,7 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = load_section(Simulate, "simulate", sim)
-    if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.job)
+    if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.runner.job)
         choice = choose_kernels(settings, model.ndof, model.nsample)
         settings = settings.model_copy(update={"kernels": choice.kernels})
     from mcchain.codegen.layout import LMAX

@@ -3,7 +3,7 @@
 * :class:`LiveOptions`, :func:`parse_rerun_samples`, :func:`check_live`: the ``--rerun``
   options, checked before anything is written;
 * :class:`LiveRun`: the stream of one run session, fed each solved chunk by
-  :func:`mcchain.chunk_execution.execute`; it records what it streamed in ``run.json``;
+  :func:`mcchain.runner.pipeline.execute`; it records what it streamed in ``run.json``;
 * :class:`LiveStream`: the rerun side, logging the chosen samples of each chunk as
   ``mcchain show`` logs them (:mod:`mcchain.viz.playback`).
 
@@ -22,13 +22,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError
-from mcchain.runs import LIVE_RRD
+from mcchain.runner.runs import LIVE_RRD
 
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.job import Job
     from mcchain.model import Model
+    from mcchain.runner.job import Job
 
 log = logging.getLogger("mcchain")
 

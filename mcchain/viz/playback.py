@@ -599,7 +599,7 @@ def open_inputs(run: str | Path) -> tuple[xr.Dataset, Model]:
     :func:`mcchain.ensemble.describe.stored_model`), never by sampling the scene again.
     """
     from mcchain.ensemble.describe import stored_model
-    from mcchain.runs import open_run, resolve_run
+    from mcchain.runner.runs import open_run, resolve_run
 
     ds = open_run(resolve_run(run))
     return ds, stored_model(ds)

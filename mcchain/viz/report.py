@@ -550,7 +550,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
     from mcchain.ensemble.describe import stored_model
     from mcchain.errors import McchainError
-    from mcchain.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     ds = open_run(folder)

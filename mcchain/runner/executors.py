@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 class HelperCompile(Protocol):
     """What the warm-up asks of a cold first run's helper compile
-    (:class:`mcchain.compile_ahead.CompileAhead`, which imports this module: named by its
+    (:class:`mcchain.compiled.ahead.CompileAhead`, which imports this module: named by its
     methods here, so that the two modules form no import circle)."""
 
     started: float
@@ -184,7 +184,7 @@ in less, so a warm run prints nothing)."""
 
 def kernel_cache_folders() -> str:
     """Where compiled kernels are kept, as the notice names them."""
-    from mcchain.caches import mcchain_cache
+    from mcchain.compiled.caches import mcchain_cache
     from mcchain.kernels.config import numba_cache
 
     return (
@@ -229,7 +229,7 @@ def compile_notice(
 
 def announce_compile(stream: Any = None, ahead: bool = False) -> None:
     """The compile notice's line (``ahead``: two processes compile, see
-    :mod:`mcchain.compile_ahead`)."""
+    :mod:`mcchain.compiled.ahead`)."""
     how = " (in two processes)" if ahead else ""
     print(
         f"compiling the kernels of this scene's analyses and topology{how}: once per "

@@ -3,7 +3,7 @@
 A first run compiles two sets of numba kernels one after the other: assembly (for the scene
 check, before anything is written) and then the analyses and the time integrator (at the
 warm-up of the first chunk). Numba compiles on one core. With two cores or more and an empty
-cache, :meth:`CompileAhead.start` runs ``python -m mcchain.compile_ahead`` beside the scene
+cache, :meth:`CompileAhead.start` runs ``python -m mcchain.compiled.ahead`` beside the scene
 check: it compiles the equilibrium and the integrator of the scene (it solves two samples
 from their written, unassembled state, so it compiles no assembly) into the same caches.
 The run's own process, its scene check done, compiles the eigen step meanwhile
@@ -18,13 +18,13 @@ warm-up compiles what is missing itself, as without it. On one core (or with
 it compiles, instead of after the scene check's compile.
 
 A small statics run on a cold cache compiles nothing itself: its kernels run interpreted
-(:mod:`mcchain.first_run`), and :func:`start_background` starts a detached process that
+(:mod:`mcchain.compiled.first_run`), and :func:`start_background` starts a detached process that
 compiles them all for the next runs, one such process at a time (a lock in
 ``MCCHAIN_CACHE_DIR/compile``, with its log and its record ``background.json``), and once
 per cache: only in an interactive terminal outside CI and batch schedulers, unless switched
 off (:func:`why_not_background`). Its failure is shown by the next run
 (:func:`background_failure_note`); a run started while it compiles waits for it where that
-is sooner (:func:`mcchain.first_run.choose`, :func:`background_remaining`).
+is sooner (:func:`mcchain.compiled.first_run.choose`, :func:`background_remaining`).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _cores() -> int:
 def assembly_is_cached() -> bool:
     """True if numba's cache holds the assembly kernel (then the scene check compiles
     nothing, and there is nothing to run beside it), or if that cannot be told."""
-    from mcchain.caches import kernels_cached
+    from mcchain.compiled.caches import kernels_cached
 
     return kernels_cached(["assembly.assemble_batch"]) is not False
 
@@ -109,7 +109,7 @@ def _command(scene_path: Path, seed: int | None, samples: int | None, *first: st
     :func:`compile_for`)."""
     seed_arg = str(-1 if seed is None else seed)
     samples_arg = str(-1 if samples is None else samples)
-    module = [sys.executable, "-m", "mcchain.compile_ahead", *first]
+    module = [sys.executable, "-m", "mcchain.compiled.ahead", *first]
     return [*module, str(scene_path), seed_arg, samples_arg]
 
 
@@ -124,7 +124,7 @@ def compile_for(
     the scene check and the eigen step too (then it solves from the assembled state)."""
     import numpy as np
 
-    from mcchain.job import resolve_kernels
+    from mcchain.runner.job import resolve_kernels
     from mcchain.solvers import solve_chunk
     from mcchain.solvers.statics import Assembled
     from mcchain.status import STATUS_DTYPE
@@ -155,9 +155,9 @@ def _compile_check_and_modes(scene_path: Path, seed: int | None) -> None:
 
 
 def _compile_check(scene: Any, model: Model) -> None:
-    """The scene check a run makes before anything is written (:func:`mcchain.job.
+    """The scene check a run makes before anything is written (:func:`mcchain.runner.job.
     default_loader`): assembly of the samples and of the scene as written."""
-    from mcchain.job import written_state
+    from mcchain.runner.job import written_state
     from mcchain.solvers.statics import check_scene, initial_state_warnings
 
     check_scene(model)
@@ -168,7 +168,7 @@ def _helper_model(scene_path: Path, seed: int | None) -> tuple[Any, Model]:
     """The scene at ``scene_path`` and its first samples for a helper to solve: the
     smallest count its design allows (two; d + 2 for Saltelli's), or its one instance
     without ``[sample]``."""
-    from mcchain.parallel import warm_model
+    from mcchain.runner.executors import warm_model
     from mcchain.scene import compile_model, load_scene
 
     scene = load_scene(scene_path)
@@ -212,7 +212,7 @@ BACKGROUND = "--background"
 
 def background_files() -> tuple[Path, Path]:
     """The lock file a background compile holds while it runs, and its log."""
-    from mcchain.caches import mcchain_cache
+    from mcchain.compiled.caches import mcchain_cache
 
     folder = mcchain_cache("compile")
     return folder / "background.lock", folder / "background.log"
@@ -326,7 +326,7 @@ def background_remaining(now: Callable[[], float] = time.time) -> float | None:
 def background_running() -> bool:
     """Whether a background compile (:func:`start_background`) holds its lock now (False
     where the lock cannot be read: NFS or Lustre without locks)."""
-    from mcchain.runs import file_locked
+    from mcchain.runner.runs import file_locked
 
     try:
         return file_locked(background_files()[0])
@@ -336,7 +336,7 @@ def background_running() -> bool:
 
 def wait_background() -> None:
     """Wait until no background compile runs (for benchmarks, tests, and a run that waits
-    for it: :func:`mcchain.first_run.choose`)."""
+    for it: :func:`mcchain.compiled.first_run.choose`)."""
     import fcntl
 
     with contextlib.suppress(OSError):
@@ -365,7 +365,7 @@ def background_note(
 def start_background(scene_path: Path, seed: int | None, samples: int | None) -> str:
     """Start a process that compiles every kernel of the scene into the caches, for the
     next runs, while this run goes on with its kernels interpreted
-    (:mod:`mcchain.first_run`). It is detached: it outlives the run (which may end first),
+    (:mod:`mcchain.compiled.first_run`). It is detached: it outlives the run (which may end first),
     and an interrupt of the run does not reach it. One at a time: a second one started
     meanwhile finds the lock held and exits. It never fails the run: a lock that cannot be
     taken for any reason (NFS or Lustre without locks: ENOLCK, ENOSYS) means "not started".

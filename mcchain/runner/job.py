@@ -22,7 +22,7 @@ from mcchain.errors import RunError
 
 if TYPE_CHECKING:
     from mcchain.model import Model
-    from mcchain.resources import DiskEstimate
+    from mcchain.runner.resources import DiskEstimate
 
 Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
 """``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
@@ -41,7 +41,7 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
-        disk: what the run writes (:class:`mcchain.resources.DiskEstimate`; ``None`` for a
+        disk: what the run writes (:class:`mcchain.runner.resources.DiskEstimate`; ``None`` for a
             scene that is not a real one, the tests' fakes).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
@@ -187,7 +187,7 @@ def prepare_job(
         text = path.read_text(encoding="utf-8")
     name = getattr(_section(scene, "scene"), "name", None) or path.stem
     nsample = int(model.nsample)
-    from mcchain.resources import estimate_disk
+    from mcchain.runner.resources import estimate_disk
 
     return Job(
         scene=scene,

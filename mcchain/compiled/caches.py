@@ -13,7 +13,7 @@ per machine boot instead of once per installation. That folder has a predictable
 
 A plain module: it imports nothing of mcchain, so the kernels (:mod:`mcchain.kernels.config`)
 and the code generator both use it without a cycle. What ``mcchain cache status`` reports is
-in :mod:`mcchain.cache_report`.
+in :mod:`mcchain.compiled.report`.
 """
 
 from __future__ import annotations
@@ -137,7 +137,7 @@ def ensure_numba_cache() -> str:
         warn_fallback("NUMBA_CACHE_DIR", configured, fallback)
         config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
         return str(fallback)
-    in_tree = Path(__file__).parent / "kernels" / "__pycache__"
+    in_tree = Path(__file__).parents[1] / "kernels" / "__pycache__"
     if writable(in_tree):
         return "beside mcchain's sources (__pycache__)"
     user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
@@ -157,7 +157,7 @@ def numba_index_folder() -> Path | None:
     module. None on Windows, whose user-wide folder this does not look up."""
     import hashlib
 
-    sources = os.path.dirname(os.path.abspath(__file__)) + os.sep + "kernels"
+    sources = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep + "kernels"
     subpath = "kernels_" + hashlib.sha1(sources.encode()).hexdigest()
     configured = os.environ.get("NUMBA_CACHE_DIR")
     if configured:

@@ -5,7 +5,7 @@ A run folder ``runs/<timestamp>-<scene>/`` holds:
 * ``scene.toml`` — the scene text the run was made from (resume reads it back);
 * ``run.json`` — the experiment log: status ``RUNNING``/``COMPLETED``/``FAILED``, start
   and end, argv, versions, git commit, host, threads, wall time per phase, status counts,
-  throughput (see :func:`mcchain.chunk_execution.execute`);
+  throughput (see :func:`mcchain.runner.pipeline.execute`);
 * ``run.log`` — the log (one line per chunk, warnings, the traceback of a failure);
 * ``parts/part-<start>-<stop>.nc`` — finished chunks, each written atomically; deleted once
   merged;
@@ -14,8 +14,8 @@ A run folder ``runs/<timestamp>-<scene>/`` holds:
   samples, streamed chunk by chunk while the run goes (``live-2.rrd``, ... on a resume);
   it never changes ``ensemble.nc``.
 
-Making a run is :mod:`mcchain.execution`'s job (with :mod:`mcchain.job` and
-:mod:`mcchain.provenance`); this module only knows the folder.
+Making a run is :mod:`mcchain.runner.plan`'s job (with :mod:`mcchain.runner.job` and
+:mod:`mcchain.runner.provenance`); this module only knows the folder.
 
 This module imports only the standard library at import time (``mcchain runs`` must stay
 fast); xarray and netCDF4 are imported when a run is opened or ``run.json`` written.

@@ -3,7 +3,7 @@
 :func:`start_run` (``mcchain run SCENE``) prepares the job, creates the run folder and
 executes it; :func:`resume_run` (``mcchain run --resume RUN``) executes the chunks an
 interrupted run lacks; :func:`extend_run` (``--extend``) adds samples to a completed one.
-:func:`mcchain.chunk_execution.execute` is the part they share (see its docstring for the
+:func:`mcchain.runner.pipeline.execute` is the part they share (see its docstring for the
 phases timed and the throughput recorded in ``run.json``).
 
 Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host names, so the
@@ -25,7 +25,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcchain.chunk_execution import (
+from mcchain.errors import McchainError, RunError
+from mcchain.runner.job import Job, Loader, check_positive, prepare_job
+from mcchain.runner.pipeline import (
     RunResult,
     execute,
     job_kernels,
@@ -33,11 +35,9 @@ from mcchain.chunk_execution import (
     now,
     run_chunks,
 )
-from mcchain.errors import McchainError, RunError
-from mcchain.job import Job, Loader, check_positive, prepare_job
-from mcchain.provenance import git_state, host_info, software_versions
-from mcchain.resources import check_disk
-from mcchain.runs import (
+from mcchain.runner.provenance import git_state, host_info, software_versions
+from mcchain.runner.resources import check_disk
+from mcchain.runner.runs import (
     COMPLETED,
     DEFAULT_OUT,
     ENSEMBLE,
@@ -52,15 +52,15 @@ from mcchain.runs import (
 from mcchain.viz.live import LiveOptions, check_live
 
 if TYPE_CHECKING:
-    from mcchain.first_run import FirstRun
-    from mcchain.parallel import SolveFn
+    from mcchain.compiled.first_run import FirstRun
+    from mcchain.runner.executors import SolveFn
 
 
 log = logging.getLogger("mcchain")
 
 
 def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -> dict[str, Any]:
-    from mcchain.parallel import plan_chunks
+    from mcchain.runner.executors import plan_chunks
 
     return {
         "id": folder.name,
@@ -124,16 +124,16 @@ def start_run(
     """Run a scene into a new run folder (``mcchain run``).
 
     Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices, the disk
-    space: :func:`mcchain.resources.check_disk`) happens before the folder is created: a
+    space: :func:`mcchain.runner.resources.check_disk`) happens before the folder is created: a
     bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams
     samples to rerun while the run goes (:class:`LiveOptions`).
 
-    ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
+    ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.compiled.first_run`,
     the console script only): a background process compiles them for the next runs, and
     should the interpreted kernels raise, the process becomes the compiled run (or its
     resume, once the folder exists). ``background_off``: what switched that background
     compile off (``--no-background-compile``, the user's config file), or None
-    (:func:`mcchain.compile_ahead.why_not_background` has the other reasons).
+    (:func:`mcchain.compiled.ahead.why_not_background` has the other reasons).
     """
     t0 = time.perf_counter()
     if run_dir is not None:
@@ -144,8 +144,8 @@ def start_run(
     real = loader is None and solve is None and dask is None  # the real scene and kernels
     interpreted = first_run is not None and real  # compiled in the background, after the checks
     if real and not interpreted and Path(scene_path).is_file():
-        from mcchain.compile_ahead import CompileAhead
-        from mcchain.parallel import announce_compile
+        from mcchain.compiled.ahead import CompileAhead
+        from mcchain.runner.executors import announce_compile
 
         ahead = CompileAhead.start(Path(scene_path), seed, samples)
         if ahead is not None:
@@ -162,13 +162,13 @@ def start_run(
         check_live(rerun, job.model.nsample)
         check_disk(job.disk, out if run_dir is None else run_dir)
         if real:
-            from mcchain.compile_ahead import background_failure_note
+            from mcchain.compiled.ahead import background_failure_note
 
             failed = background_failure_note()
             if failed is not None:
                 job.warnings.append(failed)
         if interpreted:
-            from mcchain.compile_ahead import background_note
+            from mcchain.compiled.ahead import background_note
 
             background = background_note(Path(scene_path), seed, samples, background_off)
             assert first_run is not None
@@ -203,7 +203,7 @@ def start_run(
     except Exception as exc:
         if not interpreted or isinstance(exc, (McchainError, OSError)):
             raise
-        from mcchain.first_run import run_compiled
+        from mcchain.compiled.first_run import run_compiled
 
         run_compiled(resume=folder, reason=exc)
     finally:
@@ -237,7 +237,7 @@ def resume_run(
     wrote first.
 
     A resume whose missing part files and merge would not fit in the free space is refused
-    before anything changes (:func:`mcchain.resources.check_disk`).
+    before anything changes (:func:`mcchain.runner.resources.check_disk`).
     """
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
 
@@ -307,7 +307,7 @@ def _check_threads(threads: int | None, dask: str | None) -> None:
             f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {dask!r}"
         )
     if dask is not None:
-        from mcchain.parallel import check_scheduler
+        from mcchain.runner.executors import check_scheduler
 
         check_scheduler(dask)
     if threads is not None and dask is None:
@@ -431,7 +431,7 @@ def keep_kernels(job: Job, kernels: str | None) -> Job:
         return job
     from dataclasses import replace
 
-    from mcchain.job import resolved_settings
+    from mcchain.runner.job import resolved_settings
 
     scene = job.scene.model_copy(update={"simulate": sim.model_copy(update={"kernels": kernels})})
     return replace(job, scene=scene, settings=resolved_settings(scene, job.nsample, job.seed))

@@ -1,6 +1,6 @@
 """Executing a prepared run folder: compute the chunks it lacks, merge them, complete
 ``run.json``, or record why the run failed (:func:`execute`, which
-:func:`mcchain.execution.start_run`, ``resume_run`` and ``extend_run`` call; see its
+:func:`mcchain.runner.plan.start_run`, ``resume_run`` and ``extend_run`` call; see its
 docstring for the phases timed and the throughput recorded in ``run.json``).
 
 Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host names, so the
@@ -27,9 +27,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError, RunFailed
-from mcchain.job import Job
-from mcchain.provenance import software_versions
-from mcchain.runs import (
+from mcchain.runner.job import Job
+from mcchain.runner.provenance import software_versions
+from mcchain.runner.runs import (
     COMPLETED,
     ENSEMBLE,
     FAILED,
@@ -43,9 +43,9 @@ from mcchain.runs import (
 from mcchain.viz.live import LiveOptions, LiveRun, live_summary
 
 if TYPE_CHECKING:
-    from mcchain.compile_ahead import CompileAhead
+    from mcchain.compiled.ahead import CompileAhead
     from mcchain.ensemble.io import MergeStats
-    from mcchain.parallel import ExecutionStats, SolveFn
+    from mcchain.runner.executors import ExecutionStats, SolveFn
 
 log = logging.getLogger("mcchain")
 
@@ -130,7 +130,7 @@ def _status_counts(path: Path) -> tuple[dict[str, int], int]:
 
 
 def _interpreted() -> bool:
-    """Whether this process ran the kernels interpreted (:mod:`mcchain.first_run`)."""
+    """Whether this process ran the kernels interpreted (:mod:`mcchain.compiled.first_run`)."""
     from mcchain.kernels import config
 
     return config.INTERPRETED
@@ -138,7 +138,7 @@ def _interpreted() -> bool:
 
 def kernel_compiler(job: Job) -> str:
     """What compiled the kernels this process runs, as ``run.json``'s sessions and the
-    ensemble's attributes record it: ``"interpreted"`` (:mod:`mcchain.first_run`: plain
+    ensemble's attributes record it: ``"interpreted"`` (:mod:`mcchain.compiled.first_run`: plain
     Python, no compile), ``"native"`` (the generated lane kernels of a ``[simulate]`` on
     ``kernels = "lanes"`` through :mod:`mcchain.codegen.native`) or ``"numba"`` (the
     hand-written kernels, and the lane kernels with ``MCCHAIN_LANE_COMPILER=numba`` or
@@ -195,7 +195,7 @@ def _compute(
     from mcchain.decision.requirements import job_requirements
     from mcchain.ensemble.io import list_parts, write_part
     from mcchain.ensemble.registry import chunk_variables
-    from mcchain.parallel import ExecutionStats, Progress, run_dask, run_local
+    from mcchain.runner.executors import ExecutionStats, Progress, run_dask, run_local
 
     done = {(p.start, p.stop) for p in list_parts(parts_dir)}
     if done - set(chunks):
@@ -530,7 +530,7 @@ until``); it may note what it saw in ``record`` (``run.json``), written next."""
 def run_chunks(record: Mapping[str, Any], chunk_size: int) -> list[tuple[int, int]]:
     """The chunks of a run: ``run.json["samples"]`` in chunks of ``chunk_size``, the chunking
     starting again at every count the run had before it grew (``run.json["restarts"]``)."""
-    from mcchain.parallel import plan_chunks
+    from mcchain.runner.executors import plan_chunks
 
     return plan_chunks(int(record["samples"]), chunk_size, record.get("restarts", ()))
 
@@ -590,7 +590,7 @@ def _outside_failure(
     if not isinstance(exc, (OSError, RuntimeError)):
         return None
     from mcchain.ensemble.io import list_parts
-    from mcchain.resources import free_space, size_text
+    from mcchain.runner.resources import free_space, size_text
 
     free, _ = free_space(folder)
     missing = missing_samples(folder, record)

@@ -1,0 +1,1 @@
+"""The run: plan, execute, store (see :mod:`mcchain.runner.pipeline`)."""
