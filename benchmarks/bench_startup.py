@@ -114,7 +114,10 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
     seconds = time.perf_counter() - t0
     if code != 0:
         raise SystemExit(f"{' '.join(args)} failed in {tree}:\n{err[-2000:]}")
-    wait = "from mcchain.compiled.ahead import wait_background as w; w()"  # older: no such
+    wait = (  # trees before issue 36: mcchain.compile_ahead; older ones: no such
+        "try:\n    from mcchain.compiled.background import wait_background as w\n"
+        "except ImportError:\n    from mcchain.compile_ahead import wait_background as w\nw()"
+    )
     subprocess.run([sys.executable, "-c", wait], env=env, capture_output=True)
     return seconds, time.perf_counter() - t0, out + err
 
@@ -122,7 +125,7 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
 def _in_terminal(cmd: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, str, str]:
     """Run ``cmd`` with its stdin and stderr on a pseudo-terminal, as a user at a terminal
     runs it (a cold first run starts its background compile only there:
-    ``mcchain.compiled.ahead.why_not_background``); its exit code, stdout and stderr."""
+    ``mcchain.compiled.background.why_not_background``); its exit code, stdout and stderr."""
     import pty
     import threading
 

@@ -16,8 +16,8 @@ from test_runs_support import REPO
 from mcchain import open_run
 from mcchain.compiled import ahead
 from mcchain.compiled.ahead import CompileAhead
+from mcchain.compiled.ready import compile_notice
 from mcchain.runner import plan
-from mcchain.runner.executors import compile_notice
 
 SWEEP = REPO / "configs" / "clearance-sweep.toml"
 
@@ -28,12 +28,12 @@ def test_start__no_helper_when_assembly_is_cached_on_one_core_or_switched_off(mo
     monkeypatch.setattr(ahead, "assembly_is_cached", lambda: True)
     assert CompileAhead.start(SWEEP, 0) is None
     monkeypatch.setattr(ahead, "assembly_is_cached", lambda: False)
-    monkeypatch.setattr(ahead, "_cores", lambda: 1)
+    monkeypatch.setattr(ahead, "available_cores", lambda: 1)
     alone = CompileAhead.start(SWEEP, 0)
     assert alone is not None and alone.process is None
     alone.wait()
     alone.stop()
-    monkeypatch.setattr(ahead, "_cores", lambda: 2)
+    monkeypatch.setattr(ahead, "available_cores", lambda: 2)
     monkeypatch.setenv(ahead.ENV_SWITCH, "0")
     off = CompileAhead.start(SWEEP, 0)
     assert off is not None and off.process is None

@@ -1,6 +1,6 @@
 """The first run on a cold cache (mcchain.compiled.first_run): a small statics run goes interpreted,
 with the compiled run's ``ensemble.nc`` byte for byte, while a background process compiles
-the kernels for the next runs (mcchain.compiled.ahead); the cache is read without numba."""
+the kernels for the next runs (mcchain.compiled.background); the cache is read without numba."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import pytest
 from test_cli_commands import in_process
 from test_runs_support import REPO
 
-from mcchain.compiled import ahead, first_run
+from mcchain.compiled import ahead, background, first_run
 from mcchain.compiled.caches import kernels_cached, numba_index_folder
 from mcchain.errors import SceneError
 from mcchain.runner import pipeline, plan
@@ -287,27 +287,27 @@ def test_background_compile__one_at_a_time_detached_and_logged(monkeypatch, tmp_
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("PYTHONPATH", str(REPO))
     monkeypatch.delenv(ahead.ENV_SWITCH, raising=False)
-    lock, log = ahead.background_files()
-    assert not ahead.background_running()
-    ahead.wait_background()  # no lock file yet: nothing to wait for
-    started = ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    lock, log = background.background_files()
+    assert not background.background_running()
+    background.wait_background()  # no lock file yet: nothing to wait for
+    started = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert started.startswith("a background process compiles them for the next runs (pid ")
-    assert ahead.background_running()
-    second = ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    assert background.background_running()
+    second = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert second == f"a process compiles them already (log: {log})"
-    ahead.wait_background()
-    assert not ahead.background_running()
+    background.wait_background()
+    assert not background.background_running()
     lines = log.read_text().splitlines()
     assert len(lines) == 2 and lines[0].endswith("clearance-bar.toml: compiling")
     assert " done in " in lines[1]
     fd = os.open(lock, os.O_RDWR)
     fcntl.flock(fd, fcntl.LOCK_EX)  # another holder: nothing starts
     try:
-        assert ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5) == second
+        assert background.start_background(CONFIGS / "paper-bar.toml", 0, 5) == second
     finally:
         os.close(fd)
     monkeypatch.setenv(ahead.ENV_SWITCH, "0")
-    off = ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5)
+    off = background.start_background(CONFIGS / "paper-bar.toml", 0, 5)
     assert off == "nothing compiles them meanwhile (MCCHAIN_COMPILE_AHEAD=0)"
 
 
@@ -349,13 +349,13 @@ def own_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Path:
 def _write_record(**record) -> None:
     import json
 
-    ahead.background_record_path().write_text(json.dumps(record))
+    background.background_record_path().write_text(json.dumps(record))
 
 
 def test_background__only_interactive_outside_ci_and_schedulers_unless_switched_off(
     own_cache: Path,
 ) -> None:
-    why = ahead.why_not_background
+    why = background.why_not_background
     assert why(environ={}, interactive=True) is None
     assert why(environ={}, interactive=False) == "not started outside an interactive terminal"
     for name in ("CI", "SLURM_JOB_ID", "PBS_JOBID", "LSB_JOBID", "JOB_ID", "FLUX_JOB_ID"):
@@ -383,11 +383,11 @@ def test_background__a_lock_that_fails_means_not_started(own_cache: Path, monkey
     monkeypatch.delenv(ahead.ENV_SWITCH, raising=False)
     monkeypatch.setattr(fcntl, "flock", no_locks)
     popen = []
-    monkeypatch.setattr(ahead.subprocess, "Popen", lambda *a, **k: popen.append(a))
-    lock = ahead.background_files()[0]
-    note = ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    monkeypatch.setattr(background.subprocess, "Popen", lambda *a, **k: popen.append(a))
+    lock = background.background_files()[0]
+    note = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert note == f"nothing compiles them meanwhile (its lock {lock}: No locks available)"
-    assert popen == [] and not ahead.background_running()
+    assert popen == [] and not background.background_running()
 
 
 def test_background__its_failure_is_recorded_and_shown_once_by_the_next_run(
@@ -396,28 +396,28 @@ def test_background__its_failure_is_recorded_and_shown_once_by_the_next_run(
     def broken(*args, **kwargs):
         raise MemoryError("out of memory")
 
-    monkeypatch.setattr(ahead, "_cores", lambda: 1)
-    monkeypatch.setattr(ahead, "compile_for", broken)
-    lock = ahead.background_files()[0]
+    monkeypatch.setattr(background, "available_cores", lambda: 1)
+    monkeypatch.setattr(background, "compile_for", broken)
+    lock = background.background_files()[0]
     fd = os.open(lock, os.O_RDWR | os.O_CREAT)
     import fcntl
 
     fcntl.flock(fd, fcntl.LOCK_EX)  # as the background process holds it
     try:
         with pytest.raises(MemoryError):
-            ahead.compile_in_background(CONFIGS / "clearance-bar.toml", None, None)
+            background.compile_in_background(CONFIGS / "clearance-bar.toml", None, None)
     finally:
         os.close(fd)
-    record = ahead.read_background()
+    record = background.read_background()
     assert record is not None and record["state"] == "failed"
     assert record["error"] == "MemoryError: out of memory"
-    note = ahead.background_failure_note()
+    note = background.background_failure_note()
     assert note is not None and note.startswith("the background compile of ")
     assert "failed (MemoryError: out of memory; log: " in note
-    assert ahead.background_failure_note() is None  # shown once
+    assert background.background_failure_note() is None  # shown once
     # one killed before it finished (its lock is free, its record says running)
     _write_record(state="running", scene="s.toml", started=0.0)
-    note = ahead.background_failure_note()
+    note = background.background_failure_note()
     assert note is not None and "it ended before it finished (killed?)" in note
 
 
@@ -433,7 +433,7 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
     monkeypatch.setattr(mcchain.compiled.caches, "kernels_cached", lambda names: False)
     monkeypatch.setattr(mcchain.kernels.config, "interpret_kernels", lambda: True)
     calls = []
-    monkeypatch.setattr(ahead, "wait_background", lambda: calls.append("wait"))
+    monkeypatch.setattr(background, "wait_background", lambda: calls.append("wait"))
 
     class Exec(Exception):
         pass
@@ -444,10 +444,10 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
 
     monkeypatch.setattr(first_run, "run_compiled", run_compiled)
     _write_record(state="running", scene="s.toml", started=1000.0, expected=30.0)
-    fd = os.open(ahead.background_files()[0], os.O_RDWR | os.O_CREAT)
+    fd = os.open(background.background_files()[0], os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX)
     try:
-        assert ahead.background_remaining(lambda: 1025.0) == 5.0
+        assert background.background_remaining(lambda: 1025.0) == 5.0
         scene = CONFIGS / "clearance-sweep.toml"  # 10,000 samples
         monkeypatch.setattr(first_run, "_probe", lambda scene, seed: 8.0 / 10_000)
         with pytest.raises(Exec):
@@ -459,7 +459,7 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
         assert chosen == first_run.FirstRun(3.0 / 10_000) and calls == []
     finally:
         os.close(fd)
-    assert ahead.background_remaining(lambda: 1020.0) is None  # none runs now
+    assert background.background_remaining(lambda: 1020.0) is None  # none runs now
 
 
 def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkeypatch) -> None:

@@ -19,7 +19,7 @@ import xarray as xr
 from mcchain.cli import main
 from mcchain.errors import RunError
 from mcchain.runner import plan, runs
-from mcchain.runner.executors import plan_chunks
+from mcchain.runner.runs import plan_chunks
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow  # real solvers

@@ -13,6 +13,7 @@ import os
 import signal
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -26,11 +27,13 @@ from test_runs_support import (
     write_fake_scene,
 )
 
+from mcchain.compiled.ready import compile_notice
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.errors import RunError, SceneError
 from mcchain.runner import plan, runs
-from mcchain.runner.executors import Progress, compile_notice
+from mcchain.runner.observers import Progress
+from mcchain.runner.steps import RunState, SolvedChunk
 
 RUN_JSON_FIELDS = {
     "id",
@@ -299,16 +302,37 @@ def test_open_run__by_id_under_runs_and_errors(tmp_path: Path, monkeypatch) -> N
 def test_progress__chunks_rate_and_eta_on_a_terminal_only(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    bar = Progress(total=4, done=1, enabled=True)
-    for _ in range(3):
-        bar.update(10)
-    bar.close()
+    job: Any = None
+    todo = [(10, 20), (20, 30), (30, 40)]  # 0:10 was computed before this session
+    run = RunState(job, Path("run"), {"chunks": 4}, {}, 40, todo)
+    bar = Progress(enabled=True)
+    bar.on_start(run)
+    for start, stop in todo:
+        bar.on_chunk_done(run, SolvedChunk(start, stop, {}))
+    bar.on_chunks_done(run)
     err = capsys.readouterr().err
     assert "4/4" in err and "samples/s" in err and "chunk" in err
-    quiet = Progress(total=4, done=0)  # stderr is captured: not a terminal
-    quiet.update(10)
-    quiet.close()
+    quiet = Progress()  # stderr is captured: not a terminal
+    quiet.on_start(run)
+    quiet.on_chunk_done(run, SolvedChunk(10, 20, {}))
+    quiet.on_chunks_done(run)
     assert capsys.readouterr().err == ""
+
+
+def test_progress__a_run_that_grows_raises_the_bar_s_total(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    job: Any = None
+    record = {"chunks": 2}
+    run = RunState(job, Path("run"), record, {}, 20, [(0, 10), (10, 20)])
+    bar = Progress(enabled=True)
+    bar.on_start(run)
+    for start in (0, 10):
+        bar.on_chunk_done(run, SolvedChunk(start, start + 10, {}))
+    record["chunks"] = 3  # until added a batch
+    bar.on_chunk_done(run, SolvedChunk(20, 30, {}))
+    bar.on_chunks_done(run)
+    assert "3/3" in capsys.readouterr().err
 
 
 class _SignallingStream:

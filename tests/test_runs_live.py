@@ -17,7 +17,9 @@ import os
 import subprocess
 import sys
 import threading
+from collections.abc import Mapping
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -28,10 +30,12 @@ from test_viz_playback import read_rrd
 
 from mcchain import open_run
 from mcchain.cli import main as cli
+from mcchain.cli.describe import run_summary
 from mcchain.ensemble.io import list_parts
 from mcchain.errors import RunError
 from mcchain.runner import plan, runs
 from mcchain.runner.executors import run_local
+from mcchain.runner.steps import Observer, RunState, SolvedChunk
 from mcchain.viz import live as viz_live
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
@@ -144,7 +148,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     assert any(
         line.startswith("rerun: samples 3, 6 streamed to")
         and "0 computed before this session (replay with mcchain show)" in line
-        for line in result.summary()
+        for line in run_summary(result.record)
     )
     assert "samples 0 were computed before this session" in (run / "run.log").read_text()
 
@@ -261,13 +265,11 @@ def test_rerun__spawn_opens_a_viewer_and_a_second_default_file_never_overwrites(
     )
     assert opened == [{"samples": [33, 5], "save": None, "spawn": True}, {"closed": True}]
     assert chunks == [(list(range(16)), 0, 16), (list(range(32, 40)), 32, 8)]  # not 16:32
-    assert "rerun: samples 5, 33 streamed to a spawned viewer" in result.summary()
+    assert "rerun: samples 5, 33 streamed to a spawned viewer" in run_summary(result.record)
 
     # default file sink: live.rrd is taken (an earlier session), so live-2.rrd
     (tmp_path / "run" / runs.LIVE_RRD).write_bytes(b"earlier session")
-    job: Any = None
-    second = viz_live.LiveRun(viz_live.LiveOptions((1,)), job, tmp_path / "run", {})
-    assert second._default_path() == tmp_path / "run" / "live-2.rrd"
+    assert viz_live.LiveRun.default_path(tmp_path / "run") == tmp_path / "run" / "live-2.rrd"
 
 
 def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
@@ -292,7 +294,9 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
     assert result.record["status"] == runs.COMPLETED
     live = result.record["sessions"][-1]["rerun"]
     assert live["error"] == "No space left on device" and live["streamed"] == []
-    assert any("stream stopped: No space left on device" in line for line in result.summary())
+    assert any(
+        "stream stopped: No space left on device" in line for line in run_summary(result.record)
+    )
     assert (
         "--rerun: the live stream stopped (the run goes on)"
         in (result.folder / "run.log").read_text()
@@ -300,21 +304,30 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
     assert filecmp.cmp(result.folder / "ensemble.nc", plain.folder / "ensemble.nc", shallow=False)
 
 
-def test_run_local__observer_gets_each_chunk_on_the_calling_thread() -> None:
-    model = fake_model(10, seed=2)
-    sunk: dict[tuple[int, int], dict[str, np.ndarray]] = {}
-    seen: list[tuple[int, int, int]] = []
+def test_run_local__chunk_hooks_get_each_chunk_on_the_calling_thread_in_order() -> None:
+    job: Any = SimpleNamespace(model=fake_model(10, seed=2), scene=None, history_dtype="float32")
+    run = RunState(job, Path("run"), {}, {}, 10)
+    written: dict[tuple[int, int], Mapping[str, np.ndarray]] = {}
+    seen: list[tuple[str, int, int, int]] = []
 
-    def sink(outputs: dict[str, np.ndarray], start: int, stop: int) -> None:
-        sunk[start, stop] = outputs
+    def write(chunk: SolvedChunk) -> None:
+        written[chunk.start, chunk.stop] = chunk.outputs
 
-    def observe(outputs: dict[str, np.ndarray], start: int, stop: int) -> None:
-        seen.append((start, stop, threading.get_ident()))
-        assert outputs["status"].shape == (stop - start,)
+    class Seen(Observer):
+        def __init__(self, name: str) -> None:
+            self.name = name
 
-    run_local(model, None, [(0, 4), (4, 8), (8, 10)], sink, solve=fake_solve, observe=observe)
-    assert seen == [(a, b, threading.get_ident()) for a, b in ((0, 4), (4, 8), (8, 10))]
-    assert set(sunk) == {(0, 4), (4, 8), (8, 10)}
+        def on_chunk_done(self, state: RunState, chunk: SolvedChunk) -> None:
+            assert state is run and chunk.outputs["status"].shape == (chunk.stop - chunk.start,)
+            seen.append((self.name, chunk.start, chunk.stop, threading.get_ident()))
+
+    chunks = [(0, 4), (4, 8), (8, 10)]
+    run_local(
+        run, chunks, write, [Seen("a").on_chunk_done, Seen("b").on_chunk_done], solve=fake_solve
+    )
+    me = threading.get_ident()
+    assert seen == [(name, a, b, me) for a, b in chunks for name in "ab"]
+    assert set(written) == set(chunks)
 
 
 def test_rerun__is_imported_only_when_streaming(tmp_path: Path) -> None:

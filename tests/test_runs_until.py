@@ -18,6 +18,7 @@ import pytest
 from test_runs_extend import assert_same_values
 
 from mcchain.cli import main
+from mcchain.cli.describe import run_summary
 from mcchain.decision.sequential import confidence_sequence
 from mcchain.decision.summary import export_requirements
 from mcchain.runner import plan, runs
@@ -111,7 +112,7 @@ def test_until__stops_at_max_count_when_it_cannot_decide(tmp_path: Path) -> None
     assert [look["samples"] for look in until["looks"]] == [64, 128, 192, 200]
     assert until["stopped"] == "max_count 200 reached; undecided: rolling"
     assert result.record["samples"] == 200
-    assert any("max_count 200 reached" in line for line in result.summary())
+    assert any("max_count 200 reached" in line for line in run_summary(result.record))
     # Extended by hand afterwards, it still reports its confidence sequence (valid at any
     # count), now over the looks 64, 128, 192 and 256.
     extended = plan.extend_run(result.folder, 56, progress=False).record

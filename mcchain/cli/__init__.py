@@ -29,12 +29,13 @@ from typing import NoReturn
 
 from mcchain.cli import commands
 from mcchain.cli.commands import EXIT_FAILED, EXIT_INTERRUPTED, HANDLERS, fail
-from mcchain.cli.parser import NAMED_ERRORS, UsageError, build_parser
 from mcchain.errors import McchainError, RunFailed
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
+    from mcchain.cli.parser import NAMED_ERRORS, UsageError, build_parser
+
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:

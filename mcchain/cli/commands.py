@@ -11,7 +11,12 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from mcchain.cli.describe import describe_initial_state, describe_model
+from mcchain.cli.describe import (
+    describe_initial_state,
+    describe_model,
+    run_summary,
+    status_line,
+)
 from mcchain.errors import McchainError
 
 EXIT_USAGE = 2
@@ -47,13 +52,14 @@ def _live_options(args: argparse.Namespace) -> Any:
     from pathlib import Path
 
     from mcchain.errors import RunError
-    from mcchain.viz.live import LiveOptions, parse_rerun_samples
 
     if args.rerun is None:
         for flag, value in (("--rerun-save", args.rerun_save), ("--rerun-spawn", args.rerun_spawn)):
             if value:
                 raise RunError(f"{flag}: requires --rerun SAMPLES")
         return None
+    from mcchain.viz.live import LiveOptions, parse_rerun_samples
+
     if args.rerun_save is not None and args.rerun_spawn:
         raise RunError("--rerun-spawn: cannot be combined with --rerun-save (one sink)")
     if args.rerun_save is not None and not args.rerun_save.strip():
@@ -63,8 +69,6 @@ def _live_options(args: argparse.Namespace) -> Any:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from mcchain.runner import plan, runs
-
     progress = False if args.quiet else None
     live = _live_options(args)
     argv = ["mcchain", *sys.argv[1:]]
@@ -86,7 +90,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return fail(f"--extend: cannot be combined with {', '.join(conflicting)}")
         if args.samples is None:
             return fail("--extend: give the number of samples to add: --samples N")
-        result = plan.extend_run(
+        from mcchain.runner.plan import extend_run
+
+        result = extend_run(
             args.extend,
             args.samples,
             dask=args.dask,
@@ -110,7 +116,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         ]
         if conflicting:
             return fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
-        result = plan.resume_run(
+        from mcchain.runner.plan import resume_run
+
+        result = resume_run(
             args.resume,
             remerge=args.remerge,
             dask=args.dask,
@@ -138,12 +146,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
             background_off = background_compile_off()
             if args.no_background_compile:
                 background_off = "--no-background-compile"
-        result = plan.start_run(
+        from mcchain.runner.plan import start_run
+
+        result = start_run(
             args.scene,
             samples=args.samples,
             seed=args.seed,
             chunk_size=args.chunk_size,
-            out=args.out or runs.DEFAULT_OUT,
+            out=args.out,
             run_dir=args.run_dir,
             dask=args.dask,
             threads=args.threads,
@@ -153,14 +163,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
             first_run=first_run,
             background_off=background_off,
         )
-    for line in result.summary():
+    for line in run_summary(result.record):
         print(line)
     print(result.folder)
-    if result.all_failed:
+    samples = result.record["samples"]
+    if 0 < result.failed == samples:
         sys.stdout.flush()  # the folder, then the error line
-        samples = result.record["samples"]
         return fail(
-            f"every one of the {samples} samples failed ({result.counts_line()})", EXIT_ALL_FAILED
+            f"every one of the {samples} samples failed ({status_line(result.record)})",
+            EXIT_ALL_FAILED,
         )
     return 0
 

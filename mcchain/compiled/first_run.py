@@ -9,7 +9,7 @@ a run's ``ensemble.nc`` holds the same bytes either way, but for its attribute
 ``kernel_compiler``). So on a cold cache a small statics run is interpreted, and a detached
 process compiles the kernels into the cache meanwhile where it may (in an interactive
 terminal, outside CI and batch schedulers, not switched off:
-:func:`mcchain.compiled.ahead.background_note`): the next run loads them. Which way a run
+:func:`mcchain.compiled.background.background_note`): the next run loads them. Which way a run
 went is in ``run.json`` (its notes, ``kernels_interpreted`` and ``kernel_compiler`` in its
 session) and in the ensemble's attribute ``kernel_compiler``.
 
@@ -96,7 +96,7 @@ def choose(
     """Whether this run goes interpreted (see the module's docstring): a :class:`FirstRun`
     if so, None to go on compiled as usual. Where the probe says no, or where a background
     compile already running should end sooner than the run interpreted would (from when it
-    started and the length of the last one: :func:`mcchain.compiled.ahead.
+    started and the length of the last one: :func:`mcchain.compiled.background.
     background_remaining`, on the clock ``now``), the process is replaced by the same
     command with compiled kernels (:func:`run_compiled`, after waiting for that compile),
     and this does not return."""
@@ -133,7 +133,7 @@ def choose(
         run_compiled()
     if per_sample * count > BUDGET_S:
         run_compiled()
-    from mcchain.compiled.ahead import background_remaining, wait_background
+    from mcchain.compiled.background import background_remaining, wait_background
 
     remaining = background_remaining(now)
     if remaining is not None and remaining < per_sample * count:

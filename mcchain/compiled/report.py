@@ -14,7 +14,7 @@ from mcchain.compiled.caches import mcchain_cache, numba_index_folder
 MCCHAIN_FOLDERS = ("native", "generated", "compile", "designs")
 """The folders of mcchain's cache (:func:`mcchain_cache`): the lane kernels' machine code
 (:mod:`mcchain.codegen.native`) and text (where numba compiles it), the background
-compile's lock, record and log (:mod:`mcchain.compiled.ahead`), the sample designs."""
+compile's lock, record and log (:mod:`mcchain.compiled.background`), the sample designs."""
 
 NUMBA_SUFFIXES = (".nbi", ".nbc")
 """numba's index and machine-code files (of mcchain's kernels in :func:`numba_index_folder`;
@@ -68,7 +68,7 @@ def status_lines() -> list[str]:
     cpu, _features = target_cpu()
     lines.append(f"lane kernels: compiled by {lane_compiler()}, for CPU {cpu}, {LMAX} lanes")
     lines.append("keyed by: " + ", ".join(key_versions()))
-    from mcchain.compiled.ahead import read_background
+    from mcchain.compiled.background import read_background
 
     record = read_background()
     if record is not None:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError, SceneError
+from mcchain.runner.steps import Observer, RunState
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -52,17 +53,22 @@ def sequential_settings(attrs: Mapping[str, Any]) -> dict[str, Any] | None:
 
 
 @dataclass
-class Until:
-    """The ``grow`` of :func:`mcchain.runner.pipeline.execute` for ``until = "decided"``."""
+class Until(Observer):
+    """``until = "decided"``: the run's observer that asks for another batch of samples while
+    a requirement is undecided (:meth:`more_samples`)."""
 
     batch: int
     max_count: int
 
-    def __call__(self, folder: Path, record: dict[str, Any], nsample: int) -> int | None:
+    def more_samples(self, run: RunState) -> int | None:
+        """Look at the part files of the run's first ``run.nsample`` samples: the count of
+        one more batch, or None (every requirement decided, or ``max_count`` reached). The
+        look is noted in ``run.json["until"]["looks"]``."""
         from mcchain.ensemble.io import list_parts, open_parts
         from mcchain.runner.runs import PARTS
 
-        with open_parts(list_parts(Path(folder) / PARTS)) as ds:
+        record, nsample = run.record, run.nsample
+        with open_parts(list_parts(Path(run.folder) / PARTS)) as ds:
             look = look_at(ds, nsample, self.batch)
         entry = record.setdefault("until", self.describe())
         looks = [item for item in entry.setdefault("looks", []) if item["samples"] != nsample]

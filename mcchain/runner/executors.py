@@ -1,12 +1,13 @@
-"""Chunked execution of an ensemble: in-process or as Dask tasks.
+"""The execute stage of a run: solve its chunks here or as Dask tasks.
 
-The samples ``0:nsample`` are cut into chunks (:func:`plan_chunks`). Each chunk is solved
-by ``solve(model.select(start, stop), scene)`` (``mcchain.solvers.solve_chunk`` by
-default) and handed to a *sink* (the run folder's part-file writer) and, when given, to an
-*observer* (``mcchain run --rerun``: a live rerun stream), which is always called on the
-thread that called :func:`run_local`/:func:`run_dask`, where the chunk's results arrive —
-never on the writer thread, a numba thread or a Dask worker. Because the solvers are
-deterministic per sample, the data never depend on the chunking or the scheduler.
+Each chunk (:mod:`mcchain.runner.chunks`) is solved by ``solve(model.select(start, stop),
+scene)`` (``mcchain.solvers.solve_chunk`` by default, with the plan's solve steps:
+:class:`mcchain.runner.steps.Solve`), handed to the store's ``write`` (the part-file
+writer), then to each observer's :meth:`~mcchain.runner.steps.Observer.on_chunk_done`,
+always on the thread that called :func:`run_local`/:func:`run_dask`, where the chunk's
+results arrive — never on the writer thread, a numba thread or a Dask worker. Because the
+solvers are deterministic per sample, the data never depend on the chunking or the
+scheduler.
 
 * **in-process** (default): chunks one after the other, each solved by the numba kernels on
   all threads (``threads`` sets ``numba.set_num_threads``); the sink runs on a writer thread
@@ -16,55 +17,41 @@ deterministic per sample, the data never depend on the chunking or the scheduler
   is an existing scheduler): chunks are tasks, at most two per worker in flight; the kernels
   are warmed on every worker before the first chunk.
 
-Progress (chunks done, samples/s, ETA) goes to stderr through tqdm, only on a terminal.
+The kernels are warmed before the first chunk: here by the plan's ``warm`` (the compile
+lifecycle's :meth:`mcchain.compiled.ready.Kernels.warm`), on every Dask worker by solving
+its first samples.
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
 import os
-import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Protocol
 
-import numpy as np
+from mcchain.runner.steps import Solve, SolvedChunk
 
 if TYPE_CHECKING:
     from mcchain.model import Model
+    from mcchain.runner.steps import RunState, SolveFn, SolveStep
 
 log = logging.getLogger(__name__)
 
 
-class HelperCompile(Protocol):
-    """What the warm-up asks of a cold first run's helper compile
-    (:class:`mcchain.compiled.ahead.CompileAhead`, which imports this module: named by its
-    methods here, so that the two modules form no import circle)."""
+WriteFn = Callable[[SolvedChunk], None]
+"""``write(chunk)``: store one solved chunk (the store's part writer)."""
 
-    started: float
-    """``time.perf_counter()`` when the helper started (the compile notice's start)."""
+WarmFn = Callable[["Model", Any, "SolveFn"], None]
+"""``warm(first, scene, solve)``: compile or load the kernels before the first chunk, by
+solving ``first``, the first samples of the run's model."""
 
-    def compile_beside(self, model: Model, scene: Any) -> None:
-        """Compile, in this process, what the helper leaves out."""
-
-    def wait(self) -> None:
-        """Wait until the helper has compiled (or failed)."""
-
-
-SolveFn = Callable[["Model", Any], Mapping[str, Any]]
-"""``solve(model_chunk, scene) -> {variable: array}`` (see ``mcchain.solvers.solve_chunk``)."""
-
-SinkFn = Callable[[dict[str, np.ndarray], int, int], None]
-"""``sink(outputs, start, stop)``: store one solved chunk (outputs already coerced)."""
-
-ObserverFn = Callable[[dict[str, np.ndarray], int, int], None]
-"""``observe(outputs, start, stop)``: look at one solved chunk (read only: the same arrays go
-to the sink, possibly at the same time on the writer thread)."""
+DoneFn = Callable[["RunState", SolvedChunk], None]
+"""``done(run, chunk)``: an observer's :meth:`~mcchain.runner.steps.Observer.on_chunk_done`."""
 
 WORKER_ENV = {
     "NUMBA_NUM_THREADS": "1",
@@ -73,27 +60,6 @@ WORKER_ENV = {
     "MKL_NUM_THREADS": "1",
 }
 """Environment of LocalCluster worker processes: one compute thread each."""
-
-
-def plan_chunks(
-    nsample: int, chunk_size: int, restarts: Sequence[int] = ()
-) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``.
-
-    ``restarts``: sample indices where the chunking starts again (the sizes a run had before
-    ``--extend`` or an ``until`` batch added samples), so that the chunks a run computed
-    before it grew are still chunks of its plan.
-    """
-    if nsample < 1:
-        raise ValueError(f"nsample: must be >= 1, got {nsample}")
-    if chunk_size < 1:
-        raise ValueError(f"chunk_size: must be >= 1, got {chunk_size}")
-    bounds = sorted({0, nsample, *(b for b in restarts if 0 < b < nsample)})
-    return [
-        (s, min(s + chunk_size, stop))
-        for begin, stop in itertools.pairwise(bounds)
-        for s in range(begin, stop, chunk_size)
-    ]
 
 
 WARM_SAMPLES = 2
@@ -128,12 +94,36 @@ class ExecutionStats:
     write: float = 0.0
     worker_info: list[dict[str, Any]] = field(default_factory=list)
 
+    def count(self, chunk: SolvedChunk) -> None:
+        """Count a solved chunk handed to the store (its outputs are not kept). The figures
+        are read once every write has ended."""
+        self.chunks += 1
+        self.samples += chunk.stop - chunk.start
+        if chunk.steps is not None:
+            self.steps = (self.steps or 0) + chunk.steps
+
+    def __add__(self, other: ExecutionStats) -> ExecutionStats:
+        """The figures of two executions of one session (``until`` batches), summed."""
+        last = other if other.chunks else self
+        return replace(
+            last,
+            chunks=self.chunks + other.chunks,
+            samples=self.samples + other.samples,
+            warmup=self.warmup + other.warmup,
+            compute=self.compute + other.compute,
+            kernel=self.kernel + other.kernel,
+            write=self.write + other.write,
+            worker_info=self.worker_info + other.worker_info,
+        )
+
 
 def solve_coerced(
-    solve: SolveFn, model: Model, scene: Any, history_dtype: str
-) -> tuple[dict[str, np.ndarray], float, int | None]:
-    """Solve one chunk and cast its arrays to storage dtypes; returns (outputs, seconds,
-    the integration steps its samples took, summed: None when the solver counts none)."""
+    solve: SolveFn, model: Model, scene: Any, history_dtype: str, start: int, stop: int
+) -> SolvedChunk:
+    """Solve the chunk ``start:stop`` (``model`` holds its samples) and cast its arrays to
+    storage dtypes, with the seconds it took and the integration steps its samples took."""
+    import numpy as np
+
     from mcchain.ensemble.registry import STEPS_TAKEN, coerce_outputs
 
     t0 = time.perf_counter()
@@ -141,102 +131,43 @@ def solve_coerced(
     seconds = time.perf_counter() - t0
     taken = outputs.get(STEPS_TAKEN)
     steps = None if taken is None else int(np.sum(taken, dtype=np.int64))
-    return coerce_outputs(outputs, history_dtype), seconds, steps
+    return SolvedChunk(start, stop, coerce_outputs(outputs, history_dtype), seconds, steps)
 
 
-# -- progress ------------------------------------------------------------------------------
+def execute(
+    plan: ExecutionPlan, run: RunState, write: WriteFn, done: Sequence[DoneFn] = ()
+) -> ExecutionStats:
+    """Solve ``run.todo`` as the plan says: here (after the plan's kernels are warm) or on
+    Dask, the plan's solve steps after its solver; nothing when every chunk is there."""
+    if not run.todo:
+        return ExecutionStats(scheduler="none (all chunks present)")
+    solve = plan.solve or default_solve()
+    if plan.solve_steps:
+        solve = Solve(solve, plan.solve_steps)
+    if plan.dask:
+        return run_dask(
+            run, run.todo, write, done, address=plan.dask, workers=plan.threads, solve=solve
+        )
+    warm = plan.kernels.warm
+    return run_local(run, run.todo, write, done, threads=plan.threads, solve=solve, warm=warm)
 
 
-class Progress:
-    """Chunks done, samples/s and ETA on stderr (tqdm), silent when stderr is no terminal."""
+class ExecutionPlan(Protocol):
+    """What :func:`execute` reads of a plan (:class:`mcchain.runner.pipeline.Plan`)."""
 
-    def __init__(self, total: int, done: int, enabled: bool | None = None) -> None:
-        if enabled is None:
-            enabled = sys.stderr.isatty()
-        self.samples = 0
-        self.t0 = time.perf_counter()
-        self._bar: Any = None
-        if enabled:
-            from tqdm import tqdm
+    dask: str | None
+    threads: int | None
+    solve: SolveFn | None
+    solve_steps: Sequence[SolveStep]
 
-            self._bar = tqdm(
-                total=total, initial=done, unit="chunk", file=sys.stderr, dynamic_ncols=True
-            )
-
-    def update(self, samples: int) -> None:
-        self.samples += samples
-        if self._bar is not None:
-            rate = self.samples / max(time.perf_counter() - self.t0, 1e-9)
-            self._bar.set_postfix_str(f"{rate:,.0f} samples/s", refresh=False)
-            self._bar.update(1)
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
+    @property
+    def kernels(self) -> Warmer: ...
 
 
-# -- compile notice ---------------------------------------------------------------------------
+class Warmer(Protocol):
+    """Something that warms the kernels (:class:`mcchain.compiled.ready.Kernels`)."""
 
-COMPILE_NOTICE_AFTER = 1.0
-"""Seconds of kernel warm-up after which the compile notice is printed (a warm cache loads
-in less, so a warm run prints nothing)."""
-
-
-def kernel_cache_folders() -> str:
-    """Where compiled kernels are kept, as the notice names them."""
-    from mcchain.compiled.caches import mcchain_cache
-    from mcchain.kernels.config import numba_cache
-
-    return (
-        f"numba: {numba_cache()} (NUMBA_CACHE_DIR); lane kernels: {mcchain_cache('native')} "
-        "(MCCHAIN_CACHE_DIR)"
-    )
-
-
-@contextmanager
-def compile_notice(
-    after: float = COMPILE_NOTICE_AFTER, stream: Any = None, announced_at: float | None = None
-) -> Iterator[None]:
-    """Print one line on stderr if the block (the kernel warm-up) is still running after
-    ``after`` seconds: what is compiled, that it happens once, and where it is cached; then
-    how long it took. ``announced_at``: the line was printed then (:func:`announce_compile`),
-    only the time is printed, counted from then."""
-    import threading
-
-    stream = sys.stderr if stream is None else stream
-    t0 = time.perf_counter() if announced_at is None else announced_at
-    said = threading.Event()
-    if announced_at is not None:
-        said.set()
-
-    def say() -> None:
-        said.set()
-        announce_compile(stream)
-
-    timer = threading.Timer(after, say)
-    timer.daemon = True
-    if announced_at is None:
-        timer.start()
-    try:
-        yield
-    finally:
-        timer.cancel()
-        if announced_at is None:
-            timer.join()  # a notice being printed ends before the ready line
-        if said.is_set():
-            print(f"kernels ready in {time.perf_counter() - t0:.1f} s", file=stream, flush=True)
-
-
-def announce_compile(stream: Any = None, ahead: bool = False) -> None:
-    """The compile notice's line (``ahead``: two processes compile, see
-    :mod:`mcchain.compiled.ahead`)."""
-    how = " (in two processes)" if ahead else ""
-    print(
-        f"compiling the kernels of this scene's analyses and topology{how}: once per "
-        f"installation and topology, then loaded from the cache ({kernel_cache_folders()})",
-        file=sys.stderr if stream is None else stream,
-        flush=True,
-    )
+    def warm(self, model: Model, scene: Any, solve: SolveFn) -> None: ...
 
 
 # -- in-process ------------------------------------------------------------------------------
@@ -255,76 +186,61 @@ def _set_threads(threads: int | None) -> int:
 
 
 def run_local(
-    model: Model,
-    scene: Any,
+    run: RunState,
     chunks: Sequence[tuple[int, int]],
-    sink: SinkFn,
+    write: WriteFn,
+    done: Sequence[DoneFn] = (),
     *,
-    history_dtype: str = "float32",
     threads: int | None = None,
     solve: SolveFn | None = None,
-    progress: Progress | None = None,
-    observe: ObserverFn | None = None,
-    compile_ahead: HelperCompile | None = None,
+    warm: WarmFn | None = None,
 ) -> ExecutionStats:
-    """Solve ``chunks`` in this process, writing each on a thread apart from the compute.
+    """Solve ``chunks`` of ``run.job`` in this process, writing each on a thread apart from
+    the compute, after ``warm`` (default: solving the first samples) loaded the kernels.
 
-    ``compile_ahead``: this process compiles the eigen step while that helper process
-    compiles the rest into the cache; the warm-up then waits for the helper and loads it.
-
-    ``observe`` (optional) gets each solved chunk on this thread, after the chunk is handed
-    to the writer, so that writing and observing overlap; the next chunk is solved after it
-    returns.
+    The ``done`` hooks (the observers' :meth:`~mcchain.runner.steps.Observer.on_chunk_done`)
+    get each solved chunk on this thread, after the chunk is handed to the writer, so that
+    writing and observing overlap; the next chunk is solved after them.
     """
+    model, scene, dtype = run.job.model, run.job.scene, run.job.history_dtype
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler="in-process", threads=_set_threads(threads))
     t0 = time.perf_counter()
-    announced = None if compile_ahead is None else compile_ahead.started
-    with compile_notice(announced_at=announced):
-        if compile_ahead is not None:
-            compile_ahead.compile_beside(model, scene)
-            compile_ahead.wait()
-        solve(warm_model(model), scene)  # compile or load the cached kernels
+    first = warm_model(model)
+    if warm is None:
+        solve(first, scene)  # compile or load the cached kernels
+    else:
+        warm(first, scene, solve)
     stats.warmup = time.perf_counter() - t0
     log.info("kernels warmed in %.2f s (%d threads)", stats.warmup, stats.threads)
 
-    def write(outputs: dict[str, np.ndarray], start: int, stop: int) -> float:
+    def timed_write(chunk: SolvedChunk) -> float:
         t = time.perf_counter()
-        sink(outputs, start, stop)
+        write(chunk)
+        _written(chunk)
         return time.perf_counter() - t
 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcchain-writer") as writer:
-        pending: tuple[Future[float], tuple[int, int, float, int | None]] | None = None
+        pending: Future[float] | None = None
         for start, stop in chunks:
-            chunk = model.select(start, stop)
-            outputs, seconds, steps = solve_coerced(solve, chunk, scene, history_dtype)
-            stats.kernel += seconds
+            chunk = solve_coerced(solve, model.select(start, stop), scene, dtype, start, stop)
+            stats.kernel += chunk.seconds
             if pending is not None:  # at most one chunk waits for the writer
-                stats.write += pending[0].result()
-                _chunk_done(stats, progress, pending[1])
-            pending = (writer.submit(write, outputs, start, stop), (start, stop, seconds, steps))
-            if observe is not None:
-                observe(outputs, start, stop)
-            del outputs
+                stats.write += pending.result()
+            stats.count(chunk)
+            pending = writer.submit(timed_write, chunk)
+            for hook in done:
+                hook(run, chunk)
+            del chunk
         if pending is not None:
-            stats.write += pending[0].result()
-            _chunk_done(stats, progress, pending[1])
+            stats.write += pending.result()
     stats.compute = time.perf_counter() - t0
     return stats
 
 
-def _chunk_done(
-    stats: ExecutionStats, progress: Progress | None, chunk: tuple[int, int, float, int | None]
-) -> None:
-    start, stop, seconds, steps = chunk
-    stats.chunks += 1
-    stats.samples += stop - start
-    if steps is not None:
-        stats.steps = (stats.steps or 0) + steps
-    log.info("chunk %d:%d solved in %.3f s and written", start, stop, seconds)
-    if progress is not None:
-        progress.update(stop - start)
+def _written(chunk: SolvedChunk) -> None:
+    log.info("chunk %d:%d solved in %.3f s and written", chunk.start, chunk.stop, chunk.seconds)
 
 
 # -- Dask ------------------------------------------------------------------------------------
@@ -345,12 +261,11 @@ def _worker_setup(solve: SolveFn, model: Model, scene: Any) -> dict[str, Any]:
 
 def _dask_task(
     solve: SolveFn, model: Model, scene: Any, history_dtype: str, start: int, stop: int
-) -> tuple[int, int, dict[str, np.ndarray], float, int | None]:
+) -> SolvedChunk:
     import numba
 
     numba.set_num_threads(1)
-    outputs, seconds, steps = solve_coerced(solve, model, scene, history_dtype)
-    return start, stop, outputs, seconds, steps
+    return solve_coerced(solve, model, scene, history_dtype, start, stop)
 
 
 CONNECT_TIMEOUT = 5.0
@@ -424,22 +339,20 @@ def dask_client(address: str, workers: int | None = None) -> Iterator[Any]:
 
 
 def run_dask(
-    model: Model,
-    scene: Any,
+    run: RunState,
     chunks: Sequence[tuple[int, int]],
-    sink: SinkFn,
+    write: WriteFn,
+    done: Sequence[DoneFn] = (),
     *,
     address: str,
     workers: int | None = None,
-    history_dtype: str = "float32",
     solve: SolveFn | None = None,
-    progress: Progress | None = None,
-    observe: ObserverFn | None = None,
 ) -> ExecutionStats:
-    """Solve ``chunks`` as Dask tasks; the results are written here, as they arrive, and
-    handed to ``observe`` (optional) here too, after the write."""
+    """Solve ``chunks`` of ``run.job`` as Dask tasks; the results are written here, as they
+    arrive, and handed to the ``done`` hooks here too, after the write."""
     from dask.distributed import as_completed
 
+    model, scene, dtype = run.job.model, run.job.scene, run.job.history_dtype
     solve = solve or default_solve()
     stats = ExecutionStats(scheduler=f"dask {address}")
     t0 = time.perf_counter()
@@ -478,7 +391,7 @@ def run_dask(
                     solve,
                     model.select(start, stop),
                     scene_future,
-                    history_dtype,
+                    dtype,
                     start,
                     stop,
                     pure=False,
@@ -488,17 +401,18 @@ def run_dask(
         for _ in range(min(2 * stats.workers, len(queue))):
             submit()
         for future in in_flight:
-            start, stop, outputs, seconds, steps = future.result()
+            chunk = future.result()
             future.release()
             if queue:
                 submit()
-            stats.kernel += seconds
+            stats.kernel += chunk.seconds
+            stats.count(chunk)
             t = time.perf_counter()
-            sink(outputs, start, stop)
+            write(chunk)
             stats.write += time.perf_counter() - t
-            if observe is not None:
-                observe(outputs, start, stop)
-            del outputs
-            _chunk_done(stats, progress, (start, stop, seconds, steps))
+            _written(chunk)
+            for hook in done:
+                hook(run, chunk)
+            del chunk
         stats.compute = time.perf_counter() - t0
     return stats

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain import __version__
-from mcchain.errors import RunError
+from mcchain.errors import RunError, check_positive
 
 if TYPE_CHECKING:
     from mcchain.model import Model
@@ -48,6 +48,8 @@ class Job:
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
         notes: lines about choices made for the user, e.g. the loop kernels that
             ``[simulate] kernels = "auto"`` took (:func:`resolve_kernels`).
+        kernels: the path that integrates the time histories (``[simulate] kernels``,
+            resolved), None without ``[simulate]``.
     """
 
     scene: Any
@@ -64,6 +66,7 @@ class Job:
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    kernels: str | None = None
 
     def resized(self, nsample: int) -> Job:
         """The same job with ``nsample`` samples (a run that ``--extend`` or ``until`` grew):
@@ -145,12 +148,6 @@ def _warnings(model: Model) -> list[str]:
     return [str(line) for line in lines]
 
 
-def check_positive(name: str, value: int | None) -> None:
-    """``value`` is ``None`` or an integer >= 1; else a :class:`RunError` naming ``name``."""
-    if value is not None and (not isinstance(value, int) or value < 1):
-        raise RunError(f"{name}: must be an integer >= 1, got {value!r}")
-
-
 def prepare_job(
     scene_path: str | Path,
     *,
@@ -187,6 +184,9 @@ def prepare_job(
         text = path.read_text(encoding="utf-8")
     name = getattr(_section(scene, "scene"), "name", None) or path.stem
     nsample = int(model.nsample)
+    settings = resolved_settings(scene, nsample, effective_seed)
+    warnings = _warnings(model)
+    kernels = scene_kernels(scene)
     from mcchain.runner.resources import estimate_disk
 
     return Job(
@@ -201,10 +201,18 @@ def prepare_job(
         compression=str(storage.compression),
         complevel=int(storage.complevel),
         disk=estimate_disk(scene, model, nsample, int(chunk)),
-        settings=resolved_settings(scene, nsample, effective_seed),
-        warnings=_warnings(model),
+        settings=settings,
+        warnings=warnings,
         notes=[] if kernels_note is None else [kernels_note],
+        kernels=kernels,
     )
+
+
+def scene_kernels(scene: Any) -> str | None:
+    """The path that integrates the scene's time histories (``[simulate] kernels``), or None
+    without ``[simulate]``."""
+    sim = _section(scene, "simulate")
+    return None if sim is None else str(getattr(sim, "kernels", "lanes"))
 
 
 def resolve_kernels(scene: Any, model: Model, nsample: int) -> tuple[Any, str | None]:

@@ -23,8 +23,8 @@ from mcchain.contact import (
 from mcchain.errors import SceneError
 from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
-from mcchain.runner.resources import check_memory
 from mcchain.scene.fields import GROUND_NAME
+from mcchain.scene.memory import check_memory
 from mcchain.scene.models import Scene
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
