@@ -230,7 +230,7 @@ def test_cli_runs__does_not_import_numpy_numba_or_xarray() -> None:
 def test_cli_show__parses_and_calls_show_run(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from mcchain.viz import playback
+    from mcchain.viz import show
 
     calls: list[tuple[Any, ...]] = []
 
@@ -238,7 +238,7 @@ def test_cli_show__parses_and_calls_show_run(
         calls.append((run, samples, options))
         return [*samples, 9]
 
-    monkeypatch.setattr(playback, "show_run", show_run)
+    monkeypatch.setattr(show, "show_run", show_run)
     argv = ["show", "RUN", "--samples", "3,0,3", "--worst", "energy:1", "--save", "x.rrd"]
     assert cli.main(argv) == 0
     assert capsys.readouterr().out == "samples 3,0,9\nx.rrd\n"

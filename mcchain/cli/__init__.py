@@ -1,7 +1,7 @@
 """``mcchain`` command line: a thin front end, and the one place that parses arguments.
 
 Commands: ``run`` (:mod:`mcchain.runner.plan`), ``validate``, ``runs`` (:mod:`mcchain.runner.runs`),
-``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
+``show`` (:func:`mcchain.viz.show.show_run`), ``report``
 (:func:`mcchain.viz.report.write_report`); the benchmarks are scripts in ``benchmarks/``.
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having

@@ -273,7 +273,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     from mcchain.ensemble.queries import parse_samples
     from mcchain.errors import RunError
-    from mcchain.viz.playback import show_run
+    from mcchain.viz.show import show_run
 
     if args.save is not None and Path(args.save).exists() and not args.force:
         raise RunError(f"--save: {args.save} already exists (add --force to overwrite it)")

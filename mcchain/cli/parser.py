@@ -256,7 +256,7 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
 
     The viewer flags are those of ``rr.script_add_args`` (``--save``, ``--serve``,
     ``--connect``/``--url``, ``--stdout``, ``--headless``) plus ``--spawn`` (the default),
-    which :func:`mcchain.viz.playback.show` hands to ``rr.script_setup``; they are declared
+    which :func:`mcchain.viz.show.show` hands to ``rr.script_setup``; they are declared
     here rather than by ``rr.script_add_args`` so that parsing does not import rerun.
     """
     from mcchain.ensemble.queries import DEFAULT_LIMIT

@@ -1,25 +1,25 @@
 """The execute stage of a run: solve its chunks here or as Dask tasks.
 
-Each chunk (:mod:`mcchain.runner.chunks`) is solved by ``solve(model.select(start, stop),
-scene)`` (``mcchain.solvers.solve_chunk`` by default, with the plan's solve steps:
-:class:`mcchain.runner.steps.Solve`), handed to the store's ``write`` (the part-file
-writer), then to each observer's :meth:`~mcchain.runner.steps.Observer.on_chunk_done`,
-always on the thread that called :func:`run_local`/:func:`run_dask`, where the chunk's
-results arrive — never on the writer thread, a numba thread or a Dask worker. Because the
-solvers are deterministic per sample, the data never depend on the chunking or the
-scheduler.
+Each chunk (:func:`mcchain.runner.runs.run_chunks`) is solved by
+``solve(model.select(start, stop), scene)`` (``mcchain.solvers.solve_chunk`` by default,
+with the plan's solve steps: :class:`mcchain.runner.steps.Solve`), handed to the store's
+``write`` (the part-file writer), then to each observer's
+:meth:`~mcchain.runner.steps.Observer.on_chunk_done`, always on the thread that called
+:func:`run_local`/:func:`run_dask`, where the chunk's results arrive — never on the writer
+thread, a numba thread or a Dask worker. Because the solvers are deterministic per sample,
+the data never depend on the chunking or the scheduler.
 
 * **in-process** (default): chunks one after the other, each solved by the numba kernels on
-  all threads (``threads`` sets ``numba.set_num_threads``); the sink runs on a writer thread
+  all threads (``threads`` sets ``numba.set_num_threads``); the store writes on a thread
   apart from the compute, with at most one chunk waiting, so memory is O(chunk).
 * **Dask** (``address="local"`` starts a :class:`~distributed.LocalCluster` of process
   workers, one thread each, ``NUMBA_NUM_THREADS=1`` in their environment; any other address
   is an existing scheduler): chunks are tasks, at most two per worker in flight; the kernels
   are warmed on every worker before the first chunk.
 
-The kernels are warmed before the first chunk: here by the plan's ``warm`` (the compile
-lifecycle's :meth:`mcchain.compiled.ready.Kernels.warm`), on every Dask worker by solving
-its first samples.
+The kernels are warmed before the first chunk, by solving its first samples
+(:func:`warm_model`): here through the plan's kernels (the compile lifecycle's
+:meth:`mcchain.compiled.ready.Kernels.warm`), on every Dask worker as they are.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
 
 1. **store**, opened: the folder locked, the session in ``run.json``
    (:meth:`mcchain.runner.store.Store.session_held`, which also records a failure);
-2. **execute**: the chunks the folder lacks (:func:`mcchain.runner.chunks.missing_chunks`)
+2. **execute**: the chunks the folder lacks (:func:`mcchain.runner.runs.missing_chunks`)
    are solved here or on Dask (:mod:`mcchain.runner.executors`), each written as a part file
    by the store and handed to the observers; then, while an observer asks for more samples
    (``until``), the run grows and its new chunks are computed;
@@ -33,13 +33,13 @@ Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host name
 same scene and seed give a byte-identical file whatever the chunk size, thread count or
 scheduler, and a resumed run equals an uninterrupted one.
 
-This module imports only the standard library at import time; numpy, xarray, netCDF4,
-numba, the solvers and rerun are imported when a run executes.
+This module imports only the standard library at import time, and each stage's module
+when the stage comes; numpy, xarray, netCDF4, numba, the solvers and rerun are imported
+when a run executes.
 """
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,8 +51,6 @@ if TYPE_CHECKING:
     from mcchain.compiled.ready import Kernels
     from mcchain.runner.job import Job
     from mcchain.runner.steps import SolveFn, SolveStep
-
-log = logging.getLogger("mcchain")
 
 
 @dataclass
@@ -118,7 +116,7 @@ def run_pipeline(plan: Plan) -> RunResult:
             from mcchain.runner.executors import execute
 
             stats = execute(plan, run, store.write, on_chunk_done)
-            while True:
+            while True:  # the first observer that answers a count decides (until)
                 more = None
                 for hook in more_samples:
                     more = hook(run)

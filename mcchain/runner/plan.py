@@ -160,7 +160,7 @@ def start_run(
 
         run_compiled(resume=folder, reason=exc)
     finally:
-        if kernels.ahead is not None:  # the run failed before its warm-up
+        if kernels.ahead is not None:  # its helper, if the run failed before its warm-up
             kernels.stop()
 
 

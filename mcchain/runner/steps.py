@@ -1,9 +1,9 @@
 """What plugs into a run: observers, which the pipeline calls in order at fixed points, and
 solve steps, which complete a chunk's solve where it runs.
 
-* An :class:`Observer` subclass overrides the hooks it needs (the others do nothing). The
-  pipeline (:func:`mcchain.runner.pipeline.run_pipeline`) calls each hook on every observer
-  of the plan, in the plan's order, in the run's own process and thread. A hook reads the
+* An :class:`Observer` subclass overrides the hooks it needs (the pipeline,
+  :func:`mcchain.runner.pipeline.run_pipeline`, calls only those: the base's do nothing),
+  on every observer of the plan, in the plan's order, in the run's own process and thread. A hook reads the
   :class:`RunState` and the :class:`SolvedChunk`, may keep its own entry of ``run.json``
   up to date (``run.record``, ``run.session``: the pipeline writes the file), and returns
   nothing; :meth:`Observer.more_samples` alone returns a decision. No hook calls back into
@@ -20,8 +20,8 @@ The hooks, in the order a session calls them:
 2. ``on_chunk_done(run, chunk)``: a chunk was solved and handed to the store (the part
    file may still be being written, on the writer thread); ``chunk.outputs`` is read only.
 3. ``more_samples(run)``: every chunk of ``run.nsample`` samples is stored; the first
-   observer that returns a count larger than ``run.nsample`` grows the run to it, and its
-   new chunks are computed (2. again), then 3. again.
+   observer that answers a count decides: one larger than ``run.nsample`` grows the run to
+   it and its new chunks are computed (2. again, then 3.); None, or no larger count, goes on.
 4. ``on_chunks_done(run)``: the computing is over, also when it failed (close what was
    opened in 1.); ``run.json`` is written after it.
 5. ``on_merged(run)``: ``ensemble.nc`` holds every sample; the record is completed and
