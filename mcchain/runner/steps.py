@@ -3,11 +3,11 @@ solve steps, which complete a chunk's solve where it runs.
 
 * An :class:`Observer` subclass overrides the hooks it needs (the pipeline,
   :func:`mcchain.runner.pipeline.run_pipeline`, calls only those: the base's do nothing),
-  on every observer of the plan, in the plan's order, in the run's own process and thread. A hook reads the
-  :class:`RunState` and the :class:`SolvedChunk`, may keep its own entry of ``run.json``
-  up to date (``run.record``, ``run.session``: the pipeline writes the file), and returns
-  nothing; :meth:`Observer.more_samples` alone returns a decision. No hook calls back into
-  the pipeline.
+  on every observer of the plan, in the plan's order, in the run's own process and thread.
+  A hook reads the :class:`RunState` and the :class:`SolvedChunk`, may keep its own entry
+  of ``run.json`` up to date (``run.record``, ``run.session``: the pipeline writes the
+  file), and returns nothing; :meth:`Observer.more_samples` alone returns a decision. No
+  hook calls back into the pipeline.
 * A :data:`SolveStep` is ``step(model_chunk, scene, outputs) -> outputs``: it runs right
   after a chunk's solve, where the solve runs (this process, or a Dask worker: it must
   pickle), and what it returns is what the store writes and the observers see
