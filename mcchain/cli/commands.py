@@ -227,7 +227,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _validation_lines(scene_path: Any) -> list[str]:
     """What ``mcchain validate`` prints for a scene that passes its checks."""
-    from mcchain.runner.job import default_loader, written_state
+    from mcchain.runner.job import default_loader
+    from mcchain.solvers.statics import written_state
 
     scene, model = default_loader(scene_path, None, None)
     name = getattr(getattr(scene, "scene", None), "name", scene_path)

@@ -161,8 +161,7 @@ def compile_check_and_modes(scene_path: Path, seed: int | None) -> None:
 def _compile_check(scene: Any, model: Model) -> None:
     """The scene check a run makes before anything is written (:func:`mcchain.runner.job.
     default_loader`): assembly of the samples and of the scene as written."""
-    from mcchain.runner.job import written_state
-    from mcchain.solvers.statics import check_scene, initial_state_warnings
+    from mcchain.solvers.statics import check_scene, initial_state_warnings, written_state
 
     check_scene(model)
     initial_state_warnings(*written_state(scene))

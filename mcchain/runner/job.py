@@ -95,7 +95,7 @@ class Job:
 def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[Any, Model]:
     """Load, compile and check a scene with the real scene module and statics checks."""
     from mcchain.scene import compile_model, load_scene
-    from mcchain.solvers.statics import check_scene, initial_state_warnings
+    from mcchain.solvers.statics import check_scene, initial_state_warnings, written_state
 
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
@@ -106,15 +106,6 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
         check_requirements(scene, model)
     model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
-
-
-def written_state(scene: Any) -> tuple[Model, Any]:
-    """The scene as written (without ``[sample]``) compiled, and its assembled state."""
-    from mcchain.scene import compile_model
-    from mcchain.solvers.statics import assemble
-
-    written = compile_model(scene.model_copy(update={"sample": None}))
-    return written, assemble(written)
 
 
 def _section(scene: Any, name: str) -> Any:

@@ -16,7 +16,6 @@ import time
 import traceback
 from typing import TYPE_CHECKING, Any
 
-from mcchain.runner.runs import ENSEMBLE
 from mcchain.runner.steps import Observer, RunState, SolvedChunk
 
 if TYPE_CHECKING:
@@ -112,6 +111,7 @@ def requirement_lines(run: RunState) -> list[str]:
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
     from mcchain.decision.until import sequential_settings
     from mcchain.ensemble.io import open_ensemble
+    from mcchain.runner.runs import ENSEMBLE
 
     ds = open_ensemble(run.folder / ENSEMBLE)
     try:

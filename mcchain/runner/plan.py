@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from mcchain.compiled.first_run import FirstRun
     from mcchain.runner.job import Job, Loader
     from mcchain.runner.pipeline import RunResult
-    from mcchain.runner.steps import SolveFn
+    from mcchain.runner.steps import Observer, SolveFn
     from mcchain.viz.live import LiveOptions
 
 
@@ -126,6 +126,9 @@ def start_run(
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
+        from mcchain.runner.observers import observers_for
+
+        observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
         prepare_seconds = time.perf_counter() - t0
         from mcchain.runner.runs import create_run
 
@@ -133,9 +136,6 @@ def start_run(
         folder, record = create_run(job, scene_path, argv, out, run_dir)
         if grow is not None:
             record["until"] = grow.describe()
-        from mcchain.runner.observers import observers_for
-
-        observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
         from mcchain.runner.pipeline import Plan, run_pipeline
 
         plan = Plan(
@@ -192,12 +192,9 @@ def resume_run(
     A resume whose missing part files and merge would not fit in the free space is refused
     before anything changes (:func:`mcchain.runner.resources.check_disk`).
     """
-    from mcchain.compiled.ready import Kernels
     from mcchain.decision.until import keep_sequential, sequential_job
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
     from mcchain.runner.observers import observers_for
-    from mcchain.runner.pipeline import Plan, run_pipeline
-    from mcchain.runner.provenance import software_versions
     from mcchain.runner.resources import check_disk
     from mcchain.runner.runs import (
         COMPLETED,
@@ -246,23 +243,8 @@ def resume_run(
     check_disk(job.disk, folder, missing_samples(folder, record), retry="resume")
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
-    kernels = Kernels()
-    kernels.after_checks(job.kernels, job.nsample)
-    plan = Plan(
-        job,
-        folder,
-        record,
-        software_versions(),
-        observers_for(job, progress=progress, rerun=rerun, grow=grow),
-        kernels,
-        dask=dask,
-        threads=threads,
-        solve=solve,
-        argv=list(sys.argv if argv is None else argv),
-        prepare_seconds=time.perf_counter() - t0,
-        keep_parts=keep_parts,
-    )
-    return run_pipeline(plan)
+    observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
+    return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
 
 
 def _check_threads(threads: int | None, dask: str | None) -> None:
@@ -315,12 +297,9 @@ def extend_run(
     on one path. The old ``ensemble.nc`` stays in place until the merged one replaces it:
     an interrupted extension is completed by ``mcchain run --resume RUN``.
     """
-    from mcchain.compiled.ready import Kernels
     from mcchain.decision.until import keep_sequential
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
     from mcchain.runner.observers import observers_for
-    from mcchain.runner.pipeline import Plan, run_pipeline
-    from mcchain.runner.provenance import software_versions
     from mcchain.runner.resources import check_disk
     from mcchain.runner.runs import (
         COMPLETED,
@@ -369,6 +348,28 @@ def extend_run(
     record["restarts"] = sorted({*record.get("restarts", []), old})
     record["samples"] = total
     record["chunks"] = len(run_chunks(record, job.chunk_size))
+    observers = observers_for(job, progress=progress, rerun=rerun)
+    return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
+
+
+def _run_existing(
+    job: Job,
+    folder: Path,
+    record: dict[str, Any],
+    observers: Sequence[Observer],
+    t0: float,
+    dask: str | None,
+    threads: int | None,
+    solve: SolveFn | None,
+    argv: Sequence[str] | None,
+    keep_parts: bool,
+) -> RunResult:
+    """The pipeline of a run folder that exists (resumed or extended), whose checks passed
+    (since ``t0``): its kernels are loaded or compiled at the warm-up."""
+    from mcchain.compiled.ready import Kernels
+    from mcchain.runner.pipeline import Plan, run_pipeline
+    from mcchain.runner.provenance import software_versions
+
     kernels = Kernels()
     kernels.after_checks(job.kernels, job.nsample)
     plan = Plan(
@@ -376,7 +377,7 @@ def extend_run(
         folder,
         record,
         software_versions(),
-        observers_for(job, progress=progress, rerun=rerun),
+        observers,
         kernels,
         dask=dask,
         threads=threads,
