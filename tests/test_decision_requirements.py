@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -30,6 +31,10 @@ BAD_REQUIREMENTS = {
     "target 1": (REQ.format(extra="max = 4.0\ntarget = 1.0"), "requirement.p0.target"),
     "target 0": (REQ.format(extra="max = 4.0\ntarget = 0"), "requirement.p0.target"),
     "confidence": (REQ.format(extra="max = 4.0\nconfidence = 1.5"), "requirement.p0.confidence"),
+    "confidence below a half": (
+        REQ.format(extra="max = 4.0\nconfidence = 0.4"),
+        "requirement.p0.confidence",
+    ),
     "name": (REQ.replace('"p0"', '"Pin Force"').format(extra="max = 1.0"), "requirement[0].name"),
     "duplicate": (
         REQ.format(extra="max = 4.0") + REQ.format(extra="max = 5.0"),
@@ -96,6 +101,59 @@ def test_requirement_met__limits_and_nan() -> None:
     assert requirement_met(values, upper).tolist() == [1.0, 1.0, 1.0, 0.0, 0.0]
     lower = SimpleNamespace(min=2.0, max=None)
     assert requirement_met(values, lower).tolist() == [0.0, 1.0, 1.0, 0.0, 1.0]
+    # ties at a limit meet it
+    assert requirement_met(np.array([2.0, 3.0]), both).tolist() == [1.0, 1.0]
+
+
+def test_requirement_met__a_failure_bit_fails_whatever_the_value() -> None:
+    """impact_count is -1 on a diverged sample (the value meaning "no contact law"): the
+    failure bit, not the value, decides; a warning bit (contact_lost) does not."""
+    from mcchain.decision.requirements import decision_values, defined_samples
+    from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, Status
+
+    impacts = np.array([-1, 3, 0, 1200, 7], dtype=np.int32)
+    status = np.array([DIVERGED, 0, CONTACT_LOST, 0, DIVERGED | CONTACT_LOST], dtype=np.uint32)
+    defined = defined_samples(status)
+    assert defined.tolist() == [False, True, True, True, False]
+    at_most = SimpleNamespace(min=None, max=1000.0, output="impact_count")
+    assert requirement_met(impacts, at_most, defined).tolist() == [0.0, 1.0, 1.0, 0.0, 0.0]
+    assert requirement_met(impacts, at_most).tolist() == [1.0, 1.0, 1.0, 0.0, 1.0]  # no status
+    assert np.isnan(decision_values(impacts, defined, "impact_count")[[0, 4]]).all()
+    for flag in Status:  # every failure bit alone fails, no warning bit does
+        alone = defined_samples(np.array([flag.value], dtype=np.uint32))
+        assert bool(alone[0]) == (not flag.value & FAILURE_BITS)
+
+
+def test_requirement_met__an_event_that_never_happened_is_never() -> None:
+    """first_separation_time NaN on a sample without a failure bit: never separated, +inf:
+    it meets "not before 1 ms" and fails "before 20 ms"; with a failure bit it fails both."""
+    from mcchain.decision.requirements import decision_values, is_event_time
+    from mcchain.status import DIVERGED
+
+    assert is_event_time("first_separation_time") and is_event_time("contact_lost_time")
+    assert not is_event_time("free_flight_time") and not is_event_time("peak_contact_force")
+    assert not is_event_time("no_such_output") and not is_event_time(None)
+    t = np.array([math.nan, 0.0005, 0.002, math.nan, 0.001])
+    defined = np.array([True, True, True, False, True])
+    late = SimpleNamespace(min=0.001, max=None, output="first_separation_time")
+    early = SimpleNamespace(min=None, max=0.02, output="first_separation_time")
+    window = SimpleNamespace(min=0.001, max=0.02, output="first_separation_time")
+    assert requirement_met(t, late, defined).tolist() == [1.0, 0.0, 1.0, 0.0, 1.0]
+    assert requirement_met(t, early, defined).tolist() == [0.0, 1.0, 1.0, 0.0, 1.0]
+    assert requirement_met(t, window, defined).tolist() == [0.0, 0.0, 1.0, 0.0, 1.0]
+    values = decision_values(t, defined, "first_separation_time")
+    assert values[0] == math.inf and math.isnan(values[3])
+    # the same NaN on an output that is no event time stays undefined
+    peak = SimpleNamespace(min=0.001, max=None, output="peak_contact_force")
+    assert requirement_met(t, peak, defined).tolist() == [0.0, 0.0, 1.0, 0.0, 1.0]
+    status = np.array([0, 0, 0, DIVERGED, 0], dtype=np.uint32)
+    from mcchain.decision.requirements import chunk_requirement_met, resolve_selection
+
+    req = _requirement(output="first_separation_time", select={"joint": "B"}, min=0.001)
+    sel = resolve_selection(req, ("sample", "joint"), {"joint": ["A", "B"]})
+    outputs = {"first_separation_time": np.c_[np.zeros(5), t], "status": status}
+    met = chunk_requirement_met(outputs, [req], [sel])
+    assert met.dtype == np.int8 and met[:, 0].tolist() == [1, 0, 1, 0, 1]
 
 
 def test_allocate__failures_at_high_values_cut_from_above() -> None:
@@ -161,48 +219,153 @@ def test_requirement_met__stored_per_sample_chunk_independent(
     assert met.values[:, 0].tolist() == exact.astype(int).tolist()
 
 
-def _requirement(**kw: object) -> object:
+def _requirement(**kw: object) -> Any:
     from mcchain.scene.study import Requirement
 
     return Requirement.model_validate({"name": "r", "output": "omega", **kw})
 
 
+def _one_sided(confidence: float = 0.95) -> object:
+    from mcchain.decision.stats import one_sided_bounds
+
+    return lambda k, n: one_sided_bounds(k, n, confidence)
+
+
 def test_summary__undefined_counted_apart_and_undecided_sample_count() -> None:
-    from mcchain.decision.stats import samples_to_decide
+    from mcchain.decision.stats import one_sided_bounds, samples_to_decide
     from mcchain.decision.summary import requirement_lines, summarize_requirement
 
     requirement = _requirement(max=1.0, target=0.01)
     values = np.r_[np.zeros(296), [2.0, 2.0, math.nan, math.nan]]  # 4 failures, 2 undefined
     met = requirement_met(values, requirement)
-    s = summarize_requirement(requirement, values, met, "random")
+    s = summarize_requirement(requirement, values, met, "random", units="rad/s")
     assert (s.samples, s.failures, s.undefined) == (300, 4, 2)
+    assert (s.p_lower, s.p_upper) == one_sided_bounds(4, 300, 0.95)
     assert s.verdict == "undecided"
-    assert s.samples_needed == samples_to_decide(4, 300, 0.01, 0.95) > 300
+    assert s.samples_needed == samples_to_decide(4, 300, 0.01, 0.95, interval=_one_sided()) > 300
     # the 99 % quantile is x_(297) of 300 with the NaN samples at +inf, beyond the limit
-    assert s.quantile == 2.0 and math.isnan(s.quantile_upper)
+    assert s.quantile == 2.0 and s.quantile_upper == math.inf
     text = "\n".join(requirement_lines(s, "random"))
     assert f"about {int(s.samples_needed)} samples" in text
-    assert "368 needed" in text
+    assert "omega <= 1 rad/s" in text
+    assert "95 % bounds (each one-sided; together a 90 % interval)" in text
 
 
 def test_summary__both_limits_quantile_on_the_side_failing_more() -> None:
-    from mcchain.decision.summary import summarize_requirement
+    from mcchain.decision.summary import limit_text, summarize_requirement
 
     requirement = _requirement(min=-1.0, max=1.0, target=0.05)
     values = np.r_[np.linspace(-0.9, 0.9, 88), np.full(10, -2.0), np.full(2, 2.0)]
     s = summarize_requirement(requirement, values, requirement_met(values, requirement), "lhs")
     assert s.side == "min" and s.level == 0.05 and s.failures == 12
-    assert s.quantile == np.sort(values)[math.ceil(100 * 0.05) - 1]
+    assert s.quantile == np.sort(values)[5 - 1]  # x_(5): 100 x 0.05 = 5 exactly
     assert s.verdict == "fail (approximate)"
+    assert limit_text(s) == "-1 <= omega <= 1"  # both limits shown
 
 
-def test_summary__no_failure_gives_the_success_run_figures() -> None:
+def test_summary__quantile_point_is_x7_of_100_at_target_007() -> None:
+    from mcchain.decision.summary import summarize_requirement
+
+    requirement = _requirement(min=50.0, target=0.07)
+    values = np.arange(1.0, 101.0)
+    s = summarize_requirement(requirement, values, requirement_met(values, requirement), "random")
+    assert s.side == "min" and s.quantile == 7.0
+    upper = _requirement(max=500.0, target=0.07)
+    s = summarize_requirement(upper, values, requirement_met(values, upper), "random")
+    assert s.side == "max" and s.quantile == 93.0
+
+
+def test_summary__no_failure_gives_the_success_run_figure() -> None:
     from mcchain.decision.summary import requirement_lines, summarize_requirement
 
     requirement = _requirement(max=1.0, target=0.01)
     values = np.zeros(100)
     s = summarize_requirement(requirement, values, requirement_met(values, requirement), "random")
     text = "\n".join(requirement_lines(s, "random"))
-    assert "n = ln(1 - C)/ln(1 - p) = 298.073" in text
-    assert "the two-sided interval above needs 368" in text
-    assert "about 368 samples (268 more)" in text
+    assert "ceil(ln(1 - C)/ln(1 - p)) = 299 failure-free samples" in text
+    assert "about 299 samples (199 more)" in text
+    passed = np.zeros(299)
+    s = summarize_requirement(requirement, passed, requirement_met(passed, requirement), "random")
+    assert s.verdict == "pass" and s.samples_needed == 299
+
+
+def test_summary__every_sample_failing_warns_with_units_and_range() -> None:
+    """The kN-vs-N mistake: max = 5.0 on a force in N."""
+    from mcchain.decision.summary import all_fail_warning, requirement_lines, summarize_requirement
+
+    requirement = _requirement(
+        output="peak_contact_force", select={"joint": "B"}, max=5.0, target=0.01
+    )
+    values = np.r_[np.linspace(2719.55, 5016.37, 10), math.nan]
+    met = requirement_met(values, requirement)
+    s = summarize_requirement(requirement, values, met, "random", units="N")
+    warning = all_fail_warning(s)
+    assert warning is not None and warning.startswith("warning: requirement r: every one of")
+    for part in ("<= 5 N", "2719.55 N (2.72 kN)", "5016.37 N (5.016 kN)", "1 undefined"):
+        assert part in warning
+    assert warning in requirement_lines(s, "random")
+    # all undefined: says so; one passing sample: no warning
+    nan = np.full(4, math.nan)
+    s = summarize_requirement(requirement, nan, requirement_met(nan, requirement), "random")
+    assert "all 4 undefined" in (all_fail_warning(s) or "")
+    ok = np.r_[values, 4.0]
+    s = summarize_requirement(requirement, ok, requirement_met(ok, requirement), "random")
+    assert all_fail_warning(s) is None
+
+
+def test_summary__empty_running_intersection_is_no_verdict() -> None:
+    """An until run whose first look is all failures and whose later looks have none: the
+    confidence sequence's running intersection empties; that is reported as such."""
+    from mcchain.decision.sequential import sequential_bounds
+    from mcchain.decision.summary import requirement_lines, summarize_requirement
+
+    requirement = _requirement(max=1.0, target=0.01)
+    values = np.r_[np.full(100, 2.0), np.zeros(20_000)]
+    met = requirement_met(values, requirement)
+    lo, hi = sequential_bounds(met == 0, 100, 0.95, 0.01)
+    assert lo > hi
+    s = summarize_requirement(
+        requirement, values, met, "random", sequential={"batch": 100, "method": "m"}
+    )
+    assert s.decision == "empty" and (s.p_lower, s.p_upper) == (lo, hi)
+    text = "\n".join(requirement_lines(s, "random"))
+    assert "NO VERDICT: the running intersection of the sequential interval is empty" in text
+
+
+def test_summary__until_counts_from_the_sequential_interval() -> None:
+    """In an until run, the samples needed and the zero-failure figure come from the
+    confidence sequence that decides (whole batches), not from Clopper–Pearson."""
+    from mcchain.decision.sequential import confidence_sequence
+    from mcchain.decision.summary import requirement_lines, summarize_requirement
+
+    requirement = _requirement(max=1.0, target=0.01)
+    values = np.zeros(256)
+    met = requirement_met(values, requirement)
+    s = summarize_requirement(
+        requirement, values, met, "random", sequential={"batch": 256, "method": "m"}
+    )
+    assert s.sequential and s.decision == "undecided"
+    # (1 - p)^n = b/((b + n)/(1 - C)) at the bound: 0.0145 after 300 samples, 0.0094 after 512
+    assert s.success_run % 256 == 0 and s.success_run == s.samples_needed == 512
+    assert confidence_sequence(0, s.success_run, 0.95, 0.01)[1] <= 0.01
+    assert confidence_sequence(0, s.success_run - 256, 0.95, 0.01)[1] > 0.01
+    text = "\n".join(requirement_lines(s, "random"))
+    assert f"{int(s.success_run)} failure-free samples pass at 95 %" in text
+    assert "sequential bounds (each one-sided, valid at every look)" in text
+    # a caller that does not pass the sequential settings (the report) still says so
+    from mcchain.decision.summary import summary_lines
+
+    words = "\n".join(summary_lines([s], [], "random"))
+    assert "intervals: sequential" in words and "Clopper" not in words
+
+
+def test_family_line__bonferroni_beside_several_requirements() -> None:
+    from mcchain.decision.summary import family_line, summarize_requirement
+
+    values = np.zeros(400)
+    r1, r2 = _requirement(max=1.0), _requirement(max=1.0, name="s", confidence=0.99)
+    s1 = summarize_requirement(r1, values, requirement_met(values, r1), "random")
+    s2 = summarize_requirement(r2, values, requirement_met(values, r2), "random")
+    assert family_line([s1]) is None
+    assert "probability >= 1 - 2 x 0.05 = 0.9 (Bonferroni" in (family_line([s1, s1]) or "")
+    assert "1 - sum(1 - C) = 0.94" in (family_line([s1, s2]) or "")

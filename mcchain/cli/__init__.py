@@ -9,7 +9,8 @@ written nothing; usage errors of ``show`` and ``report`` name the command
 (``mcchain show: ...``). A run that fails once started (a full disk, its folder removed,
 ``RunFailed``) prints one such line and exits with 1, keeping its finished chunks; a run
 that completes with every sample failed prints its folder, then one such line with the
-status counts, and exits with 3.
+status counts, and exits with 3. ``verdict`` (:mod:`mcchain.decision.verdict`) exits 0 when
+every requirement passes, 1 when one fails, 4 when none fails but one is undecided.
 
 The package: :mod:`~mcchain.cli.parser` (the arguments), :mod:`~mcchain.cli.commands` (a
 handler per command), :mod:`~mcchain.cli.describe` (what ``validate`` prints). It imports only

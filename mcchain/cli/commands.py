@@ -340,6 +340,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_verdict(args: argparse.Namespace) -> int:
+    from mcchain.decision.verdict import run_verdict
+
+    table = run_verdict(args.run)
+    for line in table.lines():
+        print(line)
+    return table.exit_code
+
+
 def _cmd_rare(args: argparse.Namespace) -> int:
     from mcchain.decision.rare import rare_run
 
@@ -368,6 +377,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "report": _cmd_report,
     "export": _cmd_export,
     "check": _cmd_check,
+    "verdict": _cmd_verdict,
     "rare": _cmd_rare,
     "cache": _cmd_cache,
 }

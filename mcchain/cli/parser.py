@@ -188,23 +188,41 @@ def build_parser() -> argparse.ArgumentParser:
 
     check = sub.add_parser(
         "check",
-        help="re-solve a subset of a run with a tighter integration and count flipped verdicts",
-        description="re-solve a subset of a run's samples with rtol/atol (or dt) TIGHTEN times "
-        "tighter; per requirement, how many verdicts flip and how far the outputs move "
-        "(RUN/export/check.csv); the run's ensemble is not touched",
+        help="re-solve the samples a numerical error could flip, tighter, and give the verdicts "
+        "again",
+        description="re-solve a run's samples with rtol/atol (or dt) TIGHTEN times tighter: "
+        "samples spread evenly over the run, then every sample near a limit (or undefined); per "
+        "requirement the verdict on the run's values and on the tightened ones, the flips, a "
+        "bound on the flips not seen, and which tolerance to use (RUN/export/check.csv); the "
+        "run's ensemble is not touched",
         named_errors=True,
     )
     check.add_argument("run", help="run folder (or its id under runs/)")
     check.add_argument(
-        "--tighten", type=float, required=True, metavar="F", help="tightening factor (e.g. 10)"
+        "--tighten",
+        type=float,
+        default=10.0,
+        metavar="F",
+        help="tightening factor (default 10)",
     )
     check.add_argument(
         "--samples",
         type=positive,
-        default=64,
+        default=None,
         metavar="M",
-        help="samples re-solved, spread evenly over the run (default 64)",
+        help="samples re-solved spread evenly over the run, before those near a limit (default: "
+        "enough to bound the unseen flips by a tenth of the narrowest interval, at least 64)",
     )
+
+    verdict = sub.add_parser(
+        "verdict",
+        help="the requirements' verdict table; exit 0 all pass, 1 one fails, 4 one undecided",
+        description="print every requirement's verdict with its bounds and units; exit 0 when "
+        "every requirement passes, 1 when one fails, 4 when none fails but one is undecided (2: "
+        "a bad run or a run without requirements)",
+        named_errors=True,
+    )
+    verdict.add_argument("run", help="run folder (or its id under runs/)")
 
     rare = sub.add_parser(
         "rare",

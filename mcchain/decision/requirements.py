@@ -3,14 +3,25 @@ tolerance allocation.
 
 A ``[[requirement]]`` (:class:`mcchain.scene.study.Requirement`) names a per-sample ensemble
 variable (``output``) and one entry of each of its other dimensions (``select``); a sample
-meets it when that value lies in [min, max]. A NaN value (a failed instance) fails it.
+meets it when that value lies in [min, max].
+
+**Failed is a status bit, never a value.** A sample with a failure bit in ``status``
+(:data:`mcchain.status.FAILURE_BITS`) fails every requirement and is *undefined*, whatever
+its stored value (``impact_count`` −1, a peak of 0, NaN): :func:`defined_samples` (from a
+solver's ``status`` array) and :func:`defined_mask` (from a Dataset) say which samples are
+defined; every verdict, count, allocation and check reads them. On a defined sample, the
+time of an event (an output the registry marks ``event_time``, e.g.
+``first_separation_time``) that is NaN means the event never happened: +inf for a
+requirement, so it passes a ``min`` and fails a ``max``. Any other NaN fails and counts as
+undefined (:func:`decision_values`).
 
 * :func:`check_requirements`: the scene's requirements against what its analyses produce
   (run before anything is written; a bad one is one :class:`SceneError` line).
 * :func:`requirement_met`: 1.0 met / 0.0 failed for an array of values.
 * :func:`chunk_requirement_met`: ``requirement_met`` (sample, requirement) of one solved
   chunk, from the solver's arrays (per sample, so independent of the chunking).
-* :func:`requirement_values`: a requirement's per-sample values from an xarray Dataset.
+* :func:`requirement_values`: a requirement's per-sample values from an xarray Dataset, as
+  stored; :func:`requirement_decision_values`: the same as a requirement reads them.
 * :func:`allocate`: the tolerance allocation — for one sampled parameter, the widest range
   cut from above or below whose failure probability's upper bound meets the target.
 """
@@ -27,6 +38,7 @@ import numpy as np
 
 from mcchain.decision.stats import clopper_pearson_arrays
 from mcchain.errors import SceneError
+from mcchain.status import FAILURE_BITS
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -196,10 +208,68 @@ def check_requirements(scene: Scene, model: Model) -> list[Selection]:
 
 
 # -- evaluation ------------------------------------------------------------------------------
-def requirement_met(values: np.ndarray, requirement: Any) -> np.ndarray:
-    """1.0 where ``values`` lie in [requirement.min, requirement.max] (a missing limit is
-    none), 0.0 elsewhere, NaN values included (float64, the shape of ``values``)."""
-    x = np.asarray(values, dtype=np.float64)
+def defined_samples(status: np.ndarray) -> np.ndarray:
+    """(nsample,) bool: True where ``status`` has no failure bit (the sample's values are
+    defined), from a solver's or a Dataset's ``status`` array."""
+    return (np.asarray(status).astype(np.int64) & FAILURE_BITS) == 0
+
+
+def defined_mask(ds: xr.Dataset) -> np.ndarray:
+    """(nsample,) bool: the samples of a Dataset without a failure bit in ``status`` (all of
+    them when it stores no ``status``). The one test of "failed" for every decision."""
+    if "status" not in ds.data_vars:
+        return np.ones(ds.sizes.get("sample", 0), dtype=bool)
+    return defined_samples(ds["status"].values)
+
+
+def is_event_time(output: str | None) -> bool:
+    """Whether ``output`` is the time of an event, NaN when it never happened (the
+    registry's ``event_time``)."""
+    from mcchain.ensemble.registry import VARIABLES
+
+    spec = VARIABLES.get(str(output)) if output is not None else None
+    return bool(spec is not None and spec.event_time)
+
+
+def decision_values(
+    values: np.ndarray, defined: np.ndarray | None = None, output: str | None = None
+) -> np.ndarray:
+    """The values a requirement reads (float64, the shape of ``values``): NaN on a sample
+    that is not ``defined`` (a failure bit: whatever was stored), +inf where an
+    :func:`is_event_time` ``output`` is NaN on a defined sample (never), else as stored.
+
+    Args:
+        values: (nsample, ...) the output's values.
+        defined: (nsample,) bool from :func:`defined_samples`; None: every sample defined.
+        output: the output's name (for the event-time rule); None: not an event time.
+    """
+    x = np.array(values, dtype=np.float64)
+    if defined is not None:
+        mask = np.asarray(defined, dtype=bool).reshape((-1,) + (1,) * (x.ndim - 1))
+        x = np.where(mask, x, np.nan)
+        if is_event_time(output):
+            x = np.where(mask & np.isnan(x), np.inf, x)
+    elif is_event_time(output):
+        x = np.where(np.isnan(x), np.inf, x)
+    return x
+
+
+def requirement_met(
+    values: np.ndarray, requirement: Any, defined: np.ndarray | None = None
+) -> np.ndarray:
+    """1.0 where the sample meets ``requirement`` (float64, the shape of ``values``), 0.0
+    where it fails it.
+
+    A sample meets it when its :func:`decision_values` value lies in [requirement.min,
+    requirement.max] (a missing limit is none): a sample not ``defined`` fails, an event
+    that never happened (+inf) passes a ``min`` and fails a ``max``, any other NaN fails.
+
+    Args:
+        values: the output's values as stored.
+        requirement: has ``min``, ``max`` and (for the event-time rule) ``output``.
+        defined: (nsample,) bool, :func:`defined_samples`; None: every sample defined.
+    """
+    x = decision_values(values, defined, getattr(requirement, "output", None))
     met = ~np.isnan(x)
     if requirement.min is not None:
         met &= x >= requirement.min
@@ -214,12 +284,13 @@ def chunk_requirement_met(
     selections: Sequence[Selection],
 ) -> np.ndarray:
     """``requirement_met`` (nsample, nrequirement), int8, of one solved chunk: each sample
-    from its own values only."""
+    from its own values and ``status`` only (a failure bit fails every requirement)."""
+    defined = defined_samples(outputs["status"]) if "status" in outputs else None
     columns = []
     for requirement, sel in zip(requirements, selections, strict=True):
         where: tuple[Any, ...] = (slice(None), *sel.index)
         values = np.asarray(outputs[sel.output])[where]
-        columns.append(requirement_met(values, requirement))
+        columns.append(requirement_met(values, requirement, defined))
     return np.stack(columns, axis=1).astype(np.int8)
 
 
@@ -306,6 +377,21 @@ def requirement_values(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
     }
     sel = resolve_selection(requirement, dims, labels, where)
     return np.asarray(da.isel(dict(zip(dims[1:], sel.index, strict=True))).values, dtype=np.float64)
+
+
+def requirement_decision_values(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
+    """:func:`requirement_values` as the requirement reads them (:func:`decision_values`):
+    NaN on samples with a failure bit, +inf for an event that never happened."""
+    return decision_values(
+        requirement_values(ds, requirement), defined_mask(ds), requirement.output
+    )
+
+
+def dataset_requirement_met(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
+    """(nsample,) float64 ``requirement_met`` of one requirement, recomputed from a Dataset's
+    values and ``status`` (the rule of :func:`requirement_met`; also right for a run stored
+    before failure bits decided)."""
+    return requirement_met(requirement_values(ds, requirement), requirement, defined_mask(ds))
 
 
 # -- tolerance allocation --------------------------------------------------------------------

@@ -1,23 +1,34 @@
 """Statistics of a pass/fail decision: pure functions of counts and samples (no I/O).
 
-* :func:`clopper_pearson`: the exact (Clopper–Pearson) two-sided interval of a binomial
-  proportion, from the beta quantiles: its coverage is at least ``confidence`` for every
-  true probability when the samples are independent draws (``design = "random"``).
-* :func:`verdict`: ``pass`` when the interval's upper end is at most the target, ``fail``
-  when its lower end is above it, else ``undecided``. With the two-sided interval each
-  verdict is wrong with probability at most (1 − confidence)/2.
-* :func:`quantile_interval`: a quantile of the samples and its distribution-free
-  order-statistic interval (valid for any continuous distribution, independent draws),
-  with the sample count an interval needs when the samples are too few.
+**What ``confidence`` means** (one meaning, in fixed-count and ``until`` runs alike): a
+requirement's confidence C makes two one-sided statements. ``lower_C`` is a lower bound of
+P(fail) and ``upper_C`` an upper bound, each holding with probability at least C. The
+verdict is PASS iff upper_C <= target, FAIL iff lower_C > target, else undecided: each
+verdict is wrong with probability at most 1 − C. The pair [lower_C, upper_C] is a two-sided
+interval at level 2C − 1 (90 % for C = 95 %).
+
+* :func:`one_sided_bounds`: (lower_C, upper_C) by the exact (Clopper–Pearson) beta
+  quantiles, each end one-sided at C (independent draws, ``design = "random"``).
+* :func:`clopper_pearson`: the exact two-sided interval at level C (each tail (1 − C)/2);
+  ``clopper_pearson(k, n, 2C − 1)`` is ``one_sided_bounds(k, n, C)``.
+* :func:`verdict`: ``pass`` when the upper end is at most the target, ``fail`` when the lower
+  end is above it, :data:`EMPTY` when the lower end is above the upper one (a running
+  intersection of a confidence sequence that came out empty), else ``undecided``.
+* :func:`quantile_bounds`: a quantile of the samples with its one-sided order-statistic
+  bounds at C (distribution-free, independent draws); :func:`quantile_interval` the two-sided
+  interval of the earlier meaning.
 * :func:`samples_to_decide`: how many samples the observed failure rate implies to reach a
-  verdict; :func:`success_run_samples`: the classical zero-failure figure
-  n = ln(1 − C)/ln(1 − p).
+  verdict by a given interval; :func:`success_run_samples`: the zero-failure figure
+  n = ln(1 − C)/ln(1 − p) (not rounded), :func:`success_run_count` the count, rounded up.
+* :func:`family_confidence`: the Bonferroni statement over several verdicts.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 from scipy import stats as _stats
@@ -25,7 +36,11 @@ from scipy import stats as _stats
 PASS = "pass"
 FAIL = "fail"
 UNDECIDED = "undecided"
-VERDICTS = (PASS, FAIL, UNDECIDED)
+EMPTY = "empty"
+"""The verdict of an interval whose lower end lies above its upper end: the running
+intersection of a confidence sequence emptied (the looks contradict each other: a
+probability <= 1 − C event, or samples that are not independent draws). No verdict."""
+VERDICTS = (PASS, FAIL, UNDECIDED, EMPTY)
 
 
 def _alpha(confidence: float) -> float:
@@ -34,26 +49,68 @@ def _alpha(confidence: float) -> float:
     return 1.0 - float(confidence)
 
 
+def _counts(failures: int, samples: int) -> tuple[int, int]:
+    k, n = int(failures), int(samples)
+    if n < 0 or not 0 <= k <= max(n, 0):
+        raise ValueError(f"failures: must be in [0, samples], got {k} of {n}")
+    return k, n
+
+
+def _beta_bounds(k: int, n: int, tail: float) -> tuple[float, float]:
+    """Beta(tail; k, n − k + 1) (0 when k = 0) and Beta(1 − tail; k + 1, n − k) (1 when
+    k = n): the exact binomial bounds with ``tail`` outside each."""
+    if n == 0:
+        return 0.0, 1.0
+    lower = 0.0 if k == 0 else float(_stats.beta.ppf(tail, k, n - k + 1))
+    upper = 1.0 if k == n else float(_stats.beta.ppf(1 - tail, k + 1, n - k))
+    return lower, upper
+
+
+def one_sided_bounds(failures: int, samples: int, confidence: float) -> tuple[float, float]:
+    """(lower_C, upper_C): the exact one-sided bounds of a failure probability at C each.
+
+    Args:
+        failures: samples that failed, 0 <= failures <= samples.
+        samples: samples drawn; 0 gives the uninformative (0, 1).
+        confidence: C in (0, 1): P(p >= lower_C) >= C and P(p <= upper_C) >= C for every
+            true p (independent draws).
+
+    Returns:
+        lower_C = Beta(1 − C; k, n − k + 1) quantile (0 when k = 0) and upper_C =
+        Beta(C; k + 1, n − k) quantile (1 when k = n). With k = 0, upper_C = 1 − (1 − C)^(1/n).
+    """
+    return _beta_bounds(*_counts(failures, samples), _alpha(confidence))
+
+
+def one_sided_bounds_arrays(
+    failures: np.ndarray, samples: np.ndarray, confidence: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`one_sided_bounds` element by element over arrays of counts (samples >= 1)."""
+    return _beta_bound_arrays(failures, samples, _alpha(confidence))
+
+
 def clopper_pearson(failures: int, samples: int, confidence: float) -> tuple[float, float]:
-    """The exact two-sided interval (p_lower, p_upper) of a failure probability.
+    """The exact two-sided interval (p_lower, p_upper) of a failure probability at level C.
+
+    Each tail holds (1 − C)/2: ``clopper_pearson(k, n, 2C − 1)`` equals
+    :func:`one_sided_bounds` ``(k, n, C)``, the pair a verdict at confidence C reads.
 
     Args:
         failures: samples that failed, 0 <= failures <= samples.
         samples: samples drawn; 0 gives the uninformative (0, 1).
         confidence: two-sided confidence C in (0, 1); each tail holds (1 − C)/2.
-
-    Returns:
-        p_lower = Beta(α/2; k, n − k + 1) quantile (0 when k = 0) and p_upper =
-        Beta(1 − α/2; k + 1, n − k) quantile (1 when k = n), α = 1 − C.
     """
-    alpha = _alpha(confidence)
-    k, n = int(failures), int(samples)
-    if n < 0 or not 0 <= k <= max(n, 0):
-        raise ValueError(f"failures: must be in [0, samples], got {k} of {n}")
-    if n == 0:
-        return 0.0, 1.0
-    lower = 0.0 if k == 0 else float(_stats.beta.ppf(alpha / 2, k, n - k + 1))
-    upper = 1.0 if k == n else float(_stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
+    return _beta_bounds(*_counts(failures, samples), _alpha(confidence) / 2)
+
+
+def _beta_bound_arrays(
+    failures: np.ndarray, samples: np.ndarray, tail: float
+) -> tuple[np.ndarray, np.ndarray]:
+    k = np.asarray(failures, dtype=np.float64)
+    n = np.asarray(samples, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        lower = np.where(k > 0, _stats.beta.ppf(tail, np.maximum(k, 1), n - k + 1), 0.0)
+        upper = np.where(k < n, _stats.beta.ppf(1 - tail, k + 1, np.maximum(n - k, 1)), 1.0)
     return lower, upper
 
 
@@ -61,17 +118,14 @@ def clopper_pearson_arrays(
     failures: np.ndarray, samples: np.ndarray, confidence: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`clopper_pearson` element by element over arrays of counts (samples >= 1)."""
-    alpha = _alpha(confidence)
-    k = np.asarray(failures, dtype=np.float64)
-    n = np.asarray(samples, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        lower = np.where(k > 0, _stats.beta.ppf(alpha / 2, np.maximum(k, 1), n - k + 1), 0.0)
-        upper = np.where(k < n, _stats.beta.ppf(1 - alpha / 2, k + 1, np.maximum(n - k, 1)), 1.0)
-    return lower, upper
+    return _beta_bound_arrays(failures, samples, _alpha(confidence) / 2)
 
 
 def verdict(p_lower: float, p_upper: float, target: float) -> str:
-    """``pass`` if p_upper <= target, ``fail`` if p_lower > target, else ``undecided``."""
+    """``pass`` if p_upper <= target, ``fail`` if p_lower > target, :data:`EMPTY` if
+    p_lower > p_upper (no interval: no verdict), else ``undecided``."""
+    if p_lower > p_upper:
+        return EMPTY
     if p_upper <= target:
         return PASS
     if p_lower > target:
@@ -79,38 +133,80 @@ def verdict(p_lower: float, p_upper: float, target: float) -> str:
     return UNDECIDED
 
 
+def family_confidence(confidences: Sequence[float]) -> float:
+    """The probability, at least, that every one of several verdicts holds together:
+    1 − Σ(1 − C_i) (Bonferroni; no assumption on how the requirements depend on each other;
+    may be <= 0, then nothing is claimed for the family)."""
+    return 1.0 - float(sum(1.0 - float(c) for c in confidences))
+
+
 def success_run_samples(target: float, confidence: float) -> float:
     """The success-run figure n = ln(1 − C)/ln(1 − p) (not rounded): failure-free samples
-    that show P(fail) <= p with one-sided confidence C. The two-sided interval of
-    :func:`clopper_pearson` needs ``success_run_samples(p, (1 + C)/2)`` of them to pass."""
+    that show P(fail) <= p at confidence C, the count from which
+    :func:`one_sided_bounds` ``(0, n, C)`` passes (:func:`success_run_count`)."""
     alpha = _alpha(confidence)
     if not 0.0 < target < 1.0:
         raise ValueError(f"target: must be in (0, 1), got {target!r}")
     return math.log(alpha) / math.log1p(-target)
 
 
+def success_run_count(target: float, confidence: float) -> int:
+    """The smallest n with upper_C(0 of n) = 1 − (1 − C)^(1/n) <= target: ⌈ln(1 − C)/ln(1 −
+    p)⌉, checked against the bound itself (298 for p = 1 %, C = 95 %)."""
+    n = max(math.ceil(success_run_samples(target, confidence)), 1)
+    while n > 1 and one_sided_bounds(0, n - 1, confidence)[1] <= target:
+        n -= 1  # the logarithms rounded the figure up past a whole count
+    while one_sided_bounds(0, n, confidence)[1] > target:
+        n += 1
+    return n
+
+
+Interval = Callable[[int, int], tuple[float, float]]
+"""An interval of a failure probability from (failures, samples): (lower, upper)."""
+
+
 def samples_to_decide(
-    failures: int, samples: int, target: float, confidence: float, limit: int = 1 << 40
+    failures: int,
+    samples: int,
+    target: float,
+    confidence: float,
+    limit: int = 1 << 40,
+    *,
+    interval: Interval | None = None,
 ) -> float:
     """The smallest sample count N at which the observed failure rate k/n, held, decides.
 
-    With k = 0: the N at which a failure-free run passes, ⌈ln((1 − C)/2)/ln(1 − p)⌉ (the
-    two-sided interval's success-run figure). Else the smallest N with ⌊N k/n + ½⌋
-    failures whose interval lies wholly below the target (rate below it) or above it (rate
-    above). NaN when the rate equals the target (no N decides) or N would exceed ``limit``.
-    Already decided counts return ``samples``.
+    Args:
+        failures, samples: the counts observed.
+        target, confidence: the requirement's.
+        limit: the largest N searched (NaN beyond).
+        interval: ``(k, n) -> (lower, upper)``, the interval that decides; default the
+            two-sided Clopper–Pearson at ``confidence`` (:func:`clopper_pearson`). A verdict
+            at confidence C passes ``lambda k, n: one_sided_bounds(k, n, C)``; an ``until``
+            run its confidence sequence.
+
+    Returns:
+        With k = 0: the smallest N at which N failure-free samples pass. Else the smallest N
+        with ⌊N k/n + ½⌋ failures whose interval lies wholly below the target (rate below
+        it) or above it (rate above). NaN when the rate equals the target (no N decides) or
+        N would exceed ``limit``. Already decided counts return ``samples``.
     """
-    k, n = int(failures), int(samples)
-    if n > 0 and verdict(*clopper_pearson(k, n, confidence), target) != UNDECIDED:
+    k, n = _counts(failures, samples)
+    if interval is None:
+
+        def interval(kk: int, nn: int) -> tuple[float, float]:
+            return clopper_pearson(kk, nn, confidence)
+
+    if n > 0 and verdict(*interval(k, n), target) not in (UNDECIDED, EMPTY):
         return float(n)
-    if k == 0:
-        return float(math.ceil(success_run_samples(target, (1 + confidence) / 2)))
-    rate = k / n
+    rate = k / n if n else 0.0
     if rate == target:
         return math.nan
 
     def decided(count: int) -> bool:
-        lo, hi = clopper_pearson(min(math.floor(count * rate + 0.5), count), count, confidence)
+        if count < 1:
+            return False
+        lo, hi = interval(min(math.floor(count * rate + 0.5), count), count)
         return hi <= target if rate < target else lo > target
 
     hi = max(n, 1)
@@ -132,15 +228,18 @@ def samples_to_decide(
 
 @dataclass(frozen=True)
 class QuantileInterval:
-    """A sample quantile and its distribution-free interval.
+    """A sample quantile and its distribution-free bounds.
 
     Attributes:
         probability: the quantile's level q (0 < q < 1).
-        value: the inverse empirical CDF at q, x_(⌈n q⌉) (a sample value); NaN without samples.
-        lower, upper: order statistics x_(r), x_(s) with P(x_(r) <= ξ_q <= x_(s)) >= C for
-            any continuous distribution; NaN where no order statistic is extreme enough.
-        samples_needed: the count from which both ends exist, max(⌈ln(α/2)/ln q⌉,
-            ⌈ln(α/2)/ln(1 − q)⌉), α = 1 − C.
+        value: the inverse empirical CDF at q, x_(⌈n q⌉) (a sample value; ⌈n q⌉ in exact
+            arithmetic on the decimal q); NaN without samples.
+        lower, upper: order statistics x_(r), x_(s) with P(x_(r) <= ξ_q) >= 1 − tail and
+            P(ξ_q <= x_(s)) >= 1 − tail for any continuous distribution; NaN where no order
+            statistic is extreme enough. :func:`quantile_bounds`: tail = 1 − C (each end
+            one-sided at C); :func:`quantile_interval`: tail = (1 − C)/2.
+        samples_needed: the count from which both ends exist, max(⌈ln(tail)/ln q⌉,
+            ⌈ln(tail)/ln(1 − q)⌉).
     """
 
     probability: float
@@ -150,38 +249,44 @@ class QuantileInterval:
     samples_needed: int
 
 
+def _exact(q: float | Fraction) -> Fraction:
+    """q as the decimal it was written as: 0.07 is 7/100, so 100 × 0.07 is exactly 7 (the
+    binary 0.07 is 0.0700000000000000067, whose ceiling of 100 q is 8)."""
+    return q if isinstance(q, Fraction) else Fraction(repr(float(q)))
+
+
 def quantile_samples_needed(probability: float, confidence: float) -> int:
-    """Samples from which the order-statistic interval of the ``probability`` quantile has
-    both ends: the upper end needs q^n <= α/2, the lower one (1 − q)^n <= α/2."""
-    tail = _alpha(confidence) / 2
-    q = float(probability)
+    """Samples from which the two-sided order-statistic interval of :func:`quantile_interval`
+    has both ends: the upper end needs q^n <= α/2, the lower one (1 − q)^n <= α/2."""
+    return _samples_needed(float(probability), _alpha(confidence) / 2)
+
+
+def quantile_bounds_samples_needed(probability: float, confidence: float) -> int:
+    """Samples from which both one-sided bounds of :func:`quantile_bounds` exist: q^n <= 1 − C
+    and (1 − q)^n <= 1 − C (298 for q = 0.99 at C = 0.95)."""
+    return _samples_needed(float(probability), _alpha(confidence))
+
+
+def _samples_needed(q: float, tail: float) -> int:
     return int(
         max(math.ceil(math.log(tail) / math.log(q)), math.ceil(math.log(tail) / math.log1p(-q)))
     )
 
 
-def quantile_interval(
-    values: np.ndarray, probability: float, confidence: float
+def _order_bounds(
+    values: np.ndarray, probability: float | Fraction, tail: float, needed: int
 ) -> QuantileInterval:
-    """The ``probability`` quantile of ``values`` with its order-statistic interval.
-
-    ``values`` may hold ±inf (a failed sample counted on the failing side); NaN is not
-    allowed (the caller decides where a failed sample goes). The interval's ends are the
-    order statistics r (largest with P(Bin(n, q) <= r − 1) <= α/2) and s (smallest with
-    P(Bin(n, q) <= s − 1) >= 1 − α/2), 1-based.
-    """
     x = np.sort(np.asarray(values, dtype=np.float64).ravel())
     if np.isnan(x).any():
         raise ValueError("values: NaN is not allowed (place failed samples at ±inf)")
-    q = float(probability)
-    if not 0.0 < q < 1.0:
+    exact = _exact(probability)
+    q = float(exact)
+    if not 0 < exact < 1:
         raise ValueError(f"probability: must be in (0, 1), got {q!r}")
-    tail = _alpha(confidence) / 2
-    needed = quantile_samples_needed(q, confidence)
     n = x.size
     if n == 0:
         return QuantileInterval(q, math.nan, math.nan, math.nan, needed)
-    value = float(x[max(math.ceil(n * q) - 1, 0)])
+    value = float(x[max(math.ceil(n * exact) - 1, 0)])
     cdf = _stats.binom.cdf(np.arange(n + 1), n, q)  # cdf[j] = P(Bin(n, q) <= j)
     # lower end x_(r): P(x_(r) > ξ_q) = P(Bin <= r - 1) <= tail; largest such r >= 1
     ok_lower = np.flatnonzero(cdf[:n] <= tail)  # index j = r - 1
@@ -190,3 +295,34 @@ def quantile_interval(
     ok_upper = np.flatnonzero(cdf[:n] >= 1 - tail)  # index j = s - 1
     upper = float(x[ok_upper[0]]) if ok_upper.size else math.nan
     return QuantileInterval(q, value, lower, upper, needed)
+
+
+def quantile_bounds(
+    values: np.ndarray, probability: float | Fraction, confidence: float
+) -> QuantileInterval:
+    """The ``probability`` quantile of ``values`` with its one-sided bounds at C.
+
+    ``values`` may hold ±inf (a failed sample counted on the failing side, an event that
+    never happened at +inf); NaN is not allowed. ``lower`` is x_(r), r the largest with
+    P(Bin(n, q) <= r − 1) <= 1 − C; ``upper`` is x_(s), s the smallest with
+    P(Bin(n, q) <= s − 1) >= C (1-based). For a ``max`` requirement at level q = 1 − target,
+    ``upper <= max`` exactly when the verdict passes (the bounds are the order-statistic
+    duals of :func:`one_sided_bounds`).
+
+    Args:
+        probability: q in (0, 1); a float is read as the decimal it prints as, a
+            :class:`fractions.Fraction` as is.
+    """
+    q = float(_exact(probability))
+    tail = _alpha(confidence)
+    return _order_bounds(values, probability, tail, _samples_needed(q, tail))
+
+
+def quantile_interval(
+    values: np.ndarray, probability: float, confidence: float
+) -> QuantileInterval:
+    """The ``probability`` quantile of ``values`` with its two-sided order-statistic interval
+    at level C (each end with (1 − C)/2 outside; see :func:`quantile_bounds`)."""
+    q = float(_exact(probability))
+    tail = _alpha(confidence) / 2
+    return _order_bounds(values, probability, tail, _samples_needed(q, tail))

@@ -22,28 +22,34 @@ import csv
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mcchain.decision.requirements import (
-    VARIABLE,
     allocate,
+    dataset_requirement_met,
+    decision_values,
+    defined_mask,
     requirement_met,
     requirement_values,
     stored_requirements,
 )
-from mcchain.decision.sequential import sequential_bounds
+from mcchain.decision.sequential import confidence_sequence, sequential_bounds
 from mcchain.decision.stats import (
+    EMPTY,
     UNDECIDED,
-    clopper_pearson,
-    quantile_interval,
+    Interval,
+    family_confidence,
+    one_sided_bounds,
+    quantile_bounds,
     samples_to_decide,
-    success_run_samples,
     verdict,
 )
+from mcchain.decision.units import format_quantity, output_units
 from mcchain.decision.until import sequential_settings
 
 if TYPE_CHECKING:
@@ -83,16 +89,25 @@ class RequirementSummary:
     Attributes:
         name, samples, failures, undefined, p_fail, p_lower, p_upper, confidence, target,
         quantile, quantile_lower, quantile_upper: the CSV's columns (see docs/scenes.md).
-        decision: ``pass``, ``fail`` or ``undecided``.
+            [p_lower, p_upper] = [lower_C, upper_C], each end a one-sided bound at C.
+        decision: ``pass``, ``fail``, ``undecided`` or ``empty`` (an empty running
+            intersection of an ``until`` run's sequence: no verdict).
         exact: whether the interval is exact for the design (else approximate).
         side: ``max`` or ``min``: the limit the quantile is taken at.
         level: the quantile's level (1 − target for ``max``, target for ``min``).
         limit: that limit's value.
-        quantile_samples_needed: samples from which the quantile interval has both ends.
-        samples_needed: samples the observed rate needs to decide (= samples if decided,
-            NaN if the rate equals the target).
-        success_run: the one-sided success-run figure ln(1 − C)/ln(1 − target).
+        quantile_samples_needed: samples from which both quantile bounds exist.
+        samples_needed: samples the observed rate needs to decide by the interval that
+            decides (= samples if decided, NaN if the rate equals the target).
+        success_run: failure-free samples that pass by the interval that decides
+            (⌈ln(1 − C)/ln(1 − target)⌉ for a fixed count; an ``until`` run's sequence needs
+            more, counted in whole batches).
         output: the output and its selection, as text (``omega[mode=0]``).
+        units: the output's unit (:func:`mcchain.decision.units.output_units`).
+        minimum, maximum: the requirement's limits (NaN: none).
+        observed_min, observed_max: the smallest and largest finite value over the defined
+            samples (NaN if none).
+        sequential: whether the interval is an ``until`` run's confidence sequence.
     """
 
     name: str
@@ -116,6 +131,12 @@ class RequirementSummary:
     samples_needed: float
     success_run: float
     output: str
+    units: str = ""
+    minimum: float = math.nan
+    maximum: float = math.nan
+    observed_min: float = math.nan
+    observed_max: float = math.nan
+    sequential: bool = False
 
     @property
     def verdict(self) -> str:
@@ -172,12 +193,14 @@ def output_label(requirement: Requirement) -> str:
     return f"{requirement.output}[{inner}]"
 
 
-def met_of(ds: xr.Dataset, requirement: Requirement, values: np.ndarray) -> np.ndarray:
-    """``requirement_met`` of one requirement as stored (computed from ``values`` for a run
-    that predates the variable)."""
-    if VARIABLE in ds.data_vars and requirement.name in [str(v) for v in ds["requirement"].values]:
-        return np.asarray(ds[VARIABLE].sel(requirement=requirement.name).values, dtype=np.float64)
-    return requirement_met(values, requirement)
+def met_of(
+    ds: xr.Dataset, requirement: Requirement, values: np.ndarray | None = None
+) -> np.ndarray:
+    """``requirement_met`` of one requirement, recomputed from the Dataset's values and
+    ``status`` (:func:`mcchain.decision.requirements.dataset_requirement_met`): what a run
+    stores, and right for a run stored before a failure bit decided. ``values`` is unused
+    (kept for callers that pass it)."""
+    return dataset_requirement_met(ds, requirement)
 
 
 def quantile_side(requirement: Requirement, values: np.ndarray) -> str:
@@ -187,28 +210,71 @@ def quantile_side(requirement: Requirement, values: np.ndarray) -> str:
         return "max"
     if requirement.max is None:
         return "min"
-    above = int(np.sum(values > requirement.max))
-    below = int(np.sum(values < requirement.min))
+    with np.errstate(invalid="ignore"):
+        above = int(np.sum(values > requirement.max))
+        below = int(np.sum(values < requirement.min))
     return "min" if below > above else "max"
 
 
+def _limit(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _exact_decimal(x: float) -> Fraction:
+    return Fraction(repr(float(x)))
+
+
 def summarize_requirement(
-    requirement: Requirement, values: np.ndarray, met: np.ndarray, design: str | None
+    requirement: Requirement,
+    values: np.ndarray,
+    met: np.ndarray,
+    design: str | None,
+    *,
+    units: str = "",
+    sequential: Mapping[str, Any] | None = None,
 ) -> RequirementSummary:
-    """The summary of one requirement from its per-sample values and ``requirement_met``."""
+    """The summary of one requirement.
+
+    Args:
+        values: (nsample,) the values the requirement reads
+            (:func:`mcchain.decision.requirements.decision_values`): NaN where the sample is
+            undefined, +inf for an event that never happened.
+        met: (nsample,) ``requirement_met`` (1 met, 0 failed).
+        design: the sampling design (None without ``[sample]``).
+        units: the output's unit, for the words.
+        sequential: an ``until`` run's ``sequential`` settings (``batch``): the interval is
+            its confidence sequence over the looks; None: a fixed count.
+    """
     values = np.asarray(values, dtype=np.float64)
+    failed = np.asarray(met) == 0
     n = int(values.size)
-    failures = int(np.sum(np.asarray(met) == 0))
+    failures = int(np.sum(failed))
     undefined = int(np.sum(np.isnan(values)))
-    lo, hi = clopper_pearson(failures, n, requirement.confidence)
-    decision = verdict(lo, hi, requirement.target)
+    confidence, target = float(requirement.confidence), float(requirement.target)
+    interval: Interval
+    if sequential is None:
+
+        def interval(k: int, m: int) -> tuple[float, float]:
+            return one_sided_bounds(k, m, confidence)
+
+        lo, hi = interval(failures, n)
+        batch = 1
+    else:
+        batch = int(sequential["batch"])
+
+        def interval(k: int, m: int) -> tuple[float, float]:
+            lower, upper = confidence_sequence(np.asarray(k), np.asarray(m), confidence, target)
+            return float(lower), float(upper)
+
+        lo, hi = sequential_bounds(failed, batch, confidence, target)
     side = quantile_side(requirement, values)
     if side == "max":
-        level, limit, worst = 1.0 - requirement.target, requirement.max, math.inf
+        level, limit, worst = 1 - _exact_decimal(target), requirement.max, math.inf
     else:
-        level, limit, worst = requirement.target, requirement.min, -math.inf
-    # a failed instance (NaN) counts beyond the limit, as it counts as a failure
-    q = quantile_interval(np.where(np.isnan(values), worst, values), level, requirement.confidence)
+        level, limit, worst = _exact_decimal(target), requirement.min, -math.inf
+    # an undefined sample counts beyond the limit, as it counts as a failure
+    q = quantile_bounds(np.where(np.isnan(values), worst, values), level, confidence)
+    finite = values[np.isfinite(values)]
     return RequirementSummary(
         name=requirement.name,
         samples=n,
@@ -217,45 +283,62 @@ def summarize_requirement(
         p_fail=failures / n if n else math.nan,
         p_lower=lo,
         p_upper=hi,
-        confidence=requirement.confidence,
-        target=requirement.target,
-        decision=decision,
+        confidence=confidence,
+        target=target,
+        decision=verdict(lo, hi, target),
         exact=design in EXACT_DESIGNS,
         quantile=q.value,
         quantile_lower=q.lower,
         quantile_upper=q.upper,
         side=side,
-        level=level,
-        limit=float(limit) if limit is not None else math.nan,
+        level=float(level),
+        limit=_limit(limit),
         quantile_samples_needed=q.samples_needed,
-        samples_needed=samples_to_decide(failures, n, requirement.target, requirement.confidence),
-        success_run=success_run_samples(requirement.target, requirement.confidence),
+        samples_needed=_whole_batches(
+            samples_to_decide(failures, n, target, confidence, interval=interval), batch
+        ),
+        success_run=_whole_batches(
+            samples_to_decide(0, 0, target, confidence, interval=interval), batch
+        ),
         output=output_label(requirement),
+        units=units,
+        minimum=_limit(requirement.min),
+        maximum=_limit(requirement.max),
+        observed_min=float(finite.min()) if finite.size else math.nan,
+        observed_max=float(finite.max()) if finite.size else math.nan,
+        sequential=sequential is not None,
     )
+
+
+def _whole_batches(count: float, batch: int) -> float:
+    """``count`` rounded up to the next look of a run that looks every ``batch`` samples."""
+    return count if math.isnan(count) else float(math.ceil(count / batch) * batch)
 
 
 def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
     """Every requirement of a stored ensemble, summarized ([] without requirements).
 
-    A run that added samples until decided (``[sample] until``) reports the interval that
-    kept its confidence over its looks (:func:`mcchain.decision.sequential.sequential_bounds`)
-    and the verdict from it; the counts and the quantile are the same as for a fixed count.
+    Each requirement reads its output with the failure bits of ``status`` (a failed sample
+    fails, undefined) and the event-time rule
+    (:func:`mcchain.decision.requirements.requirement_decision_values`). A run that added
+    samples until decided (``[sample] until``) reports the interval that kept its confidence
+    over its looks (:func:`mcchain.decision.sequential.sequential_bounds`), the verdict and
+    the sample counts from it; the quantile is the same as for a fixed count.
     """
     design = design_of(ds)
     sequential = sequential_settings(ds.attrs)
+    defined = defined_mask(ds)
     out = []
     for requirement in stored_requirements(ds):
-        values = requirement_values(ds, requirement)
-        met = met_of(ds, requirement, values)
-        summary = summarize_requirement(requirement, values, met, design)
-        if sequential is not None:
-            lo, hi = sequential_bounds(
-                met == 0, int(sequential["batch"]), requirement.confidence, requirement.target
+        raw = requirement_values(ds, requirement)
+        values = decision_values(raw, defined, requirement.output)
+        met = requirement_met(raw, requirement, defined)
+        units = output_units(requirement.output, requirement.select, ds[requirement.output].attrs)
+        out.append(
+            summarize_requirement(
+                requirement, values, met, design, units=units, sequential=sequential
             )
-            summary = replace(
-                summary, p_lower=lo, p_upper=hi, decision=verdict(lo, hi, requirement.target)
-            )
-        out.append(summary)
+        )
     return out
 
 
@@ -286,13 +369,57 @@ def _pct(x: float) -> str:
     return f"{100 * x:.3g} %"
 
 
+def limit_text(s: RequirementSummary) -> str:
+    """The requirement as written, with units: ``peak_contact_force[joint=B] <= 5000 N (5
+    kN)``, or ``0.001 s (1 ms) <= ... <= 0.02 s (20 ms)`` with both limits."""
+    low, high = (format_quantity(x, s.units) for x in (s.minimum, s.maximum))
+    if not math.isnan(s.minimum) and not math.isnan(s.maximum):
+        return f"{low} <= {s.output} <= {high}"
+    if not math.isnan(s.maximum):
+        return f"{s.output} <= {high}"
+    return f"{s.output} >= {low}"
+
+
+def interval_name(s: RequirementSummary) -> str:
+    """How [p_lower, p_upper] is named: each end a one-sided bound at C."""
+    c = _pct(s.confidence)
+    if s.sequential:
+        return f"{c} sequential bounds (each one-sided, valid at every look)"
+    return f"{c} bounds (each one-sided; together a {_pct(2 * s.confidence - 1)} interval)"
+
+
+def all_fail_warning(s: RequirementSummary) -> str | None:
+    """A ``warning:`` line when every sample fails the requirement (often a limit in the
+    wrong unit: ``max = 5.0`` on a force in N), with the range the output took; None
+    otherwise."""
+    if s.samples == 0 or s.failures < s.samples:
+        return None
+    head = f"warning: requirement {s.name}: every one of the {s.samples} samples fails it"
+    if math.isnan(s.observed_min):
+        return (
+            f"{head} ({limit_text(s)}): no sample has a value to compare (all {s.undefined} "
+            "undefined: a failure bit in status)"
+        )
+    units = f" (the output is in {s.units})" if s.units else ""
+    undefined = f"; {s.undefined} undefined" if s.undefined else ""
+    return (
+        f"{head}: the limit is {limit_text(s)}{units}, the samples' values range over "
+        f"{format_quantity(s.observed_min, s.units)} to {format_quantity(s.observed_max, s.units)}"
+        f"{undefined}: is the limit written in the output's unit?"
+    )
+
+
 def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
-    """What one requirement's row says, in words."""
-    limit = f"{s.output} {'<=' if s.side == 'max' else '>='} {_g(s.limit, 6)}"
+    """What one requirement's row says, in words (every limit, quantile and bound with the
+    output's unit)."""
+    c = _pct(s.confidence)
     words = {
-        "pass": f"PASS: P(fail) <= {_g(s.target)} shown",
-        "fail": f"FAIL: P(fail) > {_g(s.target)} shown",
-        UNDECIDED: f"UNDECIDED: the interval contains the target {_g(s.target)}",
+        "pass": f"PASS: P(fail) <= {_g(s.target)} shown at {c}",
+        "fail": f"FAIL: P(fail) > {_g(s.target)} shown at {c}",
+        UNDECIDED: f"UNDECIDED: the bounds enclose the target {_g(s.target)}",
+        EMPTY: "NO VERDICT: the running intersection of the sequential interval is empty "
+        f"(lower bound {_g(s.p_lower)} > upper bound {_g(s.p_upper)}): the looks contradict "
+        "each other (an event of probability <= 1 - C, or samples that are not independent)",
     }[s.decision]
     if s.exact:
         approx = ""
@@ -301,39 +428,70 @@ def requirement_lines(s: RequirementSummary, design: str | None) -> list[str]:
     else:
         approx = f" [approximate: design {design!r} does not draw independent samples]"
     lines = [
-        f"requirement {s.name} ({limit}; target {_g(s.target)}, confidence {_g(s.confidence)}): "
-        f"{words}{approx}",
-        f"  {s.failures} of {s.samples} samples failed ({s.undefined} undefined: failed "
-        f"instances); P(fail) = {_g(s.p_fail)}, {_pct(s.confidence)} interval "
+        f"requirement {s.name} ({limit_text(s)}; target {_g(s.target)}, confidence "
+        f"{_g(s.confidence)}): {words}{approx}",
+        f"  {s.failures} of {s.samples} samples failed ({s.undefined} undefined: a failure bit "
+        f"in status); P(fail) = {_g(s.p_fail)}, {interval_name(s)} "
         f"[{_g(s.p_lower)}, {_g(s.p_upper)}]",
     ]
     bound = "upper" if s.side == "max" else "lower"
     q_text = (
-        f"  {_g(100 * s.level)} % quantile of {s.output}: {_g(s.quantile, 6)}, "
-        f"{_pct(s.confidence)} interval [{_g(s.quantile_lower, 6)}, {_g(s.quantile_upper, 6)}]"
+        f"  {_g(100 * s.level)} % quantile of {s.output}: {format_quantity(s.quantile, s.units)}, "
+        f"{c} bounds [{format_quantity(s.quantile_lower, s.units)}, "
+        f"{format_quantity(s.quantile_upper, s.units)}]"
     )
+    if s.undefined:
+        q_text += f" (the {s.undefined} undefined counted beyond the limit)"
     if math.isnan(s.quantile_lower) or math.isnan(s.quantile_upper):
         q_text += (
             f" (too few samples for its {bound if math.isnan(s.quantile_upper) else 'other'} "
-            f"end: {s.quantile_samples_needed} needed)"
+            f"bound: {s.quantile_samples_needed} needed)"
         )
     lines.append(q_text)
+    by = " (whole batches, by the sequential interval)" if s.sequential else ""
     if s.decision == UNDECIDED:
         if math.isnan(s.samples_needed):
             lines.append("  the observed rate equals the target: no sample count decides it")
         else:
             lines.append(
                 f"  to decide at the observed rate: about {int(s.samples_needed)} samples "
-                f"({int(s.samples_needed) - s.samples} more)"
+                f"({int(s.samples_needed) - s.samples} more){by}"
             )
-    if s.failures == 0:
-        two_sided = math.ceil(success_run_samples(s.target, (1 + s.confidence) / 2))
-        lines.append(
-            f"  no failure: the success-run figure n = ln(1 - C)/ln(1 - p) = "
-            f"{_g(s.success_run, 6)} failure-free samples show P(fail) <= {_g(s.target)} at "
-            f"one-sided {_pct(s.confidence)}; the two-sided interval above needs {two_sided}"
+    if s.failures == 0 and not math.isnan(s.success_run):
+        figure = (
+            f"{int(s.success_run)} failure-free samples pass at {c}{by}"
+            if s.sequential
+            else f"the success-run figure ceil(ln(1 - C)/ln(1 - p)) = {int(s.success_run)} "
+            f"failure-free samples show P(fail) <= {_g(s.target)} at {c}"
         )
+        lines.append(f"  no failure: {figure}")
+    warning = all_fail_warning(s)
+    if warning is not None:
+        lines.append(warning)
     return lines
+
+
+def family_line(summaries: list[RequirementSummary]) -> str | None:
+    """The statement over several requirements' verdicts together (Bonferroni); None for
+    fewer than two."""
+    if len(summaries) < 2:
+        return None
+    k = len(summaries)
+    together = family_confidence([s.confidence for s in summaries])
+    sum_text = (
+        f"1 - {k} x {_g(1 - summaries[0].confidence)}"
+        if len({s.confidence for s in summaries}) == 1
+        else "1 - sum(1 - C)"
+    )
+    if together <= 0:
+        return (
+            f"together: {k} verdicts, each wrong with probability at most 1 - C; "
+            f"{sum_text} = {_g(together)}: nothing is claimed for all of them at once"
+        )
+    return (
+        f"together: all {k} verdicts hold at once with probability >= {sum_text} = "
+        f"{_g(together)} (Bonferroni, whatever the dependence between the requirements)"
+    )
 
 
 def allocation_lines(rows: list[AllocationRow], requirement: str) -> list[str]:
@@ -371,18 +529,37 @@ def summary_lines(
         if alloc:
             lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
             lines += alloc
+    return lines + validity_lines(summaries, design, sequential)
+
+
+def validity_lines(
+    summaries: list[RequirementSummary],
+    design: str | None,
+    sequential: Mapping[str, Any] | None = None,
+) -> list[str]:
+    """What the verdicts claim: the family statement over several requirements, and which
+    interval the design gets ([] without requirements)."""
+    lines = []
+    together = family_line(summaries)
+    if together is not None:
+        lines.append(together)
+    if sequential is None and any(s.sequential for s in summaries):
+        sequential = {"method": "confidence sequence", "batch": "a batch"}  # a caller without it
     if summaries and sequential is not None:
         lines.append(
             f"intervals: sequential ({sequential['method']}), samples added {sequential['batch']} "
-            "at a time until decided: valid whenever the run stopped; each verdict is wrong with "
-            "probability at most 1 - confidence"
+            "at a time until decided: each bound one-sided at the requirement's confidence C and "
+            "valid whenever the run stopped; PASS iff the upper bound <= target, FAIL iff the "
+            "lower bound > target: each verdict is wrong with probability at most 1 - C"
             + ("" if design in EXACT_DESIGNS else f", APPROXIMATE for design {design!r}")
         )
     elif summaries:
         if design in EXACT_DESIGNS:
             lines.append(
-                "intervals: exact Clopper-Pearson (independent random draws); each verdict "
-                "is wrong with probability at most (1 - confidence)/2"
+                "intervals: exact Clopper-Pearson bounds (independent random draws), each "
+                "one-sided at the requirement's confidence C; PASS iff the upper bound <= "
+                "target, FAIL iff the lower bound > target: each verdict is wrong with "
+                "probability at most 1 - C"
             )
         else:
             lines.append(

@@ -64,6 +64,7 @@ class Until(Observer):
         """Look at the part files of the run's first ``run.nsample`` samples: the count of
         one more batch, or None (every requirement decided, or ``max_count`` reached). The
         look is noted in ``run.json["until"]["looks"]``."""
+        from mcchain.decision.stats import EMPTY, UNDECIDED
         from mcchain.ensemble.io import list_parts, open_parts
         from mcchain.runner.runs import PARTS
 
@@ -74,8 +75,12 @@ class Until(Observer):
         looks = [item for item in entry.setdefault("looks", []) if item["samples"] != nsample]
         entry["looks"] = [*looks, look]
         undecided = [name for name, r in look["requirements"].items() if r["verdict"] == UNDECIDED]
+        # an empty running intersection never fills again: no more samples decide it
+        empty = [name for name, r in look["requirements"].items() if r["verdict"] == EMPTY]
         if not undecided:
-            entry["stopped"] = f"decided after {nsample} samples"
+            entry["stopped"] = f"decided after {nsample} samples" + (
+                f"; no verdict (empty running intersection): {', '.join(empty)}" if empty else ""
+            )
             log.info("until: every requirement decided after %d samples", nsample)
             return None
         if nsample >= self.max_count:
@@ -90,9 +95,6 @@ class Until(Observer):
     def describe(self) -> dict[str, Any]:
         """The ``sequential`` settings entry (and the start of ``run.json["until"]``)."""
         return {"method": METHOD, "batch": self.batch, "max_count": self.max_count}
-
-
-UNDECIDED = "undecided"
 
 
 def look_at(ds: xr.Dataset, nsample: int, batch: int) -> dict[str, Any]:

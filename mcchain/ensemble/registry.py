@@ -55,6 +55,9 @@ class VariableSpec:
         dtype: dtype rule, one of :data:`DTYPE_RULES`.
         analysis: producing analysis, one of :data:`ANALYSES`.
         attrs: further CF attributes (flag masks, comments).
+        event_time: the time of an event, NaN on a sample where the event never happened:
+            a requirement reads that NaN as "never" (+inf) when the sample has no failure
+            bit (:func:`mcchain.decision.requirements.decision_values`).
     """
 
     name: str
@@ -64,6 +67,7 @@ class VariableSpec:
     dtype: str
     analysis: str
     attrs: Mapping[str, Any] = field(default_factory=dict)
+    event_time: bool = False
 
     def storage_dtype(self, history_dtype: str = "float32") -> np.dtype:
         """The numpy dtype the variable is stored with."""
@@ -85,9 +89,11 @@ def _v(
     long_name: str,
     dtype: str,
     analysis: str,
+    *,
+    event_time: bool = False,
     **attrs: Any,
 ) -> VariableSpec:
-    return VariableSpec(name, dims, units, long_name, dtype, analysis, attrs)
+    return VariableSpec(name, dims, units, long_name, dtype, analysis, attrs, event_time)
 
 
 _MIXED_Q = "m (x, y), rad (theta)"
@@ -327,6 +333,7 @@ VARIABLES: dict[str, VariableSpec] = {
             "first time the journal left the bearing wall (NaN if never)",
             "float64",
             "simulate",
+            event_time=True,
         ),
         _v(
             "diverged_time",
@@ -335,6 +342,7 @@ VARIABLES: dict[str, VariableSpec] = {
             "first time the diverged flag was raised (NaN if never)",
             "float64",
             "simulate",
+            event_time=True,
         ),
         _v(
             "singular_time",
@@ -343,6 +351,7 @@ VARIABLES: dict[str, VariableSpec] = {
             "first time the singular flag was raised (NaN if never)",
             "float64",
             "simulate",
+            event_time=True,
         ),
         _v(
             "contact_lost_time",
@@ -351,13 +360,15 @@ VARIABLES: dict[str, VariableSpec] = {
             "first time the contact_lost flag was raised (NaN if never)",
             "float64",
             "simulate",
+            event_time=True,
         ),
         _v(
             "requirement_met",
             ("sample", "requirement"),
             "1",
-            "1 where the sample meets the requirement, 0 where it fails it (a NaN output "
-            "fails); limits, target and confidence of each requirement in the attributes",
+            "1 where the sample meets the requirement, 0 where it fails it (a failure bit in "
+            "status fails every requirement; a NaN event time means never); limits, target and "
+            "confidence of each requirement in the attributes",
             "int8",
             "requirement",
             flag_values=np.array([0, 1], dtype=np.int8),

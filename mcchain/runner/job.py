@@ -160,6 +160,9 @@ def prepare_job(
     path = Path(scene_path)
     scene, model = (loader or default_loader)(path, samples, seed)
     scene, kernels_note = resolve_kernels(scene, model, int(model.nsample))
+    from mcchain.decision.tolerance import requirement_tolerance
+
+    scene, tolerance_note = requirement_tolerance(scene)
     from mcchain.scene.models import Storage
 
     # A scene without ``[storage]`` (a fake) gets the schema's defaults.
@@ -194,7 +197,7 @@ def prepare_job(
         disk=estimate_disk(scene, model, nsample, int(chunk)),
         settings=settings,
         warnings=warnings,
-        notes=[] if kernels_note is None else [kernels_note],
+        notes=[note for note in (kernels_note, tolerance_note) if note is not None],
         kernels=kernels,
     )
 

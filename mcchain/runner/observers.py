@@ -1,5 +1,5 @@
 """The observers of a run (:func:`observers_for`), and the runner's own: the progress bar
-and the requirements' summary.
+and the requirements' verdict lines.
 
 Each is an :class:`mcchain.runner.steps.Observer`; :func:`observers_for` lists them, in the
 order the pipeline calls them, beside those of other packages (the live rerun stream,
@@ -35,7 +35,7 @@ def observers_for(
 ) -> list[Observer]:
     """The observers of a run of ``job``, in the order the pipeline calls them: the live
     rerun stream (``--rerun``), the progress bar (``progress``: None on a terminal only),
-    ``until`` (``grow``), the requirements' summary (a scene with ``[[requirement]]``)."""
+    ``until`` (``grow``), the requirements' verdict lines (a scene with ``[[requirement]]``)."""
     observers: list[Observer] = []
     if rerun is not None:
         from mcchain.viz.live import LiveRun
@@ -45,7 +45,7 @@ def observers_for(
     if grow is not None:
         observers.append(grow)
     if getattr(job.scene, "requirement", None):
-        observers.append(RequirementSummary())
+        observers.append(VerdictLines())
     return observers
 
 
@@ -90,7 +90,7 @@ class Progress(Observer):
             self._bar = None
 
 
-class RequirementSummary(Observer):
+class VerdictLines(Observer):
     """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
     from the merged ensemble, in ``run.json["requirements"]`` (``mcchain run`` prints it,
     ``mcchain export --requirements`` writes it with the CSVs). The ensemble is complete
@@ -98,7 +98,7 @@ class RequirementSummary(Observer):
 
     def on_merged(self, run: RunState) -> None:
         try:
-            run.record["requirements"] = requirement_lines(run)
+            run.record["requirements"] = verdict_lines(run)
         except Exception as error:
             log.error("requirement summary failed: %s\n%s", error, traceback.format_exc())
             run.record["requirements"] = [
@@ -106,8 +106,8 @@ class RequirementSummary(Observer):
             ]
 
 
-def requirement_lines(run: RunState) -> list[str]:
-    """The summary lines of the run's merged ensemble (:class:`RequirementSummary`)."""
+def verdict_lines(run: RunState) -> list[str]:
+    """The summary lines of the run's merged ensemble (:class:`VerdictLines`)."""
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
     from mcchain.decision.until import sequential_settings
     from mcchain.ensemble.io import open_ensemble

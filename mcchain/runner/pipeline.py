@@ -12,7 +12,7 @@
 3. **store**, closed: the parts merged into ``ensemble.nc``, ``run.json`` completed.
 
 The observers (:class:`mcchain.runner.steps.Observer`: progress, the live rerun stream,
-``until``, the requirements' summary) are called at fixed points of this loop and never
+``until``, the requirements' verdict lines) are called at fixed points of this loop and never
 call back into it; see :mod:`mcchain.runner` for where a new one goes.
 
 Phases timed in ``run.json["timings"]`` (seconds, summed over sessions): ``prepare``

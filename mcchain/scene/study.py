@@ -248,10 +248,11 @@ class Requirement(Section):
     probability of breaking it.
 
     A sample fails the requirement when its output lies outside [``min``, ``max``]; a
-    sample whose output is NaN (a failed instance) fails too, and is counted apart as
-    undefined. Every run stores ``requirement_met`` (sample, requirement); ``mcchain export
-    RUN --requirements`` gives the failure probability with its interval, the verdict, the
-    quantile at the target and the tolerance allocation (docs/scenes.md).
+    sample with a failure bit in ``status`` fails too, and is counted apart as undefined; a
+    NaN time of an event that never happened means "never". Every run stores
+    ``requirement_met`` (sample, requirement); ``mcchain export RUN --requirements`` gives
+    the failure probability with its bounds, the verdict, the quantile at the target and the
+    tolerance allocation (docs/scenes.md).
     """
 
     name: Annotated[str, Strict(), AfterValidator(_check_requirement_name)] = Field(
@@ -284,10 +285,11 @@ class Requirement(Section):
     )
     confidence: Num = Field(
         default=DEFAULT_REQUIREMENT_CONFIDENCE,
-        gt=0,
+        ge=0.5,
         lt=1,
-        description="two-sided confidence of every interval (and so of every verdict) of this "
-        f"requirement, in (0, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
+        description="C: each bound of this requirement is one-sided at C (P(fail) <= upper "
+        "with probability C, >= lower with C), so each verdict is wrong with probability at "
+        f"most 1 - C; in [0.5, 1); default {DEFAULT_REQUIREMENT_CONFIDENCE}.",
     )
 
     @model_validator(mode="after")
