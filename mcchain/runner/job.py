@@ -180,6 +180,7 @@ def prepare_job(
     nsample = int(model.nsample)
     settings = resolved_settings(scene, nsample, effective_seed)
     warnings = _warnings(model)
+    notes = [note for note in (kernels_note, tolerance_note) if note is not None]
     kernels = scene_kernels(scene)
     from mcchain.runner.resources import estimate_disk
 
@@ -197,7 +198,7 @@ def prepare_job(
         disk=estimate_disk(scene, model, nsample, int(chunk)),
         settings=settings,
         warnings=warnings,
-        notes=[note for note in (kernels_note, tolerance_note) if note is not None],
+        notes=notes,
         kernels=kernels,
     )
 
