@@ -76,6 +76,27 @@ START_SEATED = 2
 (|δ| ≤ :func:`seat_tolerance`): in contact from t = 0 whichever side of 0 rounding puts δ,
 undamped and without an onset, until the journal is more than the tolerance off the wall."""
 
+ContactStart = Literal["pressed", "seated", "centred"]
+"""``[joint.contact] start``: where the journal of an assembled state starts its time history
+(:func:`mcchain.solvers.start.contact_start`): pressed into its wall along the ideal
+mechanism's joint force at t = 0 by the δ₀ whose force K δ₀^m balances it, on its wall with
+no force (the assembled state as it is), or at its bearing's centre (d = 0)."""
+
+PLACE_SEATED, PLACE_PRESSED, PLACE_CENTRED = 0, 1, 2
+"""The codes of :data:`ContactStart` the start kernel takes (``mcchain.kernels.start``)."""
+
+PLACE_CODES: dict[str, int] = {
+    "seated": PLACE_SEATED,
+    "pressed": PLACE_PRESSED,
+    "centred": PLACE_CENTRED,
+}
+"""Scene spelling of ``[joint.contact] start`` → its code."""
+
+DEFAULT_START: dict[str, str] = {"contact": "pressed", "auto": "seated", "link": "seated"}
+"""``[joint.contact] start`` by the joint's model when the file does not give it: model
+contact starts pressed; model auto on the link, which carries the joint force from t = 0
+(the rigid limit of a pressed start: the journal seated on its wall); the link has no law."""
+
 SEAT_TOLERANCE = 1e-9
 """Relative to the clearance: a journal with |δ| ≤ SEAT_TOLERANCE · c is on the wall
 (seated). Above the rounding of δ (≈ 1e-16 of the mechanism's size, i.e. ≲ 1e-13 c for

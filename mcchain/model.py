@@ -39,7 +39,7 @@ from mcchain.codes import (
     LOAD_TABLE,
     JointKind,
 )
-from mcchain.contact import CONTACT
+from mcchain.contact import CONTACT, DEFAULT_START, MODEL_NAMES
 from mcchain.parameters import TABLE
 
 __all__ = [  # the codes are re-exported: they are the model's
@@ -103,6 +103,11 @@ class Model:
             ground), judged on the scene as written: 1 off its wall (free or pressed: kept
             where written, not a constraint of the assembly), 2 on it (seated: held on the
             wall); 0 for the others (assembly places them as the link).
+        joint_contact_start: (njoint,) ``[joint.contact] start`` of each joint as a scene
+            spells it (:data:`mcchain.contact.ContactStart`; "seated", the place assembly
+            gives, for joints without a contact law): where
+            :func:`mcchain.solvers.start.contact_start` puts a journal the file does not
+            write; default "pressed" for model contact, "seated" for the others.
         joint_start: (*, njoint) the mode each contact-law joint starts its time history in
             (:data:`mcchain.contact.START_LINK`, ``START_LAW``, ``START_SEATED``), set from
             the start state by :func:`mcchain.solvers.start.start_modes`; default: the
@@ -201,6 +206,7 @@ class Model:
     joint_contact_radius: np.ndarray = None  # type: ignore[assignment]
     joint_written: np.ndarray = None  # type: ignore[assignment]
     joint_start: np.ndarray = None  # type: ignore[assignment]
+    joint_contact_start: tuple[str, ...] = ()  # not an array: no kernel reads it
     # Prismatic joints (optional: None gives no axis, as for revolute joints).
     joint_axis: np.ndarray = None  # type: ignore[assignment]
     joint_relative_angle: np.ndarray = None  # type: ignore[assignment]
@@ -254,6 +260,11 @@ class Model:
         for name, value in defaults.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
+        if len(self.joint_contact_start) != njoint:  # a model built without a scene
+            start = tuple(
+                DEFAULT_START[MODEL_NAMES[int(m)]] for m in np.asarray(self.joint_model)[:njoint]
+            )
+            object.__setattr__(self, "joint_contact_start", start)
         if self.joint_start is None:  # the law from t = 0 for model contact, else the link
             start = (np.asarray(self.joint_model).reshape(-1) == CONTACT).astype(np.float64)
             object.__setattr__(self, "joint_start", start[np.newaxis, :njoint].copy())

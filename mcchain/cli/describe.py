@@ -114,18 +114,27 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
 def describe_initial_state(model: Any, assembled: Any) -> list[str]:
     """The lines ``mcchain validate`` prints about the assembled state at t = 0 (sample 0 of
     ``model``): each body's pose and velocity; each clearance joint's d, |d| − c, the model
-    it starts its time history in and the force that model gives at t = 0."""
+    it starts its time history in and the force that model gives at t = 0. The state is the
+    time history's start: assembled, then each contact-law journal the scene does not write
+    placed where its ``[joint.contact] start`` says (:func:`mcchain.solvers.start.contact_start`).
+    """
     import numpy as np
 
     from mcchain.contact import START_LINK, START_SEATED
     from mcchain.kernels.joints import joint_vectors
     from mcchain.model import JointKind
-    from mcchain.solvers.start import start_modes
+    from mcchain.solvers.start import contact_start, start_modes
     from mcchain.solvers.statics import start_multipliers
 
     if int(assembled.status[0]) != 0:
         return ["initial state: cannot be assembled"]
-    q, v = assembled.q[0], assembled.v[0]
+    one = model.select(0, 1)
+    placed = contact_start(
+        one, assembled.q[:1].copy(), assembled.v[:1].copy(), assembled.status[:1].copy()
+    )
+    if int(placed[2][0]) != 0:
+        return ["initial state: the contact start cannot be closed around its journals"]
+    q, v = placed[0][0], placed[1][0]
     lines = ["initial state at t = 0 (assembled):"]
     for b, name in enumerate(model.body_names):
         x, y, th = q[3 * b : 3 * b + 3]

@@ -311,17 +311,16 @@ def _velocities_at_rest_in_bearings(km, s, J, minv, S, v):
     return True
 
 
-@njit(**INLINE)
-def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
-    """Directions of the clearance joints' d from the ideal-joint mechanism at t = 0.
+@njit(**JIT)
+def ideal_joint_multipliers(km, s, q, v, minv, lscale, lam):
+    """λ of the ideal-joint mechanism at t = 0, into ``lam`` (2 njoint + ndriver,): two rows
+    per joint in joint order (a prismatic joint's own two), then the drivers.
 
     Every joint is closed (d = 0) from ``q`` (M-smallest correction), the velocities are
-    analysed with the journals at rest in their bearings, and the multipliers of
-    M q̈ + Jᵀλ = F, J q̈ = γ give the force on each journal from its bearing, f = −λ. The
-    journal presses on the wall opposite to f, so u = −f/|f| (λ/|λ|): written into
-    ``target[k]`` and ``found[k] = True`` for every clearance joint whose eccentricity is
-    unset and whose force is more than 1e-9 of the largest force. ``q``, ``v`` are not
-    changed. Returns False when the ideal mechanism cannot be assembled or is redundant.
+    analysed with the journals at rest in their bearings, and λ solves M q̈ + Jᵀλ = F,
+    J q̈ = γ: the force on joint k's journal from its bearing is f = −(λ_2k, λ_2k+1) (N).
+    ``q``, ``v`` are not changed. Returns the force scale max(|F|, |λ|) (N), or −1 when the
+    ideal mechanism cannot be assembled or is redundant.
     """
     n = q.shape[0]
     nj = km.joint_body_a.shape[0]
@@ -334,13 +333,12 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
     J = np.empty((ma, n))
     S = np.empty((ma, ma))
     if _close_joints(km, s, qi, closed, held, minv, lscale, psi, J, S) != 0:
-        return False
+        return -1.0
     _assembly_residual(km, s, qi, closed, held, psi, J)
     if not _velocities_at_rest_in_bearings(km, s, J, minv, S, vi):
-        return False
+        return -1.0
     F = np.empty(n)
     applied_forces(km, s, qi, vi, 0.0, F)
-    lam = np.zeros(ma)
     for i in range(ma):
         acc = 0.0
         for k in range(n):
@@ -358,7 +356,25 @@ def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
             lam[2 * k] -= gx
             lam[2 * k + 1] -= gy
     cholesky_solve(S, ma, lam)
-    fscale = max(max_abs(F, n), max_abs(lam, ma))
+    return max(max_abs(F, n), max_abs(lam, ma))
+
+
+@njit(**INLINE)
+def ideal_joint_directions(km, s, q, v, minv, lscale, target, found):
+    """Directions of the clearance joints' d from the ideal-joint mechanism at t = 0.
+
+    The multipliers of :func:`ideal_joint_multipliers` give the force on each journal from
+    its bearing, f = −λ. The journal presses on the wall opposite to f, so u = −f/|f|
+    (λ/|λ|): written into ``target[k]`` and ``found[k] = True`` for every clearance joint
+    whose eccentricity is unset and whose force is more than 1e-9 of the largest force.
+    ``q``, ``v`` are not changed. Returns False when the ideal mechanism cannot be assembled
+    or is redundant.
+    """
+    nj = km.joint_body_a.shape[0]
+    lam = np.zeros(2 * nj + km.driver_body.shape[0])
+    fscale = ideal_joint_multipliers(km, s, q, v, minv, lscale, lam)
+    if fscale < 0.0:
+        return False
     for k in range(nj):
         if km.joint_kind[k] != JOINT_CLEARANCE:
             continue

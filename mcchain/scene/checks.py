@@ -449,6 +449,18 @@ def _check_contact(
                 f"{where}.model: {joint.model!r} needs a [joint.contact] table (the law and "
                 "its stiffness)"
             )
+    start = contact.start if contact is not None else None
+    if start is not None and joint.resolved_model == "link":
+        raise SceneError(
+            f'{where}.contact.start: model "link" has no contact law to start in (give '
+            'model = "contact" or "auto", or remove start)'
+        )
+    if start == "pressed" and joint.resolved_model == "auto":
+        raise SceneError(
+            f'{where}.contact.start: model "auto" starts on the link, which carries the '
+            'joint force from t = 0 (a pressed start\'s rigid limit): "pressed" is for model '
+            '"contact"; give "seated" (the default) or "centred"'
+        )
     prefix = f"joint.{joint.name}.contact."
     for path in sorted(p for p in sampled if p.startswith(prefix)):
         key = path[len(prefix) :]

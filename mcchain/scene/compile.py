@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mcchain.contact import (
+    DEFAULT_START,
     LAW_CODES,
     LINK,
     MODEL_CODES,
@@ -143,6 +144,12 @@ def compile_model(
     index[GROUND_NAME] = GROUND
     written = _written_state(scene, paths)
     joint_written = _written_journals(scene, written, joint_model, index)
+    joint_contact_start = tuple(
+        (j.contact.start or DEFAULT_START[j.resolved_model])
+        if j.contact is not None and joint_model[k] != LINK
+        else "seated"
+        for k, j in enumerate(scene.joint)
+    )
 
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
@@ -163,6 +170,7 @@ def compile_model(
         joint_model=joint_model,
         joint_contact_law=joint_law,
         joint_written=joint_written,
+        joint_contact_start=joint_contact_start,
         driver_body=topo([GROUND_NAME if d.slides else str(d.body) for d in scene.driver]),
         driver_joint=np.array(
             [scene.joint_names.index(str(d.joint)) if d.slides else -1 for d in scene.driver],
@@ -233,7 +241,31 @@ def _written_journals(
         )
         delta = float(np.hypot(d[0, 0], d[0, 1])) - clearance
         codes[k] = 2 if abs(delta) <= seat_tolerance(clearance) else 1
+        _check_written_start(joint, delta, clearance)
     return codes
+
+
+def _check_written_start(joint: Any, delta: float, clearance: float) -> None:
+    """Refuse a ``[joint.contact] start`` given with a journal the file writes elsewhere:
+    the written state is kept whatever ``start`` says, so a start that names another place
+    (seated: on its wall; pressed: δ > 0; centred: d = 0, each within
+    :func:`mcchain.contact.seat_tolerance`) contradicts it."""
+    start = joint.contact.start
+    tolerance = seat_tolerance(clearance)
+    if start is None:
+        return
+    place = "seated" if abs(delta) <= tolerance else "pressed" if delta > 0.0 else "free"
+    agrees = {
+        "seated": place == "seated",
+        "pressed": place == "pressed",
+        "centred": abs(delta + clearance) <= tolerance,
+    }[start]
+    if not agrees:
+        raise SceneError(
+            f"joint.{joint.name}.contact.start: {start!r} contradicts the journal the file "
+            f"writes ({place}, |d| - c = {delta:.6g} m), which is kept as written; remove "
+            "start, or the bodies' positions to have the journal placed"
+        )
 
 
 def _items(scene: Scene, kind: str) -> list[Any]:

@@ -12,7 +12,7 @@ from pydantic import (
     model_validator,
 )
 
-from mcchain.contact import HERTZ_EXPONENT, LAW_CODES, LawName
+from mcchain.contact import HERTZ_EXPONENT, LAW_CODES, ContactStart, LawName
 from mcchain.parameters import unset_value
 from mcchain.scene.fields import (
     BodyRef,
@@ -119,6 +119,14 @@ class Contact(Section):
     )
     poisson_ratio: Num | None = Field(
         default=None, gt=-1, le=0.5, description="Poisson's ratio ν of journal and bearing."
+    )
+    start: ContactStart | None = Field(
+        default=None,
+        description='where a journal the file does not write starts: "pressed" (into its '
+        "wall along the ideal mechanism's joint force at t = 0, by the δ₀ with K δ₀^m = that "
+        'force, at rest in its bearing), "seated" (on its wall, no force) or "centred" '
+        '(d = 0); default "pressed" for model contact, "seated" for auto (the link). A '
+        "written journal stays as written.",
     )
 
     @model_validator(mode="after")

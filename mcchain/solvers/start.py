@@ -1,7 +1,9 @@
 """The start state of a time history (item 3 of the contract of
 :func:`mcchain.solvers.simulate.simulate`): the model's assembled state or the one passed,
-``[simulate] perturb`` added to named coordinates and the others projected back onto the
-constraints; and the mode each contact-law joint starts in, the same for every method.
+each contact-law journal the scene does not write placed where its ``[joint.contact] start``
+says (:func:`contact_start`), ``[simulate] perturb`` added to named coordinates and the
+others projected back onto the constraints; and the mode each contact-law joint starts in,
+the same for every method.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numpy as np
 from mcchain.errors import SceneError
 from mcchain.model import Model
 from mcchain.scene.models import Simulate
+from mcchain.solvers.threads import over_samples
 from mcchain.status import ASSEMBLY_FAILED, FAILURE_BITS
 
 _PERTURB = re.compile(
@@ -52,11 +55,13 @@ def start_state(
     v_start: np.ndarray | None = None,
     status: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Start positions and velocities (nsample, ndof) and the status after perturbation."""
+    """Start positions and velocities (nsample, ndof) and the status, after the contact start
+    (:func:`contact_start`) and the perturbation."""
     n, ndof = model.nsample, model.ndof
     q = np.array(np.broadcast_to(model.q0 if q_start is None else q_start, (n, ndof)), float)
     v = np.array(np.broadcast_to(model.v0 if v_start is None else v_start, (n, ndof)), float)
     status = np.zeros(n, np.uint32) if status is None else status.astype(np.uint32).copy()
+    q, v, status = contact_start(model, q, v, status)
     if not settings.perturb:
         return q, v, status
     modes = start_modes(model, q)  # of the state before the perturbation
@@ -67,6 +72,39 @@ def start_state(
         (q if which == "q" else v)[:, i] += value
         (fixed_q if which == "q" else fixed_v).append(i)
     return (*_project_start(model, q, v, fixed_q, fixed_v, status, modes),)
+
+
+def contact_start(
+    model: Model, q: np.ndarray, v: np.ndarray, status: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The state (q, v: (nsample, 3 nbody), status (nsample,) uint32) with each contact-law
+    journal that the scene does not write (``Model.joint_written`` 0) placed where its
+    ``[joint.contact] start`` (``Model.joint_contact_start``) says: pressed along the ideal
+    mechanism's joint force at t = 0 by the δ₀ whose force K δ₀^m balances it, centred
+    (d = 0), or seated (as assembled); the rest of the mechanism closed again around it,
+    every held journal at rest in its bearing (:mod:`mcchain.kernels.start`). Unchanged,
+    without calling a kernel, where every such journal starts seated (model auto by default,
+    and every scene without a law).
+    """
+    from mcchain.contact import LINK, PLACE_CODES, PLACE_SEATED
+
+    place = np.array(
+        [
+            PLACE_CODES[name] if model.joint_model[k] != LINK and model.joint_written[k] == 0
+            else PLACE_SEATED
+            for k, name in enumerate(model.joint_contact_start)
+        ],
+        dtype=np.int64,
+    )  # fmt: skip
+    if not np.any(place != PLACE_SEATED) or not model.nsample:
+        return q, v, status
+    from mcchain.kernels.start import place_journals_batch
+
+    # C order: numba compiles per layout, and a copy of a broadcast start is F-ordered
+    q, v = np.ascontiguousarray(q), np.ascontiguousarray(v)
+    status = np.ascontiguousarray(status, dtype=np.uint32)
+    over_samples(place_journals_batch, model.nsample, model.kernel_model(), place, q, v, status)
+    return q, v, status
 
 
 def start_modes(model: Model, q: np.ndarray) -> np.ndarray:

@@ -65,6 +65,24 @@ def simulate_float64(model: Model, settings: dict[str, Any], **kwargs: Any) -> d
     return simulate(model, settings, history_dtype=np.float64, **kwargs)
 
 
+def simulate_scene(text: str, **settings: Any) -> dict[str, Any]:
+    """The time history of a scene given as TOML text from its assembled state, its
+    ``[simulate]`` keys updated with ``settings``, float64 histories."""
+    from mcchain.scene import compile_model, load_scene_text
+    from mcchain.solvers.simulate import simulate
+    from mcchain.solvers.statics import assemble
+
+    scene = load_scene_text(text)
+    if scene.simulate is None:
+        raise ValueError("simulate_scene: the scene has no [simulate] section")
+    model = compile_model(scene)
+    start = assemble(model)
+    return simulate(
+        model, scene.simulate.model_copy(update=settings), q_start=start.q, v_start=start.v,
+        status=start.status, history_dtype=np.float64,
+    )  # fmt: skip
+
+
 def history_errors(result: dict[str, Any], reference: dict[str, Any]) -> tuple[float, float]:
     """(max position error in m over x, y, relative joint force error) of sample 0; inf where
     the result is not finite."""
