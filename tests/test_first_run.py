@@ -19,7 +19,7 @@ from test_runs_support import REPO
 from mcchain.compiled import ahead, background, first_run
 from mcchain.compiled.caches import kernels_cached, numba_index_folder
 from mcchain.errors import SceneError
-from mcchain.runner import pipeline, plan
+from mcchain.runner import executors, plan
 from mcchain.runner.runs import read_record
 
 CONFIGS = REPO / "configs"
@@ -262,7 +262,7 @@ def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_
             progress=False, first_run=chosen, solve=solve,
         )  # fmt: skip
     assert calls == []
-    monkeypatch.setattr(pipeline, "_compute", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(executors, "execute", lambda *a, **k: 1 / 0)  # after the folder
     with pytest.raises(SystemExit):
         plan.start_run(
             CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "s",
