@@ -267,7 +267,7 @@ def test_cli_show__parses_and_calls_show_run(
 def test_cli_report__parses_and_calls_write_report(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from mcchain.viz import report
+    from mcchain.viz import report, report_page
 
     calls: list[tuple[str, str | None]] = []
 
@@ -275,7 +275,7 @@ def test_cli_report__parses_and_calls_write_report(
         calls.append((run, out))
         return report.Report([Path("d/a.png")], {"sobol.png": "no design"})
 
-    monkeypatch.setattr(report, "write_report", write_report)
+    monkeypatch.setattr(report_page, "write_report", write_report)
     assert cli.main(["report", "RUN", "--out", "d"]) == 0
     assert calls == [("RUN", "d")]
     assert capsys.readouterr().out == "skipped sobol.png: no design\nd/a.png\n"

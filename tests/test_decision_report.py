@@ -1,11 +1,11 @@
-"""What a run with requirements gives a reader: ``requirements.png``, ``report/index.html``
-(parsed with html.parser), ``mcchain show --failed`` and the export's refusals."""
+"""What a run with requirements gives a reader: ``requirements.png`` (its bins against the
+closed form, zero-failure bins as upper bounds), ``mcchain show --failed`` and the export's
+refusals (the page: ``test_viz_report_page.py``)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -24,80 +24,35 @@ def reported_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return run_pinned_bar(tmp_path_factory.mktemp("reported"), SAMPLES, ["report"])
 
 
-class Page(HTMLParser):
-    """Headings, table cells, image sources and figure captions of a page."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.headings: list[str] = []
-        self.cells: list[str] = []
-        self.images: list[str] = []
-        self.captions: list[str] = []
-        self.scripts = 0
-        self._in: list[str] = []
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        self._in.append(tag)
-        if tag == "img":
-            self.images.append(dict(attrs)["src"] or "")
-            self._in.pop()
-        if tag == "script":
-            self.scripts += 1
-
-    def handle_endtag(self, tag: str) -> None:
-        while self._in and self._in.pop() != tag:
-            pass
-
-    def handle_data(self, data: str) -> None:
-        if not self._in or not data.strip():
-            return
-        if self._in[-1] in ("h1", "h2", "h3"):
-            self.headings.append(data.strip())
-        elif "td" in self._in:
-            self.cells.append(data.strip())
-        if "figcaption" in self._in:
-            self.captions.append(data.strip())
-
-
-def test_report_page__sections_verdict_and_figures(reported_run: Path) -> None:
-    page = Page()
-    page.feed((reported_run / "report" / "index.html").read_text(encoding="utf-8"))
-    assert page.scripts == 0
-    for heading in ("Scene", "Sampled parameters", "Status counts", "Requirements"):
-        assert heading in page.headings
-    assert {"Tolerance allocation", "Numerical check", "Figures"} <= set(page.headings)
-    assert "body.bar.inertia" in page.cells
-    assert "pulsation" in page.cells
-    assert any(c.startswith("fail") or c.startswith("undecided") for c in page.cells)
-    assert "requirements.png" in page.images and "status_counts.png" in page.images
-    for image in page.images:
-        assert (reported_run / "report" / image).is_file()
-    assert any("exceedance curve" in c for c in page.captions)
-    text = (reported_run / "report" / "index.html").read_text(encoding="utf-8")
-    assert "mcchain check" in text  # no check.csv: how to run the check
-
-
-def test_report_page__shows_the_check_table_when_present(reported_run: Path) -> None:
-    from mcchain.runner.runs import open_run
-    from mcchain.viz.report import Report
-    from mcchain.viz.report_page import index_html
-
-    check = reported_run / "export" / "check.csv"
-    check.parent.mkdir(exist_ok=True)
-    check.write_text("requirement,samples,flips\npulsation,64,0\n")
-    try:
-        page = Page()
-        page.feed(
-            index_html(reported_run, open_run(reported_run), reported_run / "report", Report())
-        )
-        assert page.cells[-3:] == ["pulsation", "64", "0"]
-    finally:
-        check.unlink()
-
-
 def test_requirements_png__drawn(reported_run: Path) -> None:
     png = reported_run / "report" / "requirements.png"
     assert png.stat().st_size > 10_000
+
+
+def test_requirements_png__zero_failure_bins_are_upper_bounds_on_a_log_axis(
+    reported_run: Path,
+) -> None:
+    """P(fail) by parameter on a log axis: a bin without a failure is drawn as its one-sided
+    upper bound 1 − (1 − C)^(1/n), not as a point at 0; the bound is the success-run figure
+    turned around (299 failure-free samples show P(fail) <= 1 % at 95 %: 298.07 rounded up)."""
+    from mcchain.runner.runs import open_run
+    from mcchain.viz.report_requirements import requirements_figure
+
+    x = np.arange(600.0)
+    _, _, _, hi, _, count = binned_failure(x, np.zeros(600, dtype=bool), 0.95)
+    np.testing.assert_allclose(hi, 1.0 - 0.05 ** (1.0 / count))  # the closed form at k = 0
+    _, _, _, hi, _, _ = binned_failure(np.arange(299.0), np.zeros(299, dtype=bool), 0.95)
+    assert hi[0] > 0.01  # 12 bins of ~25: each bound is far above the 1 % of 299 together
+    fig = requirements_figure(open_run(reported_run))
+    assert not isinstance(fig, str)
+    exceedance_ax, inertia_ax = fig.axes[:2]
+    assert exceedance_ax.get_yscale() == inertia_ax.get_yscale() == "log"
+    (bounds,) = [line for line in inertia_ax.get_lines() if line.get_marker() == "v"]
+    # 600 samples in 12 equal-count bins of 50; failures (J < 0.059) only in the first
+    np.testing.assert_allclose(bounds.get_ydata(), 1.0 - 0.05 ** (1.0 / 50))
+    assert len(bounds.get_ydata()) == 11
+    assert inertia_ax.get_xlabel() == "inertia bar [kg m²]"
+    assert exceedance_ax.get_xlabel() == "omega[mode=0] [Hz]"
 
 
 def test_exceedance__shares_and_nan_beyond() -> None:
@@ -116,7 +71,7 @@ def test_binned_failure__pinned_bar_bins_against_exact() -> None:
     rng = np.random.default_rng(5)
     J = rng.uniform(J_LOW, J_HIGH, 24_000)
     failed = bar_pulsation(M, J, A) > LIMIT
-    _, p, lo, hi, edges = binned_failure(J, failed, 0.95)
+    _, p, lo, hi, edges, _ = binned_failure(J, failed, 0.95)
     J_star = J_LOW + float(pinned_bar_exceedance(LIMIT, M, A, J_LOW, J_HIGH)) * (J_HIGH - J_LOW)
     exact = np.clip((J_star - edges[:-1]) / (edges[1:] - edges[:-1]), 0.0, 1.0)
     assert np.sum((lo <= exact) & (exact <= hi)) >= len(exact) - 1

@@ -138,7 +138,7 @@ def test_param_axis__key_item_and_display_units() -> None:
         1.0,
     )
     assert scatter.param_axis("body.bar.mass", large) == ("mass bar [kg]", 1.0)
-    assert scatter.param_axis("scene.gravity[1]", large) == ("gravity[1] [m s-2]", 1.0)
+    assert scatter.param_axis("scene.gravity[1]", large) == ("gravity[1] [m/s²]", 1.0)
     assert scatter.param_axis("joint.B.points[1][0]", large)[0] == "points[1][0] B [m]"
 
 
@@ -199,7 +199,8 @@ def test_report__contact_run_writes_the_contact_figures(contact_run: Any, tmp_pa
         "reaction_envelopes.png",
     } <= written
     for path in result.written:
-        assert_real_picture(path)
+        if path.suffix == ".png":
+            assert_real_picture(path)
 
 
 def test_peak_force_figure__unit_axes_and_no_straight_line(contact_run: Any) -> None:

@@ -2,7 +2,7 @@
 
 Commands: ``run`` (:mod:`mcchain.runner.plan`), ``validate``, ``runs`` (:mod:`mcchain.runner.runs`),
 ``show`` (:func:`mcchain.viz.show.show_run`), ``report``
-(:func:`mcchain.viz.report.write_report`); the benchmarks are scripts in ``benchmarks/``.
+(:func:`mcchain.viz.report_page.write_report`); the benchmarks are scripts in ``benchmarks/``.
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
 written nothing; usage errors of ``show`` and ``report`` name the command

@@ -302,7 +302,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from mcchain.viz.report import write_report
+    from mcchain.viz.report_page import write_report
 
     report = write_report(args.run, args.out)
     for name, reason in report.skipped.items():

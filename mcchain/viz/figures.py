@@ -49,9 +49,30 @@ def grid(n: int, max_col: int = 4) -> tuple[int, int]:
     return (n + ncol - 1) // ncol, ncol
 
 
+VECTOR_FIGURES = frozenset({"requirements", "status_counts"})
+"""Figures also written as SVG (``<name>.svg`` beside the PNG): few marks, read closely and
+printed; the report page carries the SVG. Dense figures (thousands of points, bands of
+hundreds of times) stay PNG only: as SVG they were 2-12x larger (journal orbit: 1.0 MB
+against 82 kB)."""
+
+
 def save(fig: Figure, path: Path) -> Path:
-    """Write ``fig`` as a PNG at :data:`DPI`; returns ``path``."""
+    """Write ``fig`` as a PNG at :data:`DPI` (and as an SVG beside it for the names of
+    :data:`VECTOR_FIGURES`); returns ``path``."""
     fig.savefig(path, dpi=DPI)
+    if path.stem in VECTOR_FIGURES:
+        save_svg(fig, path.with_suffix(".svg"))
+    return path
+
+
+def save_svg(fig: Figure, path: Path) -> Path:
+    """Write ``fig`` as an SVG whose text stays text (searchable, a third smaller) and whose
+    element ids are salted with the file's name (several SVGs inlined in one page never
+    share an id); returns ``path``."""
+    import matplotlib
+
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": path.stem}):
+        fig.savefig(path, format="svg")
     return path
 
 

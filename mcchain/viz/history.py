@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names
+from mcchain.ensemble.units import reading_unit
 from mcchain.viz.contact import FAILED, LINK, LINK_LOST, STATE_COLORS, STATES, joint_models
 from mcchain.viz.figures import block, figure, grid, panel_title, save_or_reason, suptitle
 from mcchain.viz.scatter import param_axis
@@ -150,10 +151,12 @@ def reaction_envelopes_figure(
     nlost = int(np.isfinite(lost).sum())
     marked = False
     for ax, (title, quant, units, peaks) in zip(axes.flat, panels, strict=False):
+        unit, scale = reading_unit(units, _largest(quant, peaks))  # kN for kilonewtons
+        quant = scale * quant
         ax.fill_between(time, quant[0], quant[2], color="C0", alpha=0.3, lw=0, label="5–95 %")
         ax.plot(time, quant[1], color="C0", lw=1.2, label="median")
         if peaks is not None and np.isfinite(peaks).any():
-            median, high = np.nanquantile(peaks, [0.5, 0.95])
+            median, high = scale * np.nanquantile(peaks, [0.5, 0.95])
             ax.axhline(median, color="C3", lw=1.0, ls="--", label="per-sample peak: median")
             ax.axhline(high, color="C3", lw=0.8, ls=":", label="per-sample peak: 95 %")
             marked = True
@@ -164,7 +167,7 @@ def reaction_envelopes_figure(
             )  # fmt: skip
         panel_title(ax, title)
         ax.set_xlabel("time [s]")
-        ax.set_ylabel(units)
+        ax.set_ylabel(unit)
         ax.legend(fontsize=7, frameon=False)
     for ax, (k, share) in zip(list(axes.flat)[len(panels) :], shares, strict=False):
         seen = [code for code in range(len(STATES)) if share[code].any()]
@@ -191,6 +194,16 @@ def reaction_envelopes_figure(
         )
     suptitle(fig, title)
     return fig
+
+
+def _largest(quant: np.ndarray, peaks: np.ndarray | None) -> float:
+    """The largest finite |value| of a panel's bands and peaks (0 if none): what picks its
+    reading unit."""
+    values = [np.abs(quant[np.isfinite(quant)])]
+    if peaks is not None:
+        values.append(np.abs(peaks[np.isfinite(peaks)]))
+    found = np.concatenate(values)
+    return float(found.max()) if found.size else 0.0
 
 
 def _peaks(ds: xr.Dataset, name: str, k: int) -> np.ndarray | None:

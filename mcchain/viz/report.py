@@ -1,4 +1,5 @@
-"""Plots of an ensemble as PNG files (``mcchain report RUN [--out DIR]``).
+"""Plots of an ensemble as PNG files (``mcchain report RUN [--out DIR]``; the command and
+its page are :mod:`mcchain.viz.report_page`, which imports this module, never the reverse).
 
 Each figure is drawn only when the run holds what it needs; otherwise it is skipped and the
 reason is logged, printed and returned (:class:`Report`). Files (in ``DIR``, default
@@ -34,15 +35,15 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
 ``contact_loss.png``            which samples lost contact, and when
                                 (``contact_lost_time``): the fraction lost by time t, and
                                 the time of loss against each sampled parameter
-``status_counts.png``           how many samples carry each status flag
-``requirements.png``           per ``[[requirement]]``: the output's exceedance curve with
+``status_counts.png/.svg``      how many samples carry each status flag
+``requirements.png/.svg``       per ``[[requirement]]``: the output's exceedance curve with
                                 its band, limit and target; P(fail) against each sampled
-                                parameter with the allocated bound
+                                parameter on a log axis (zero-failure bins as upper
+                                bounds) with the allocated bound
                                 (:mod:`mcchain.viz.report_requirements`)
-``index.html``                  one plain page of the run: scene, sampled parameters, status
-                                counts, each requirement's answer, the numerical check and
-                                every figure (:mod:`mcchain.viz.report_page`; ``mcchain
-                                report RUN`` only)
+``index.html``                  the page that carries every figure: the answer first, then
+                                the evidence, model form, ensemble and provenance
+                                (:mod:`mcchain.viz.report_page`; ``mcchain report RUN`` only)
 ``sobol.png``, ``sobol.csv``    Sobol indices (SALib) of ω, |joint_force_eq| and the peak
                                 contact force (an output constant over the samples is named
                                 with its value instead of zero bars), for a ``design =
@@ -56,7 +57,9 @@ contact figures                 ``scatter_peak_contact_force.png``: peak normal 
 ==============================  ==========================================================
 
 Figures are made with :class:`matplotlib.figure.Figure` and the Agg canvas (no pyplot, no
-global backend switch). A lazy ensemble is read in blocks, never whole.
+global backend switch); the few read closely are also written as SVG
+(:data:`mcchain.viz.figures.VECTOR_FIGURES`). A lazy ensemble is read in blocks, never
+whole.
 """
 
 from __future__ import annotations
@@ -69,10 +72,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mcchain.ensemble.queries import dim_names, run_design
+from mcchain.ensemble.queries import dim_names
 from mcchain.status import Status, counts
 from mcchain.viz.contact import joint_models
-from mcchain.viz.figures import figure, grid, panel_title, save, save_or_reason, suptitle
+from mcchain.viz.figures import (
+    VECTOR_FIGURES,
+    figure,
+    grid,
+    panel_title,
+    save,
+    save_or_reason,
+    suptitle,
+)
 from mcchain.viz.history import contact_loss, reaction_envelopes
 from mcchain.viz.report_contact import (
     impact_figure,
@@ -229,15 +240,38 @@ def _in_hz(w: np.ndarray) -> str:
     return f"mean {mean:.4g} rad/s ({_to_hz(mean):.4g} Hz), sd {sd:.3g} ({_to_hz(sd):.3g} Hz)"
 
 
-def is_constant(y: np.ndarray) -> bool:
-    """Whether the finite values ``y`` (non-empty) differ by round-off only
-    (:data:`CONSTANT_RTOL`)."""
-    return bool(np.ptp(y) <= CONSTANT_RTOL * float(np.abs(y).max()))
+def is_constant(y: np.ndarray, scale: float | None = None) -> bool:
+    """Whether the finite values ``y`` (non-empty) differ by round-off only: a spread of at
+    most :data:`CONSTANT_RTOL` times ``scale``, the size of the quantity (default: the
+    largest ``|y|``; pass the largest value of the whole result, so that a coordinate that
+    stays at 0 ± 1e-16 m in a mechanism of 0.1 m is constant too)."""
+    size = float(np.abs(y).max()) if scale is None else float(scale)
+    return bool(np.ptp(y) <= CONSTANT_RTOL * size)
 
 
-def constant_note(label: str, y: np.ndarray) -> str:
-    """``"ω1 = 12.5 in all 64 samples"``: what a plot says of a constant output."""
-    return f"{label} = {float(y[0]):.6g} in all {len(y)} samples"
+def constant_note(label: str, y: np.ndarray, scale: float | None = None) -> str:
+    """``"ω1 = 12.5 in all 64 samples"``, with ``" (constant to 2e-15)"`` when the values
+    differ by round-off (the spread relative to ``scale``, as :func:`is_constant`): what a
+    plot says instead of drawing a constant output's rounding noise."""
+    spread, middle = float(np.ptp(y)), float(np.median(y))
+    value = middle if abs(middle) > spread else 0.0  # 0 ± round-off reads as 0
+    text = f"{label} = {value:.6g} in all {len(y)} samples"
+    if spread > 0.0:
+        size = float(np.abs(y).max()) if scale is None else float(scale)
+        text += f" (constant to {spread / size:.0e})" if size > 0.0 else ""
+    return text
+
+
+def _sizes_by_units(result: Result) -> list[float]:
+    """Per component, the largest finite |value| over the components of the same units
+    (the quantity's size, against which round-off is judged)."""
+    units = [result.units_of(k) for k in range(len(result.labels))]
+    values = result.values.reshape(result.values.shape[0], -1)
+    largest = np.where(np.isfinite(values), np.abs(values), 0.0).max(axis=0, initial=0.0)
+    size: dict[str, float] = {}
+    for u, m in zip(units, largest, strict=True):
+        size[u] = max(size.get(u, 0.0), float(m))
+    return [size[u] for u in units]
 
 
 def scatter(ds: xr.Dataset, result: Result, path: Path) -> Path | str:
@@ -250,13 +284,14 @@ def scatter_figure(ds: xr.Dataset, result: Result) -> Figure | str:
     parameter (:func:`mcchain.viz.scatter.parameter_scatter`); constant components are named
     in the title, not drawn."""
     rows, constant = [], []
+    sizes = _sizes_by_units(result)
     for k, label in enumerate(result.labels):
         y = result.values[:, k]
         finite = y[np.isfinite(y)]
-        if len(finite) and not is_constant(finite):
+        if len(finite) and not is_constant(finite, sizes[k]):
             rows.append((f"{label} [{result.units_of(k)}]", y))
         elif len(finite):
-            constant.append(constant_note(label, finite))
+            constant.append(constant_note(label, finite, sizes[k]))
     if not rows:
         if constant:
             return f"{result.name} is constant: " + "; ".join(constant)
@@ -506,6 +541,9 @@ def make_report(
     def record(name: str, produced: Path | str) -> None:
         if isinstance(produced, Path):
             report.written.append(produced)
+            vector = produced.with_suffix(".svg")
+            if produced.stem in VECTOR_FIGURES and vector.is_file():
+                report.written.append(vector)
         else:
             log.info("report: %s skipped: %s", name, produced)
             report.skipped[name] = produced
@@ -542,27 +580,4 @@ def make_report(
 
     found_requirements = requirements_figure(ds)
     record("requirements.png", save_or_reason(found_requirements, out / "requirements.png"))
-    return report
-
-
-def write_report(run: str | Path, out: str | Path | None = None) -> Report:
-    """``mcchain report``: every figure of a run folder (path or id under ``runs/``) into
-    ``out`` (default ``RUN/report``); the design comes from the ensemble's own settings."""
-    from mcchain.ensemble.describe import stored_model
-    from mcchain.errors import McchainError
-    from mcchain.runner.runs import open_run, resolve_run, writable_folder
-
-    folder = resolve_run(run)
-    ds = open_run(folder)
-    target = Path(out) if out else folder / "report"
-    writable_folder(target, "--out")
-    try:
-        model = stored_model(ds)
-    except McchainError as err:  # an ensemble without a usable scene: draw what needs none
-        log.info("report: the run's model cannot be rebuilt (%s)", err)
-        model = None
-    report = make_report(ds, target, design=run_design(folder, ds), model=model)
-    from mcchain.viz.report_page import write_index
-
-    report.written.append(write_index(folder, ds, target, report))
     return report

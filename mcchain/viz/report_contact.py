@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names, largest, peak_abs_over_time, sample_ids
+from mcchain.ensemble.units import in_reading_unit, reading_unit
 from mcchain.viz import contact
 from mcchain.viz.figures import block, figure, panel_title, suptitle
 from mcchain.viz.scatter import param_axis, parameter_scatter
@@ -95,7 +96,9 @@ def peak_force_figure(ds: xr.Dataset, models: list[str | None]) -> Figure | str:
     if not rows:
         return "the run has no contact force history of a clearance joint"
     title = "peak contact force against the sampled parameters"
-    return parameter_scatter(ds, [(f"{label} [N]", y) for label, y in rows], title)
+    finite = np.abs(np.concatenate([y[np.isfinite(y)] for _, y in rows]))
+    unit, scale = reading_unit("N", float(finite.max()))  # kN for kilonewtons
+    return parameter_scatter(ds, [(f"{label} [{unit}]", scale * y) for label, y in rows], title)
 
 
 def impact_figure(ds: xr.Dataset) -> Figure | str:
@@ -180,7 +183,8 @@ def orbit_figure(
             assert orbit is not None  # q present and joint k is a clearance joint
             at = int(np.flatnonzero(orbit.joints == k)[0])
             drawn |= _draw_orbit(ax, orbit.offset[:, at], orbit.state[:, at])
-            lines = [f"sample {ids[pos]}: {labels[i]} = {peaks[pos, i]:.4g} N"]
+            force = in_reading_unit(float(peaks[pos, i]), "N")
+            lines = [f"sample {ids[pos]}: {labels[i]} = {force}"]
             if params is not None:
                 named = [param_axis(p, params[:, c]) for c, p in enumerate(paths)]
                 values = [scale * params[pos, c] for c, (_, scale) in enumerate(named)]

@@ -4,12 +4,16 @@ One row per requirement:
 
 * first panel: the exceedance curve of the output on a log scale — P(output > x) for a
   ``max`` (P(output < x) for a ``min``), the share of samples beyond x — with its pointwise
-  Clopper–Pearson band, the limit (vertical) and the target (horizontal). The curve crosses
-  the limit at the failure probability; it crosses the target at the quantile of
-  ``requirements.csv``.
-* one panel per sampled parameter: P(fail) in equal-count bins of the parameter, each with
-  its Clopper–Pearson interval, the target, and the allocated bound of ``allocation.csv``
-  (the kept side unshaded).
+  band between the one-sided bounds at the requirement's confidence, the limit (vertical)
+  and the target (horizontal). The curve crosses the limit at the failure probability; it
+  crosses the target at the quantile of ``requirements.csv``.
+* one panel per sampled parameter: P(fail) in equal-count bins of the parameter on a log
+  axis, each bin with failures between its exact one-sided bounds at the requirement's
+  confidence (as the verdict reads P(fail)), each bin without a failure as its upper bound
+  (hollow ▽), the target, and the allocated
+  bound of ``allocation.csv`` (the kept side unshaded).
+
+Axes are in reading units (kN, mm: :mod:`mcchain.ensemble.units`).
 """
 
 from __future__ import annotations
@@ -19,10 +23,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.decision.requirements import requirement_values, stored_requirements
-from mcchain.decision.stats import clopper_pearson_arrays
+from mcchain.decision.stats import one_sided_bounds_arrays
 from mcchain.decision.summary import allocations, met_of, output_label, quantile_side
+from mcchain.ensemble.units import reading_unit, units_of
 from mcchain.viz.figures import figure, panel_title, suptitle
-from mcchain.viz.scatter import param_axis
+from mcchain.viz.scatter import param_reading
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -56,37 +61,58 @@ def exceedance(
         beyond = finite.size - np.searchsorted(finite, grid, side="right") + undefined
     else:
         beyond = np.searchsorted(finite, grid, side="left") + undefined
-    lo, hi = clopper_pearson_arrays(beyond, np.full(beyond.shape, n), confidence)
+    lo, hi = one_sided_bounds_arrays(beyond, np.full(beyond.shape, n), confidence)
     return grid, beyond / n, lo, hi
 
 
-def _exceedance_panel(ax: Axes, requirement: Requirement, values: np.ndarray) -> None:
+def output_axis(
+    ds: xr.Dataset, requirement: Requirement, values: np.ndarray
+) -> tuple[str, str, float]:
+    """(axis label ``peak_contact_force[joint=B] [kN]``, reading unit, scale) of a
+    requirement's output, in the reading unit of its largest finite value
+    (:mod:`mcchain.ensemble.units`)."""
+    units = units_of(ds[requirement.output].attrs, requirement.output) or ""
+    finite = np.abs(values[np.isfinite(values)])
+    unit, scale = reading_unit(units, float(finite.max()) if finite.size else 0.0)
+    return f"{output_label(requirement)} [{unit or '-'}]", unit, scale
+
+
+def _exceedance_panel(
+    ax: Axes, requirement: Requirement, values: np.ndarray, axis: tuple[str, str, float]
+) -> None:
     side = quantile_side(requirement, values)
     x, share, lo, hi = exceedance(values, side, requirement.confidence)
     floor = 0.5 / max(values.size, 1)  # zero cannot be drawn on a log axis
     label = "P(output > x)" if side == "max" else "P(output < x)"
-    ax.fill_between(x, np.maximum(lo, floor), hi, color="C0", alpha=0.25, linewidth=0)
-    ax.step(x, np.maximum(share, floor), where="post", color="C0", label=label)
+    xlabel, unit, scale = axis
+    ax.fill_between(scale * x, np.maximum(lo, floor), hi, color="C0", alpha=0.25, linewidth=0)
+    # where no sample is beyond x the share is 0: not drawn (the band's top bounds it)
+    ax.step(scale * x, np.where(share > 0, share, np.nan), where="post", color="C0", label=label)
     limit = requirement.max if side == "max" else requirement.min
+    assert limit is not None  # quantile_side picks a side the requirement has
     for value in (requirement.min, requirement.max):
         if value is not None:
-            ax.axvline(value, color="C3", linestyle="--", linewidth=1.0)
+            ax.axvline(scale * value, color="C3", linestyle="--", linewidth=1.0)
     ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
     ax.set_yscale("log")
     ax.set_ylim(floor, 1.05)
-    ax.set_xlabel(output_label(requirement))
+    ax.set_xlabel(xlabel)
     ax.set_ylabel(label)
     panel_title(
         ax,
         f"{requirement.name}: exceedance, {100 * requirement.confidence:g} % band; limit "
-        f"{limit:g} (dashed), target {requirement.target:g} (dotted)",
+        f"{scale * limit:.4g}{' ' + unit if unit else ''} (dashed), target "
+        f"{requirement.target:g} (dotted)",
     )
 
 
 def binned_failure(
     x: np.ndarray, failed: np.ndarray, confidence: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(bin centres, P(fail), interval low, high, bin edges) in equal-count bins of ``x``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(bin centres, P(fail), lower bound, upper bound, bin edges, samples per bin) in
+    equal-count bins of ``x``; the bounds are the exact one-sided bounds at ``confidence``
+    each, as the verdict reads them (:func:`mcchain.decision.stats.one_sided_bounds`; with
+    no failure the upper one is 1 − (1 − C)^(1/n))."""
     n = x.size
     nbins = int(max(1, min(MAX_BINS, n // MIN_PER_BIN)))
     edges = np.unique(np.quantile(x, np.linspace(0.0, 1.0, nbins + 1)))
@@ -94,9 +120,9 @@ def binned_failure(
     count = np.bincount(which, minlength=max(edges.size - 1, 1))
     fails = np.bincount(which, weights=failed.astype(float), minlength=count.size)
     keep = count > 0
-    lo, hi = clopper_pearson_arrays(fails[keep], count[keep], confidence)
+    lo, hi = one_sided_bounds_arrays(fails[keep], count[keep], confidence)
     centres = 0.5 * (edges[:-1] + edges[1:]) if edges.size > 1 else edges
-    return centres[keep], fails[keep] / count[keep], lo, hi, edges
+    return centres[keep], fails[keep] / count[keep], lo, hi, edges, count[keep]
 
 
 def _parameter_panel(
@@ -107,19 +133,31 @@ def _parameter_panel(
     failed: np.ndarray,
     allocation: AllocationRow | None,
 ) -> None:
-    label, scale = param_axis(path, x)
-    centres, p, lo, hi, edges = binned_failure(x, failed, requirement.confidence)
-    ax.errorbar(
-        scale * centres,
-        p,
-        yerr=[p - lo, hi - p],
-        fmt="o",
-        color="C0",
-        markersize=3,
-        capsize=2,
-    )
+    """P(fail) in bins of one parameter on a log axis: bins with failures as points between
+    their one-sided bounds, bins without as their upper bound (a hollow ▽: zero cannot be
+    drawn on a log axis, and "≤ bound" is what such a bin shows)."""
+    name, unit, scale = param_reading(path, x)
+    centres, p, lo, hi, edges, _ = binned_failure(x, failed, requirement.confidence)
+    some = p > 0
+    if some.any():
+        ax.errorbar(
+            scale * centres[some],
+            p[some],
+            yerr=[p[some] - lo[some], hi[some] - p[some]],
+            fmt="o",
+            color="C0",
+            markersize=3,
+            capsize=2,
+            label="P(fail), one-sided bounds",
+        )
+    bound = hi[~some]  # no failure: its one-sided upper bound, 1 − (1 − C)^(1/n)
+    if bound.size:
+        ax.plot(
+            scale * centres[~some], bound, "v", color="C0", markerfacecolor="none", markersize=5,
+            label=f"no failure: one-sided {100 * requirement.confidence:g} % upper bound",
+        )  # fmt: skip
     ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
-    title = f"P(fail) by {label.split(' [')[0]}, {100 * requirement.confidence:g} % intervals"
+    title = f"P(fail) by {name}, {100 * requirement.confidence:g} % bounds"
     if allocation is not None and np.isfinite(allocation.bound):
         b = scale * allocation.bound
         ax.axvline(b, color="C2", linewidth=1.5)
@@ -128,13 +166,16 @@ def _parameter_panel(
             ax.axvspan(b, high, color="0.85", zorder=0)
         else:
             ax.axvspan(low, b, color="0.85", zorder=0)
-        op = "<=" if allocation.side == "upper" else ">="
-        title += f"; allocated {op} {b:.4g} (green)"
+        op = "≤" if allocation.side == "upper" else "≥"
+        title += f"; allocated {op} {b:.4g}{' ' + unit if unit else ''} (green)"
     elif allocation is not None:
         title += "; no one-sided range meets the target"
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_xlabel(label)
+    drawn = np.concatenate([lo[some & (lo > 0)], bound, [requirement.target]])
+    ax.set_yscale("log")
+    ax.set_ylim(max(float(drawn.min()) / 3.0, 1e-12), 1.5)
+    ax.set_xlabel(f"{name} [{unit or '-'}]")
     ax.set_ylabel("P(fail)")
+    ax.legend(fontsize=6, frameon=False, loc="lower left")
     panel_title(ax, title)
 
 
@@ -155,7 +196,7 @@ def requirements_figure(ds: xr.Dataset) -> Figure | str:
     for i, requirement in enumerate(requirements):
         values = requirement_values(ds, requirement)
         failed = met_of(ds, requirement, values) == 0
-        _exceedance_panel(axes[i, 0], requirement, values)
+        _exceedance_panel(axes[i, 0], requirement, values, output_axis(ds, requirement, values))
         for j, path in enumerate(paths):
             allocation = rows.get((requirement.name, path))
             _parameter_panel(axes[i, 1 + j], requirement, path, params[:, j], failed, allocation)

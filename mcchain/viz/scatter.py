@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.ensemble.queries import dim_names
+from mcchain.ensemble.units import reading_unit
 from mcchain.parameters import param_units
 from mcchain.viz.figures import figure, suptitle
 
@@ -29,28 +30,32 @@ MIN_PER_BIN = 4
 """Fewest samples in a bin of the binned trend (fewer: no trend drawn)."""
 MAX_BINS = 10
 """Most bins of the binned trend."""
-SMALL_LENGTH = 0.1
-"""Lengths (m) whose sampled values all stay below this are shown in mm."""
 MAX_SCATTER_POINTS = 4000
 """Points drawn per panel (a fixed random subset; the trend and ρ use every sample)."""
 
 
-def param_axis(path: str, values: np.ndarray) -> tuple[str, float]:
-    """Axis label and scale of a sampled parameter: ``joint.B.clearance`` with values of
-    0.1 mm -> ``("clearance B [mm]", 1e3)`` (plot ``scale * values``);
-    ``joint.B.contact.restitution`` -> ``("restitution B [-]", 1.0)``."""
+def param_reading(path: str, values: np.ndarray) -> tuple[str, str, float]:
+    """(name, reading unit, scale) of a sampled parameter, in the reading unit of its
+    largest value (:func:`mcchain.ensemble.units.reading_unit`): ``joint.B.clearance``
+    with values of 0.1 mm -> ``("clearance B", "mm", 1e3)`` (read ``scale * values``);
+    ``joint.B.contact.restitution`` -> ``("restitution B", "", 1.0)``."""
     base, bracket, index = path.partition("[")
     parts = [part.strip('"') for part in base.split(".")]
     if parts[0] == "scene" or len(parts) < 3:
-        label = parts[-1] + bracket + index
+        name = parts[-1] + bracket + index
     else:
-        label = f"{parts[-1]}{bracket}{index} {parts[1]}"
-    units, scale = param_units(path), 1.0
+        name = f"{parts[-1]}{bracket}{index} {parts[1]}"
     finite = np.abs(np.asarray(values, dtype=np.float64))
     finite = finite[np.isfinite(finite)]
-    if units == "m" and len(finite) and finite.max() < SMALL_LENGTH:
-        units, scale = "mm", 1e3
-    return f"{label} [{'-' if units == '1' else units}]", scale
+    unit, scale = reading_unit(param_units(path), float(finite.max()) if len(finite) else 0.0)
+    return name, unit, scale
+
+
+def param_axis(path: str, values: np.ndarray) -> tuple[str, float]:
+    """Axis label and scale of a sampled parameter (:func:`param_reading`):
+    ``("clearance B [mm]", 1e3)``, ``("restitution B [-]", 1.0)``."""
+    name, unit, scale = param_reading(path, values)
+    return f"{name} [{unit or '-'}]", scale
 
 
 def binned_quantiles(
