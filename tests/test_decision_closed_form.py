@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 from test_cli_commands import Ran
 
-from mcchain.decision.requirements import allocate
+from mcchain.decision.allocation import allocate
 from mcchain.decision.stats import one_sided_bounds, one_sided_bounds_arrays
 from mcchain.decision.summary import ALLOCATION_COLUMNS, REQUIREMENT_COLUMNS
 from mcchain.testing.closed_forms import (
@@ -183,8 +183,7 @@ def test_allocation__converges_to_the_exact_bound() -> None:
     gaps = []
     for n in (2_000, 20_000, 200_000):
         J = rng.uniform(J_LOW, J_HIGH, size=n)
-        met = (bar_pulsation(M, J, A) <= LIMIT).astype(float)
-        result = allocate(J, met, TARGET, 0.95)
+        result = allocate(J, bar_pulsation(M, J, A) > LIMIT, TARGET, 0.95, (J_LOW, J_HIGH))
         assert result.side == "lower"
         gaps.append(result.bound - exact_bound)
     assert gaps[2] < gaps[1] < gaps[0]

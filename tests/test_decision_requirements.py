@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from test_cli_commands import Ran, assert_scene_refused
 
-from mcchain.decision.requirements import allocate, requirement_met
-from mcchain.decision.stats import clopper_pearson
+from mcchain.decision.allocation import allocate, upper_bound
+from mcchain.decision.requirements import requirement_met
 from mcchain.testing.factory import bar_scene_dict, clearance_bar_text, toml_text
 
 PENDULUM = toml_text(
@@ -157,33 +157,40 @@ def test_requirement_met__an_event_that_never_happened_is_never() -> None:
 
 
 def test_allocate__failures_at_high_values_cut_from_above() -> None:
-    """x uniform on a grid of 10,000 values, failing where x > 0.9: every cut at or below
-    the last x whose kept set passes; the widest one is found, its p_upper exact."""
+    """x on a grid of 10,000 values, failing where x > 0.9: the widest passing range keeps
+    x <= bound; its p_upper is the simultaneous bound of its counts, and one more kept
+    value (a failure) would not pass."""
     x = np.linspace(0.0, 1.0, 10_000)
-    met = (x <= 0.9).astype(float)
-    result = allocate(x, met, target=0.01, confidence=0.95)
-    assert result.side == "upper"
+    failed = x > 0.9
+    result = allocate(x, failed, target=0.01, confidence=0.95, support=(0.0, 1.0))
+    assert result.side == "upper" and result.passes
     kept = x <= result.bound
+    assert (result.low, result.high) == (0.0, result.bound)
     assert result.samples_kept == kept.sum()
-    failures = int(np.sum(met[kept] == 0))
-    assert result.p_upper == pytest.approx(clopper_pearson(failures, int(kept.sum()), 0.95)[1])
+    assert result.failures == int(failed[kept].sum()) > 0  # it keeps some failures
+    assert result.p_upper == pytest.approx(
+        min(upper_bound(result.failures, result.samples_kept, 0.95, 3), 0.01)
+    )
     assert result.p_upper <= 0.01
-    # one more sample kept breaks the target
-    more = x <= x[kept.sum()]
-    assert clopper_pearson(int(np.sum(met[more] == 0)), int(more.sum()), 0.95)[1] > 0.01
+    more = int(kept.sum()) + 1
+    assert upper_bound(int(failed[:more].sum()), more, 0.95, 3) > 0.01
 
 
-def test_allocate__failures_at_low_values_cut_from_below_and_unreachable() -> None:
+def test_allocate__failures_at_low_values_cut_from_below_and_both_ends() -> None:
     x = np.linspace(0.0, 1.0, 10_000)
-    met = (x >= 0.2).astype(float)
-    result = allocate(x, met, target=0.01, confidence=0.95)
-    assert result.side == "lower"
-    assert 0.19 < result.bound < 0.21
-    # failures at both ends: no one-sided cut reaches the target
-    met2 = ((x >= 0.2) & (x <= 0.8)).astype(float)
-    none = allocate(x, met2, target=0.01, confidence=0.95)
-    assert math.isnan(none.bound)
-    assert none.p_upper > 0.01
+    result = allocate(x, x < 0.2, target=0.01, confidence=0.95, support=(0.0, 1.0))
+    assert result.side == "lower" and 0.19 < result.bound < 0.21 and result.high == 1.0
+    # failures at both ends (20 % each): only the two-sided chain reaches the target
+    both = allocate(x, (x < 0.2) | (x > 0.8), target=0.01, confidence=0.95)
+    assert both.side == "both" and both.passes and math.isnan(both.bound)
+    assert 0.19 < both.low < 0.21 and 0.79 < both.high < 0.81
+    # passing only in [0.1, 0.4], off centre: no chain of the three isolates it; the best
+    # range and its bound are given
+    none = allocate(x, (x < 0.1) | (x > 0.4), target=0.01, confidence=0.95)
+    assert not none.passes and math.isnan(none.bound) and none.p_upper > 0.01
+    # the best: x <= 0.4, a quarter of it failing (the kept set of lowest bound)
+    assert (none.side, none.low) == ("upper", -math.inf) and 0.399 < none.high < 0.4
+    assert none.failures == 1000 and 0.25 < none.p_upper < 0.35
 
 
 def test_requirement_met__stored_per_sample_chunk_independent(

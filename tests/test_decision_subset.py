@@ -124,3 +124,85 @@ def test_rare__refusals_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, err
         assert not (tmp_path / "r").exists()
+
+
+# -- ties, discrete outputs, failure modes, NaN, nothing found (closed forms) ------------
+CASE_SEEDS = 3
+"""Seeds per closed form here; the 100-seed table is benchmarks/bench_subset_cases.py."""
+
+
+@pytest.mark.parametrize("name", ["plateau", "integer", "boolean", "series"])
+def test_subset__closed_forms_within_three_stated_cov(name: str) -> None:
+    from mcchain.testing.rare_events import CASES
+
+    case = CASES[name]
+    for seed in range(CASE_SEEDS):
+        r = subset_simulation(case.response, case.ndim, per_level=PER_LEVEL, seed=seed)
+        assert abs(r.p_fail - case.exact) <= 3 * r.cov * r.p_fail, (seed, r.p_fail)
+        assert r.cov >= r.cov_levels and r.cov >= r.cov_lineage
+    if name in ("plateau", "integer", "boolean"):
+        assert any("discrete or saturated" in w for w in r.warnings)
+    if name == "boolean":  # no level between: plain Monte Carlo up to the budget
+        assert any("stopped rising" in w for w in r.warnings)
+        assert r.samples_spent == 20 * PER_LEVEL and r.levels == 1
+    if name == "series":
+        assert len(r.modes) == 2 and r.p_fail == pytest.approx(
+            r.modes[0].p_fail + r.modes[1].p_fail, rel=0.05
+        )
+
+
+def test_next_event__ties_counted_not_assumed() -> None:
+    from mcchain.decision.subset import next_event
+
+    r = np.r_[np.zeros(930), np.linspace(0.1, 0.7, 70)] - 1.0  # 930 tie at -1
+    threshold, count = next_event(r, 100, 0.1)
+    assert count == 70 and threshold > -1.0  # {r > -1}: 70 points, nearer p0 than all 1000
+    r = np.r_[np.full(150, 2.0), np.zeros(850)] - 3.0  # 150 tie at the top
+    assert next_event(r, 100, 0.1) == (-1.0, 150)
+    assert next_event(np.zeros(1000), 100, 0.1) is None  # all tie: no event
+
+
+def test_lineage_cov__plain_monte_carlo_is_binomial() -> None:
+    from mcchain.decision.subset import lineage_cov
+
+    eve = np.arange(1000)
+    failed = np.zeros(1000, bool)
+    failed[:40] = True
+    assert lineage_cov(eve, failed) == pytest.approx(math.sqrt((1 - 0.04) / (1000 * 0.04)))
+    assert lineage_cov(np.zeros(1000, int), failed) == pytest.approx(math.sqrt(1 - 1 / 1))
+    assert lineage_cov(eve, np.zeros(1000, bool)) == math.inf
+
+
+def test_subset__nan_responses_counted_as_failures() -> None:
+    """A quarter of the points are failed instances (NaN): P = 0.25 + the rest's share."""
+
+    def respond(u: np.ndarray) -> np.ndarray:
+        r = u[:, 0] - 3.0
+        return np.where(u[:, 1] > 0.6744897501960817, np.nan, r)
+
+    r = subset_simulation(respond, 2, per_level=1000, seed=1)
+    exact = 0.25 + 0.75 * float(1 - ndtr(3.0))
+    assert abs(r.p_fail - exact) <= 3 * r.cov * r.p_fail
+    assert 200 < r.undefined <= r.samples_spent and r.levels == 1
+    assert any("NaN (failed instances): counted as failures" in w for w in r.warnings)
+
+
+def test_subset__nothing_fails_gives_an_upper_bound_not_zero() -> None:
+    r = subset_simulation(lambda u: -1.0 - u[:, 0] ** 2, 1, per_level=100, seed=0, max_levels=4)
+    assert r.p_fail == 0.0 and r.cov == math.inf
+    assert 0.0 < r.p_upper < 1.0
+    assert any("no failure found" in w for w in r.warnings)
+    # a plateau of ties all the way down: the level grows to the budget, then the bound
+    flat = subset_simulation(
+        lambda u: np.full(len(u), -1.0), 1, per_level=100, seed=0, max_levels=5
+    )
+    assert flat.samples_spent == 500 and flat.p_upper == pytest.approx(1 - 0.05 ** (1 / 500))
+
+
+def test_margin__two_limits_are_two_failure_modes() -> None:
+    values = np.array([0.0, 5.0, -5.0, np.nan])
+    m = margin(values, -1.0, 2.0)
+    assert m.shape == (4, 2)
+    np.testing.assert_array_equal(m[:3], [[-2.0, -1.0], [3.0, -6.0], [-7.0, 4.0]])
+    assert np.isnan(m[3]).all()
+    assert margin(values, None, 2.0).shape == (4,)

@@ -24,6 +24,7 @@ LIGHT = (
     "mcchain.runner.observers",
     "mcchain.runner.executors",
     "mcchain.runner.provenance",
+    "mcchain.runner.summary",
     "mcchain.compiled.ready",
     "mcchain.viz.live",
 )

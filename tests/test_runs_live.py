@@ -30,12 +30,12 @@ from test_viz_playback import read_rrd
 
 from mcchain import open_run
 from mcchain.cli import main as cli
-from mcchain.cli.describe import run_summary
 from mcchain.ensemble.io import list_parts
 from mcchain.errors import RunError
 from mcchain.runner import plan, runs
 from mcchain.runner.executors import run_local
 from mcchain.runner.steps import Observer, RunState, SolvedChunk
+from mcchain.runner.summary import run_summary
 from mcchain.viz import live as viz_live
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"

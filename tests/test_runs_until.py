@@ -18,10 +18,10 @@ import pytest
 from test_runs_extend import assert_same_values
 
 from mcchain.cli import main
-from mcchain.cli.describe import run_summary
 from mcchain.decision.sequential import confidence_sequence
 from mcchain.decision.summary import export_requirements
 from mcchain.runner import plan, runs
+from mcchain.runner.summary import run_summary
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
@@ -91,7 +91,7 @@ def test_until__stops_at_the_first_decided_look_with_the_samples_of_one_run(tmp_
     assert looks[-1]["requirements"]["rolling"]["p_lower"] == lower.max() > 0.01
     assert looks[-1]["requirements"]["rolling"]["p_upper"] == upper.min()
     # The export reports that interval and its verdict, and says which interval it is.
-    csv_path, _, txt_path = export_requirements(result.folder)
+    csv_path, _, txt_path, *_ = export_requirements(result.folder)
     with open(csv_path, encoding="utf-8") as f:
         (row,) = list(csv.DictReader(f))
     assert float(row["p_lower"]) == pytest.approx(lower.max(), rel=1e-12)
@@ -117,7 +117,7 @@ def test_until__stops_at_max_count_when_it_cannot_decide(tmp_path: Path) -> None
     # count), now over the looks 64, 128, 192 and 256.
     extended = plan.extend_run(result.folder, 56, progress=False).record
     assert extended["samples"] == 256 and extended["restarts"] == [64, 128, 192, 200]
-    csv_path, _, _ = export_requirements(result.folder)
+    csv_path, *_ = export_requirements(result.folder)
     with open(csv_path, encoding="utf-8") as f:
         (row,) = list(csv.DictReader(f))
     with runs.open_run(result.folder) as ds:

@@ -201,9 +201,14 @@ def test_page__the_answer_comes_first_in_one_sentence_with_units(reported_run: P
     p = f"P(fail) = {100 * s.p_fail:.3g} % ({name}: {100 * s.p_lower:.3g} %–"
     assert p + f"{100 * s.p_upper:.3g} %), beyond the target 1 %." in answer
     (row,) = allocations(ds)  # J cut from below: large J lowers p
-    bound = with_units(row.bound, "kg m2", magnitude=0.5)
-    assert f"Binding parameter: inertia bar ≥ {bound} keeps" in answer
-    assert f"({row.samples_kept} of {SAMPLES} samples kept)" in answer
+    low = with_units(row.low, "kg m2", magnitude=0.5)
+    assert row.side == "lower"
+    if row.meets_target:
+        assert f"Binding parameter: inertia bar ≥ {low} keeps" in answer
+        assert f"({row.samples_kept} of {SAMPLES} samples kept)" in answer
+    else:  # 600 samples: the bound over every cut tried stays just above the target
+        assert f"the nearest is inertia bar (its best range, inertia bar ≥ {low}, keeps " in answer
+        assert f"{row.samples_kept} samples and P(fail) ≤ {100 * row.p_upper:.3g} %)" in answer
 
 
 def test_page__provenance_from_run_json_and_the_settings(reported_run: Path) -> None:

@@ -11,12 +11,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from mcchain.cli.describe import (
-    describe_initial_state,
-    describe_model,
-    run_summary,
-    status_line,
-)
+from mcchain.cli.describe import describe_initial_state, describe_model
 from mcchain.errors import McchainError
 
 EXIT_USAGE = 2
@@ -163,6 +158,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             first_run=first_run,
             background_off=background_off,
         )
+    from mcchain.runner.summary import run_summary, status_line
+
     for line in run_summary(result.record):
         print(line)
     print(result.folder)
@@ -369,6 +366,34 @@ def _cmd_rare(args: argparse.Namespace) -> int:
     return 0
 
 
+EXIT_UNDECIDED = 4
+"""``mcchain confirm``: the requirement is undecided inside the range (1: it fails)."""
+
+
+def _cmd_confirm(args: argparse.Namespace) -> int:
+    from mcchain.decision.confirm import confirm_run
+
+    if args.out is not None and args.run_dir is not None:
+        return fail("--run-dir: cannot be combined with --out")
+    result = confirm_run(
+        args.run,
+        args.requirement,
+        parameter=args.parameter,
+        box=args.box,
+        ranges=args.range,
+        samples=args.samples,
+        seed=args.seed,
+        out=args.out or "runs",
+        run_dir=args.run_dir,
+        argv=["mcchain", *sys.argv[1:]],
+        progress=False if args.quiet else None,
+    )
+    for line in result.lines():
+        print(line)
+    print(result.folder)
+    return {"pass": 0, "fail": EXIT_FAILED}.get(result.decision, EXIT_UNDECIDED)
+
+
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "validate": _cmd_validate,
@@ -379,6 +404,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": _cmd_check,
     "verdict": _cmd_verdict,
     "rare": _cmd_rare,
+    "confirm": _cmd_confirm,
     "cache": _cmd_cache,
 }
 """The handler of each command."""

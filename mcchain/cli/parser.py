@@ -244,8 +244,48 @@ def build_parser() -> argparse.ArgumentParser:
     rare.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
     rare.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
 
+    add_confirm_parser(sub)
     add_cache_parser(sub)
     return parser
+
+
+def add_confirm_parser(sub: Any) -> None:
+    """``mcchain confirm RUN --requirement NAME``: a new run inside an allocated range."""
+    confirm = sub.add_parser(
+        "confirm",
+        help="decide an allocated range on fresh samples: a new run of the scene with the "
+        "range cut into its distribution",
+        description="run the scene of RUN again with a fresh seed and one parameter's "
+        "distribution cut to the range allocated for requirement NAME (or --box, or --range), "
+        "and give that requirement's verdict there; exit 0 pass, 1 fail, 4 undecided",
+        named_errors=True,
+    )
+    confirm.add_argument("run", help="run folder (or its id under runs/)")
+    confirm.add_argument("--requirement", required=True, metavar="NAME", help="the requirement")
+    confirm.add_argument(
+        "--parameter", metavar="PATH", help="confirm this parameter's allocated range"
+    )
+    confirm.add_argument(
+        "--box", action="store_true", help="confirm the box over all sampled parameters"
+    )
+    confirm.add_argument(
+        "--range",
+        action="append",
+        default=[],
+        metavar="PATH=LOW:HIGH",
+        help="confirm this range (repeatable; an empty end is not cut)",
+    )
+    confirm.add_argument(
+        "--samples",
+        type=positive,
+        metavar="N",
+        help="samples of the new run (default: from the success-run figure, or what the rate "
+        "seen inside the range needs to decide)",
+    )
+    confirm.add_argument("--seed", type=seed, metavar="S", help="seed (default: the run's + 1)")
+    confirm.add_argument("--out", metavar="DIR", help="folder of run folders (default: runs)")
+    confirm.add_argument("--run-dir", metavar="PATH", help="exact run folder (must not exist)")
+    confirm.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def add_cache_parser(sub: Any) -> None:

@@ -2,9 +2,13 @@
 simulation (:mod:`mcchain.decision.subset`) driven by mcchain's batch kernels.
 
 The requirement's output is the response: its margin beyond the limit (output − max for a
-``max``, min − output for a ``min``, the larger of the two with both; failure: margin > 0,
-a failed instance counts as failed). Every Markov-chain step of a level is one batch of the
-scene's kernels (``mcchain.solvers.solve_chunk`` on a model compiled at the chains'
+``max``, min − output for a ``min``; failure: margin > 0). With both limits the two sides
+are two failure modes, each followed by its own subset simulation and the probabilities
+added (the sides are disjoint): one side's margins, however small beside the other's, are
+never hidden by a maximum. A sample with a failure bit in ``status`` (a failed instance)
+fails, and is counted apart as undefined; an event time that is NaN on a sample without
+one (``first_separation_time``: "never") is +inf. Every Markov-chain step of a level is one
+batch of the scene's kernels (``mcchain.solvers.solve_chunk`` on a model compiled at the chains'
 parameters). The result goes to a new run folder (``runs/<stamp>-<scene>/``):
 
 * ``export/subset.csv`` — one row, columns :data:`SUBSET_COLUMNS`: the method, P(fail), its
@@ -43,10 +47,16 @@ SUBSET_COLUMNS = (
     "level_probability",
     "seed",
     "samples_plain_mc",
+    "p_upper",
+    "undefined",
+    "cov_levels",
+    "cov_lineage",
+    "modes",
+    "unit",
 )
-"""Columns of ``export/subset.csv``."""
+"""Columns of ``export/subset.csv`` (docs/scenes.md)."""
 
-LEVEL_COLUMNS = ("level", "threshold", "probability", "cov", "acceptance")
+LEVEL_COLUMNS = ("level", "threshold", "probability", "cov", "acceptance", "mode", "unit")
 """Columns of ``export/subset-levels.csv``."""
 
 DEFAULT_PER_LEVEL = 1000
@@ -54,14 +64,15 @@ DEFAULT_PER_LEVEL = 1000
 
 
 def margin(values: np.ndarray, minimum: float | None, maximum: float | None) -> np.ndarray:
-    """The margin beyond a requirement's limits (> 0: failed; NaN stays NaN = failed)."""
+    """The margins beyond a requirement's limits (> 0: failed; NaN stays NaN = failed): (n,)
+    with one limit, (n, 2) with both (columns: output − max, min − output; two modes)."""
     x = np.asarray(values, dtype=np.float64)
-    out = np.full(x.shape, -np.inf)
+    sides = []
     if maximum is not None:
-        out = np.maximum(out, x - maximum)
+        sides.append(x - maximum)
     if minimum is not None:
-        out = np.maximum(out, minimum - x)
-    return np.where(np.isnan(x), np.nan, out)
+        sides.append(minimum - x)
+    return sides[0] if len(sides) == 1 else np.stack(sides, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -76,13 +87,49 @@ class RareResult:
 
     def lines(self) -> list[str]:
         r = self.result
-        return [
-            f"requirement {self.requirement}: P(fail) = {r.p_fail:.3g}, c.o.v. {r.cov:.2f} "
-            f"(at most {r.cov_upper:.2f} if the levels are correlated), {r.levels} levels of "
-            f"{r.per_level}, {r.samples_spent} kernel solves",
-            f"plain Monte Carlo would need about {_plain_mc(r.p_fail, r.cov):,.0f} samples "
-            "for the same c.o.v.",
+        modes = f" over {len(r.modes)} failure modes (its two limits)" if r.modes else ""
+        if r.p_fail > 0:
+            head = (
+                f"requirement {self.requirement}: P(fail) = {r.p_fail:.3g}, c.o.v. {r.cov:.2f} "
+                f"(at most {r.cov_upper:.2f} if the levels are correlated)"
+            )
+        else:
+            head = (
+                f"requirement {self.requirement}: no failure found: P(fail) < {r.p_upper:.3g} "
+                "(approximate one-sided bound)"
+            )
+        lines = [
+            f"{head}{modes}, {r.levels} levels of {r.per_level}, {r.samples_spent} kernel "
+            f"solves ({r.undefined} undefined: failed instances, counted as failures)",
         ]
+        if r.p_fail > 0:
+            lines.append(
+                f"plain Monte Carlo would need about {_plain_mc(r.p_fail, r.cov):,.0f} samples "
+                "for the same c.o.v."
+            )
+        return lines + [f"warning: {w}" for w in r.warnings]
+
+
+def level_rows(result: Any, unit: str) -> list[dict[str, Any]]:
+    """The rows of ``subset-levels.csv``: every level of every failure mode."""
+    rows = []
+    for mode, r in enumerate(result.modes or [result], start=1):
+        acceptance = [math.nan, *r.acceptance]
+        for j, (b, p, c, a) in enumerate(
+            zip(r.thresholds, r.level_probabilities, r.level_covs, acceptance, strict=True)
+        ):
+            rows.append(
+                {
+                    "level": j + 1,
+                    "threshold": b,
+                    "probability": p,
+                    "cov": c,
+                    "acceptance": a,
+                    "mode": mode,
+                    "unit": unit,
+                }
+            )
+    return rows
 
 
 def _plain_mc(p: float, cov: float) -> float:
@@ -104,7 +151,7 @@ def rare_run(
     """Estimate P(fail) of one requirement of a scene by subset simulation (module
     docstring); every check happens before the run folder is made."""
     from mcchain.decision.subset import METHOD, parameters_of, subset_simulation
-    from mcchain.decision.summary import write_csv
+    from mcchain.decision.tables import write_csv
     from mcchain.runner.job import check_positive, prepare_job
     from mcchain.runner.provenance import software_versions
     from mcchain.runner.runs import (
@@ -140,6 +187,9 @@ def rare_run(
     result = subset_simulation(respond, len(distributions), per_level=per_level, seed=seed)
     export = folder / "export"
     export.mkdir()
+    from mcchain.ensemble.registry import VARIABLES
+
+    unit = VARIABLES[req.output].units if req.output in VARIABLES else "1"
     row = {
         "requirement": req.name,
         "method": METHOD,
@@ -152,26 +202,16 @@ def rare_run(
         "level_probability": 0.1,
         "seed": seed,
         "samples_plain_mc": _plain_mc(result.p_fail, result.cov),
+        "p_upper": result.p_upper,
+        "undefined": result.undefined,
+        "cov_levels": result.cov_levels,
+        "cov_lineage": result.cov_lineage,
+        "modes": max(1, len(result.modes)),
+        "unit": unit,
     }
     csv_path, levels_path = export / "subset.csv", export / "subset-levels.csv"
     write_csv(csv_path, SUBSET_COLUMNS, [row])
-    acceptance = [math.nan, *result.acceptance]
-    write_csv(
-        levels_path,
-        LEVEL_COLUMNS,
-        [
-            {"level": j + 1, "threshold": b, "probability": p, "cov": c, "acceptance": a}
-            for j, (b, p, c, a) in enumerate(
-                zip(
-                    result.thresholds,
-                    result.level_probabilities,
-                    result.level_covs,
-                    acceptance,
-                    strict=True,
-                )
-            )
-        ],
-    )
+    write_csv(levels_path, LEVEL_COLUMNS, level_rows(result, unit))
     write_record(
         folder,
         {
@@ -194,7 +234,11 @@ def rare_run(
 
 def _response(scene: Any, requirement: Any, distributions: list[Any], parameters_of: Any) -> Any:
     """The batch response of a requirement: margins at standard-normal points."""
-    from mcchain.decision.requirements import check_requirements
+    from mcchain.decision.requirements import (
+        check_requirements,
+        decision_values,
+        defined_samples,
+    )
     from mcchain.scene import compile_model
     from mcchain.solvers import solve_chunk
 
@@ -209,6 +253,7 @@ def _response(scene: Any, requirement: Any, distributions: list[Any], parameters
             index = tuple(check_requirements(scene, model)[position].index)
         outputs = solve_chunk(model, scene)
         values = np.asarray(outputs[requirement.output])[(slice(None), *index)]
+        values = decision_values(values, defined_samples(outputs["status"]), requirement.output)
         return margin(values, requirement.min, requirement.max)
 
     return respond

@@ -1,5 +1,5 @@
-"""Requirements on an ensemble: which outputs they read, which samples meet them, and the
-tolerance allocation.
+"""Requirements on an ensemble: which outputs they read and which samples meet them (the
+tolerance allocation is :mod:`mcchain.decision.allocation`).
 
 A ``[[requirement]]`` (:class:`mcchain.scene.study.Requirement`) names a per-sample ensemble
 variable (``output``) and one entry of each of its other dimensions (``select``); a sample
@@ -22,8 +22,6 @@ undefined (:func:`decision_values`).
   chunk, from the solver's arrays (per sample, so independent of the chunking).
 * :func:`requirement_values`: a requirement's per-sample values from an xarray Dataset, as
   stored; :func:`requirement_decision_values`: the same as a requirement reads them.
-* :func:`allocate`: the tolerance allocation — for one sampled parameter, the widest range
-  cut from above or below whose failure probability's upper bound meets the target.
 """
 
 from __future__ import annotations
@@ -36,7 +34,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mcchain.decision.stats import clopper_pearson_arrays
 from mcchain.errors import SceneError
 from mcchain.status import FAILURE_BITS
 
@@ -392,74 +389,3 @@ def dataset_requirement_met(ds: xr.Dataset, requirement: Requirement) -> np.ndar
     values and ``status`` (the rule of :func:`requirement_met`; also right for a run stored
     before failure bits decided)."""
     return requirement_met(requirement_values(ds, requirement), requirement, defined_mask(ds))
-
-
-# -- tolerance allocation --------------------------------------------------------------------
-UPPER = "upper"
-LOWER = "lower"
-
-
-@dataclass(frozen=True)
-class Allocation:
-    """The widest one-sided range of a sampled parameter that meets a requirement's target.
-
-    Attributes:
-        side: ``upper`` (keep parameter <= bound) or ``lower`` (keep parameter >= bound).
-        bound: the last kept sample value; NaN when no cut meets the target.
-        samples_kept: samples inside the range (with a NaN bound: at the best cut).
-        p_upper: their failure probability's upper bound (with a NaN bound: the lowest any
-            cut on ``side`` reaches).
-    """
-
-    side: str
-    bound: float
-    samples_kept: int
-    p_upper: float
-
-
-def _cuts(
-    x: np.ndarray, failed: np.ndarray, confidence: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For the kept sets {x <= x_(i)} (ties kept together): their bound, sizes and p_upper."""
-    order = np.argsort(x, kind="stable")
-    xs, fs = x[order], failed[order]
-    last = np.flatnonzero(np.r_[xs[1:] != xs[:-1], True])  # last index of each distinct value
-    kept = last + 1
-    failures = np.cumsum(fs)[last]
-    upper = clopper_pearson_arrays(failures, kept, confidence)[1]
-    return xs[last], kept, upper
-
-
-def allocate(
-    parameter: np.ndarray, met: np.ndarray, target: float, confidence: float
-) -> Allocation:
-    """The tolerance allocation of one requirement over one sampled parameter.
-
-    Every cut at a sample value is tried from above (keep parameter <= b) and from below
-    (keep parameter >= b), each with the others' sampled spread kept; the widest range
-    (most samples kept) whose Clopper–Pearson upper bound is <= ``target`` wins (ties:
-    ``upper``). The search over cuts is a screening step: the bound found is where the
-    evidence of this ensemble holds, and a confirming run restricted to it gives the
-    interval its stated confidence.
-
-    Args:
-        parameter: (nsample,) the parameter's sampled values.
-        met: (nsample,) requirement_met (1 met, 0 failed).
-    """
-    x = np.asarray(parameter, dtype=np.float64)
-    failed = np.asarray(met) == 0
-    results = []
-    for side, sign in ((UPPER, 1.0), (LOWER, -1.0)):
-        bounds, kept, upper = _cuts(sign * x, failed, confidence)
-        ok = np.flatnonzero(upper <= target)
-        if ok.size:
-            i = ok[-1]
-            results.append(Allocation(side, float(sign * bounds[i]), int(kept[i]), float(upper[i])))
-        else:
-            i = int(np.argmin(upper)) if upper.size else -1
-            best = (int(kept[i]), float(upper[i])) if upper.size else (0, 1.0)
-            results.append(Allocation(side, math.nan, best[0], best[1]))
-    found = [r for r in results if not math.isnan(r.bound)]
-    if found:
-        return max(found, key=lambda r: r.samples_kept)  # max keeps the first (upper) on ties
-    return min(results, key=lambda r: r.p_upper)

@@ -6,7 +6,10 @@ Files written into ``RUN/export/``:
 
 * ``requirements.csv`` — :data:`REQUIREMENT_COLUMNS`, one row per requirement;
 * ``allocation.csv`` — :data:`ALLOCATION_COLUMNS`, one row per requirement and sampled
-  parameter;
+  parameter; ``allocation-box.csv`` — :data:`BOX_COLUMNS`, the box over all the parameters
+  (:mod:`mcchain.decision.allocation_table`);
+* ``whatif.csv`` and ``whatif.png`` — P(fail) for narrowed parameter ranges, reweighted
+  from the same samples (:mod:`mcchain.decision.whatif`);
 * ``requirements.txt`` — :func:`summary_lines`: verdicts in words, samples needed, the
   success-run figure, and which interval the design gets.
 
@@ -18,8 +21,6 @@ independent; the same interval is reported labelled *approximate* (``verdict`` r
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -29,8 +30,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.decision.allocation_table import (
+    ALLOCATION_COLUMNS,
+    BOX_COLUMNS,
+    AllocationRow,
+    BoxRow,
+    allocation_lines,
+    allocations,
+    box_allocations,
+)
 from mcchain.decision.requirements import (
-    allocate,
     dataset_requirement_met,
     decision_values,
     defined_mask,
@@ -38,6 +47,7 @@ from mcchain.decision.requirements import (
     requirement_values,
     stored_requirements,
 )
+from mcchain.decision.sampled import EXACT_DESIGNS, design_of
 from mcchain.decision.sequential import confidence_sequence, sequential_bounds
 from mcchain.decision.stats import (
     EMPTY,
@@ -49,6 +59,7 @@ from mcchain.decision.stats import (
     samples_to_decide,
     verdict,
 )
+from mcchain.decision.tables import write_csv
 from mcchain.decision.units import format_quantity, output_units
 from mcchain.decision.until import sequential_settings
 
@@ -73,10 +84,6 @@ REQUIREMENT_COLUMNS = (
     "quantile_upper",
 )
 """Columns of ``requirements.csv``, exactly (a contract)."""
-ALLOCATION_COLUMNS = ("requirement", "parameter", "side", "bound", "samples_kept", "p_upper")
-"""Columns of ``allocation.csv``, exactly (a contract)."""
-EXACT_DESIGNS = ("random",)
-"""Designs whose samples are independent draws: the binomial interval is exact."""
 APPROXIMATE = " (approximate)"
 """Appended to a verdict whose interval is not exact for the design."""
 
@@ -160,29 +167,6 @@ class RequirementSummary:
             "quantile_lower": self.quantile_lower,
             "quantile_upper": self.quantile_upper,
         }
-
-
-@dataclass(frozen=True)
-class AllocationRow:
-    """One row of ``allocation.csv``."""
-
-    requirement: str
-    parameter: str
-    side: str
-    bound: float
-    samples_kept: int
-    p_upper: float
-
-    def row(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in ALLOCATION_COLUMNS}
-
-
-def design_of(ds: xr.Dataset) -> str | None:
-    """The sampling design of a stored ensemble (``[sample] design``), None without
-    ``[sample]``."""
-    settings = json.loads(str(ds.attrs.get("settings", "{}")))
-    sample = (settings.get("scene") or {}).get("sample")
-    return None if not sample else str(sample.get("design", "random"))
 
 
 def output_label(requirement: Requirement) -> str:
@@ -342,24 +326,6 @@ def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
     return out
 
 
-def allocations(ds: xr.Dataset) -> list[AllocationRow]:
-    """The tolerance allocation of every requirement over every sampled parameter."""
-    requirements = stored_requirements(ds)
-    if not requirements or "parameters" not in ds.data_vars or "param" not in ds.dims:
-        return []
-    params = np.asarray(ds["parameters"].transpose("sample", "param").values, dtype=np.float64)
-    paths = [str(p) for p in ds["param"].values]
-    rows = []
-    for requirement in requirements:
-        met = met_of(ds, requirement, requirement_values(ds, requirement))
-        for j, path in enumerate(paths):
-            a = allocate(params[:, j], met, requirement.target, requirement.confidence)
-            rows.append(
-                AllocationRow(requirement.name, path, a.side, a.bound, a.samples_kept, a.p_upper)
-            )
-    return rows
-
-
 # -- words ---------------------------------------------------------------------------------
 def _g(x: float, digits: int = 4) -> str:
     return "NaN" if isinstance(x, float) and math.isnan(x) else f"{x:.{digits}g}"
@@ -494,40 +460,25 @@ def family_line(summaries: list[RequirementSummary]) -> str | None:
     )
 
 
-def allocation_lines(rows: list[AllocationRow], requirement: str) -> list[str]:
-    """The allocation of one requirement in words."""
-    lines = []
-    for r in rows:
-        if r.requirement != requirement:
-            continue
-        if math.isnan(r.bound):
-            lines.append(
-                f"  {r.parameter}: no one-sided range reaches the target (best: p_upper "
-                f"{_g(r.p_upper)} keeping {r.samples_kept} samples, cut from the {r.side} side)"
-            )
-        else:
-            op = "<=" if r.side == "upper" else ">="
-            lines.append(
-                f"  {r.parameter} {op} {_g(r.bound, 6)} keeps p_upper {_g(r.p_upper)} "
-                f"({r.samples_kept} samples kept)"
-            )
-    return lines
-
-
 def summary_lines(
     summaries: list[RequirementSummary],
     rows: list[AllocationRow],
     design: str | None,
     sequential: Mapping[str, Any] | None = None,
+    boxes: list[BoxRow] | None = None,
 ) -> list[str]:
     """``requirements.txt`` (and the end of ``mcchain run``): every requirement in words,
-    its allocation, and the interval's validity for the design."""
+    its allocation (``boxes``: the box over the parameters too), and the interval's
+    validity for the design."""
     lines = []
     for s in summaries:
         lines += requirement_lines(s, design)
-        alloc = allocation_lines(rows, s.name)
+        alloc = allocation_lines(rows, s.name, boxes)
         if alloc:
-            lines.append("  tolerance allocation (each parameter alone, the others as sampled):")
+            lines.append(
+                "  tolerance allocation (each parameter alone, the others as sampled; bounds "
+                "valid over every cut tried):"
+            )
             lines += alloc
     return lines + validity_lines(summaries, design, sequential)
 
@@ -573,46 +524,31 @@ def validity_lines(
 
 
 # -- files ---------------------------------------------------------------------------------
-def _csv_value(value: Any) -> Any:
-    if isinstance(value, float):
-        return "NaN" if math.isnan(value) else repr(value)
-    return value
-
-
-def write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
-    """A CSV of ``rows`` under ``columns``, written atomically (floats exactly, NaN as NaN)."""
-    import io
-
-    from mcchain.ensemble.io import write_text_atomic
-
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(columns), lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: _csv_value(v) for k, v in row.items()})
-    write_text_atomic(path, buffer.getvalue())
-
-
 def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
-    """``requirements.csv``, ``allocation.csv`` and ``requirements.txt`` into ``folder``."""
+    """``requirements.csv``, ``allocation.csv``, ``requirements.txt``, then
+    ``allocation-box.csv`` (two or more sampled parameters), ``whatif.csv`` and
+    ``whatif.png`` into ``folder``; returns their paths in that order."""
+    from mcchain.decision.whatif import write_whatif
     from mcchain.ensemble.io import write_text_atomic
 
     summaries = summarize(ds)
     rows = allocations(ds)
+    boxes = box_allocations(ds)
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / "requirements.csv", folder / "allocation.csv", folder / "requirements.txt"]
     write_csv(paths[0], REQUIREMENT_COLUMNS, [s.row() for s in summaries])
     write_csv(paths[1], ALLOCATION_COLUMNS, [r.row() for r in rows])
-    write_text_atomic(
-        paths[2],
-        "\n".join(summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs)))
-        + "\n",
-    )
-    return paths
+    lines = summary_lines(summaries, rows, design_of(ds), sequential_settings(ds.attrs), boxes)
+    write_text_atomic(paths[2], "\n".join(lines) + "\n")
+    if boxes:
+        paths.append(folder / "allocation-box.csv")
+        write_csv(paths[-1], BOX_COLUMNS, [b.row() for b in boxes])
+    return paths + write_whatif(ds, folder)
 
 
 def export_requirements(run: str | Path) -> list[Path]:
-    """``mcchain export RUN --requirements``: the three files into ``RUN/export/``.
+    """``mcchain export RUN --requirements``: the files of :func:`write_requirements` into
+    ``RUN/export/``.
 
     Raises:
         RunError: the run has no requirements.
@@ -621,11 +557,11 @@ def export_requirements(run: str | Path) -> list[Path]:
     from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
-    ds = open_run(folder)
-    if not stored_requirements(ds):
-        raise RunError(
-            f"{run}: the run has no [[requirement]]: nothing to export with --requirements"
-        )
-    target = folder / "export"
-    writable_folder(target, "--requirements")
-    return write_requirements(ds, target)
+    with open_run(folder) as ds:  # closed after: xarray shares the file with later opens
+        if not stored_requirements(ds):
+            raise RunError(
+                f"{run}: the run has no [[requirement]]: nothing to export with --requirements"
+            )
+        target = folder / "export"
+        writable_folder(target, "--requirements")
+        return write_requirements(ds, target)

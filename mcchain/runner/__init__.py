@@ -12,7 +12,8 @@ Read it top to bottom:
 * **execute** (:mod:`~mcchain.runner.executors`): the chunks the folder lacks are solved here
   or on Dask, each handed to the store, then to the observers.
 * **store** (:mod:`~mcchain.runner.store`): part files, their merge into ``ensemble.nc``,
-  ``run.json`` (and the failure of a run that fails, keeping its finished chunks).
+  ``run.json`` (and the failure of a run that fails, keeping its finished chunks); what the
+  run says at its end is :mod:`~mcchain.runner.summary`'s, from ``run.json``.
 
 :func:`~mcchain.runner.pipeline.run_pipeline` is the loop; it calls the observers at fixed
 points and they never call back into it (:mod:`~mcchain.runner.steps` is the protocol).

@@ -150,7 +150,7 @@ def _hooks(observers: Sequence[Observer], name: str) -> list[Callable[..., Any]]
 class RunResult:
     """What a run returns (:func:`run_pipeline`; ``start_run``, ``resume_run`` and
     ``extend_run`` of :mod:`mcchain.runner.plan`): its folder and ``run.json`` (what
-    ``mcchain run`` prints of it: :func:`mcchain.cli.describe.run_summary`)."""
+    ``mcchain run`` prints of it: :func:`mcchain.runner.summary.run_summary`)."""
 
     folder: Path
     record: dict[str, Any]

@@ -228,11 +228,46 @@ def ppf(dist: Distribution, u: np.ndarray) -> np.ndarray:
 
     uniform [lo, hi]: lo + u (hi - lo); normal [mean, std]: mean + std Φ⁻¹(u); lognormal
     [mu, sigma]: exp(mu + sigma Φ⁻¹(u)); truncnormal [mean, std, lo, hi]: scipy.stats.truncnorm
-    (clipped to [lo, hi] against rounding); choice [v...]: v[floor(u n)].
+    (clipped to [lo, hi] against rounding); choice [v...]: v[floor(u n)]. With ``within =
+    [low, high]``: the same distribution truncated there, F⁻¹(F(low) + u (F(high) −
+    F(low))) (choice: the values inside, each equally likely), clipped to [low, high].
     """
     u = np.asarray(u, dtype=np.float64)
-    a = dist.args
-    kind = dist.kind
+    within = getattr(dist, "within", None)
+    if within is None:
+        return _ppf(dist.kind, dist.args, u)
+    low, high = within
+    if dist.kind == "choice":
+        inside = [v for v in dist.args if low <= v <= high]
+        return _ppf("choice", inside, u)
+    lo, hi = cdf(dist.kind, dist.args, np.array([low, high], dtype=np.float64))
+    x = _ppf(dist.kind, dist.args, lo + u * (hi - lo))
+    return np.clip(x, low, high)
+
+
+def cdf(kind: str, args: list[float], x: np.ndarray) -> np.ndarray:
+    """The cumulative distribution function of a continuous distribution (``within``
+    ignored), for :func:`ppf` and the what-if weights."""
+    x = np.asarray(x, dtype=np.float64)
+    if kind == "uniform":
+        lo, hi = args
+        return np.clip((x - lo) / (hi - lo), 0.0, 1.0) if hi > lo else (x >= lo).astype(float)
+    from scipy import stats
+
+    if kind == "normal":
+        return np.asarray(stats.norm.cdf(x, loc=args[0], scale=args[1]))
+    if kind == "lognormal":
+        with np.errstate(divide="ignore"):
+            z = np.log(np.maximum(x, 0.0))
+        return np.asarray(stats.norm.cdf(z, loc=args[0], scale=args[1]))
+    if kind == "truncnormal":
+        mean, std, lo, hi = args
+        a, b = (lo - mean) / std, (hi - mean) / std
+        return np.asarray(stats.truncnorm.cdf(x, a, b, loc=mean, scale=std))
+    raise ValueError(f"no cumulative distribution function for {kind!r}")
+
+
+def _ppf(kind: str, a: list[float], u: np.ndarray) -> np.ndarray:
     if kind == "uniform":
         return a[0] + u * (a[1] - a[0])
     if kind == "choice":

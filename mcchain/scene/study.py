@@ -42,6 +42,10 @@ class Distribution(Section):
     * ``truncnormal = [mean, std, low, high]``: normal(mean, std) restricted to [low, high],
       std > 0, low < high, low <= mean <= high;
     * ``choice = [v1, v2, ...]``: one of the values, each equally likely.
+
+    ``within = [low, high]`` beside any of them restricts it to [low, high] (the
+    distribution truncated there: values outside are never drawn, the others keep their
+    relative likelihood); ``mcchain confirm`` writes it for an allocated range.
     """
 
     uniform: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
@@ -49,6 +53,14 @@ class Distribution(Section):
     lognormal: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
     truncnormal: Annotated[list[Num], Field(min_length=4, max_length=4)] | None = None
     choice: Annotated[list[Num], Field(min_length=1)] | None = None
+    within: Annotated[list[Num], Field(min_length=2, max_length=2)] | None = None
+
+    @field_validator("within")
+    @classmethod
+    def _within(cls, v: list[float] | None) -> list[float] | None:
+        if v is not None and not v[0] < v[1]:
+            raise ValueError(f"low must be below high, got [{v[0]!r}, {v[1]!r}]")
+        return v
 
     @field_validator("uniform")
     @classmethod
@@ -86,6 +98,16 @@ class Distribution(Section):
                 "a distribution is a table with exactly one of "
                 f"{', '.join(DISTRIBUTIONS)}; got " + (", ".join(given) if given else "none")
             )
+        if self.within is not None:
+            low, high = self.within
+            own = self._own_bounds()
+            if self.kind == "choice" and not any(low <= v <= high for v in self.args):
+                raise ValueError(f"within: no value of choice lies in [{low!r}, {high!r}]")
+            if own is not None and self.kind != "choice" and not (own[0] < high and low < own[1]):
+                raise ValueError(
+                    f"within: [{low!r}, {high!r}] does not overlap the {self.kind} range "
+                    f"[{own[0]!r}, {own[1]!r}]"
+                )
         return self
 
     @property
@@ -102,7 +124,20 @@ class Distribution(Section):
 
     def bounds(self) -> tuple[float, float] | None:
         """The closed interval of the values a bounded distribution can give (uniform,
-        truncnormal, choice); None for the unbounded ones (normal, lognormal)."""
+        truncnormal, choice, or any with ``within``); None for the unbounded ones (normal,
+        lognormal)."""
+        own = self._own_bounds()
+        if self.within is None:
+            return own
+        low, high = self.within
+        if self.kind == "choice":
+            inside = [v for v in self.args if low <= v <= high]
+            return min(inside), max(inside)
+        if own is None:
+            return low, high
+        return max(own[0], low), min(own[1], high)
+
+    def _own_bounds(self) -> tuple[float, float] | None:
         a = self.args
         kind = self.kind
         if kind == "uniform":

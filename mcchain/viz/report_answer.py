@@ -7,12 +7,12 @@ it (:func:`mcchain.ensemble.units.with_units`).
 
 The binding parameter (from the tolerance allocation, one row per sampled parameter):
 
-* some parameter's one-sided range reaches the target only by cutting samples: the one that
-  keeps the fewest (the range that must shrink most) binds;
+* some parameter's range (one- or two-sided) reaches the target only by cutting samples: the
+  one that keeps the fewest (the range that must shrink most) binds;
 * every parameter's whole sampled range reaches it: none binds, and the allocated ranges are
   the sampled ones;
-* no parameter alone reaches it: none can be allocated, and the one whose best cut gives the
-  lowest upper bound of P(fail) is named as the nearest.
+* no parameter alone reaches it: none can be allocated, and the one whose best range gives
+  the lowest upper bound of P(fail) is named as the nearest.
 """
 
 from __future__ import annotations
@@ -102,19 +102,24 @@ def binding(s: RequirementSummary, rows: list[AllocationRow]) -> tuple[str, Allo
     mine = [r for r in rows if r.requirement == s.name]
     if not mine:
         return "none", None
-    reach = [r for r in mine if math.isfinite(r.bound)]
+    reach = [r for r in mine if r.meets_target]
     if not reach:
         return "unreachable", min(mine, key=lambda r: r.p_upper)
-    cut = [r for r in reach if r.samples_kept < s.samples]
+    cut = [r for r in reach if r.side != "all"]
     if not cut and len(reach) == len(mine):
         return "none-binds", None
     return "cut", min(cut or reach, key=lambda r: r.samples_kept)
 
 
 def _range(units: Units, r: AllocationRow) -> str:
-    name = units.param(r.parameter)[0]
-    op = "≤" if r.side == "upper" else "≥"
-    return f"{esc(name)} {op} {esc(units.param_value(r.parameter, r.bound))}"
+    """The allocated range of a row (``allocation.csv``'s side, low and high)."""
+    name = esc(units.param(r.parameter)[0])
+    low, high = (esc(units.param_value(r.parameter, v)) for v in (r.low, r.high))
+    return {
+        "upper": f"{name} ≤ {high}",
+        "lower": f"{name} ≥ {low}",
+        "both": f"{low} ≤ {name} ≤ {high}",
+    }.get(r.side, f"{name} as sampled")
 
 
 def sentence(s: RequirementSummary, rows: list[AllocationRow], units: Units) -> str:
@@ -146,7 +151,7 @@ def sentence(s: RequirementSummary, rows: list[AllocationRow], units: Units) -> 
         name = units.param(row.parameter)[0]
         text += (
             " No range of a single parameter reaches the target; the nearest is "
-            f"<b>{esc(name)}</b> (its best one-sided cut, from the {row.side} side, keeps "
+            f"<b>{esc(name)}</b> (its best range, {_range(units, row)}, keeps "
             f"{row.samples_kept} samples and P(fail) ≤ {percent(row.p_upper)})."
         )
     if not s.exact:
@@ -215,12 +220,7 @@ def requirement_tables(
         alloc = []
         for r in rows:
             name = units.param(r.parameter)[0]
-            op = "≤" if r.side == "upper" else "≥"
-            bound = (
-                "none reaches the target"
-                if math.isnan(r.bound)
-                else f"{op} {esc(units.param_value(r.parameter, r.bound))}"
-            )
+            bound = _range(units, r) if r.meets_target else f"none; best: {_range(units, r)}"
             alloc.append(
                 [
                     esc(r.requirement),
@@ -233,9 +233,9 @@ def requirement_tables(
         parts += [
             "<h3>Tolerance allocation</h3>",
             "<p>For each requirement and each sampled parameter alone (the others as sampled): "
-            "the widest one-sided range whose upper bound of P(fail) meets the target. The "
-            "bound comes from a search over cuts; a run sampled inside it confirms it at the "
-            "stated confidence.</p>",
+            "the widest range, one- or two-sided, whose upper bound of P(fail) meets the "
+            "target; the bound holds over every cut tried, and <code>mcchain confirm</code> "
+            "decides the range on fresh samples.</p>",
             table(["requirement", "parameter", "range", "samples kept", "P(fail) ≤"], alloc),
         ]
     return "\n".join(parts) + "</section>"

@@ -158,18 +158,23 @@ def _parameter_panel(
         )  # fmt: skip
     ax.axhline(requirement.target, color="k", linestyle=":", linewidth=1.0)
     title = f"P(fail) by {name}, {100 * requirement.confidence:g} % bounds"
-    if allocation is not None and np.isfinite(allocation.bound):
-        b = scale * allocation.bound
-        ax.axvline(b, color="C2", linewidth=1.5)
-        low, high = scale * edges[0], scale * edges[-1]
-        if allocation.side == "upper":
-            ax.axvspan(b, high, color="0.85", zorder=0)
-        else:
-            ax.axvspan(low, b, color="0.85", zorder=0)
-        op = "≤" if allocation.side == "upper" else "≥"
-        title += f"; allocated {op} {b:.4g}{' ' + unit if unit else ''} (green)"
+    u = f" {unit}" if unit else ""
+    if allocation is not None and allocation.meets_target and allocation.side != "all":
+        left, right = scale * edges[0], scale * edges[-1]
+        kept = []
+        if allocation.side in ("lower", "both"):  # the cut below: shaded, green at the face
+            ax.axvline(scale * allocation.low, color="C2", linewidth=1.5)
+            ax.axvspan(left, scale * allocation.low, color="0.85", zorder=0)
+            kept.append(f"≥ {scale * allocation.low:.4g}{u}")
+        if allocation.side in ("upper", "both"):
+            ax.axvline(scale * allocation.high, color="C2", linewidth=1.5)
+            ax.axvspan(scale * allocation.high, right, color="0.85", zorder=0)
+            kept.append(f"≤ {scale * allocation.high:.4g}{u}")
+        title += f"; allocated {' and '.join(kept)} (green)"
+    elif allocation is not None and allocation.meets_target:
+        title += "; the whole sampled range meets the target"
     elif allocation is not None:
-        title += "; no one-sided range meets the target"
+        title += "; no range meets the target"
     drawn = np.concatenate([lo[some & (lo > 0)], bound, [requirement.target]])
     ax.set_yscale("log")
     ax.set_ylim(max(float(drawn.min()) / 3.0, 1e-12), 1.5)
