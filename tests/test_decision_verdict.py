@@ -24,8 +24,8 @@ from test_cli_commands import Ran, assert_usage_error
 from mcchain.decision.requirements import dataset_requirement_met, defined_mask
 from mcchain.decision.stats import one_sided_bounds
 from mcchain.decision.summary import summarize, summary_lines
-from mcchain.decision.units import format_quantity, output_units
 from mcchain.decision.verdict import EXIT_FAIL, EXIT_PASS, EXIT_UNDECIDED, exit_code
+from mcchain.ensemble.units import format_quantity, output_units
 from mcchain.status import CONTACT_LOST, DIVERGED
 from mcchain.testing.closed_forms import bar_pulsation
 from mcchain.testing.factory import bar_scene_dict, toml_text
@@ -121,7 +121,7 @@ def test_units__readable_multiples_and_mixed_units() -> None:
     assert format_quantity(1000.0, "") == "1000"
     assert format_quantity(math.nan, "N") == "NaN" and format_quantity(math.inf, "s") == "inf s"
     assert output_units("peak_contact_force") == "N"
-    assert output_units("omega") == "rad/s"
+    assert output_units("omega") == "rad s-1"
     assert output_units("impact_count") == ""
     assert output_units("q_eq", {"body": "bar", "dof": "theta"}) == "rad"
     assert output_units("q_eq", {"body": "bar", "dof": 0}) == "m"

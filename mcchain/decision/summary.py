@@ -60,8 +60,8 @@ from mcchain.decision.stats import (
     verdict,
 )
 from mcchain.decision.tables import write_csv
-from mcchain.decision.units import format_quantity, output_units
 from mcchain.decision.until import sequential_settings
+from mcchain.ensemble.units import format_quantity, output_units, pretty_units
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -110,7 +110,7 @@ class RequirementSummary:
             (⌈ln(1 − C)/ln(1 − target)⌉ for a fixed count; an ``until`` run's sequence needs
             more, counted in whole batches).
         output: the output and its selection, as text (``omega[mode=0]``).
-        units: the output's unit (:func:`mcchain.decision.units.output_units`).
+        units: the output's unit (:func:`mcchain.ensemble.units.output_units`).
         minimum, maximum: the requirement's limits (NaN: none).
         observed_min, observed_max: the smallest and largest finite value over the defined
             samples (NaN if none).
@@ -366,7 +366,7 @@ def all_fail_warning(s: RequirementSummary) -> str | None:
             f"{head} ({limit_text(s)}): no sample has a value to compare (all {s.undefined} "
             "undefined: a failure bit in status)"
         )
-    units = f" (the output is in {s.units})" if s.units else ""
+    units = f" (the output is in {pretty_units(s.units)})" if s.units else ""
     undefined = f"; {s.undefined} undefined" if s.undefined else ""
     return (
         f"{head}: the limit is {limit_text(s)}{units}, the samples' values range over "

@@ -11,7 +11,11 @@ the stored SI value beside it, so the number a CSV holds can always be found aga
   ``"10 Hz (62.83 rad/s)"``; a value already in its reading unit is written once;
 * :func:`in_reading_unit` — the reading value alone (``"5 kN"``), for titles;
 * :func:`interval_with_units` — a value and its interval in one unit;
-* :func:`pretty_units` — a CF string as text (``rad s-1`` -> ``rad/s``, ``1`` -> ``""``).
+* :func:`pretty_units` — a CF string as text (``rad s-1`` -> ``rad/s``, ``1`` -> ``""``);
+* :func:`output_units` — the CF unit of a requirement's output (a mixed unit resolved by
+  its ``dof`` selection);
+* :func:`format_quantity` — a limit as the user wrote it, SI first and its reading beside:
+  ``"5000 N (5 kN)"``, ``"2.4e-05 m (0.024 mm)"`` (the decision layer's printed lines).
 
 Rules (documented here only): lengths below 0.1 m read in mm, below 1 µm in nm; forces,
 moments, pressures and energies of 1000 and more in k..., of 10⁶ and more in M... (and G
@@ -22,6 +26,7 @@ for pressures); times below 1 s in ms, below 1 ms in µs; pulsations (rad/s) in 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Hashable, Mapping
 from typing import Any
 
@@ -42,7 +47,7 @@ SMALL_LENGTH = 0.1
 """Lengths (m) whose magnitude stays below this read in mm."""
 TINY_LENGTH = 1e-6
 """Lengths (m) whose magnitude stays below this read in nm (from 1 µm up, mm: engineers
-write clearances and penetrations in mm, 0.024 mm, as :mod:`mcchain.decision.units` does)."""
+write clearances and penetrations in mm, 0.024 mm)."""
 
 _PREFIXED = {"N": ("kN", "MN"), "N m": ("kN m", "MN m"), "J": ("kJ", "MJ"), "Pa": ("kPa", "MPa")}
 """Units read with a k or M prefix from 10³ and 10⁶ on (pressures: G from 10⁹)."""
@@ -155,3 +160,45 @@ def units_of(attrs: Mapping[Hashable, Any], name: str) -> str | None:
     from mcchain.ensemble.registry import VARIABLES
 
     return VARIABLES[name].units if name in VARIABLES else None
+
+
+_MIXED = re.compile(r"\s*([^,()]+?)\s*\(([^)]*)\)")
+DOF_NAMES = ("x", "y", "theta")
+
+
+def output_units(
+    output: str, select: Mapping[str, Any] | None = None, attrs: Mapping[str, Any] | None = None
+) -> str:
+    """The CF unit of a requirement's output: ``attrs["units"]`` (a Dataset variable's), else
+    the registry's; a mixed unit (``q_eq``: ``m (x, y), rad (theta)``) resolved by
+    ``select``'s ``dof`` (label or index); ``""`` for a pure number or an unknown output."""
+    units = str((attrs or {}).get("units", "")) or (units_of({}, output) or "")
+    pieces = _MIXED.findall(units)
+    if pieces and "dof" in (select or {}):
+        dof = (select or {})["dof"]
+        label = DOF_NAMES[dof] if isinstance(dof, int) and 0 <= dof < len(DOF_NAMES) else str(dof)
+        for unit, labels in pieces:
+            if label in [x.strip() for x in labels.split(",")]:
+                units = unit
+                break
+    return "" if units in ("1", "mixed") else units
+
+
+def format_quantity(value: float, units: str, digits: int = 6) -> str:
+    """``value`` (SI, CF ``units``) as a limit is written, then in its reading unit when that
+    differs: ``"5000 N (5 kN)"``, ``"2.4e-05 m (0.024 mm)"``, ``"5 N"``, ``"3"`` (no unit);
+    NaN and ±inf as such (``"inf s"``)."""
+    value = float(value)
+    si = pretty_units(units)
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        text = "inf" if value > 0 else "-inf"
+        return f"{text} {si}" if si else text
+    text = _joined(f"{value:.{digits}g}", si)
+    if not si or value == 0.0:
+        return text
+    unit, scale = reading_unit(units, abs(value))
+    if unit == si:
+        return text
+    return f"{text} ({_joined(_number(scale * value, 4), unit)})"
