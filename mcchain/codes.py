@@ -57,3 +57,64 @@ LOAD_TABLE = 2
 """``Model.force_law`` of a load times a cubic spline through a table of factors."""
 LOAD_LAWS = {"constant": LOAD_CONSTANT, "harmonic": LOAD_HARMONIC, "table": LOAD_TABLE}
 """``[[force]] law`` -> ``Model.force_law`` code."""
+
+# -- [[output]]: what the kernels track per output (mcchain.kernels.outputs) -----------------
+OUTPUT_POSITION = 0
+"""An output of a body point's position (m): a vector, with its rate."""
+OUTPUT_VELOCITY = 1
+"""... of a body point's velocity (m/s): a vector, with its rate (the acceleration)."""
+OUTPUT_ACCELERATION = 2
+"""... of a body point's acceleration (m/s²): a vector, values only."""
+OUTPUT_ANGLE = 3
+"""... of a body's angle (rad), with its rate."""
+OUTPUT_ANGULAR_VELOCITY = 4
+"""... of a body's angular velocity (rad/s), with its rate."""
+OUTPUT_JOINT_FORCE = 5
+"""... of a joint's force on its journal body (N): a vector, values only."""
+OUTPUT_CONTACT_FORCE = 6
+"""... of a clearance joint's normal force (N), values only."""
+OUTPUT_PENETRATION = 7
+"""... of a contact-law joint's penetration δ = |d| − c (m), with its rate."""
+OUTPUT_DRIVER = 8
+"""... of a driver's torque (N m) or force (N), −λ of its row, values only."""
+OUTPUT_KINDS = {
+    "position": OUTPUT_POSITION,
+    "velocity": OUTPUT_VELOCITY,
+    "acceleration": OUTPUT_ACCELERATION,
+    "angle": OUTPUT_ANGLE,
+    "angular_velocity": OUTPUT_ANGULAR_VELOCITY,
+    "joint_force": OUTPUT_JOINT_FORCE,
+    "contact_force": OUTPUT_CONTACT_FORCE,
+    "penetration": OUTPUT_PENETRATION,
+    "driver_torque": OUTPUT_DRIVER,
+    "driver_force": OUTPUT_DRIVER,
+}
+"""``[[output]] of`` -> kind code."""
+OUTPUT_WITH_RATE = (
+    OUTPUT_POSITION,
+    OUTPUT_VELOCITY,
+    OUTPUT_ANGLE,
+    OUTPUT_ANGULAR_VELOCITY,
+    OUTPUT_PENETRATION,
+)
+"""The kinds whose rate the state gives: a cubic Hermite on each step; the others are
+interpolated by the cubic through four step ends, as the peaks."""
+OUTPUT_COMPONENTS = {"x": 0, "y": 1, "magnitude": 2}
+"""``[[output]] component`` -> code (−1: a scalar quantity)."""
+OUTPUT_REDUCTIONS = {
+    "max": 0,
+    "min": 1,
+    "max_abs": 2,
+    "rms": 3,
+    "mean": 4,
+    "range": 5,
+    "first_time_above": 6,
+    "first_time_below": 7,
+}
+"""``[[output]] reduce`` -> code."""
+OUTPUT_WIDTH = 11
+"""Numbers an output's running reduction keeps (mcchain.kernels.outputs): its last four
+values, the rate at the last one, the largest and smallest values, the integrals of the value
+and of its square, the first crossing time and the length of window covered; a sample's four
+times and count are kept once, as the peaks' clock (PEAK_CLOCK). Here, with no numba, so
+that the code generator lays out its rows without importing the kernels."""

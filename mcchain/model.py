@@ -157,6 +157,11 @@ class Model:
         spring_damping: (*, nspring) N s/m, along the spring.
         q0: (*, 3 nbody) initial positions [X, Y, θ]*.
         v0: (*, 3 nbody) initial velocities.
+        reference: (6,) int64 for a model that carries, after its mechanism, the same
+            mechanism with every clearance joint ideal (``[[output]] relative_to``,
+            :mod:`mcchain.solvers.ideal`): the mechanism's own nbody, njoint, ndriver, nforce,
+            nspring and joint constraint rows (its energy, max |Φ| and step control leave the
+            copy out); (0,) for every other model.
     """
 
     body_names: tuple[str, ...]
@@ -228,6 +233,8 @@ class Model:
     force_law: np.ndarray = None  # type: ignore[assignment]
     force_frequency: np.ndarray = None  # type: ignore[assignment]
     force_phase: np.ndarray = None  # type: ignore[assignment]
+    # An ideal copy after the mechanism (optional: None gives none).
+    reference: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         njoint = len(self.joint_names)
@@ -248,6 +255,7 @@ class Model:
             "joint_model": np.zeros(njoint, dtype=np.int64),
             "joint_contact_law": np.zeros(njoint, dtype=np.int64),
             "joint_written": np.zeros(njoint, dtype=np.int64),
+            "reference": np.zeros(0, dtype=np.int64),
         }
         # ... and parameter arrays: the value of the unset key, from the parameter table.
         count = {"joint": njoint, "driver": ndriver, "force": nforce}
@@ -318,6 +326,11 @@ class Model:
     def has_prismatic(self) -> bool:
         """Whether any joint is prismatic."""
         return bool(np.any(self.joint_kind == JointKind.PRISMATIC))
+
+    @property
+    def has_reference(self) -> bool:
+        """Whether the model carries an ideal copy of its mechanism (:attr:`reference`)."""
+        return bool(np.asarray(self.reference).size)
 
     @property
     def has_contact(self) -> bool:

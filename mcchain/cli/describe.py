@@ -106,6 +106,10 @@ def describe_model(model: Any, scene_name: str, nominal: Any = None) -> list[str
     lines.append(f"coordinates: {model.ndof}")
     lines.append(f"constraint rows: {model.ncon}")
     lines.append(f"degrees of freedom: {model.nmode}")
+    outputs = model.meta.get("outputs") or ()
+    if outputs:  # the scene's [[output]]s: what each variable will hold
+        lines.append("outputs:")
+        lines += [f"  {o.name} ({_units(o.units)}): {o.long_name}" for o in outputs]
     return lines
 
 

@@ -74,7 +74,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         """The lane's kinetic energy from the velocities in W rows ``vrow``
         (:func:`mcchain.kernels.forces.body_kinetic_energy` of each body, summed)."""
         terms = []
-        for b in range(topo.nbody):
+        for b in range(topo.own_bodies):  # not an ideal copy's (Topology.reference)
             m, inertia = at("P", slots[f"m{b}"]), at("P", slots[f"J{b}"])
             rates = [at(vrow, 3 * b + i) for i in range(3)]
             terms += inline(FORCE_KERNELS, "body_kinetic_energy", [m, inertia, *rates], "")[1]

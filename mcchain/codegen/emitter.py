@@ -371,7 +371,7 @@ class Emitter(SchurComplement):
         # A running max (numba's max of many arguments is the same left fold): with demand
         # ordering each Φ_r is then consumed where it is made instead of kept to the end.
         terms = []
-        for r in range(topo.ncon):
+        for r in (r for r in range(topo.ncon) if topo.own_row(r)):  # not an ideal copy's
             law = self._row_law(r)
             terms.append(
                 f"abs(phi{r})" if law is None else f"(abs(phi{r}) if {law} == 0.0 else 0.0)"
@@ -661,7 +661,7 @@ class Emitter(SchurComplement):
         for d in range(topo.ndriver):
             self.emit(f"dtq{d} = -lam{topo.driver_row[d]}")
         self.emit("energy = 0.0")
-        for b in range(topo.nbody):
+        for b in range(topo.own_bodies):  # an ideal copy's (Topology.reference) left out
             x, y, th = 3 * b, 3 * b + 1, 3 * b + 2
             rates = [f"v{x}", f"v{y}", f"v{th}"]
             (kinetic,) = self.kernel(
@@ -670,14 +670,14 @@ class Emitter(SchurComplement):
             arguments = [f"p_m{b}", "p_gx", "p_gy", f"q{x}", f"q{y}"]
             (potential,) = self.kernel(FORCE_KERNELS, "gravity_potential", arguments)
             self.emit(f"energy += {kinetic}", f"energy -= {potential}")
-        for f, b in enumerate(topo.force_body):
+        for f, b in enumerate(topo.force_body[: topo.own_forces]):
             if b == GROUND or f in topo.varying_loads:  # a load varying in time: no potential
                 continue
             self._point(b, f"p_fpx{f}", f"p_fpy{f}", f"fp{f}", world=True)
             arguments = [f"p_fx{f}", f"p_fy{f}", f"fp{f}X", f"fp{f}Y", f"p_tq{f}", f"q{3 * b + 2}"]
             (potential,) = self.kernel(FORCE_KERNELS, "load_potential", arguments)
             self.emit(f"energy -= {potential}")
-        for s in range(len(topo.spring_a)):
+        for s in range(topo.own_springs):
             a, b = topo.spring_a[s], topo.spring_b[s]
             self._point(a, f"p_spax{s}", f"p_spay{s}", f"sa{s}")
             self._point(b, f"p_spbx{s}", f"p_spby{s}", f"sb{s}")

@@ -23,8 +23,15 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import FORCE_KERNELS, Emitter
-from mcchain.codegen.layout import CONTACT_ROW_MEANINGS, LMAX, ROW_MEANINGS, Layout
+from mcchain.codegen.layout import (
+    CONTACT_ROW_MEANINGS,
+    LMAX,
+    OUTPUT_ROW_MEANINGS,
+    ROW_MEANINGS,
+    Layout,
+)
 from mcchain.codegen.native import NativeModule, array_layout_ok
+from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.contact import (
@@ -71,7 +78,7 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
     return text
 
 
-def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
+def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -> dict[str, str]:
     em = Emitter(topo)
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
@@ -244,13 +251,13 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     block("apply_projection")
     # Kinetic energy of the lane and the velocities scaled by ``scale`` (re-seat).
     em.emit("ke = 0.0")
-    for body in range(topo.nbody):
+    for body in range(topo.own_bodies):  # not an ideal copy's (Topology.reference)
         rates = [f"v{3 * body + i}" for i in range(3)]
         arguments = [f"p_m{body}", f"p_J{body}", *rates]
         (kinetic,) = em.kernel(FORCE_KERNELS, "body_kinetic_energy", arguments)
         em.emit(f"ke += {kinetic}")
     block("kinetic")
-    em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(ndof)))
+    em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(3 * topo.own_bodies)))
     block("scale_velocity")
 
     # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
@@ -259,6 +266,9 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     stride = 2 * ndof
     new = " + ".join(f"bw[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
     err = " + ".join(f"be[{j}] * {elem('kq0', 'r', stride * j)}" for j in range(nstage))
+    # An ideal copy (Topology.reference) follows the mechanism's steps: its rows are not in
+    # the norm, so the mechanism steps as it would alone.
+    own = 3 * topo.own_bodies
     b["error_norm"] = "\n".join(
         [
             "en = 0.0",
@@ -268,8 +278,10 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
             f"    yn = y + hh * ({new})",
             f"    {elem('qn', 'r')} = yn",
             f"    e_ = hh * ({err}) / (atol + rtol * max(abs(y), abs(yn)))",
+            # (the copy's rows as exact zeros of the same sum: the same fused operations)
+            *([] if own == ndof else [f"    e_ = e_ if i < {2 * own} else 0.0"]),
             "    en += e_ * e_",
-            f"en = math.sqrt(en / {2 * ndof})",
+            f"en = math.sqrt(en / {2 * own})",
             "en = en if en == en else np.inf",
         ]
     )
@@ -286,6 +298,7 @@ def _blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     )
     b.update(contact_blocks(topo, lay, b["kill_lane"]))
     b.update(_peak_blocks(topo, lay))
+    b.update(output_blocks(topo, lay, outputs))
     return b
 
 
@@ -415,14 +428,19 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
 entry points call, so a scene run with ``rk4`` compiles no projection or adaptive code."""
 
 
-def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
+def generate_source(topo: Topology, variant: str, lmax: int = LMAX, outputs: Signature = ()) -> str:
     """Source of the lane-kernel module of ``topo`` for ``variant`` (a key of
     :data:`VARIANTS`), for work rows ``lmax`` doubles long (default: this CPU's SIMD
-    register)."""
+    register), tracking the ``[[output]]``s ``outputs`` (their structure:
+    :mod:`mcchain.codegen.output_blocks`; none: the text of a scene without)."""
     users, tableau, suffix, parts_of = VARIANTS[variant]
+    if tableau is None:
+        outputs = ()  # the radau right-hand side tracks nothing
     parts = [templates.HEADER, f"# topology: {topo!r}\n# variant: {variant}\n"]
+    if outputs:
+        parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
-    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45")
+    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45", outputs=len(outputs))
     if tableau is not None:
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
     if topo.contact_joints:
@@ -431,12 +449,14 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
         parts.append(_contact_functions(adaptive=variant == "rk45"))
     if tableau is not None:
         parts.append(_peak_functions())
+    if outputs:
+        parts += [OUTPUT_ROW_MEANINGS, output_functions(with_hermite=not topo.contact_joints)]
     if any(topo.driver_tables) or any(topo.load_tables):
         parts.append(_table_constants(topo))
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    blocks = _blocks(topo, nstage, lay)
+    blocks = _blocks(topo, nstage, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
@@ -444,6 +464,7 @@ def generate_source(topo: Topology, variant: str, lmax: int = LMAX) -> str:
     if not topo.contact_joints:
         parts_of = tuple(p.replace(templates.FIRST_STAGE_RESEATED, "") for p in parts_of)
     text = "\n".join(parts_of).replace("@CT", ", out_ct, sum_ct" if topo.contact_joints else "")
+    text = text.replace("@OT", ", ot_in, out_ot" if outputs else "")
     parts.append(schedule_lane_loops(_fill(text, blocks, tokens, lay)))
     return "\n".join(parts)
 
@@ -515,7 +536,7 @@ def _table_constants(topo: Topology) -> str:
 LaneKernels = ModuleType | NativeModule
 """A topology's lane kernels: entry points called with numpy arrays and scalars."""
 
-_MODULES: dict[tuple[Topology, str], LaneKernels] = {}
+_MODULES: dict[tuple[Topology, str, Signature], LaneKernels] = {}
 
 
 @functools.cache
@@ -534,7 +555,7 @@ def _native_usable() -> bool:
     return False
 
 
-def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
+def lane_kernels(topo: Topology, variant: str, outputs: Signature = ()) -> LaneKernels:
     """The compiled lane kernels of a topology for one :data:`VARIANTS` key (``accel`` and
     ``outputs``; ``erk_run``; ``erk_project_run``; ``adaptive_run``).
 
@@ -544,11 +565,12 @@ def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
     named after the variant. ``MCCHAIN_LANE_COMPILER=numba`` compiles the same text with
     ``@njit`` instead (the reference of the tests and ``benchmarks/bench_native.py``; the
     same numbers; also where this NumPy's array layout is not the one the native entries
-    read, with a warning)."""
-    module = _MODULES.get((topo, variant))
+    read, with a warning). ``outputs``: the ``[[output]]``s they track (their structure,
+    :mod:`mcchain.codegen.output_blocks`)."""
+    module = _MODULES.get((topo, variant, outputs))
     if module is None:
         prefix = "mcchain_gen_" + variant.replace("-", "_")
-        source = generate_source(topo, variant)
+        source = generate_source(topo, variant, outputs=outputs)
         if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba" or not _native_usable():
             from mcchain.kernels.config import numba_cache
 
@@ -557,5 +579,5 @@ def lane_kernels(topo: Topology, variant: str) -> LaneKernels:
         else:
             digest = hashlib.sha256(source.encode()).hexdigest()[:20]
             module = NativeModule(source, f"{prefix}_{digest}")
-        _MODULES[(topo, variant)] = module
+        _MODULES[(topo, variant, outputs)] = module
     return module

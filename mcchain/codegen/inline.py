@@ -6,8 +6,9 @@ only place its formulas are written. The loop kernels call it; the lane generato
 from its module's source file (parsed, not imported: the generator never imports numba),
 its parameters replaced by the lane's expressions, its locals renamed with the joint's
 suffix, module constants written as literals, and calls of the module's other functions
-inlined in turn. The text is the function's arithmetic operation for operation, so the
-lanes and the loop kernels round alike.
+(and of functions it imports from another kernel module) inlined in turn. The text is the
+function's arithmetic operation for operation, so the lanes and the loop kernels round
+alike.
 
 The kernels' ``hypot(x, y)`` (libm's, robust to overflow) is written √(x² + y²) in the lanes,
 which vectorises; the two differ by at most an ulp, as the lanes' own sine and cosine
@@ -183,10 +184,14 @@ class _Inliner:
             x, y = (self.expr(a) for a in node.args)
             squares = ast.BinOp(ast.BinOp(x, ast.Mult(), x), ast.Add(), ast.BinOp(y, ast.Mult(), y))
             return [ast.Call(ast.parse("math.sqrt", mode="eval").body, [squares], [])]
-        if not isinstance(func, ast.Name) or func.id not in _module(self.module)[0]:
+        functions, _constants, imported = _module(self.module)
+        module = self.module
+        if isinstance(func, ast.Name) and func.id not in functions and func.id in imported:
+            module = imported[func.id]  # a kernel imported from another kernel module
+        if not isinstance(func, ast.Name) or func.id not in _module(module)[0]:
             raise TypeError(f"{self.where(node)}: cannot inline {ast.unparse(func)}")
         arguments = [ast.unparse(self.expr(a)) for a in node.args]
-        return _Inliner(self.module, func.id, self.suffix, self.out).run(arguments)
+        return _Inliner(module, func.id, self.suffix, self.out).run(arguments)
 
     def expr(self, node: ast.expr) -> ast.expr:
         if isinstance(node, ast.Name):

@@ -11,6 +11,7 @@ run-time value, so the loop is vectorised rather than unrolled.
 from __future__ import annotations
 
 from mcchain.codegen.topology import Topology
+from mcchain.codes import OUTPUT_WIDTH
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 
 
@@ -59,6 +60,12 @@ ROW_MEANINGS = """\
 """
 """Legend of the row map written into the header of a generated module."""
 
+OUTPUT_ROW_MEANINGS = """\
+# [[output]]s: ot OUTPUT_WIDTH rows each, their running reductions; otk their four times and
+# the count fed (mcchain.kernels.outputs).
+"""
+"""Legend of the output rows, written only into modules that have them."""
+
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
     "nim", "pkd", "tff", "tse",
@@ -83,10 +90,17 @@ class Layout:
     lane group."""
 
     def __init__(
-        self, topo: Topology, nstage: int, lmax: int | None = None, adaptive: bool = False
+        self,
+        topo: Topology,
+        nstage: int,
+        lmax: int | None = None,
+        adaptive: bool = False,
+        outputs: int = 0,
     ):
         """``adaptive``: with the rows only the adaptive kernel uses (``pw``: ω_c² at the
-        accepted state, per contact-law joint, for the located re-seat dwell)."""
+        accepted state, per contact-law joint, for the located re-seat dwell); ``outputs``:
+        the number of ``[[output]]``s (rows ``ot``, OUTPUT_WIDTH each, and their clock
+        ``otk``: mcchain.kernels.outputs), last."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -119,6 +133,9 @@ class Layout:
             self.add("e0", 1)
             if adaptive:
                 self.add("pw", ncj)
+        if outputs:
+            self.add("ot", OUTPUT_WIDTH * outputs)
+            self.add("otk", PEAK_CLOCK)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -77,6 +77,21 @@ def _row_order(pattern: list[set[int]]) -> list[int]:
     return natural if bandwidth(natural) <= bandwidth(order) else order
 
 
+def _block_order(pattern: list[set[int]], own: list[int]) -> list[int]:
+    """:func:`_row_order` of a mechanism's own rows ``own`` (all: the usual case), then of
+    the others' (an ideal copy after it, Topology.reference: a block of S of its own), each
+    ordered as it would be alone, so that the mechanism's factorisation is the one it has
+    without the copy, operation for operation."""
+    if len(own) == len(pattern):
+        return _row_order(pattern)
+    blocks = []
+    for rows in (own, [r for r in range(len(pattern)) if r not in set(own)]):
+        local = {r: i for i, r in enumerate(rows)}
+        sub = [{local[j] for j in pattern[r] if j in local} for r in rows]
+        blocks += [rows[i] for i in _row_order(sub)]
+    return blocks
+
+
 class SchurComplement:
     """Emits S = B M⁻¹ Bᵀ, its sparse LDLᵀ and the solves; the host class provides
     :meth:`rows` (B's non-zeros), :meth:`emit`, :meth:`_reload` and :meth:`_row_law`
@@ -111,7 +126,7 @@ class SchurComplement:
             for col, val in row.items():
                 self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
         pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
-        order = _row_order(pattern)
+        order = _block_order(pattern, [r for r in range(n) if self.topo.own_row(r)])
         self.order = order
         # Entries of S in the permuted numbering (i, j: positions), lower part.
         pos = {r: i for i, r in enumerate(order)}

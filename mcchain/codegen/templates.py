@@ -86,6 +86,7 @@ _GROUP_SETUP = """
                 W[(QROW + i) * LMAXV + l] = np.nan if dead else Q0[i, s0 + l]
                 W[(VROW + i) * LMAXV + l] = np.nan if dead else V0[i, s0 + l]
         @@contact_setup
+        @@outputs_setup
 """
 
 _GROUP_FINISH = """
@@ -95,12 +96,13 @@ _GROUP_FINISH = """
             t_sing[s0 + l] = tsg[l]
             t_cl[s0 + l] = tcl[l]
         @@peaks_finish
+        @@outputs_finish
         @@contact_finish
 """
 
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
-            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
+            out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
             status, t_div, t_sing, t_cl"""
 
 ERK_KERNEL = (
@@ -161,6 +163,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                         @@contact_check_c
                     @@contact_step_c
                     @@peaks_c
+                    @@outputs_c
                 if n == nstep or n % out_every == 0:
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
@@ -187,7 +190,7 @@ PROJECT_CALL = """
 
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
-                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk,
+                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
                  status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
 
 ADAPTIVE_KERNEL = (
@@ -247,6 +250,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                     @@contact_check
                 @@contact_switch
                 @@peaks
+                @@outputs_feed
                 if iout[l] < nout and @[tl] == t_out[iout[l]]:
                     group_outputs_SUFFIX(
                         W, l, l + 1, s0, iout[l], @[tl], LAMROW, out_q, out_v, out_jf, out_cf,

@@ -46,6 +46,8 @@ class Topology:
     # Table laws: per driver / load, (knots, ascending coefficients) of its spline, or ()
     driver_tables: tuple[tuple[tuple[float, ...], ...], ...] = ()
     load_tables: tuple[tuple[tuple[float, ...], ...], ...] = ()
+    # An ideal copy after the mechanism (Model.reference): the mechanism's own counts, or ()
+    reference: tuple[int, ...] = ()
 
     def __repr__(self) -> str:
         # The contact fields only when a joint uses the law, the driver laws only when one is
@@ -64,6 +66,8 @@ class Topology:
             names = [n for n in names if n != "driver_tables"]
         if not any(self.load_tables):
             names = [n for n in names if n != "load_tables"]
+        if not self.reference:
+            names = [n for n in names if n != "reference"]
         items = ", ".join(f"{n}={getattr(self, n)!r}" for n in names)
         return f"Topology({items})"
 
@@ -91,6 +95,7 @@ class Topology:
                                   model.driver_table_coef),
             load_tables=_tables(model.force_table_size, model.force_table_knots,
                                 model.force_table_coef),
+            reference=t(model.reference),
         )  # fmt: skip
 
     @property
@@ -126,6 +131,28 @@ class Topology:
             for r, kind in zip(self.joint_row, self.joint_kind, strict=True)
             if kind == JointKind.CLEARANCE
         )
+
+    @property
+    def own_bodies(self) -> int:
+        """The mechanism's own bodies (all, but in a model with an ideal copy after them,
+        ``Model.reference``: its energy and step control leave the copy out)."""
+        return self.reference[0] if self.reference else self.nbody
+
+    @property
+    def own_forces(self) -> int:
+        """The mechanism's own loads (see :attr:`own_bodies`)."""
+        return self.reference[3] if self.reference else len(self.force_body)
+
+    @property
+    def own_springs(self) -> int:
+        """The mechanism's own spring-dampers (see :attr:`own_bodies`)."""
+        return self.reference[4] if self.reference else len(self.spring_a)
+
+    def own_row(self, r: int) -> bool:
+        """Whether constraint row ``r`` is the mechanism's own (see :attr:`own_bodies`)."""
+        if not self.reference or r < self.reference[5]:
+            return True
+        return r in self.driver_row[: self.reference[2]]
 
     @property
     def contact_joints(self) -> tuple[int, ...]:

@@ -412,18 +412,21 @@ class _Resolver:
         self.solved: dict[int, dict[str, np.ndarray]] = {}
 
     def add(self, index: np.ndarray) -> None:
+        from mcchain.ensemble.outputs import model_output_variables
         from mcchain.ensemble.registry import VARIABLES, coerce_outputs
 
+        specs = {**VARIABLES, **model_output_variables(self.job.model)}  # the [[output]]s too
         todo = np.array([i for i in np.asarray(index).tolist() if i not in self.solved], int)
         step = max(int(self.job.chunk_size), 1)
         for start in range(0, todo.size, step):
             part = todo[start : start + step]
             out = coerce_outputs(
-                self.solve(self.job.model.take(part), self.scene), self.job.history_dtype
-            )
+                self.solve(self.job.model.take(part), self.scene), self.job.history_dtype,
+                model_output_variables(self.job.model),
+            )  # fmt: skip
             if self.requirements is not None:
                 out = self.requirements.add_to(out)
-            dims = {k: VARIABLES[k].dims for k in out if k in VARIABLES}
+            dims = {k: specs[k].dims for k in out if k in specs}
             keep = {k: v for k, v in out.items() if k in dims and "time" not in dims[k]}
             for j, i in enumerate(part.tolist()):
                 self.solved[i] = {k: v[j] for k, v in keep.items()}

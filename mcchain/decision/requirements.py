@@ -70,7 +70,7 @@ def produced_outputs(scene: Scene, model: Model) -> dict[str, tuple[str, ...]]:
     or ``[modes]`` (``joint_moment_eq`` with a prismatic joint), the modes' with
     ``[modes]`` (``mode_shape`` unless ``shapes = false``, ``omega_cycle`` with ``along``),
     every per-sample variable of ``[simulate]`` (the contact-law summaries only in a scene
-    with a contact law).
+    with a contact law), and the scene's ``[[output]]``s.
     """
     from mcchain.ensemble.registry import VARIABLES
 
@@ -96,6 +96,8 @@ def produced_outputs(scene: Scene, model: Model) -> dict[str, tuple[str, ...]]:
             continue
         if has.get(spec.analysis, False):
             out[name] = spec.dims
+    for output in scene.output:  # the scene's [[output]]s: (sample,) each
+        out[output.name] = ("sample",)
     return out
 
 

@@ -20,11 +20,12 @@ Dims whose size comes from the model: ``body``, ``dof`` (3), ``joint``, ``xy`` (
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.spec import VariableSpec
 from mcchain.parameters import param_units
 from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
 
@@ -41,45 +42,6 @@ ANALYSES = ("sample", "equilibrium", "modes", "simulate", "requirement", "always
 ``[[requirement]]`` tables, or every run."""
 
 DTYPE_RULES = ("float64", "history", "uint32", "int32", "int8", "bool")
-
-
-@dataclass(frozen=True)
-class VariableSpec:
-    """Declaration of one ensemble variable.
-
-    Attributes:
-        name: netCDF variable name (a contract with users: never renamed).
-        dims: dimension names, ``sample`` first.
-        units: CF units string.
-        long_name: CF long_name.
-        dtype: dtype rule, one of :data:`DTYPE_RULES`.
-        analysis: producing analysis, one of :data:`ANALYSES`.
-        attrs: further CF attributes (flag masks, comments).
-        event_time: the time of an event, NaN on a sample where the event never happened:
-            a requirement reads that NaN as "never" (+inf) when the sample has no failure
-            bit (:func:`mcchain.decision.requirements.decision_values`).
-    """
-
-    name: str
-    dims: tuple[str, ...]
-    units: str
-    long_name: str
-    dtype: str
-    analysis: str
-    attrs: Mapping[str, Any] = field(default_factory=dict)
-    event_time: bool = False
-
-    def storage_dtype(self, history_dtype: str = "float32") -> np.dtype:
-        """The numpy dtype the variable is stored with."""
-        if self.dtype == "history":
-            return np.dtype(history_dtype)
-        if self.dtype == "uint32":
-            return np.dtype(STATUS_DTYPE)
-        return np.dtype(self.dtype)
-
-    def attributes(self) -> dict[str, Any]:
-        """CF attributes: ``units``, ``long_name`` and the extras."""
-        return {"units": self.units, "long_name": self.long_name, **self.attrs}
 
 
 def _v(
@@ -434,10 +396,13 @@ stored (:func:`coerce_outputs` leaves it out)."""
 
 
 def coerce_outputs(
-    outputs: Mapping[str, Any], history_dtype: str = "float32"
+    outputs: Mapping[str, Any],
+    history_dtype: str = "float32",
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> dict[str, np.ndarray]:
     """Cast a solver's arrays to their storage dtypes (the axis outputs, ``time`` and
-    ``cycle_phase``, stay float64; :data:`STEPS_TAKEN` is left out).
+    ``cycle_phase``, stay float64; :data:`STEPS_TAKEN` is left out). ``extra``: the scene's
+    own variables (its ``[[output]]``s, :mod:`mcchain.ensemble.outputs`).
 
     Raises ``ValueError`` for an undeclared name or an array whose kind cannot be stored
     under its rule (a float for ``status``, a non-integer count).
@@ -452,7 +417,7 @@ def coerce_outputs(
         if name in AXIS_OUTPUTS:
             result[name] = np.asarray(arr, dtype=np.float64)
             continue
-        spec = VARIABLES.get(name)
+        spec = VARIABLES.get(name) or (extra or {}).get(name)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         target = spec.storage_dtype(history_dtype)
@@ -534,6 +499,7 @@ def build_dataset(
     attrs: Mapping[str, Any] | None = None,
     labels: Mapping[str, Sequence[str]] | None = None,
     variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> xr.Dataset:
     """The Dataset of one chunk of samples from a solver's output dict: the variables of
     :func:`chunk_variables` (same arguments, same errors) as an :class:`xarray.Dataset`."""
@@ -545,6 +511,7 @@ def build_dataset(
         attrs=attrs,
         labels=labels,
         variable_attrs=variable_attrs,
+        extra=extra,
     ).to_dataset()
 
 
@@ -557,6 +524,7 @@ def chunk_variables(
     attrs: Mapping[str, Any] | None = None,
     labels: Mapping[str, Sequence[str]] | None = None,
     variable_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    extra: Mapping[str, VariableSpec] | None = None,
 ) -> ChunkVariables:
     """The variables of one chunk of samples from a solver's output dict.
 
@@ -572,18 +540,24 @@ def chunk_variables(
             requirements' names).
         variable_attrs: attributes added to a variable's registry ones, by name (the
             requirements' limits on ``requirement_met``).
+        extra: the scene's own variables (default: the ``[[output]]``s the model carries,
+            :mod:`mcchain.ensemble.outputs`), written after the registry's.
 
     Raises:
         ValueError: an undeclared name, a wrong rank, shape or dtype kind, or no ``status``.
     """
     outputs = dict(outputs)
+    if extra is None:
+        from mcchain.ensemble.outputs import model_output_variables
+
+        extra = model_output_variables(model)
     if "parameters" not in outputs:
         outputs["parameters"] = np.asarray(model.parameters, dtype=np.float64).reshape(
             model.nsample, len(model.param_paths)
         )
     if "status" not in outputs:
         raise ValueError("status: missing from the solver output")
-    arrays = coerce_outputs(outputs, history_dtype)
+    arrays = coerce_outputs(outputs, history_dtype, extra)
     names = model_coordinates(model)
     for dim, given in (labels or {}).items():
         names[dim] = np.array(list(given), dtype=object)
@@ -597,7 +571,7 @@ def chunk_variables(
 
     data_vars: dict[str, Variable] = {}
     used: set[str] = set()
-    for name, spec in VARIABLES.items():
+    for name, spec in {**VARIABLES, **extra}.items():
         if name not in arrays:
             continue
         arr = arrays[name]
@@ -610,8 +584,9 @@ def chunk_variables(
             if n != expected:
                 raise ValueError(f"{name}: dim {dim} has size {n}, expected {expected}")
         used.update(spec.dims)
-        extra = dict((variable_attrs or {}).get(name, {}))
-        data_vars[name] = (spec.dims, arr, variable_attributes(name) | extra)
+        added = dict((variable_attrs or {}).get(name, {}))
+        own = variable_attributes(name) if name in VARIABLES else spec.attributes()
+        data_vars[name] = (spec.dims, arr, own | added)
 
     coords: dict[str, Variable] = {
         "sample": (
@@ -651,8 +626,10 @@ def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
     """
     if "status" not in ds.data_vars:
         raise ValueError("status: missing")
+    from mcchain.ensemble.outputs import stored_output
+
     for name, var in ds.data_vars.items():
-        spec = VARIABLES.get(str(name))
+        spec = VARIABLES.get(str(name)) or stored_output(str(name), var.attrs)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
         if tuple(var.dims) != spec.dims:

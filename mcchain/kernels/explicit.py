@@ -42,7 +42,14 @@ from mcchain.kernels.clearance import (
 )
 from mcchain.kernels.config import INLINE, JIT, hypot, njit
 from mcchain.kernels.contact import contact_mode, elastic_energy
-from mcchain.kernels.forces import applied_forces, kinetic_energy, mass_diagonal, potential_energy
+from mcchain.kernels.forces import (
+    applied_forces,
+    kinetic_energy,
+    mass_diagonal,
+    own_items,
+    own_row,
+    potential_energy,
+)
 from mcchain.kernels.joints import (
     constraint_gamma,
     constraint_jacobian,
@@ -51,6 +58,7 @@ from mcchain.kernels.joints import (
     joint_forces,
     joint_vectors,
 )
+from mcchain.kernels.outputs import feed_outputs, output_state, outputs_finish
 from mcchain.kernels.peaks import (
     PEAK_CLOCK,
     PEAK_WIDTH,
@@ -229,6 +237,11 @@ def index1_acceleration(km, s, q, v, t, balpha2, bbeta2, tau, minv, cols, first,
         if row_law[r, 0] == 1.0:
             work_phi[r] = 0.0
     err = max_abs(work_phi, m)
+    if km.reference.shape[0] > 0:  # an ideal copy's rows are not the mechanism's
+        err = 0.0
+        for r in range(m):
+            if own_row(km, r) and not abs(work_phi[r]) <= err:
+                err = abs(work_phi[r])
     for k in range(n):
         qdd_out[k] = work_F[k]
     if m > 0:
@@ -344,7 +357,7 @@ def reseat(km, s, q, v, t, minv, cols, first, cst, row_law, tau, work_B, work_S,
     excess = kinetic + potential_energy(km, s, q) + contact_energy(km, s, q, cst) - before
     if excess > 0.0 and kinetic > excess:
         scale = math.sqrt((kinetic - excess) / kinetic)
-        for i in range(v.shape[0]):
+        for i in range(3 * own_items(km, 0, v.shape[0] // 3)):  # not an ideal copy's
             v[i] = scale * v[i]
 
 
@@ -352,7 +365,7 @@ def reseat(km, s, q, v, t, minv, cols, first, cst, row_law, tau, work_B, work_S,
 def rk4_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, A, bw, cc,
     balpha2, bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct,
-    sum_ct, peaks_out, status, t_div, t_sing, t_cl,
+    sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div, t_sing, t_cl,
 ):  # fmt: skip
     """Fixed-step RK4 (tableau ``A``, ``bw``, ``cc``, strictly sub-diagonal) with Baumgarte
     on the samples ``start:stop``: ``nstep`` steps of ``h``, the last one ``h_last`` long;
@@ -367,7 +380,9 @@ def rk4_run(
     (0 link, 1 contact, 2 free) per output time; ``sum_ct`` (nsample, 5 ncj): the summaries
     (mcchain.contact.CONTACT_SUMMARY) per joint, their peak contact force the continuous one.
     ``peaks_out`` (nsample, njoint + ndriver): the continuous peaks of |joint force| and
-    |driver torque| (:mod:`mcchain.kernels.peaks`), fed at every step's start.
+    |driver torque| (:mod:`mcchain.kernels.peaks`), fed at every step's start; the
+    ``[[output]]``s (``out_spec``, ``out_data``: :func:`mcchain.kernels.outputs.outputs_feed`)
+    into ``out_values`` (nsample, nout), fed there too.
     """
     ndof = Q0.shape[1]
     nj = km.joint_body_a.shape[0]
@@ -375,12 +390,16 @@ def rk4_run(
     ncj = contact_joints(km)
     limit2 = CONTACT_STEP_LIMIT * CONTACT_STEP_LIMIT
     npk = peaks_out.shape[1]
+    nout = out_spec.shape[0]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             for k in range(npk):
                 peaks_out[s, k] = np.nan
+            for k in range(nout):
+                out_values[s, k] = np.nan
             continue
+        ot, oscratch = output_state(km, nout)
         q = Q0[s].copy()
         v = V0[s].copy()
         minv = np.zeros(ndof)
@@ -486,6 +505,8 @@ def rk4_run(
                     wca = 0.0
                 peak_values(km, lam0, cst, values)
                 peaks_feed(pk, values, t)
+                if nout > 0:
+                    feed_outputs(km, s, ot, out_spec, out_data, t, q, v, qdd, lam0, cst, oscratch)
                 if n == nstep or n % out_every == 0:
                     it = t_out.shape[0] - 1 if n == nstep else n // out_every
                     write_outputs(
@@ -506,6 +527,7 @@ def rk4_run(
                 )  # fmt: skip
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
+        outputs_finish(s, (st & FAILURE_BITS) != 0, ot, out_spec, out_data, out_values)
         finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
         status[s] = st
 

@@ -287,17 +287,38 @@ def applied_stiffness_add(km, s, q, t, K_out):
 
 
 @njit(**JIT)
+def own_items(km, kind, total):
+    """How many of the ``total`` items of ``kind`` (0 bodies, 1 joints, 2 drivers, 3 loads,
+    4 springs) are the mechanism's own: all, but in a model that carries an ideal copy
+    after them (``Model.reference``: ``[[output]] relative_to``), whose energy and max |Φ|
+    are left out of the mechanism's."""
+    return km.reference[kind] if km.reference.shape[0] > 0 else total
+
+
+@njit(**JIT)
+def own_row(km, r):
+    """Whether constraint row ``r`` is the mechanism's own (see :func:`own_items`): a row of
+    its joints (the first ``reference[5]``) or of its drivers."""
+    if km.reference.shape[0] == 0 or r < km.reference[5]:
+        return True
+    for d in range(km.reference[2]):
+        if km.driver_row[d] == r:
+            return True
+    return False
+
+
+@njit(**JIT)
 def potential_energy(km, s, q):
     """Potential energy, J: −m g·r, −f·(r + p) and −τ θ of constant loads, and
     ½ k (L − L₀)². A load that varies in time has no potential (it does work, as a driver
-    does)."""
+    does). The mechanism's own (:func:`own_items`)."""
     energy = 0.0
     ig = s % km.gravity.shape[0]
     im = s % km.body_mass.shape[0]
     gx, gy = km.gravity[ig, 0], km.gravity[ig, 1]
-    for b in range(km.body_mass.shape[1]):
+    for b in range(own_items(km, 0, km.body_mass.shape[1])):
         energy -= gravity_potential(km.body_mass[im, b], gx, gy, q[3 * b], q[3 * b + 1])
-    for k in range(km.force_body.shape[0]):
+    for k in range(own_items(km, 3, km.force_body.shape[0])):
         b = km.force_body[k]
         if b < 0 or km.force_law[k] != LOAD_CONSTANT:
             continue
@@ -305,7 +326,7 @@ def potential_energy(km, s, q):
         torque = km.force_torque[s % km.force_torque.shape[0], k]
         x, y = q[3 * b] + px, q[3 * b + 1] + py
         energy -= load_potential(fx, fy, x, y, torque, q[3 * b + 2])
-    for k in range(km.spring_body_a.shape[0]):
+    for k in range(own_items(km, 4, km.spring_body_a.shape[0])):
         _, _, _, _, ux, uy = spring_vectors(km, s, q, k)
         stiffness = km.spring_stiffness[s % km.spring_stiffness.shape[0], k]
         rest = km.spring_rest_length[s % km.spring_rest_length.shape[0], k]
@@ -315,11 +336,11 @@ def potential_energy(km, s, q):
 
 @njit(**JIT)
 def kinetic_energy(km, s, v):
-    """Kinetic energy ½ q̇ᵀ M q̇, J."""
+    """Kinetic energy ½ q̇ᵀ M q̇, J, of the mechanism's own bodies (:func:`own_items`)."""
     energy = 0.0
     im = s % km.body_mass.shape[0]
     ij = s % km.body_inertia.shape[0]
-    for b in range(km.body_mass.shape[1]):
+    for b in range(own_items(km, 0, km.body_mass.shape[1])):
         mass, inertia = km.body_mass[im, b], km.body_inertia[ij, b]
         energy += body_kinetic_energy(mass, inertia, v[3 * b], v[3 * b + 1], v[3 * b + 2])
     return energy

@@ -49,6 +49,7 @@ from mcchain.kernels.forces import (
     damper_stiffness_add,
     kinetic_energy,
     mass_diagonal,
+    own_row,
     spring_vectors,
 )
 from mcchain.kernels.joints import (
@@ -59,6 +60,7 @@ from mcchain.kernels.joints import (
     constraint_residual,
 )
 from mcchain.kernels.linalg import lu_factor, lu_solve
+from mcchain.kernels.outputs import feed_outputs, output_state, outputs_finish
 from mcchain.kernels.peaks import peak_values, peaks_feed, peaks_finish, peaks_start
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 from mcchain.status import (
@@ -74,7 +76,8 @@ from mcchain.status import (
 def generalized_alpha_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, alpha_m,
     alpha_f, gam, beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
-    out_en, out_ct, sum_ct, peaks_out, status, t_div, t_sing, t_cl, nsteps_out, nevals_out,
+    out_en, out_ct, sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div, t_sing,
+    t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``: ``nstep``
     steps of ``h``, the last one ``h_last`` long, step n starting at
@@ -97,19 +100,25 @@ def generalized_alpha_run(
     method, not by the law), then the switch of model auto, the located onsets and
     separations, and the re-seats. ``cols``, ``first``: the constraint pattern (re-seat
     projection); ``out_ct``, ``sum_ct``, ``peaks_out``: the contact outputs and the
-    continuous peaks (see explicit.rk4_run), fed with λ at every step's start.
+    continuous peaks (see explicit.rk4_run), fed with λ at every step's start, as the
+    ``[[output]]``s (``out_spec``, ``out_data`` into ``out_values``, see explicit.rk4_run)
+    with the state's q̈.
     """
     ndof = Q0.shape[1]
     nsys = ndof + ncon
     nj = km.joint_body_a.shape[0]
     ncj = contact_joints(km)
     npk = peaks_out.shape[1]
+    nout = out_spec.shape[0]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
             nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             for k in range(npk):
                 peaks_out[s, k] = np.nan
+            for k in range(nout):
+                out_values[s, k] = np.nan
             continue
+        ot, oscratch = output_state(km, nout)
         q = Q0[s].copy()
         v = V0[s].copy()
         m = np.zeros(ndof)
@@ -156,7 +165,7 @@ def generalized_alpha_run(
             law_rows(km, cst, row_law)
             err = 0.0
             for r in range(ncon):
-                if row_law[r, 0] != 1.0:
+                if row_law[r, 0] != 1.0 and own_row(km, r):
                     err = max(err, abs(phi[r]))
             for i in range(ndof):
                 err += 0.0 * (q[i] + v[i])
@@ -180,6 +189,8 @@ def generalized_alpha_run(
                     )  # fmt: skip
             peak_values(km, lam, cst, values)
             peaks_feed(pk, values, t)
+            if nout > 0:
+                feed_outputs(km, s, ot, out_spec, out_data, t, q, v, qdd, lam, cst, oscratch)
             if n == nstep or n % out_every == 0:
                 it = t_out.shape[0] - 1 if n == nstep else n // out_every
                 write_outputs(
@@ -281,6 +292,7 @@ def generalized_alpha_run(
                     lam[r] = rhs[ndof + r]
         nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
+        outputs_finish(s, (st & FAILURE_BITS) != 0, ot, out_spec, out_data, out_values)
         finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
         status[s] = st
         nsteps_out[s] = nst

@@ -56,6 +56,13 @@ def point_velocity(vx, vy, w, px, py):
 
 
 @njit(**JIT)
+def point_acceleration(ax, ay, al, w, px, py):
+    """Acceleration r̈ + θ̈ Ω p − θ̇² p of the rotated point p of a body with accelerations
+    (ẍ, ÿ, θ̈) turning at θ̇ = ``w``, m/s²."""
+    return ax - al * py - w * w * px, ay + al * px - w * w * py
+
+
+@njit(**JIT)
 def separation(xa, ya, pax, pay, xb, yb, pbx, pby):
     """d = (r_b + p_b) − (r_a + p_a) from the centres r and rotated points p of bodies a and
     b (r = 0 for the ground), m: the world points first, so that a closed joint's d is their

@@ -124,6 +124,7 @@ def solve_coerced(
     storage dtypes, with the seconds it took and the integration steps its samples took."""
     import numpy as np
 
+    from mcchain.ensemble.outputs import model_output_variables
     from mcchain.ensemble.registry import STEPS_TAKEN, coerce_outputs
 
     t0 = time.perf_counter()
@@ -131,7 +132,8 @@ def solve_coerced(
     seconds = time.perf_counter() - t0
     taken = outputs.get(STEPS_TAKEN)
     steps = None if taken is None else int(np.sum(taken, dtype=np.int64))
-    return SolvedChunk(start, stop, coerce_outputs(outputs, history_dtype), seconds, steps)
+    coerced = coerce_outputs(outputs, history_dtype, model_output_variables(model))
+    return SolvedChunk(start, stop, coerced, seconds, steps)
 
 
 def execute(

@@ -100,6 +100,10 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
     check_scene(model)
+    if scene.output:
+        from mcchain.solvers.outputs import check_ideal
+
+        check_ideal(scene, model)
     if scene.requirement:
         from mcchain.decision.requirements import check_requirements
 

@@ -16,6 +16,7 @@ from mcchain.parameters import PARAMETERS
 from mcchain.scene.fields import GROUND_NAME
 from mcchain.scene.mechanism import Driver, Force, Joint
 from mcchain.scene.models import FIXED_STEP_METHODS, LOOP_METHODS, Scene
+from mcchain.scene.outputs import check_outputs
 from mcchain.scene.paths import (
     PARAM_SHAPES,
     PERTURB_KEYS,
@@ -190,6 +191,7 @@ def check_scene(scene: Scene) -> None:
         sampled_as = scene.sample.vary[written] if written and scene.sample else None
         _check_clearance_scale(scene, i, where, sampled_as, written)
 
+    check_outputs(scene)
     along = scene.modes.along if scene.modes is not None else None
     if along is not None and along.driver not in {d.body for d in scene.driver if not d.slides}:
         driven = ", ".join(d.name for d in scene.driver if not d.slides) or "none"

@@ -27,6 +27,7 @@ from mcchain.parameters import PARAMETERS, TABLE
 from mcchain.scene.fields import GROUND_NAME
 from mcchain.scene.memory import check_memory
 from mcchain.scene.models import Scene
+from mcchain.scene.outputs import check_output_windows
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key
 from mcchain.scene.sampling import sample_parameters
 from mcchain.scene.study import MAX_SEED, saltelli_count_error
@@ -64,7 +65,8 @@ def compile_model(
     Returns:
         The model; ``parameters`` (nsample, nparam) holds the sampled values in the order of
         ``[sample.vary]`` and ``param_paths`` their paths as written. ``meta`` carries
-        ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``.
+        ``scene_name``, ``seed``, ``design`` (None without ``[sample]``) and ``nsample``, and
+        with ``[[output]]`` tables, ``outputs`` (them, :mod:`mcchain.ensemble.outputs`).
 
     Raises:
         SceneError: a bad ``nsample``/``seed`` (for design ``"saltelli"``, a count that is not
@@ -154,7 +156,7 @@ def compile_model(
     def topo(refs: list[str]) -> np.ndarray:
         return np.array([index[r] for r in refs], dtype=np.int64)
 
-    return Model(
+    model = Model(
         body_names=tuple(scene.body_names),
         joint_names=tuple(scene.joint_names),
         driver_names=tuple(scene.driver_names),
@@ -189,9 +191,12 @@ def compile_model(
             "design": sample.design if sample is not None else None,
             "nsample": nsample,
             "written": written,
+            **({"outputs": tuple(scene.output)} if scene.output else {}),
         },
         **{k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()},
     )
+    check_output_windows(scene, model)
+    return model
 
 
 def _written_state(scene: Scene, paths: list[str]) -> dict[str, tuple[bool, ...]]:

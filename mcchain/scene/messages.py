@@ -58,7 +58,7 @@ def loc_path(loc: tuple[str | int, ...], data: Any) -> str:
         if isinstance(elem, int):
             parent = loc[i - 1] if i > 0 else None
             item = node[elem] if isinstance(node, list) and 0 <= elem < len(node) else None
-            if i == 1 and (parent in KINDS or parent == "requirement") and parts:
+            if i == 1 and (parent in KINDS or parent in ("requirement", "output")) and parts:
                 key = "body" if parent == "driver" else "name"
                 name = item.get(key) if isinstance(item, dict) else None
                 parts[-1] = item_path(str(parent), elem, name)

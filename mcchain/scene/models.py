@@ -44,6 +44,7 @@ from mcchain.scene.fields import (
     flatten_dotted,
 )
 from mcchain.scene.mechanism import Body, Driver, Force, Joint, SceneSection, Spring
+from mcchain.scene.outputs import Output
 from mcchain.scene.study import Requirement, Sample
 
 DEFAULT_BAUMGARTE = (10.0, 10.0)
@@ -225,6 +226,7 @@ class Scene(Section):
     requirement: list[Requirement] = Field(
         default_factory=list, description="``[[requirement]]``; default none."
     )
+    output: list[Output] = Field(default_factory=list, description="``[[output]]``; default none.")
 
     _text: str = PrivateAttr(default="")
     _source: str = PrivateAttr(default="<string>")

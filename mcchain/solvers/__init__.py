@@ -13,6 +13,7 @@ from mcchain.model import Model
 from mcchain.scene.models import Scene
 from mcchain.solvers.statics import (
     Assembled,
+    EquilibriumResult,
     assemble,
     solve_equilibrium,
     solve_modes,
@@ -54,9 +55,23 @@ def solve_chunk(
         assembled = assemble(model)
     status = assembled.status.copy()
     equilibrium = None
+    timed = [o for o in scene.output if o.at is None]
+    static = [o for o in scene.output if o.at is not None]
+    ideal = _Ideal(model, scene) if any(o.relative_to for o in scene.output) else None
     if scene.equilibrium is not None or scene.modes is not None:
         settings = scene.equilibrium
         equilibrium = solve_equilibrium(model, assembled.q, assembled.status, settings)
+        if static:
+            from mcchain.solvers.outputs import equilibrium_outputs
+
+            reference: tuple[Model, np.ndarray, np.ndarray] | None = None
+            if any(o.relative_to for o in static):
+                assert ideal is not None
+                status |= ideal.equilibrium().status
+                reference = (ideal.model, ideal.equilibrium().q, ideal.equilibrium().lam)
+            out.update(
+                equilibrium_outputs(static, model, equilibrium.q, equilibrium.lam, reference)
+            )
         out["q_eq"] = wrap_angles(equilibrium.q).reshape(nsample, model.nbody, 3)
         out["joint_force_eq"] = equilibrium.joint_force
         if model.has_prismatic:
@@ -86,25 +101,76 @@ def solve_chunk(
         from mcchain.ensemble.registry import STEPS_TAKEN
         from mcchain.solvers.simulate import simulate
 
-        if scene.simulate.start == "equilibrium":
+        at_equilibrium = scene.simulate.start == "equilibrium"
+        if at_equilibrium:
             if equilibrium is None:
                 equilibrium = solve_equilibrium(model, assembled.q, assembled.status)
                 status |= equilibrium.status
             q_start, v_start = equilibrium.q, np.zeros_like(equilibrium.q)
         else:
             q_start, v_start = assembled.q, assembled.v
-        history = simulate(
-            model,
-            scene.simulate,
-            q_start=q_start,
-            v_start=v_start,
-            history_dtype=np.dtype(scene.storage.history_dtype),
-            status=status,
-            diagnostics=True,
-        )
+        storage = np.dtype(scene.storage.history_dtype)
+        if timed:
+            from mcchain.solvers.outputs import simulate_outputs
+
+            start: tuple[np.ndarray, np.ndarray] | None = None
+            if any(o.relative_to for o in timed):
+                assert ideal is not None
+                start = ideal.start(at_equilibrium)
+                status |= ideal.status(at_equilibrium)
+            history = simulate_outputs(
+                model, timed, scene.simulate, q_start, v_start, start, status,
+                history_dtype=storage, diagnostics=True,
+            )  # fmt: skip
+        else:
+            history = simulate(
+                model,
+                scene.simulate,
+                q_start=q_start,
+                v_start=v_start,
+                history_dtype=storage,
+                status=status,
+                diagnostics=True,
+            )
         status |= history.pop("status")
         out[STEPS_TAKEN] = history.pop("steps")
         del history["rejected_steps"], history["evaluations"]
         out.update(history)
     out["status"] = status
     return out
+
+
+class _Ideal:
+    """The ideal mechanism of a chunk (every clearance joint ideal, the same samples:
+    :func:`mcchain.solvers.ideal.ideal_model`), its assembled start and equilibrium, each
+    computed once when first asked."""
+
+    def __init__(self, model: Model, scene: Scene) -> None:
+        from mcchain.solvers.ideal import ideal_model
+
+        self.model = ideal_model(model)
+        self.settings = scene.equilibrium
+        self._assembled: Assembled | None = None
+        self._equilibrium: EquilibriumResult | None = None
+
+    def assembled(self) -> Assembled:
+        if self._assembled is None:
+            self._assembled = assemble(self.model)
+        return self._assembled
+
+    def equilibrium(self) -> EquilibriumResult:
+        if self._equilibrium is None:
+            start = self.assembled()
+            self._equilibrium = solve_equilibrium(self.model, start.q, start.status, self.settings)
+        return self._equilibrium
+
+    def start(self, at_equilibrium: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The start of its time history: assembled, or at rest at its equilibrium."""
+        if at_equilibrium:
+            q = self.equilibrium().q
+            return q, np.zeros_like(q)
+        return self.assembled().q, self.assembled().v
+
+    def status(self, at_equilibrium: bool) -> np.ndarray:
+        """The status bits of that start (a failed one fails the sample's outputs)."""
+        return self.equilibrium().status if at_equilibrium else self.assembled().status

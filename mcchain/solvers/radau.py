@@ -68,6 +68,9 @@ class RadauRun(Protocol):
     contact_history: np.ndarray | None
     contact_summary: np.ndarray | None
     peaks: np.ndarray | None
+    output_values: np.ndarray | None
+
+    def output_args(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
 def run_radau(run: RadauRun, flat: tuple[np.ndarray, ...], singular_pivot: float) -> None:
@@ -177,6 +180,12 @@ class _Sample:
         self.state = np.zeros(kr.NSTATE)
         self.work = (np.zeros(n), np.zeros(n), np.zeros(n, complex))
         self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
+        # [[output]]s: their state, and the signals at the segment's step ends (the hook)
+        from mcchain.kernels.outputs import output_state
+
+        self.spec, self.data, _values = run.output_args()
+        self.ot, self.oscratch = output_state(self.km, self.spec.shape[0])
+        self.step_signals: list[tuple[float, np.ndarray, np.ndarray]] = []
 
     # -- the right-hand side and the step hook ---------------------------------------------
     def accelerations(self, t: float, y: np.ndarray) -> float:
@@ -241,6 +250,8 @@ class _Sample:
 
         cl, cst, step = self.cl, self.cst, self.last_step
         self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
+        if self.spec.shape[0]:
+            self.step_signals.append((t, *self.signals(t, y, evaluate=False)))
         self.step_penetration.append(np.where(self.in_contact(), cst[:, cl.PEN], math.nan))
         ready = [self.reseat_margin(j, t, y, evaluate=False) > 0.0 for j in range(len(self.joints))]
         for j in range(len(self.joints)):
@@ -256,6 +267,37 @@ class _Sample:
                     else float(brentq(margin, t_old, t, xtol=EVENT_XTOL, rtol=EVENT_XTOL))
                 )  # fmt: skip
         return 1.0
+
+    def signals(
+        self, t: float, y: np.ndarray, evaluate: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The ``[[output]]``s' signals and rates at (t, y) (``evaluate`` False: from the last
+        evaluation, there), in the present modes."""
+        from mcchain.kernels.outputs import output_values_at
+
+        if evaluate:
+            self.accelerations(t, y)
+        q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
+        f, r = output_values_at(
+            self.km, self.i, self.spec, self.data, q, v, self.qdd, self.lam, self.cst,
+            self.oscratch,
+        )  # fmt: skip
+        return f.copy(), r.copy()
+
+    def segment_outputs(self, dense: _Dense, clipped: bool) -> None:
+        """Feed the ``[[output]]``s the segment's step ends (``clipped``: the last one at its
+        event, evaluated on the dense output), in its modes."""
+        from mcchain.kernels.outputs import outputs_feed
+
+        points = self.step_signals
+        self.step_signals = []
+        if not points:
+            return
+        if clipped:
+            stop = float(dense.ts[-1])
+            points[-1] = (stop, *self.signals(stop, dense(stop)))
+        for t, f, r in points:
+            outputs_feed(self.i, self.ot, self.spec, self.data, t, f, r)
 
     def reseat_margin(self, j: int, t: float, y: np.ndarray, evaluate: bool = True) -> float:
         """:func:`mcchain.kernels.clearance.reseat_margin` of contact-law joint ``j`` at
@@ -441,6 +483,9 @@ class _Sample:
         nan_history(i, written, *self.flat)
         assert run.peaks is not None
         run.peaks[i] = np.nan if fail_bit else self.peaks
+        from mcchain.kernels.outputs import outputs_finish
+
+        outputs_finish(i, bool(fail_bit), self.ot, self.spec, self.data, run.output_args()[2])
         finish_contact(self.km, i, int(run.status[i]), written, cst, *self.contact, run.peaks)
 
     def segment(self, t: float, y: np.ndarray, written: int) -> _Segment:
@@ -464,6 +509,7 @@ class _Sample:
             return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
         self.last_step = None
         self.step_penetration = []
+        self.step_signals = []
         g = [event(t, y) for event in events]
         run.steps[i] -= 1  # the hook's call at the segment's start
         dense = _Dense(t)
@@ -502,10 +548,12 @@ class _Sample:
             if found is not None:
                 dense.clip(stop)
                 self.segment_peaks(dense, clipped=True)
+                self.segment_outputs(dense, clipped=True)
                 y_stop = _Dense.piece(stop, step)
                 return _Segment(written, 0, math.nan, kinds[found[1] - 1], stop, y_stop)
         if dense.pieces:  # the segment's peaks, in its modes
             self.segment_peaks(dense, clipped=False)
+            self.segment_outputs(dense, clipped=False)
         return _Segment(written, 0, math.nan)
 
     def write(self, it: int, t: float, y: np.ndarray) -> float:

@@ -149,11 +149,24 @@ class _Run:
     # Continuous peaks per sample (sample, njoint + ndriver): |joint force| of each joint, then
     # |λ| of each driver (mcchain.kernels.peaks), every method; NaN for a failed sample.
     peaks: np.ndarray | None = None
+    # [[output]]s (mcchain.solvers.output_plan.OutputPlan; an empty one without) and their
+    # values (sample, nout), every method.
+    plan: Any = None
+    output_values: np.ndarray | None = None
 
     @property
     def groups(self) -> int:
         """Lane groups of the lane kernels: ``lanes`` samples each, the last one short."""
         return -(-self.model.nsample // self.lanes)
+
+    def output_args(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ``[[output]]`` arrays the loop kernels take: spec, data and the values."""
+        assert self.plan is not None and self.output_values is not None
+        return self.plan.spec, np.ascontiguousarray(self.plan.data), self.output_values
+
+    def lane_output_args(self) -> tuple[np.ndarray, ...]:
+        """The ``[[output]]`` arrays the lane kernels take after the peaks (none without)."""
+        return self.output_args()[1:] if self.plan is not None and self.plan.names else ()
 
     def contact_args(self) -> tuple[np.ndarray, ...]:
         """The contact arrays the lane kernels take after the histories (none without)."""
@@ -169,7 +182,7 @@ def _lane_setup(run: _Run, variant: str) -> tuple[Any, np.ndarray, np.ndarray, n
     from mcchain.codegen.topology import Topology, pack_parameters
 
     topo = Topology.from_model(run.model)
-    module = lane_kernels(topo, variant)
+    module = lane_kernels(topo, variant, run.plan.signature if run.plan is not None else ())
     P = pack_parameters(run.model, topo)
     Q0 = np.ascontiguousarray(run.q.T)
     V0 = np.ascontiguousarray(run.v.T)
@@ -194,7 +207,8 @@ def _run_erk(run: _Run, project: bool) -> None:
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
-        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+        run.peaks, *run.lane_output_args(), run.status, run.t_div, run.t_sing, run.t_cl,
+        min_block=1,
     )  # fmt: skip
 
 
@@ -224,7 +238,7 @@ def _run_rk4_loop(run: _Run) -> None:
         *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
-        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+        run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
 
 
@@ -253,8 +267,8 @@ def _run_rk45(run: _Run) -> None:
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
-        *run.contact_args(), run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
-        run.rejected_steps, run.evaluations, min_block=1,
+        *run.contact_args(), run.peaks, *run.lane_output_args(), run.status, run.t_div,
+        run.t_sing, run.t_cl, run.steps, run.rejected_steps, run.evaluations, min_block=1,
     )  # fmt: skip
 
 
@@ -281,8 +295,8 @@ def _run_generalized_alpha(run: _Run) -> None:
         coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
         SINGULAR_PIVOT, s.max_newton,
         *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
-        run.peaks, run.status, run.t_div, run.t_sing, run.t_cl, run.steps, run.evaluations,
-        min_block=1,
+        run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
+        run.evaluations, min_block=1,
     )  # fmt: skip
 
 
@@ -388,6 +402,7 @@ def simulate(
     status: np.ndarray | None = None,
     lanes: int | None = None,
     diagnostics: bool = False,
+    outputs: Any = None,
 ) -> dict[str, np.ndarray]:
     """Integrate every sample of ``model`` as ``sim`` (the ``[simulate]`` section) says.
 
@@ -417,6 +432,9 @@ def simulate(
             (the start's index-1 solve) + one residual per Newton iteration (+ 1: the
             index-1 solve after a last step shortened to land on t_end). Samples failed
             on entry: all 0 (radau's ``rejected_steps`` -1).
+        outputs: the ``[[output]]``s to track (:class:`mcchain.solvers.output_plan.OutputPlan`,
+            for this model: with a relative one, the model carries its ideal copy); their
+            values are returned as ``output_values`` (sample, nout), NaN for a failed sample.
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
@@ -463,6 +481,10 @@ def simulate(
         run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
         run.contact_summary = np.full((n, len(CONTACT_SUMMARY) * ncj), np.nan)
     run.peaks = np.full((n, model.njoint + model.ndriver), np.nan)
+    from mcchain.solvers.output_plan import empty_plan
+
+    run.plan = empty_plan(n) if outputs is None else outputs
+    run.output_values = np.full((n, len(run.plan.names)), np.nan)
     if n:
         METHODS[settings.method].run(run)
     result = {"time": time, **out, **_peak_outputs(model, run.peaks)}
@@ -475,6 +497,8 @@ def simulate(
         ]
     if ncj:
         result.update(_contact_outputs(run, history_dtype))
+    if outputs is not None:
+        result["output_values"] = run.output_values
     result["status"] = run.status
     result["diverged_time"] = run.t_div
     result["singular_time"] = run.t_sing

@@ -1,0 +1,204 @@
+"""The lanes' ``[[output]]``s: the scalar per-lane code that
+:func:`mcchain.codegen.generate.generate_source` puts into the templates' ``@@outputs_*``
+blocks, and the reduction functions it copies into the generated module.
+
+At every accepted state (the fixed step: each step's start, with the first stage's q̈ and
+λ; the adaptive step: each accepted state, with the last stage's) each output's signal and
+rate are computed from the lane's rows — a body's quantity by
+:func:`mcchain.kernels.outputs.body_signal` inlined (with the lane's own sine and cosine),
+a joint's from the emitter's outputs (its force, normal force) or its Φ̇ (a penetration's
+rate), a driver's from λ — and fed to the same reduction the loop kernels run
+(:mod:`mcchain.kernels.outputs`, copied). A scene without outputs gets empty blocks: its
+text, and so its kernels, are those of a build without this module.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+from mcchain.codegen.emitter import Emitter, sincos_code
+from mcchain.codegen.layout import Layout
+from mcchain.codegen.topology import Topology
+from mcchain.codes import (
+    OUTPUT_ANGULAR_VELOCITY,
+    OUTPUT_CONTACT_FORCE,
+    OUTPUT_JOINT_FORCE,
+    OUTPUT_PENETRATION,
+    OUTPUT_WIDTH,
+)
+
+OUTPUT_KERNELS = "mcchain.kernels.outputs"
+"""The module whose functions define the outputs for the loop kernels and the lanes."""
+OUTPUT_BLOCKS = ("outputs_setup", "outputs_c", "outputs_feed", "outputs_finish")
+Signature = tuple[tuple[int, ...], ...]
+"""The outputs' structure (:attr:`mcchain.solvers.outputs.OutputPlan.signature`): per
+output kind, component, item, the ideal copy's item, reduce, with rate."""
+
+
+def output_blocks(topo: Topology, lay: Layout, outputs: Signature) -> dict[str, str]:
+    """The per-lane code of the outputs ``outputs`` (empty blocks without)."""
+    if not outputs:
+        return dict.fromkeys(OUTPUT_BLOCKS, "")
+    at = lay.at
+    base = [f"{(lay.rows['ot'] + OUTPUT_WIDTH * k) * lay.lmax} + l" for k in range(len(outputs))]
+    setup = ["for l in range(nl):"]
+    setup += [f"    outputs_start(W, {b}, {lay.lmax})" for b in base]
+    finish = [
+        "for l in range(nl):",
+        "    dead = (st[l] & FAILBITS) != 0",
+        f"    cnt = {at('otk', 4)}",
+        *(f"    t{x} = {at('otk', i)}" for i, x in enumerate("abcd")),
+        "    row = (s0 + l) % ot_in.shape[0]",
+    ]
+    for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
+        window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4]"
+        finish += [
+            f"    output_last(W, {base[k]}, {lay.lmax}, cnt, ta, tb, tc, td, {float(rate)!r}, "
+            f"{window}, {reduce})",
+            f"    out_ot[s0 + l, {k}] = np.nan if dead else output_value(W, {base[k]}, "
+            f"{lay.lmax}, {reduce})",
+        ]
+    return {
+        "outputs_setup": "\n".join(setup),
+        "outputs_c": _feed(topo, lay, outputs, base, "ts", "kvc", "lamc"),
+        "outputs_feed": _feed(topo, lay, outputs, base, at("tl"), "kv0", "lam"),
+        "outputs_finish": "\n".join(finish),
+    }
+
+
+def _feed(
+    topo: Topology, lay: Layout, outputs: Signature, base: list[str], t: str, acc: str, lam: str
+) -> str:
+    """Feed every output at the lane's state (rows q, v; accelerations in rows ``acc``,
+    multipliers in rows ``lam``) at time ``t``, unless ``t`` is not after the last fed."""
+    at = lay.at
+    em = Emitter(topo)
+    cj = {k: j for j, k in enumerate(topo.contact_joints)}
+    em.contact_source(lambda name, k: at(name, cj[k]))
+    em.load_params(lambda k: at("P", k))
+    em.emit(
+        f"tf = {t}",
+        "row = (s0 + l) % ot_in.shape[0]",
+        *(f"q{i} = {at('q', i)}" for i in range(topo.ndof)),
+        *(f"v{i} = {at('v', i)}" for i in range(topo.ndof)),
+        *(f"oa{i} = {at(acc, i)}" for i in range(topo.ndof)),
+        *(f"lam{r} = {at(lam, r)}" for r in range(topo.ncon)),
+    )
+    kinds = {kind for kind, *_ in outputs}
+    if kinds & {OUTPUT_JOINT_FORCE, OUTPUT_CONTACT_FORCE, OUTPUT_PENETRATION}:
+        em.outputs(t="tf")  # joint forces jfx, jfy, normal forces cf (and their geometry)
+        if OUTPUT_PENETRATION in kinds:
+            em.constraint_values(t="tf", v="v")  # Φ̇ of a clearance row: δ̇
+    angles: set[int] = set()
+    for k, (kind, component, item, ref, _reduce, _rate) in enumerate(outputs):
+        values = []
+        for tag, index in (("m", item), ("r", ref)):
+            if index < 0:
+                continue
+            if kind <= OUTPUT_ANGULAR_VELOCITY and index not in angles:
+                angles.add(index)
+                em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
+                                     f"o{index}"))  # fmt: skip
+            values.append(_signal(em, topo, kind, component if ref < 0 or component < 2 else -2,
+                                  index, k, f"{tag}{k}"))  # fmt: skip
+        if ref < 0:
+            (f, r) = values[0]
+        elif component < 2:
+            f, r = f"({values[0][0]}) - ({values[1][0]})", f"({values[0][1]}) - ({values[1][1]})"
+        else:  # the magnitude of the difference of the two vectors
+            (fx1, fy1, rx1, ry1), (fx2, fy2, rx2, ry2) = values
+            arguments = [f"({fx1}) - ({fx2})", f"({fy1}) - ({fy2})", f"({rx1}) - ({rx2})",
+                         f"({ry1}) - ({ry2})", "2.0"]  # fmt: skip
+            f, r = em.kernel(OUTPUT_KERNELS, "vector_component", arguments, f"_d{k}")
+        em.emit(f"of{k} = {f}", f"or{k} = {r}")
+    lines = em.take(0).splitlines()
+    feeds = []
+    for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
+        window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4], {reduce}"
+        if rate:
+            feeds.append(
+                f"hermite_feed(W, {base[k]}, {lay.lmax}, cnt, td, tf, of{k}, or{k}, {window})"
+            )
+        else:
+            feeds.append(
+                f"cubic_feed(W, {base[k]}, {lay.lmax}, cnt, tb, tc, td, tf, of{k}, {window})"
+            )
+    body = [
+        f"cnt = {at('otk', 4)}",
+        f"if cnt == 0.0 or {t} > {at('otk', 3)}:",
+        *(f"    t{x} = {at('otk', i + 1)}" for i, x in enumerate("bcd")),
+        *("    " + line for line in lines),
+        *("    " + line for line in feeds),
+        f"    {at('otk', 0)} = tb",
+        f"    {at('otk', 1)} = tc",
+        f"    {at('otk', 2)} = td",
+        f"    {at('otk', 3)} = tf",
+        f"    {at('otk', 4)} = min(cnt + 1.0, 4.0)",
+    ]
+    return "\n".join(body)
+
+
+def _signal(
+    em: Emitter, topo: Topology, kind: int, component: int, index: int, k: int, tag: str
+) -> tuple[str, ...]:
+    """The expressions of one item's quantity (and its rate): (f, r), or with ``component``
+    −2 the vector's (fx, fy, rx, ry) (a difference's magnitude is taken after)."""
+    if kind <= OUTPUT_ANGULAR_VELOCITY:
+        i = 3 * index
+        state = [f"q{i}", f"q{i + 1}", f"q{i + 2}", f"v{i}", f"v{i + 1}", f"v{i + 2}",
+                 f"oa{i}", f"oa{i + 1}", f"oa{i + 2}"]  # fmt: skip
+        point = [f"ot_in[row, {k}, 0]", f"ot_in[row, {k}, 1]"]
+        trig = [f"ocs{index}", f"osn{index}"]
+        if component == -2:
+            x = em.kernel(OUTPUT_KERNELS, "body_signal", [str(kind), "0", *trig, *state, *point],
+                          f"_x{tag}")  # fmt: skip
+            y = em.kernel(OUTPUT_KERNELS, "body_signal", [str(kind), "1", *trig, *state, *point],
+                          f"_y{tag}")  # fmt: skip
+            return x[0], y[0], x[1], y[1]
+        arguments = [str(kind), str(component), *trig, *state, *point]
+        return tuple(em.kernel(OUTPUT_KERNELS, "body_signal", arguments, f"_{tag}"))
+    if kind == OUTPUT_JOINT_FORCE:
+        if component == -2:
+            return f"jfx{index}", f"jfy{index}", "0.0", "0.0"
+        arguments = [f"jfx{index}", f"jfy{index}", "0.0", "0.0", str(component)]
+        value, _rate = em.kernel(OUTPUT_KERNELS, "vector_component", arguments, f"_{tag}")
+        return value, "math.nan"
+    if kind == OUTPUT_CONTACT_FORCE:
+        return f"cf{index}", "math.nan"
+    if kind == OUTPUT_PENETRATION:
+        return f"rho{index} - p_cl{index}", f"phid{topo.joint_row[index]}"
+    return f"-lam{topo.driver_row[index]}", "math.nan"
+
+
+def output_functions(with_hermite: bool) -> str:
+    """The source of the reduction functions of :mod:`mcchain.kernels.outputs` (and its
+    constants) copied into the generated module (for the reason of
+    :func:`mcchain.codegen.generate._contact_functions`); ``with_hermite``: also the
+    Hermite interpolant, which the contact functions do not bring."""
+    from mcchain.kernels import contact, outputs
+
+    names = ("FA", "FB", "FC", "FD", "RD", "HI", "LO", "S1", "S2", "CROSS", "SPAN")
+    constants = [f"{name} = {getattr(outputs, name)!r}" for name in names]
+    constants += [f"{name} = {getattr(outputs, name)!r}" for name in
+                  ("GL_X0", "GL_X1", "GL_W0", "GL_W1")]  # fmt: skip
+    constants.append(f"OUTPUT_WIDTH = {OUTPUT_WIDTH!r}")
+    parts = ["\n".join(constants)]
+    kernels = [contact._hermite] if with_hermite else []
+    kernels += [
+        outputs.outputs_start,
+        outputs._crossing,
+        outputs.hermite_window,
+        outputs.hermite_feed,
+        outputs._newton_slopes,
+        outputs.cubic_window,
+        outputs.cubic_feed,
+        outputs.output_last,
+        outputs.output_value,
+    ]
+    for kernel in kernels:
+        source = inspect.getsource(kernel.py_func)
+        parts.append("@njit(**JIT)\n" + source[source.index("def ") :])
+    return "\n\n".join(parts)
+
+
+__all__ = ["OUTPUT_BLOCKS", "Signature", "output_blocks", "output_functions"]
