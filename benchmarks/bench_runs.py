@@ -29,15 +29,15 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from mcchain import execution, runs  # noqa: E402
 from mcchain.ensemble.io import list_parts, merge_parts  # noqa: E402
+from mcchain.runner import plan, runs  # noqa: E402
 
 FOURBAR = REPO / "configs" / "fourbar-clearance.toml"
 
 
 def _run(scene: Path, folder: Path, args: argparse.Namespace, dask: str | None) -> dict:
     t0 = time.perf_counter()
-    result = execution.start_run(
+    result = plan.start_run(
         scene,
         samples=args.samples,
         chunk_size=args.chunk_size,

@@ -11,7 +11,7 @@ row reuses the caches the rows above it filled, as a user's session would:
 
 1. the Quick start's main job (``configs/clearance-sweep.toml``), cold, then warm. A cold
    statics run may run its kernels interpreted while a background process compiles them
-   (``mcchain.first_run``): the row "kernels cached" is the time from the cold run's start
+   (``mcchain.compiled.first_run``): the row "kernels cached" is the time from the cold run's start
    until that process is done, and every row waits for it before the next starts;
 2. the first statics run of another joint mix (the ideal double pendulum, no simulation);
 3. a new simulation topology each: the double pendulum (rk4), the four-bar with its
@@ -96,7 +96,7 @@ def _scenes(tree: Path, folder: Path, quick: bool) -> dict[str, list[str]]:
 
 def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, float, str]:
     """Seconds of the command, seconds until the kernels it compiles are in the cache (a
-    background compile included: mcchain.first_run), and its output."""
+    background compile included: mcchain.compiled.first_run), and its output."""
     env = dict(os.environ)
     env.update(
         PYTHONPATH=str(tree),
@@ -114,7 +114,10 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
     seconds = time.perf_counter() - t0
     if code != 0:
         raise SystemExit(f"{' '.join(args)} failed in {tree}:\n{err[-2000:]}")
-    wait = "from mcchain.compile_ahead import wait_background as w; w()"  # older: no such
+    wait = (  # trees before issue 36: mcchain.compile_ahead; older ones: no such
+        "try:\n    from mcchain.compiled.background import wait_background as w\n"
+        "except ImportError:\n    from mcchain.compile_ahead import wait_background as w\nw()"
+    )
     subprocess.run([sys.executable, "-c", wait], env=env, capture_output=True)
     return seconds, time.perf_counter() - t0, out + err
 
@@ -122,7 +125,7 @@ def _time(tree: Path, cache: Path, work: Path, args: list[str]) -> tuple[float, 
 def _in_terminal(cmd: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, str, str]:
     """Run ``cmd`` with its stdin and stderr on a pseudo-terminal, as a user at a terminal
     runs it (a cold first run starts its background compile only there:
-    ``mcchain.compile_ahead.why_not_background``); its exit code, stdout and stderr."""
+    ``mcchain.compiled.background.why_not_background``); its exit code, stdout and stderr."""
     import pty
     import threading
 

@@ -23,9 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mcchain import execution, open_run
+from mcchain import open_run
 from mcchain.decision.rare import rare_run
 from mcchain.decision.stats import clopper_pearson
+from mcchain.runner import plan
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "results" / "subset"
@@ -58,7 +59,7 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="bench-subset-"))
     pilot_scene = work / "pilot.toml"
     pilot_scene.write_text(scene_text(None), encoding="utf-8")
-    pilot = execution.start_run(
+    pilot = plan.start_run(
         pilot_scene, samples=2000, seed=1, run_dir=work / "pilot", progress=False
     ).folder
     with open_run(pilot) as ds:
@@ -67,9 +68,7 @@ def main() -> int:
     scene.write_text(scene_text(limit), encoding="utf-8")
 
     t0 = time.perf_counter()
-    mc = execution.start_run(
-        scene, samples=args.mc, seed=2, run_dir=work / "mc", progress=False
-    ).folder
+    mc = plan.start_run(scene, samples=args.mc, seed=2, run_dir=work / "mc", progress=False).folder
     mc_seconds = time.perf_counter() - t0
     with open_run(mc) as ds:
         failures = int(np.sum(ds["requirement_met"].values[:, 0] == 0))

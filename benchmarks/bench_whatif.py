@@ -27,9 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mcchain import execution, open_run
+from mcchain import open_run
 from mcchain.decision.stats import one_sided_bounds
 from mcchain.decision.whatif import whatifs
+from mcchain.runner import plan
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "results" / "whatif"
@@ -71,7 +72,7 @@ def scene_text(limit: float, vary: dict[str, str] | None = None) -> str:
 def run(folder: Path, name: str, text: str, samples: int, seed: int) -> tuple[Path, float]:
     (folder / f"{name}.toml").write_text(text, encoding="utf-8")
     t0 = time.perf_counter()
-    result = execution.start_run(
+    result = plan.start_run(
         folder / f"{name}.toml", samples=samples, seed=seed, run_dir=folder / name, progress=False
     )
     return result.folder, time.perf_counter() - t0

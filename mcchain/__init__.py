@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
 def open_run(run: str | os.PathLike[str]) -> xarray.Dataset:
     """The ensemble of a run folder (path, or id under ``runs/``) as a lazy Dataset."""
-    from mcchain.runs import open_run as _open_run
+    from mcchain.runner.runs import open_run as _open_run
 
     return _open_run(os.fspath(run))
 

@@ -26,7 +26,7 @@ settings.register_profile("dev", print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
 # A ``mcchain run`` the tests start as a process keeps the compiled kernels, whatever the
-# cache holds: the interpreted first run (mcchain.first_run) has tests of its own.
+# cache holds: the interpreted first run (mcchain.compiled.first_run) has tests of its own.
 os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 
 

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 from numba import config
 
-from mcchain import caches
+from mcchain import folders
 from mcchain.codegen.cache import cache_dir
+from mcchain.compiled import caches
+from mcchain.kernels.config import ensure_numba_cache
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -27,22 +29,22 @@ def blocked(tmp_path: Path) -> Path:
 
 @pytest.fixture(autouse=True)
 def fresh_warnings(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(caches, "_warned", set())
+    monkeypatch.setattr(folders, "_warned", set())
 
 
 def test_writable__a_folder_under_a_file_is_not(blocked: Path, tmp_path: Path) -> None:
-    assert not caches.writable(blocked)
-    assert caches.writable(tmp_path / "new" / "folder")
+    assert not folders.writable(blocked)
+    assert folders.writable(tmp_path / "new" / "folder")
 
 
 def test_numba_cache__unwritable_dir_moves_to_temp_with_one_warning(
     blocked: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setattr(config, "CACHE_DIR", str(blocked))
-    where = caches.ensure_numba_cache()
-    caches.ensure_numba_cache()  # warned once only
+    where = ensure_numba_cache()
+    ensure_numba_cache()  # warned once only
     err = capsys.readouterr().err.splitlines()
-    assert where == config.CACHE_DIR == str(caches.temporary_cache("numba"))
+    assert where == config.CACHE_DIR == str(folders.temporary_cache("numba"))
     assert len(err) == 1
     assert err[0].startswith(f"mcchain: warning: NUMBA_CACHE_DIR {blocked} cannot be written")
 
@@ -51,7 +53,7 @@ def test_numba_cache__writable_dir_is_kept_silently(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "numba"))
-    assert caches.ensure_numba_cache() == str(tmp_path / "numba")
+    assert ensure_numba_cache() == str(tmp_path / "numba")
     assert capsys.readouterr().err == ""
 
 
@@ -59,7 +61,7 @@ def test_generated_cache__unwritable_dir_moves_to_temp_with_one_warning(
     blocked: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(blocked))
-    assert cache_dir() == caches.temporary_cache("generated")
+    assert cache_dir() == folders.temporary_cache("generated")
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "MCCHAIN_CACHE_DIR" in err[0]
 
@@ -128,15 +130,15 @@ def own_tmp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     folder = tmp_path / "tmp"
     folder.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(folder))
-    monkeypatch.setattr(caches, "_fresh", {})
+    monkeypatch.setattr(folders, "_fresh", {})
     return folder
 
 
 def test_temporary_cache__made_private(own_tmp: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    folder = caches.temporary_cache("native")
+    folder = folders.temporary_cache("native")
     assert folder == own_tmp / f"mcchain-native-{os.getuid()}"
     assert folder.stat().st_mode & 0o777 == 0o700
-    assert caches.temporary_cache("native") == folder and capsys.readouterr().err == ""
+    assert folders.temporary_cache("native") == folder and capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("other", ["mode", "owner", "link"])
@@ -158,11 +160,11 @@ def test_temporary_cache__a_folder_made_before_by_another_user_is_not_used(
             pytest.skip("only root can give a folder to another user")  # "mode" covers it
         os.chown(planted, 65534, 65534)
     (planted / "mcchain_gen-accel-0.bin").write_bytes(b"planted")
-    folder = caches.temporary_cache("native")
+    folder = folders.temporary_cache("native")
     assert folder != planted and folder.parent == own_tmp
     assert folder.name.startswith(f"mcchain-native-{os.getuid()}-")
     assert folder.stat().st_mode & 0o777 == 0o700 and not any(folder.iterdir())
-    assert caches.temporary_cache("native") == folder  # the same one for the process
+    assert folders.temporary_cache("native") == folder  # the same one for the process
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and str(planted) in err[0] and "is not private" in err[0]
     reason = {"mode": "mode 0777", "owner": "owned by uid 65534", "link": "symbolic link"}
@@ -198,7 +200,7 @@ def test_cache_warm__the_scenes_run_then_compiles_nothing(tmp_path: Path) -> Non
     from the cache (counted), none compiled. The run records what compiled its kernels."""
     import json
 
-    from mcchain.runs import read_record
+    from mcchain.runner.runs import read_record
 
     scene = REPO / "configs" / "double-pendulum.toml"
     env = {**os.environ, "PYTHONPATH": str(REPO), "MCCHAIN_CACHE_DIR": str(tmp_path / "cache")}

@@ -13,7 +13,7 @@ import pytest
 from test_cli_commands import CLEARANCE_BAR, Ran, assert_usage_error
 from test_runs_support import fake_loader, fake_solve, write_fake_scene
 
-from mcchain import execution
+from mcchain.runner import plan
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:
@@ -34,9 +34,7 @@ def failed_fake_run(tmp_path: Path) -> Path:
 
     scene = write_fake_scene(tmp_path / "s.toml", count=30)
     with pytest.raises(FloatingPointError):
-        execution.start_run(
-            scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve
-        )
+        plan.start_run(scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve)
     (folder,) = (tmp_path / "runs").iterdir()
     return folder
 
@@ -56,9 +54,9 @@ def test_cli_run__missing_dask_names_the_extra_to_install(
 def test_cli_run__unreachable_scheduler_is_one_line_and_leaves_no_folder(
     mcchain: Callable[..., Ran], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from mcchain import parallel
+    from mcchain.runner import executors
 
-    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 0.5)  # port 1 refuses at once anyway
+    monkeypatch.setattr(executors, "CONNECT_TIMEOUT", 0.5)  # port 1 refuses at once anyway
     address = "tcp://127.0.0.1:1"
     proc = mcchain("run", CLEARANCE_BAR, "--dask", address, "--out", "runs", cwd=tmp_path)
     assert_usage_error(proc, f"--dask: no Dask scheduler answers at {address}")
@@ -68,9 +66,9 @@ def test_cli_run__unreachable_scheduler_is_one_line_and_leaves_no_folder(
 def test_cli_resume__unreachable_scheduler_leaves_the_run_as_it_was(
     mcchain: Callable[..., Ran], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from mcchain import parallel
+    from mcchain.runner import executors
 
-    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT", 0.5)
+    monkeypatch.setattr(executors, "CONNECT_TIMEOUT", 0.5)
     folder = failed_fake_run(tmp_path)
     before = snapshot(folder)
     proc = mcchain("run", "--resume", folder, "--dask", "tcp://127.0.0.1:1", cwd=tmp_path)
@@ -81,7 +79,7 @@ def test_cli_resume__unreachable_scheduler_leaves_the_run_as_it_was(
 def completed_fake_run(tmp_path: Path, count: int = 12) -> Path:
     """A completed fake run of ``count`` samples in chunks of 5."""
     scene = write_fake_scene(tmp_path / "s.toml", count=count, steps=4)
-    return execution.start_run(
+    return plan.start_run(
         scene,
         out=tmp_path / "runs",
         chunk_size=5,

@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 from test_runs_support import REPO, TESTS, fake_loader, fake_solve, write_fake_scene
 
-from mcchain import cli, execution
+from mcchain import cli
+from mcchain.runner import plan
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
 
@@ -195,7 +196,7 @@ def test_cli_validate__four_bar_rows_and_driver(
 def test_cli_runs__lists_the_runs_of_a_folder(mcchain: Callable[..., Ran], tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", name="listed", count=9)
     made = [
-        execution.start_run(
+        plan.start_run(
             scene, out=tmp_path / "out", loader=fake_loader, solve=fake_solve, progress=False
         ).folder
         for _ in range(2)
@@ -229,7 +230,7 @@ def test_cli_runs__does_not_import_numpy_numba_or_xarray() -> None:
 def test_cli_show__parses_and_calls_show_run(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from mcchain.viz import playback
+    from mcchain.viz import show
 
     calls: list[tuple[Any, ...]] = []
 
@@ -237,7 +238,7 @@ def test_cli_show__parses_and_calls_show_run(
         calls.append((run, samples, options))
         return [*samples, 9]
 
-    monkeypatch.setattr(playback, "show_run", show_run)
+    monkeypatch.setattr(show, "show_run", show_run)
     argv = ["show", "RUN", "--samples", "3,0,3", "--worst", "energy:1", "--save", "x.rrd"]
     assert cli.main(argv) == 0
     assert capsys.readouterr().out == "samples 3,0,9\nx.rrd\n"

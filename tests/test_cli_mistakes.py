@@ -15,7 +15,7 @@ import pytest
 from test_cli_commands import assert_scene_refused, assert_usage_error, in_process
 
 from mcchain.errors import SceneError
-from mcchain.runs import read_record
+from mcchain.runner.runs import read_record
 from mcchain.testing.factory import clearance_bar_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -117,7 +117,7 @@ TB = 10**12
 @pytest.fixture(scope="module")
 def completed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An uninterrupted run of :data:`SWEEP` with :data:`RUN_ARGS`."""
-    from mcchain.execution import start_run
+    from mcchain.runner.plan import start_run
 
     out = tmp_path_factory.mktemp("reference")
     return start_run(SWEEP, samples=300, chunk_size=100, out=out, progress=False).folder
@@ -136,8 +136,8 @@ class FillingDisk:
     ``free`` bytes (1 TB until full)."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch, free: int = 40_000) -> None:
-        from mcchain import resources, runs
         from mcchain.ensemble import io
+        from mcchain.runner import resources, runs
 
         self.full = False
         self.free_when_full = free

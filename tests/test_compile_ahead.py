@@ -1,4 +1,4 @@
-"""Compile ahead (mcchain.compile_ahead): on a cold cache a second process compiles the
+"""Compile ahead (mcchain.compiled.ahead): on a cold cache a second process compiles the
 analyses while the scene check compiles assembly; it changes no value."""
 
 from __future__ import annotations
@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 from test_runs_support import REPO
 
-from mcchain import compile_ahead, execution, open_run
-from mcchain.compile_ahead import CompileAhead
-from mcchain.parallel import compile_notice
+from mcchain import open_run
+from mcchain.compiled import ahead
+from mcchain.compiled.ahead import CompileAhead
+from mcchain.compiled.ready import compile_notice
+from mcchain.runner import plan
 
 SWEEP = REPO / "configs" / "clearance-sweep.toml"
 
@@ -23,16 +25,16 @@ SWEEP = REPO / "configs" / "clearance-sweep.toml"
 def test_start__no_helper_when_assembly_is_cached_on_one_core_or_switched_off(monkeypatch):
     """Warm: nothing. Cold on one core or switched off: no process (the notice still comes
     at the start); waiting and stopping are no-ops."""
-    monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: True)
+    monkeypatch.setattr(ahead, "assembly_is_cached", lambda: True)
     assert CompileAhead.start(SWEEP, 0) is None
-    monkeypatch.setattr(compile_ahead, "assembly_is_cached", lambda: False)
-    monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
+    monkeypatch.setattr(ahead, "assembly_is_cached", lambda: False)
+    monkeypatch.setattr(ahead, "available_cores", lambda: 1)
     alone = CompileAhead.start(SWEEP, 0)
     assert alone is not None and alone.process is None
     alone.wait()
     alone.stop()
-    monkeypatch.setattr(compile_ahead, "_cores", lambda: 2)
-    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
+    monkeypatch.setattr(ahead, "available_cores", lambda: 2)
+    monkeypatch.setenv(ahead.ENV_SWITCH, "0")
     off = CompileAhead.start(SWEEP, 0)
     assert off is not None and off.process is None
 
@@ -47,7 +49,7 @@ def test_compile_for__solves_without_assembling(monkeypatch, config):
         raise AssertionError("the helper assembled")
 
     monkeypatch.setattr(solvers, "assemble", no_assembly)
-    compile_ahead.compile_for(REPO / "configs" / f"{config}.toml", 0)
+    ahead.compile_for(REPO / "configs" / f"{config}.toml", 0)
 
 
 def test_compile_for__resolves_auto_kernels_for_the_runs_count(monkeypatch, tmp_path):
@@ -63,9 +65,9 @@ def test_compile_for__resolves_auto_kernels_for_the_runs_count(monkeypatch, tmp_
     )
     text = straight_chain_text([0.3] * 60, [1.0] * 60)  # 180 coordinates
     path = write_scene(tmp_path, text + "[simulate]\nt_end = 0.05\ndt = 1e-4\n", "chain60.toml")
-    compile_ahead.compile_for(path, 0, 4)
-    compile_ahead.compile_for(path, 0, 2000)
-    compile_ahead.compile_for(path, 0)  # the scene's count: 1
+    ahead.compile_for(path, 0, 4)
+    ahead.compile_for(path, 0, 2000)
+    ahead.compile_for(path, 0)  # the scene's count: 1
     assert taken == ["loop", "lanes", "loop"]
 
 
@@ -86,10 +88,10 @@ def test_the_split__helper_without_the_eigen_step_run_process_with_it(monkeypatc
     monkeypatch.setattr(
         statics, "solve_modes", lambda m, eq, **kw: calls.append((m.nsample, eq.q.shape, kw))
     )
-    compile_ahead.compile_modes(model, scene)
+    ahead.compile_modes(model, scene)
     assert calls == [(1, (1, model.ndof), {"shapes": True, "damped": True})]
     fourbar = load_scene(REPO / "configs" / "fourbar-clearance.toml")  # [simulate] only
-    compile_ahead.compile_modes(compile_model(fourbar, nsample=1), fourbar)
+    ahead.compile_modes(compile_model(fourbar, nsample=1), fourbar)
     assert len(calls) == 1
 
 
@@ -110,7 +112,7 @@ def test_cold_run__with_the_helper_gives_the_values_of_a_warm_run(tmp_path: Path
         "PYTHONPATH": str(REPO),
         "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
         "MCCHAIN_CACHE_DIR": str(tmp_path / "mcchain"),
-        compile_ahead.ENV_SWITCH: "1",
+        ahead.ENV_SWITCH: "1",
     }
     command = ["mcchain.cli", "run", str(SWEEP), "--samples", "8", "--quiet"]
     proc = subprocess.run(
@@ -124,7 +126,7 @@ def test_cold_run__with_the_helper_gives_the_values_of_a_warm_run(tmp_path: Path
     two_cores = len(os.sched_getaffinity(0)) >= 2
     assert ("(in two processes)" in proc.stderr) == two_cores
     assert "kernels ready in " in proc.stderr
-    warm = execution.start_run(SWEEP, samples=8, run_dir=tmp_path / "warm", progress=False)
+    warm = plan.start_run(SWEEP, samples=8, run_dir=tmp_path / "warm", progress=False)
     with open_run(tmp_path / "cold") as cold, open_run(warm.folder) as ref:
         for name in ("q_eq", "omega", "mode_shape", "joint_force_eq", "status"):
             np.testing.assert_array_equal(cold[name].values, ref[name].values)

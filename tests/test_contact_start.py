@@ -16,10 +16,9 @@ import numpy as np
 import pytest
 
 from mcchain.contact import MODE_CONTACT, MODE_FREE, MODE_LINK
-from mcchain.job import written_state
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers.simulate import simulate
-from mcchain.solvers.statics import assemble, initial_state_warnings
+from mcchain.solvers.statics import assemble, initial_state_warnings, written_state
 from mcchain.testing.factory import write_scene
 from mcchain.testing.scenes import fourbar_text, journal_tables
 

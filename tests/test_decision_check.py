@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from mcchain import execution, runs
 from mcchain.cli import main
 from mcchain.decision.check import CHECK_COLUMNS, check_run, spread_indices
+from mcchain.runner import plan, runs
 
 pytestmark = pytest.mark.slow  # real solvers
 
@@ -58,7 +58,7 @@ def scene_text(rtol: float = 1e-7, atol: float = 1e-10, requirement: bool = True
 def run_of(folder: Path, name: str, text: str) -> Path:
     scene = folder / f"{name}.toml"
     scene.write_text(text, encoding="utf-8")
-    return execution.start_run(scene, run_dir=folder / name, progress=False).folder
+    return plan.start_run(scene, run_dir=folder / name, progress=False).folder
 
 
 def digest(path: Path) -> str:
@@ -129,9 +129,7 @@ def test_check__refusals_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     static.write_text(
         (REPO / "configs" / "clearance-sweep.toml").read_text(encoding="utf-8"), encoding="utf-8"
     )
-    folder = execution.start_run(
-        static, samples=4, run_dir=tmp_path / "static", progress=False
-    ).folder
+    folder = plan.start_run(static, samples=4, run_dir=tmp_path / "static", progress=False).folder
     for argv, message in [
         (["check", str(folder), "--tighten", "10"], "no [simulate]"),
         (["check", str(folder), "--tighten", "0.5"], "--tighten: must be a number >= 1"),

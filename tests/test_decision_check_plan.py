@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from mcchain import execution, runs
 from mcchain.decision.check import (
     BAND,
     CHECK_COLUMNS,
@@ -30,6 +29,7 @@ from mcchain.decision.check import (
     spread_indices,
 )
 from mcchain.decision.stats import one_sided_bounds, success_run_count, verdict
+from mcchain.runner import plan, runs
 from mcchain.scene.study import Requirement
 from mcchain.status import DIVERGED
 from mcchain.testing.factory import bar_scene_dict, toml_text
@@ -79,7 +79,7 @@ def scene_text() -> str:
 def make_run(tmp_path: Path, fail_above: float | None = None) -> Path:
     scene = tmp_path / "bar.toml"
     scene.write_text(scene_text())
-    return execution.start_run(
+    return plan.start_run(
         scene, run_dir=tmp_path / "run", progress=False, solve=make_solver(fail_above)
     ).folder
 
@@ -216,7 +216,7 @@ def test_check__cli_defaults_and_one_line_refusals(
 ) -> None:
     """``mcchain check RUN`` needs no flag (F = 10, the spread count of
     :func:`spread_count`); bad flags are one line, exit 2, nothing written."""
-    import mcchain.parallel
+    import mcchain.runner.executors
     from mcchain.cli import main
 
     folder = make_run(tmp_path)
@@ -228,7 +228,7 @@ def test_check__cli_defaults_and_one_line_refusals(
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, err
     assert not (folder / "check").exists() and not (folder / "export").exists()
-    monkeypatch.setattr(mcchain.parallel, "default_solve", lambda: make_solver(None))
+    monkeypatch.setattr(mcchain.runner.executors, "default_solve", lambda: make_solver(None))
     assert main(["check", str(folder)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("check: rtol 1e-06 -> 1e-07, atol 1e-08 -> 1e-09 (10x tighter)")
@@ -241,7 +241,7 @@ def test_requirement_tolerance__tighter_only_where_the_scene_writes_none(tmp_pat
     rtol/atol written: the defaults ten times tighter, said in a note and stored in the
     settings; anything written, a fixed-step method or a requirement on statics: as is."""
     from mcchain.decision.tolerance import requirement_tolerance
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
     from mcchain.scene import load_scene_text
     from mcchain.scene.models import Simulate
 

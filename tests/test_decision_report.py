@@ -35,7 +35,7 @@ def test_requirements_png__zero_failure_bins_are_upper_bounds_on_a_log_axis(
     """P(fail) by parameter on a log axis: a bin without a failure is drawn as its one-sided
     upper bound 1 − (1 − C)^(1/n), not as a point at 0; the bound is the success-run figure
     turned around (299 failure-free samples show P(fail) <= 1 % at 95 %: 298.07 rounded up)."""
-    from mcchain.runs import open_run
+    from mcchain.runner.runs import open_run
     from mcchain.viz.report_requirements import requirements_figure
 
     x = np.arange(600.0)

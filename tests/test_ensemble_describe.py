@@ -17,7 +17,7 @@ from mcchain import cli
 from mcchain.ensemble.describe import model_of_values, stored_model
 from mcchain.model import JOINT_CLEARANCE, JOINT_IDEAL, PER_SAMPLE_FIELDS, Model
 from mcchain.scene import compile_model, load_scene_text
-from mcchain.viz import geometry, playback
+from mcchain.viz import geometry, show
 
 MAGNIFY = 100.0
 
@@ -146,7 +146,7 @@ def other_numbers(sample: Any, count: int | None = None, *args: Any, **kwargs: A
 
 def drawn(folder: Path) -> dict[str, np.ndarray]:
     """What ``show`` draws of each sample's mechanism, from the model it rebuilds."""
-    ds, model = playback.open_inputs(folder)
+    ds, model = show.open_inputs(folder)
     out: dict[str, np.ndarray] = {}
     for s in range(NSAMPLE):
         q = ds["q_eq"].sel(sample=s).values[None]
@@ -172,7 +172,7 @@ def test_show__geometry_comes_from_the_stored_parameters(
     assert before.keys() == after.keys()
     for key in before:
         np.testing.assert_array_equal(after[key], before[key], err_msg=key)
-    model = playback.open_inputs(run)[1]
+    model = show.open_inputs(run)[1]
     np.testing.assert_array_equal(model.joint_clearance[:, 0], STORED[:, 0])
     np.testing.assert_array_equal(model.joint_point_b[:, 0, 0], STORED[:, 1])
     np.testing.assert_array_equal(model.spring_point_b[:, 0, 1], STORED[:, 2])

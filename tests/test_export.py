@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """A statics sweep (equilibria, modes) and a short four-bar history."""
-    from mcchain.execution import start_run
+    from mcchain.runner.plan import start_run
 
     out = tmp_path_factory.mktemp("runs")
     statics = start_run(REPO / "configs" / "clearance-sweep.toml", samples=64, out=out,
@@ -102,7 +102,7 @@ def test_export__bad_arguments_are_one_line(runs, tmp_path, monkeypatch, capsys)
 @pytest.fixture(scope="module")
 def contact_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Three samples of the shipped contact sweep (configs/fourbar-contact-sweep.toml)."""
-    from mcchain.execution import start_run
+    from mcchain.runner.plan import start_run
 
     text = (REPO / "configs" / "fourbar-contact-sweep.toml").read_text()
     scene = write_scene(

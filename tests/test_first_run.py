@@ -1,6 +1,6 @@
-"""The first run on a cold cache (mcchain.first_run): a small statics run goes interpreted,
+"""The first run on a cold cache (mcchain.compiled.first_run): a small statics run goes interpreted,
 with the compiled run's ``ensemble.nc`` byte for byte, while a background process compiles
-the kernels for the next runs (mcchain.compile_ahead); the cache is read without numba."""
+the kernels for the next runs (mcchain.compiled.background); the cache is read without numba."""
 
 from __future__ import annotations
 
@@ -16,10 +16,11 @@ import pytest
 from test_cli_commands import in_process
 from test_runs_support import REPO
 
-from mcchain import chunk_execution, compile_ahead, execution, first_run
-from mcchain.caches import kernels_cached, numba_index_folder
+from mcchain.compiled import ahead, background, first_run
+from mcchain.compiled.caches import kernels_cached, numba_index_folder
 from mcchain.errors import SceneError
-from mcchain.runs import read_record
+from mcchain.runner import executors, plan
+from mcchain.runner.runs import read_record
 
 CONFIGS = REPO / "configs"
 
@@ -33,7 +34,7 @@ def _cold_run(config: Path, tmp_path: Path, *args: str) -> subprocess.CompletedP
         "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
         "MCCHAIN_CACHE_DIR": str(tmp_path / "mcchain"),
         first_run.ENV_SWITCH: "1",
-        compile_ahead.ENV_SWITCH: "0",
+        ahead.ENV_SWITCH: "0",
     }
     command = ["-X", "importtime", "-m", "mcchain.cli", "run", str(config), "--quiet", *args]
     return subprocess.run(
@@ -123,7 +124,7 @@ def test_numba_index_folder__each_of_numbas_choices(tmp_path: Path, monkeypatch)
 
     from numba.core import caching, config
 
-    import mcchain.caches
+    import mcchain.compiled.caches
     from mcchain.kernels import assembly
 
     function = assembly.assemble_batch.py_func
@@ -134,9 +135,9 @@ def test_numba_index_folder__each_of_numbas_choices(tmp_path: Path, monkeypatch)
     assert numba_index_folder() == Path(provided)
     monkeypatch.delenv("NUMBA_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "home-cache"))
-    writable = mcchain.caches.writable
+    writable = mcchain.compiled.caches.writable
     monkeypatch.setattr(
-        mcchain.caches,
+        mcchain.compiled.caches,
         "writable",
         lambda folder: "__pycache__" not in str(folder) and writable(folder),
     )
@@ -156,10 +157,10 @@ def test_kernels_cached__an_empty_cache_folder(tmp_path: Path, monkeypatch) -> N
 def _choose(monkeypatch, config: str, *, cached=False, per_sample=1e-3, samples=None):
     """:func:`first_run.choose` with the cache state and the probe's result given, and the
     exec recorded instead of made."""
-    import mcchain.caches
+    import mcchain.compiled.caches
     import mcchain.kernels.config
 
-    monkeypatch.setattr(mcchain.caches, "kernels_cached", lambda names: cached)
+    monkeypatch.setattr(mcchain.compiled.caches, "kernels_cached", lambda names: cached)
     monkeypatch.setattr(mcchain.kernels.config, "interpret_kernels", lambda: True)
     monkeypatch.setattr(first_run, "_probe", lambda scene, seed: per_sample)
 
@@ -247,7 +248,7 @@ def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_
         raise SystemExit(0)
 
     monkeypatch.setattr(first_run, "run_compiled", run_compiled)
-    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
+    monkeypatch.setenv(ahead.ENV_SWITCH, "0")
 
     def solve(model, scene):
         if model.nsample > 1:
@@ -256,14 +257,14 @@ def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_
 
     chosen = first_run.FirstRun(1e-3)
     with pytest.raises(ZeroDivisionError):  # a custom solve is not the interpreted kernels
-        execution.start_run(
+        plan.start_run(
             CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "r",
             progress=False, first_run=chosen, solve=solve,
         )  # fmt: skip
     assert calls == []
-    monkeypatch.setattr(chunk_execution, "_compute", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(executors, "execute", lambda *a, **k: 1 / 0)  # after the folder
     with pytest.raises(SystemExit):
-        execution.start_run(
+        plan.start_run(
             CONFIGS / "clearance-sweep.toml", samples=4, run_dir=tmp_path / "s",
             progress=False, first_run=chosen,
         )  # fmt: skip
@@ -273,7 +274,7 @@ def test_start_run__interpreted_kernels_that_raise_hand_the_run_to_its_compiled_
     bad = tmp_path / "bad.toml"
     bad.write_text("[scene]\nname = 3\n")
     with pytest.raises(SceneError):
-        execution.start_run(bad, run_dir=tmp_path / "t", progress=False, first_run=chosen)
+        plan.start_run(bad, run_dir=tmp_path / "t", progress=False, first_run=chosen)
     assert len(calls) == 1 and not (tmp_path / "t").exists()
 
 
@@ -285,28 +286,28 @@ def test_background_compile__one_at_a_time_detached_and_logged(monkeypatch, tmp_
 
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("PYTHONPATH", str(REPO))
-    monkeypatch.delenv(compile_ahead.ENV_SWITCH, raising=False)
-    lock, log = compile_ahead.background_files()
-    assert not compile_ahead.background_running()
-    compile_ahead.wait_background()  # no lock file yet: nothing to wait for
-    started = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    monkeypatch.delenv(ahead.ENV_SWITCH, raising=False)
+    lock, log = background.background_files()
+    assert not background.background_running()
+    background.wait_background()  # no lock file yet: nothing to wait for
+    started = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert started.startswith("a background process compiles them for the next runs (pid ")
-    assert compile_ahead.background_running()
-    second = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    assert background.background_running()
+    second = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert second == f"a process compiles them already (log: {log})"
-    compile_ahead.wait_background()
-    assert not compile_ahead.background_running()
+    background.wait_background()
+    assert not background.background_running()
     lines = log.read_text().splitlines()
     assert len(lines) == 2 and lines[0].endswith("clearance-bar.toml: compiling")
     assert " done in " in lines[1]
     fd = os.open(lock, os.O_RDWR)
     fcntl.flock(fd, fcntl.LOCK_EX)  # another holder: nothing starts
     try:
-        assert compile_ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5) == second
+        assert background.start_background(CONFIGS / "paper-bar.toml", 0, 5) == second
     finally:
         os.close(fd)
-    monkeypatch.setenv(compile_ahead.ENV_SWITCH, "0")
-    off = compile_ahead.start_background(CONFIGS / "paper-bar.toml", 0, 5)
+    monkeypatch.setenv(ahead.ENV_SWITCH, "0")
+    off = background.start_background(CONFIGS / "paper-bar.toml", 0, 5)
     assert off == "nothing compiles them meanwhile (MCCHAIN_COMPILE_AHEAD=0)"
 
 
@@ -348,13 +349,13 @@ def own_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Path:
 def _write_record(**record) -> None:
     import json
 
-    compile_ahead.background_record_path().write_text(json.dumps(record))
+    background.background_record_path().write_text(json.dumps(record))
 
 
 def test_background__only_interactive_outside_ci_and_schedulers_unless_switched_off(
     own_cache: Path,
 ) -> None:
-    why = compile_ahead.why_not_background
+    why = background.why_not_background
     assert why(environ={}, interactive=True) is None
     assert why(environ={}, interactive=False) == "not started outside an interactive terminal"
     for name in ("CI", "SLURM_JOB_ID", "PBS_JOBID", "LSB_JOBID", "JOB_ID", "FLUX_JOB_ID"):
@@ -362,8 +363,8 @@ def test_background__only_interactive_outside_ci_and_schedulers_unless_switched_
     assert why(environ={name: ""}, interactive=True) is None  # set but empty: not a job
     off = why(opted_out="--no-background-compile", environ={}, interactive=True)
     assert off == "switched off by --no-background-compile"
-    switch = {compile_ahead.ENV_SWITCH: "0"}
-    assert why(environ=switch, interactive=True) == f"{compile_ahead.ENV_SWITCH}=0"
+    switch = {ahead.ENV_SWITCH: "0"}
+    assert why(environ=switch, interactive=True) == f"{ahead.ENV_SWITCH}=0"
     # once per cache: one that finished, failed or was killed is not started again
     for state in ("done", "failed"):
         _write_record(state=state, scene="s.toml", started=0.0)
@@ -379,14 +380,14 @@ def test_background__a_lock_that_fails_means_not_started(own_cache: Path, monkey
     def no_locks(fd, operation):
         raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
 
-    monkeypatch.delenv(compile_ahead.ENV_SWITCH, raising=False)
+    monkeypatch.delenv(ahead.ENV_SWITCH, raising=False)
     monkeypatch.setattr(fcntl, "flock", no_locks)
     popen = []
-    monkeypatch.setattr(compile_ahead.subprocess, "Popen", lambda *a, **k: popen.append(a))
-    lock = compile_ahead.background_files()[0]
-    note = compile_ahead.start_background(CONFIGS / "clearance-bar.toml", None, None)
+    monkeypatch.setattr(background.subprocess, "Popen", lambda *a, **k: popen.append(a))
+    lock = background.background_files()[0]
+    note = background.start_background(CONFIGS / "clearance-bar.toml", None, None)
     assert note == f"nothing compiles them meanwhile (its lock {lock}: No locks available)"
-    assert popen == [] and not compile_ahead.background_running()
+    assert popen == [] and not background.background_running()
 
 
 def test_background__its_failure_is_recorded_and_shown_once_by_the_next_run(
@@ -395,28 +396,28 @@ def test_background__its_failure_is_recorded_and_shown_once_by_the_next_run(
     def broken(*args, **kwargs):
         raise MemoryError("out of memory")
 
-    monkeypatch.setattr(compile_ahead, "_cores", lambda: 1)
-    monkeypatch.setattr(compile_ahead, "compile_for", broken)
-    lock = compile_ahead.background_files()[0]
+    monkeypatch.setattr(background, "available_cores", lambda: 1)
+    monkeypatch.setattr(background, "compile_for", broken)
+    lock = background.background_files()[0]
     fd = os.open(lock, os.O_RDWR | os.O_CREAT)
     import fcntl
 
     fcntl.flock(fd, fcntl.LOCK_EX)  # as the background process holds it
     try:
         with pytest.raises(MemoryError):
-            compile_ahead.compile_in_background(CONFIGS / "clearance-bar.toml", None, None)
+            background.compile_in_background(CONFIGS / "clearance-bar.toml", None, None)
     finally:
         os.close(fd)
-    record = compile_ahead.read_background()
+    record = background.read_background()
     assert record is not None and record["state"] == "failed"
     assert record["error"] == "MemoryError: out of memory"
-    note = compile_ahead.background_failure_note()
+    note = background.background_failure_note()
     assert note is not None and note.startswith("the background compile of ")
     assert "failed (MemoryError: out of memory; log: " in note
-    assert compile_ahead.background_failure_note() is None  # shown once
+    assert background.background_failure_note() is None  # shown once
     # one killed before it finished (its lock is free, its record says running)
     _write_record(state="running", scene="s.toml", started=0.0)
-    note = compile_ahead.background_failure_note()
+    note = background.background_failure_note()
     assert note is not None and "it ended before it finished (killed?)" in note
 
 
@@ -426,13 +427,13 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
     left), then runs compiled; one of 3 s runs interpreted beside it."""
     import fcntl
 
-    import mcchain.caches
+    import mcchain.compiled.caches
     import mcchain.kernels.config
 
-    monkeypatch.setattr(mcchain.caches, "kernels_cached", lambda names: False)
+    monkeypatch.setattr(mcchain.compiled.caches, "kernels_cached", lambda names: False)
     monkeypatch.setattr(mcchain.kernels.config, "interpret_kernels", lambda: True)
     calls = []
-    monkeypatch.setattr(compile_ahead, "wait_background", lambda: calls.append("wait"))
+    monkeypatch.setattr(background, "wait_background", lambda: calls.append("wait"))
 
     class Exec(Exception):
         pass
@@ -443,10 +444,10 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
 
     monkeypatch.setattr(first_run, "run_compiled", run_compiled)
     _write_record(state="running", scene="s.toml", started=1000.0, expected=30.0)
-    fd = os.open(compile_ahead.background_files()[0], os.O_RDWR | os.O_CREAT)
+    fd = os.open(background.background_files()[0], os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX)
     try:
-        assert compile_ahead.background_remaining(lambda: 1025.0) == 5.0
+        assert background.background_remaining(lambda: 1025.0) == 5.0
         scene = CONFIGS / "clearance-sweep.toml"  # 10,000 samples
         monkeypatch.setattr(first_run, "_probe", lambda scene, seed: 8.0 / 10_000)
         with pytest.raises(Exec):
@@ -458,12 +459,12 @@ def test_background__a_run_beside_it_waits_when_that_is_sooner(own_cache: Path, 
         assert chosen == first_run.FirstRun(3.0 / 10_000) and calls == []
     finally:
         os.close(fd)
-    assert compile_ahead.background_remaining(lambda: 1020.0) is None  # none runs now
+    assert background.background_remaining(lambda: 1020.0) is None  # none runs now
 
 
 def test_user_config__switches_the_background_compile_off(tmp_path: Path, monkeypatch) -> None:
+    from mcchain.cli.user_config import background_compile_off, config_path
     from mcchain.errors import RunError
-    from mcchain.user_config import background_compile_off, config_path
 
     monkeypatch.delenv("MCCHAIN_CONFIG", raising=False)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
@@ -495,7 +496,7 @@ def test_run__no_background_compile_flag_and_user_config_reach_the_run(
 
     monkeypatch.setattr(commands, "_may_interpret", True)
     monkeypatch.setattr(first_run, "choose", lambda *a: first_run.FirstRun(None))
-    monkeypatch.setattr(execution, "start_run", start_run)
+    monkeypatch.setattr(plan, "start_run", start_run)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
     monkeypatch.delenv("MCCHAIN_CONFIG", raising=False)
     scene = CONFIGS / "paper-bar.toml"

@@ -17,11 +17,16 @@ import numpy as np
 import pytest
 
 from mcchain.cli import main
-from mcchain.job import default_loader, written_state
 from mcchain.kernels.joints import joint_separation_rate, joint_vectors
+from mcchain.runner.job import default_loader
 from mcchain.scene import compile_model, load_scene_text
 from mcchain.solvers.simulate import simulate
-from mcchain.solvers.statics import assemble, initial_state_warnings, start_multipliers
+from mcchain.solvers.statics import (
+    assemble,
+    initial_state_warnings,
+    start_multipliers,
+    written_state,
+)
 from mcchain.testing import dense
 from mcchain.testing.factory import write_scene
 from mcchain.testing.scenes import fourbar_text

@@ -7,8 +7,7 @@ from pathlib import Path
 import pytest
 from test_cli_commands import assert_usage_error, in_process
 
-from mcchain import resources
-from mcchain.scene import load_scene
+from mcchain.scene import load_scene, memory
 from mcchain.testing.factory import write_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -19,7 +18,7 @@ def test_estimate__counts_the_sampled_arrays_per_sample() -> None:
     """Two sampled numbers (a clearance, a mass): the table, draws and values (3 × 2) and
     the two model arrays made per-sample (one clearance, one mass each): 8 × 8 bytes."""
     scene = load_scene(REPO / "configs" / "clearance-sweep.toml")
-    assert resources._per_sample_model_bytes(scene) == 64
+    assert memory._per_sample_model_bytes(scene) == 64
 
 
 @pytest.mark.parametrize("command", ["validate", "run"])
@@ -41,7 +40,7 @@ def test_huge_samples_flag__names_the_flag(tmp_path, monkeypatch, capsys):
 
 
 def test_available_memory__is_known_here() -> None:
-    available = resources.available_memory()
+    available = memory.available_memory()
     assert available is not None and available > 2**20
 
 
@@ -59,8 +58,8 @@ def test_disk_estimate__is_what_the_part_files_hold(tmp_path, config):
     within its uncompressed bound."""
     import netCDF4
 
-    from mcchain.execution import start_run
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
+    from mcchain.runner.plan import start_run
 
     path = REPO / "configs" / f"{config}.toml"
     result = start_run(path, samples=6, chunk_size=4, out=tmp_path, progress=False, keep_parts=True)

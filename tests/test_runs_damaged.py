@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def completed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, bytes]:
     """A completed 300-sample statics run in 3 chunks, and its ensemble's bytes."""
-    from mcchain.execution import start_run
+    from mcchain.runner.plan import start_run
 
     out = tmp_path_factory.mktemp("runs")
     result = start_run(

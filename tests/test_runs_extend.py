@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from mcchain import execution, runs
 from mcchain.cli import main
 from mcchain.errors import RunError
-from mcchain.parallel import plan_chunks
+from mcchain.runner import plan, runs
+from mcchain.runner.runs import plan_chunks
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
 pytestmark = pytest.mark.slow  # real solvers
@@ -74,13 +74,13 @@ def test_plan_chunks__restarts_where_the_run_grew() -> None:
 @pytest.mark.parametrize("design", ["random", "sobol"])
 def test_extend__64_plus_64_equals_a_run_of_128(tmp_path: Path, design: str) -> None:
     scene = write_scene(tmp_path, design)
-    small = execution.start_run(
+    small = plan.start_run(
         scene, samples=64, chunk_size=24, run_dir=tmp_path / "small", progress=False
     ).folder
-    whole = execution.start_run(
+    whole = plan.start_run(
         scene, samples=128, chunk_size=24, run_dir=tmp_path / "whole", progress=False
     ).folder
-    result = execution.extend_run(small, 64, progress=False, argv=["extend"])
+    result = plan.extend_run(small, 64, progress=False, argv=["extend"])
     record = result.record
     assert record["status"] == "COMPLETED" and record["samples"] == 128
     assert record["extensions"][0]["from"] == 64 and record["extensions"][0]["to"] == 128
@@ -97,7 +97,7 @@ def test_extend__64_plus_64_equals_a_run_of_128(tmp_path: Path, design: str) -> 
 
 def test_extend__an_interrupted_extension_resumes_to_the_same_ensemble(tmp_path: Path) -> None:
     scene = write_scene(tmp_path, "random")
-    folder = execution.start_run(
+    folder = plan.start_run(
         scene, samples=32, chunk_size=16, run_dir=tmp_path / "run", progress=False
     ).folder
     calls = []
@@ -111,16 +111,16 @@ def test_extend__an_interrupted_extension_resumes_to_the_same_ensemble(tmp_path:
         return solve_chunk(model, scene)
 
     with pytest.raises(RuntimeError, match="power cut"):
-        execution.extend_run(folder, 32, solve=failing_solve, progress=False)
+        plan.extend_run(folder, 32, solve=failing_solve, progress=False)
     record = runs.read_record(folder)
     assert record["status"] == "FAILED" and record["samples"] == 64
     assert (folder / "ensemble.nc").exists()
     with runs.open_run(folder) as old:  # the completed part is untouched
         assert old.sizes["sample"] == 32
     with pytest.raises(RunError, match="not completed"):
-        execution.extend_run(folder, 8)
-    execution.resume_run(folder, progress=False)
-    reference = execution.start_run(
+        plan.extend_run(folder, 8)
+    plan.resume_run(folder, progress=False)
+    reference = plan.start_run(
         scene, samples=64, chunk_size=16, run_dir=tmp_path / "ref", progress=False
     ).folder
     with runs.open_run(folder) as a, runs.open_run(reference) as b:
@@ -132,7 +132,7 @@ def test_extend__a_design_that_depends_on_the_count_is_refused(
     tmp_path: Path, design: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     scene = write_scene(tmp_path, design)
-    folder = execution.start_run(scene, samples=16, run_dir=tmp_path / "r", progress=False).folder
+    folder = plan.start_run(scene, samples=16, run_dir=tmp_path / "r", progress=False).folder
     before = sorted(p.name for p in folder.iterdir())
     assert main(["run", "--extend", str(folder), "--samples", "16"]) == 2
     err = capsys.readouterr().err.strip()

@@ -13,6 +13,7 @@ import os
 import signal
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -26,11 +27,13 @@ from test_runs_support import (
     write_fake_scene,
 )
 
-from mcchain import execution, runs
+from mcchain.compiled.ready import compile_notice
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.errors import RunError, SceneError
-from mcchain.parallel import Progress, compile_notice
+from mcchain.runner import plan, runs
+from mcchain.runner.observers import Progress
+from mcchain.runner.steps import RunState, SolvedChunk
 
 RUN_JSON_FIELDS = {
     "id",
@@ -65,9 +68,9 @@ def env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{TESTS}"}
 
 
-def run(scene: Path, out: Path, **kwargs) -> execution.RunResult:  # type: ignore[no-untyped-def]
+def run(scene: Path, out: Path, **kwargs) -> plan.RunResult:  # type: ignore[no-untyped-def]
     kwargs.setdefault("progress", False)
-    return execution.start_run(scene, out=out, loader=fake_loader, solve=fake_solve, **kwargs)
+    return plan.start_run(scene, out=out, loader=fake_loader, solve=fake_solve, **kwargs)
 
 
 def test_start_run__folder_contents_and_run_json(tmp_path: Path) -> None:
@@ -178,7 +181,7 @@ def test_start_run__scene_error_writes_nothing(tmp_path: Path) -> None:
 
     scene = write_fake_scene(tmp_path / "s.toml")
     with pytest.raises(SceneError, match=r"body\.bar\.mass"):
-        execution.start_run(scene, out=tmp_path / "runs", loader=loader, solve=fake_solve)
+        plan.start_run(scene, out=tmp_path / "runs", loader=loader, solve=fake_solve)
     assert not (tmp_path / "runs").exists()
 
 
@@ -194,9 +197,7 @@ def test_start_run__failing_solver_marks_the_run_failed(tmp_path: Path) -> None:
 
     scene = write_fake_scene(tmp_path / "s.toml", count=30)
     with pytest.raises(FloatingPointError):
-        execution.start_run(
-            scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve
-        )
+        plan.start_run(scene, out=tmp_path / "runs", chunk_size=10, loader=fake_loader, solve=solve)
     (folder,) = (tmp_path / "runs").iterdir()
     record = runs.read_record(folder)
     assert record["status"] == "FAILED" and record["error"] == "boom in chunk 1"
@@ -205,7 +206,7 @@ def test_start_run__failing_solver_marks_the_run_failed(tmp_path: Path) -> None:
     (info,) = runs.list_runs(tmp_path / "runs")
     assert info.state == "FAILED"
     # The failed run completes on resume, computing only the missing chunks.
-    result = execution.resume_run(folder, loader=fake_loader, solve=fake_solve, progress=False)
+    result = plan.resume_run(folder, loader=fake_loader, solve=fake_solve, progress=False)
     assert result.record["status"] == "COMPLETED"
     assert result.record["sessions"][-1]["chunks_computed"] == 2
     reference = run(scene, tmp_path / "ref", chunk_size=10).folder
@@ -236,7 +237,7 @@ def test_resume__after_sigkill_equals_an_uninterrupted_run(tmp_path: Path) -> No
         assert list(partial.sample.values) == finished
         partial_data = partial.load()
 
-    result = execution.resume_run(target, loader=fake_loader, solve=fake_solve, argv=["resume"])
+    result = plan.resume_run(target, loader=fake_loader, solve=fake_solve, argv=["resume"])
     assert result.record["status"] == "COMPLETED"
     assert len(result.record["sessions"]) == 2
     assert result.record["sessions"][1]["chunks_computed"] == 8 - len(done)
@@ -254,19 +255,19 @@ def test_resume__refuses_completed_running_and_unknown_runs(tmp_path: Path) -> N
     scene = write_fake_scene(tmp_path / "s.toml", count=4)
     folder = run(scene, tmp_path / "runs").folder
     with pytest.raises(RunError, match="already completed"):
-        execution.resume_run(folder, loader=fake_loader, solve=fake_solve)
+        plan.resume_run(folder, loader=fake_loader, solve=fake_solve)
     with pytest.raises(RunError, match="no such run folder"):
-        execution.resume_run(tmp_path / "nope")
+        plan.resume_run(tmp_path / "nope")
     (tmp_path / "empty").mkdir()
     with pytest.raises(RunError, match="not a run folder"):
-        execution.resume_run(tmp_path / "empty")
+        plan.resume_run(tmp_path / "empty")
     record = runs.read_record(folder)
     record["status"] = "RUNNING"
     runs.write_record(folder, record)
     with runs.run_lock(folder):
         assert runs.is_locked(folder)
         with pytest.raises(RunError, match="being executed by another process"):
-            execution.resume_run(folder, loader=fake_loader, solve=fake_solve)
+            plan.resume_run(folder, loader=fake_loader, solve=fake_solve)
     assert not runs.is_locked(folder)
 
 
@@ -301,16 +302,37 @@ def test_open_run__by_id_under_runs_and_errors(tmp_path: Path, monkeypatch) -> N
 def test_progress__chunks_rate_and_eta_on_a_terminal_only(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    bar = Progress(total=4, done=1, enabled=True)
-    for _ in range(3):
-        bar.update(10)
-    bar.close()
+    job: Any = None
+    todo = [(10, 20), (20, 30), (30, 40)]  # 0:10 was computed before this session
+    run = RunState(job, Path("run"), {"chunks": 4}, {}, 40, todo)
+    bar = Progress(enabled=True)
+    bar.on_start(run)
+    for start, stop in todo:
+        bar.on_chunk_done(run, SolvedChunk(start, stop, {}))
+    bar.on_chunks_done(run)
     err = capsys.readouterr().err
     assert "4/4" in err and "samples/s" in err and "chunk" in err
-    quiet = Progress(total=4, done=0)  # stderr is captured: not a terminal
-    quiet.update(10)
-    quiet.close()
+    quiet = Progress()  # stderr is captured: not a terminal
+    quiet.on_start(run)
+    quiet.on_chunk_done(run, SolvedChunk(10, 20, {}))
+    quiet.on_chunks_done(run)
     assert capsys.readouterr().err == ""
+
+
+def test_progress__a_run_that_grows_raises_the_bar_s_total(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    job: Any = None
+    record = {"chunks": 2}
+    run = RunState(job, Path("run"), record, {}, 20, [(0, 10), (10, 20)])
+    bar = Progress(enabled=True)
+    bar.on_start(run)
+    for start in (0, 10):
+        bar.on_chunk_done(run, SolvedChunk(start, start + 10, {}))
+    record["chunks"] = 3  # until added a batch
+    bar.on_chunk_done(run, SolvedChunk(20, 30, {}))
+    bar.on_chunks_done(run)
+    assert "3/3" in capsys.readouterr().err
 
 
 class _SignallingStream:

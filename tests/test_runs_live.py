@@ -17,7 +17,9 @@ import os
 import subprocess
 import sys
 import threading
+from collections.abc import Mapping
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -26,11 +28,14 @@ from test_runs_support import REPO, TESTS, fake_loader, fake_model, fake_solve, 
 from test_viz_e2e import SCENE
 from test_viz_playback import read_rrd
 
-from mcchain import execution, open_run, runs
+from mcchain import open_run
 from mcchain.cli import main as cli
 from mcchain.ensemble.io import list_parts
 from mcchain.errors import RunError
-from mcchain.parallel import run_local
+from mcchain.runner import plan, runs
+from mcchain.runner.executors import run_local
+from mcchain.runner.steps import Observer, RunState, SolvedChunk
+from mcchain.runner.summary import run_summary
 from mcchain.viz import live as viz_live
 
 CLEARANCE_BAR = REPO / "configs" / "clearance-bar.toml"
@@ -124,7 +129,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     """An interrupted run (chunks 2:4 and 6:8 missing) resumed with ``--rerun 0,3,6``: the
     default sink is ``<run>/live.rrd``; sample 0 was computed before and is named."""
     run = tmp_path / "resumed"
-    execution.start_run(swing, run_dir=run, chunk_size=2, progress=False, keep_parts=True)
+    plan.start_run(swing, run_dir=run, chunk_size=2, progress=False, keep_parts=True)
     for part in list_parts(run / "parts"):
         if part.start in (2, 6):
             part.path.unlink()
@@ -132,7 +137,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     record = runs.read_record(run)
     runs.write_record(run, {**record, "status": runs.FAILED})
 
-    result = execution.resume_run(run, progress=False, rerun=viz_live.LiveOptions((0, 3, 6)))
+    result = plan.resume_run(run, progress=False, rerun=viz_live.LiveOptions((0, 3, 6)))
     assert result.record["sessions"][-1]["chunks_computed"] == 2
     rrd = read_rrd(run / runs.LIVE_RRD)
     assert sample_paths(rrd) == {"3", "6"}
@@ -143,7 +148,7 @@ def test_rerun__resume_streams_what_it_computes_to_the_folder_by_default(
     assert any(
         line.startswith("rerun: samples 3, 6 streamed to")
         and "0 computed before this session (replay with mcchain show)" in line
-        for line in result.summary()
+        for line in run_summary(result.record)
     )
     assert "samples 0 were computed before this session" in (run / "run.log").read_text()
 
@@ -158,7 +163,7 @@ def test_rerun__dask_logs_the_chunks_as_they_reach_the_client(
     with LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
     ) as cluster:
-        execution.start_run(
+        plan.start_run(
             swing,
             run_dir=run,
             chunk_size=2,
@@ -215,11 +220,11 @@ def test_rerun__bad_flags_are_one_line_exit_2_and_write_nothing(
 def test_rerun__bad_sample_on_resume_writes_nothing(tmp_path: Path) -> None:
     scene = write_fake_scene(tmp_path / "s.toml", count=10, steps=4)
     folder = tmp_path / "run"
-    execution.start_run(scene, run_dir=folder, loader=fake_loader, solve=fake_solve, progress=False)
+    plan.start_run(scene, run_dir=folder, loader=fake_loader, solve=fake_solve, progress=False)
     (folder / "ensemble.nc").unlink()
     before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
     with pytest.raises(RunError, match=r"^--rerun: sample 10 is not in the run \(10 samples"):
-        execution.resume_run(
+        plan.resume_run(
             folder, loader=fake_loader, solve=fake_solve, rerun=viz_live.LiveOptions((10,))
         )
     assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before
@@ -249,7 +254,7 @@ def test_rerun__spawn_opens_a_viewer_and_a_second_default_file_never_overwrites(
 
     monkeypatch.setattr(viz_live, "LiveStream", Recorder)
     scene = write_fake_scene(tmp_path / "s.toml", count=40, steps=4)
-    result = execution.start_run(
+    result = plan.start_run(
         scene,
         run_dir=tmp_path / "run",
         chunk_size=16,
@@ -260,13 +265,11 @@ def test_rerun__spawn_opens_a_viewer_and_a_second_default_file_never_overwrites(
     )
     assert opened == [{"samples": [33, 5], "save": None, "spawn": True}, {"closed": True}]
     assert chunks == [(list(range(16)), 0, 16), (list(range(32, 40)), 32, 8)]  # not 16:32
-    assert "rerun: samples 5, 33 streamed to a spawned viewer" in result.summary()
+    assert "rerun: samples 5, 33 streamed to a spawned viewer" in run_summary(result.record)
 
     # default file sink: live.rrd is taken (an earlier session), so live-2.rrd
     (tmp_path / "run" / runs.LIVE_RRD).write_bytes(b"earlier session")
-    job: Any = None
-    second = viz_live.LiveRun(viz_live.LiveOptions((1,)), job, tmp_path / "run", {})
-    assert second._default_path() == tmp_path / "run" / "live-2.rrd"
+    assert viz_live.LiveRun.default_path(tmp_path / "run") == tmp_path / "run" / "live-2.rrd"
 
 
 def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
@@ -276,11 +279,11 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
         raise OSError("No space left on device\nmore")
 
     scene = write_fake_scene(tmp_path / "s.toml", count=20, steps=4)
-    plain = execution.start_run(
+    plain = plan.start_run(
         scene, run_dir=tmp_path / "a", loader=fake_loader, solve=fake_solve, progress=False
     )
     monkeypatch.setattr(viz_live.LiveStream, "log_chunk", broken)
-    result = execution.start_run(
+    result = plan.start_run(
         scene,
         run_dir=tmp_path / "b",
         loader=fake_loader,
@@ -291,7 +294,9 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
     assert result.record["status"] == runs.COMPLETED
     live = result.record["sessions"][-1]["rerun"]
     assert live["error"] == "No space left on device" and live["streamed"] == []
-    assert any("stream stopped: No space left on device" in line for line in result.summary())
+    assert any(
+        "stream stopped: No space left on device" in line for line in run_summary(result.record)
+    )
     assert (
         "--rerun: the live stream stopped (the run goes on)"
         in (result.folder / "run.log").read_text()
@@ -299,31 +304,40 @@ def test_rerun__a_failing_stream_is_a_warning_and_the_run_completes(
     assert filecmp.cmp(result.folder / "ensemble.nc", plain.folder / "ensemble.nc", shallow=False)
 
 
-def test_run_local__observer_gets_each_chunk_on_the_calling_thread() -> None:
-    model = fake_model(10, seed=2)
-    sunk: dict[tuple[int, int], dict[str, np.ndarray]] = {}
-    seen: list[tuple[int, int, int]] = []
+def test_run_local__chunk_hooks_get_each_chunk_on_the_calling_thread_in_order() -> None:
+    job: Any = SimpleNamespace(model=fake_model(10, seed=2), scene=None, history_dtype="float32")
+    run = RunState(job, Path("run"), {}, {}, 10)
+    written: dict[tuple[int, int], Mapping[str, np.ndarray]] = {}
+    seen: list[tuple[str, int, int, int]] = []
 
-    def sink(outputs: dict[str, np.ndarray], start: int, stop: int) -> None:
-        sunk[start, stop] = outputs
+    def write(chunk: SolvedChunk) -> None:
+        written[chunk.start, chunk.stop] = chunk.outputs
 
-    def observe(outputs: dict[str, np.ndarray], start: int, stop: int) -> None:
-        seen.append((start, stop, threading.get_ident()))
-        assert outputs["status"].shape == (stop - start,)
+    class Seen(Observer):
+        def __init__(self, name: str) -> None:
+            self.name = name
 
-    run_local(model, None, [(0, 4), (4, 8), (8, 10)], sink, solve=fake_solve, observe=observe)
-    assert seen == [(a, b, threading.get_ident()) for a, b in ((0, 4), (4, 8), (8, 10))]
-    assert set(sunk) == {(0, 4), (4, 8), (8, 10)}
+        def on_chunk_done(self, state: RunState, chunk: SolvedChunk) -> None:
+            assert state is run and chunk.outputs["status"].shape == (chunk.stop - chunk.start,)
+            seen.append((self.name, chunk.start, chunk.stop, threading.get_ident()))
+
+    chunks = [(0, 4), (4, 8), (8, 10)]
+    run_local(
+        run, chunks, write, [Seen("a").on_chunk_done, Seen("b").on_chunk_done], solve=fake_solve
+    )
+    me = threading.get_ident()
+    assert seen == [(name, a, b, me) for a, b in chunks for name in "ab"]
+    assert set(written) == set(chunks)
 
 
 def test_rerun__is_imported_only_when_streaming(tmp_path: Path) -> None:
     """One process: a run without ``--rerun`` leaves rerun unimported, then one with it."""
     scene = write_fake_scene(tmp_path / "s.toml", count=8, steps=4)
     code = (
-        "import sys; from mcchain import execution; from mcchain.viz.live import LiveOptions\n"
+        "import sys; from mcchain.runner import plan; from mcchain.viz.live import LiveOptions\n"
         "from test_runs_support import *\n"
         "for name, live in (('no', None), ('yes', LiveOptions((1,)))):\n"
-        "    execution.start_run(sys.argv[1], run_dir=sys.argv[2] + name, loader=fake_loader,"
+        "    plan.start_run(sys.argv[1], run_dir=sys.argv[2] + name, loader=fake_loader,"
         " solve=fake_solve, progress=False, rerun=live)\n"
         "    print(name, 'rerun' in sys.modules)\n"
     )

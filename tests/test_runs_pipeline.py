@@ -22,10 +22,11 @@ import xarray as xr
 from dask.distributed import LocalCluster
 from test_runs_support import REPO, start_paused_child
 
-from mcchain import open_run, runs
+from mcchain import open_run
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
-from mcchain.parallel import WORKER_ENV
+from mcchain.runner import runs
+from mcchain.runner.executors import WORKER_ENV
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
@@ -214,13 +215,13 @@ REAL_MEMORY_SCRIPT = """
 import json, resource, sys
 from pathlib import Path
 import netCDF4, numpy, xarray, tqdm
-from mcchain import execution, runs
+from mcchain.runner import plan, runs
 def peak():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 tmp, scene, chunk = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 peaks = {"imports": peak()}
 for name, n in (("warm", 2 * chunk), ("medium", 20_000), ("big", 100_000)):
-    result = execution.start_run(scene, samples=n, chunk_size=chunk, out=tmp / name, progress=False)
+    result = plan.start_run(scene, samples=n, chunk_size=chunk, out=tmp / name, progress=False)
     peaks[name] = peak()
 with runs.open_run(result.folder) as ds:
     sizes = {"time": ds.sizes["time"], "nbytes": int(ds.nbytes)}

@@ -288,7 +288,8 @@ def _child_main(argv: list[str]) -> int:
     the fakes; ``... cli ARGS...``: ``mcchain ARGS...`` with the real solver. Either pauses as
     :data:`PAUSE_ENV` says, when set."""
     import mcchain.solvers
-    from mcchain import cli, execution
+    from mcchain import cli
+    from mcchain.runner import plan
 
     pause = _pause_spec()
     command, *rest = argv
@@ -300,9 +301,9 @@ def _child_main(argv: list[str]) -> int:
     options = json.loads(options_json[0]) if options_json else {}
     solve = fake_solve if pause is None else pausing(fake_solve, *pause)
     if command == "run":
-        result = execution.start_run(target, loader=fake_loader, solve=solve, **options)
+        result = plan.start_run(target, loader=fake_loader, solve=solve, **options)
     else:
-        result = execution.resume_run(target, loader=fake_loader, solve=solve, **options)
+        result = plan.resume_run(target, loader=fake_loader, solve=solve, **options)
     print(result.folder, flush=True)
     return 0
 

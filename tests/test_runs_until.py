@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 from test_runs_extend import assert_same_values
 
-from mcchain import execution, runs
 from mcchain.cli import main
 from mcchain.decision.sequential import confidence_sequence
 from mcchain.decision.summary import export_requirements
+from mcchain.runner import plan, runs
+from mcchain.runner.summary import run_summary
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
@@ -67,7 +68,7 @@ def write(folder: Path, name: str, text: str) -> Path:
 
 def test_until__stops_at_the_first_decided_look_with_the_samples_of_one_run(tmp_path: Path) -> None:
     scene = write(tmp_path, "until.toml", scene_text(0.05, 0.01))
-    result = execution.start_run(scene, run_dir=tmp_path / "until", progress=False)
+    result = plan.start_run(scene, run_dir=tmp_path / "until", progress=False)
     record = result.record
     until = record["until"]
     looks = until["looks"]
@@ -99,26 +100,22 @@ def test_until__stops_at_the_first_decided_look_with_the_samples_of_one_run(tmp_
     assert "intervals: sequential" in txt_path.read_text(encoding="utf-8")
     # One run of the final count, no until: the same samples bit for bit.
     plain = write(tmp_path, "plain.toml", scene_text(0.05, 0.01, until=""))
-    reference = execution.start_run(
-        plain, samples=final, run_dir=tmp_path / "plain", progress=False
-    )
+    reference = plan.start_run(plain, samples=final, run_dir=tmp_path / "plain", progress=False)
     with runs.open_run(reference.folder) as ds:
         assert_same_values(grown, ds.load())
 
 
 def test_until__stops_at_max_count_when_it_cannot_decide(tmp_path: Path) -> None:
     text = scene_text(0.01, 0.01, until='until = "decided"\nmax_count = 200')
-    result = execution.start_run(
-        write(tmp_path, "s.toml", text), run_dir=tmp_path / "r", progress=False
-    )
+    result = plan.start_run(write(tmp_path, "s.toml", text), run_dir=tmp_path / "r", progress=False)
     until = result.record["until"]
     assert [look["samples"] for look in until["looks"]] == [64, 128, 192, 200]
     assert until["stopped"] == "max_count 200 reached; undecided: rolling"
     assert result.record["samples"] == 200
-    assert any("max_count 200 reached" in line for line in result.summary())
+    assert any("max_count 200 reached" in line for line in run_summary(result.record))
     # Extended by hand afterwards, it still reports its confidence sequence (valid at any
     # count), now over the looks 64, 128, 192 and 256.
-    extended = execution.extend_run(result.folder, 56, progress=False).record
+    extended = plan.extend_run(result.folder, 56, progress=False).record
     assert extended["samples"] == 256 and extended["restarts"] == [64, 128, 192, 200]
     csv_path, *_ = export_requirements(result.folder)
     with open(csv_path, encoding="utf-8") as f:
@@ -158,12 +155,12 @@ def test_until__an_interrupted_run_resumes_where_it_stopped(tmp_path: Path) -> N
 
     folder = tmp_path / "r"
     with pytest.raises(RuntimeError, match="power cut"):
-        execution.start_run(scene, run_dir=folder, solve=failing_solve, progress=False)
+        plan.start_run(scene, run_dir=folder, solve=failing_solve, progress=False)
     record = runs.read_record(folder)
     assert record["status"] == "FAILED" and record["samples"] == 128
     assert [look["samples"] for look in record["until"]["looks"]] == [64]
-    resumed = execution.resume_run(folder, progress=False).record
-    reference = execution.start_run(scene, run_dir=tmp_path / "ref", progress=False).record
+    resumed = plan.resume_run(folder, progress=False).record
+    reference = plan.start_run(scene, run_dir=tmp_path / "ref", progress=False).record
     assert resumed["samples"] == reference["samples"] >= 128
     assert resumed["until"]["looks"] == reference["until"]["looks"]
     with runs.open_run(folder) as a, runs.open_run(tmp_path / "ref") as b:

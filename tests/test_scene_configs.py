@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mcchain.job import written_state
 from mcchain.model import JOINT_CLEARANCE, JOINT_IDEAL
 from mcchain.scene import compile_model, load_scene, load_scene_text
-from mcchain.solvers.statics import initial_state_warnings
+from mcchain.solvers.statics import initial_state_warnings, written_state
 from mcchain.testing.closed_forms import G, bar_pulsation, clearance_bar_pulsations
 from mcchain.testing.factory import constraint_residual, toml_text
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mcchain import execution, open_run
+from mcchain import open_run
+from mcchain.runner import plan
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import Simulate
 from mcchain.solvers.grid import GRID_RTOL, output_times
@@ -216,7 +217,7 @@ def test_run__stores_the_grid_and_counts_the_steps_taken(tmp_path: Path, fourbar
     section = f"[simulate]\nt_end = {T_TURN!r}\ndt = {DT!r}\noutput_dt = {OUTPUT_DT!r}\n"
     text = fourbar_text().replace("clearance = 1e-4\n", "") + SAMPLED
     scene.write_text(text + section + f'method = "{method}"\nkernels = "lanes"\n')
-    result = execution.start_run(scene, out=tmp_path / "runs", progress=False)
+    result = plan.start_run(scene, out=tmp_path / "runs", progress=False)
     throughput = json.loads((result.folder / "run.json").read_text())["throughput"]
     with open_run(result.folder) as ds:
         time = ds.time.values

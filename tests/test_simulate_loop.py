@@ -239,7 +239,7 @@ def test_choose_kernels__auto_takes_the_loop_only_for_short_runs_of_large_topolo
 def test_prepare_job__resolves_auto_once_for_the_whole_run(tmp_path):
     """A run resolves ``auto`` from its sample count (never per chunk): the job's scene, the
     stored settings and the note agree; ``simulate`` alone resolves it from its model."""
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
 
     n = 60  # 180 coordinates: the lanes would compile for about 20.3 s
     text = straight_chain_text([0.3] * n, [1.0] * n) + (

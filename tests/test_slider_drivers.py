@@ -343,7 +343,7 @@ def test_slider_driver__report_and_viewer_show_its_force(mcchain, tmp_path: Path
 
     import mcchain as package
     from mcchain.ensemble.describe import stored_model
-    from mcchain.viz import history, playback
+    from mcchain.viz import history, show
 
     scene = INCLINE + "[simulate]\nt_end = 0.2\ndt = 1e-4\noutput_dt = 1e-2\n"
     (tmp_path / "incline.toml").write_text(scene)
@@ -360,6 +360,6 @@ def test_slider_driver__report_and_viewer_show_its_force(mcchain, tmp_path: Path
     expected = MASS * acc + MASS * GRAVITY * math.sin(TILT)
     np.testing.assert_allclose(force.lines[0].get_ydata(), expected, rtol=1e-5, atol=1e-5)
     out = tmp_path / "incline.rrd"
-    playback.show(ds, stored_model(ds), [0], save=out)
+    show.show(ds, stored_model(ds), [0], save=out)
     rrd = read_rrd(out)
     assert "/sample/0/driver_force/P" in rrd and "/sample/0/driver_torque/P" not in rrd

@@ -73,7 +73,7 @@ def test_kernels__interpreted_give_the_compiled_bits_on_every_shipped_scene(
 
 
 def test_kernels__interpreted_give_the_compiled_bits_on_random_chains(tmp_path: Path) -> None:
-    """What the interpreted first run (mcchain.first_run) relies on, on mechanisms nobody
+    """What the interpreted first run (mcchain.compiled.first_run) relies on, on mechanisms nobody
     wrote by hand: random chains of 1-5 bars mixing clearance, ideal and prismatic joints,
     springs and applied forces, 8 random samples each of their masses and clearances."""
     from mcchain.testing.factory import chain_scene_text, write_scene

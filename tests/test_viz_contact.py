@@ -24,7 +24,7 @@ from mcchain.contact import AUTO
 from mcchain.ensemble import queries
 from mcchain.model import Model
 from mcchain.status import CONTACT_STEP_TOO_LARGE
-from mcchain.viz import contact, history, playback, report, report_contact, scatter
+from mcchain.viz import contact, history, report, report_contact, scatter, show
 
 HALF = 0.5  # m, half length of the synthetic bars (test_viz_synthetic.HALF)
 PRESS = 0.02  # ρ − 1 in contact: a penetration of 2 % of the clearance
@@ -362,7 +362,7 @@ def test_show__orbit_entity_holds_d_over_c_coloured_by_state(
 ) -> None:
     ds, model, _ = contact_run
     out = tmp_path / "orbit.rrd"
-    playback.show(ds, model, [0, FAILED_SAMPLE], save=out)
+    show.show(ds, model, [0, FAILED_SAMPLE], save=out)
     rrd = read_rrd(out)
     orbit = orbit_closed_form()
     for s in (0, FAILED_SAMPLE):

@@ -22,7 +22,7 @@ from mcchain import cli
 from mcchain.cli import parser as parser_module
 from mcchain.ensemble import queries
 from mcchain.errors import RunError
-from mcchain.viz import geometry, live, playback
+from mcchain.viz import geometry, live, playback, show
 
 FLOAT32 = 1e-6  # relative round-off of positions, which rerun stores as float32
 OFFSET_FROM_FLOAT32 = 4 * 2.0**-24 * 2.0  # |d| from float32 positions of ~1 m (m, unmagnified)
@@ -79,7 +79,7 @@ def saved(
     ds, model = synthetic
     out = tmp_path_factory.mktemp("show") / "sub" / "show.rrd"
     mp = pytest.MonkeyPatch()
-    mp.setattr(playback, "open_inputs", lambda run: (ds, model))
+    mp.setattr(show, "open_inputs", lambda run: (ds, model))
     try:
         assert cli.main(["show", "RUN", "--samples", "0,1", "--save", str(out)]) == 0
     finally:
@@ -190,7 +190,7 @@ def test_show__equilibrium_only_run_is_one_frame_at_zero(tmp_path: Path) -> None
     ds = make_dataset(params, history=False)
     model = make_model(params)
     out = tmp_path / "eq.rrd"
-    playback.show(ds, model, [0], save=out)
+    show.show(ds, model, [0], save=out)
     rrd = read_rrd(out)
     force = rrd["/sample/0/joint_force/O"]
     np.testing.assert_array_equal(force["time"], [0])

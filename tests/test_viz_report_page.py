@@ -31,7 +31,7 @@ from mcchain.ensemble.units import (
     reading_unit,
     with_units,
 )
-from mcchain.runs import open_run
+from mcchain.runner.runs import open_run
 from mcchain.scene.study import Requirement
 from mcchain.testing import browser
 from mcchain.viz import report_modelform, report_outputs

@@ -1,7 +1,7 @@
 """``mcchain`` command line: a thin front end, and the one place that parses arguments.
 
-Commands: ``run`` (:mod:`mcchain.execution`), ``validate``, ``runs`` (:mod:`mcchain.runs`),
-``show`` (:func:`mcchain.viz.playback.show_run`), ``report``
+Commands: ``run`` (:mod:`mcchain.runner.plan`), ``validate``, ``runs`` (:mod:`mcchain.runner.runs`),
+``show`` (:func:`mcchain.viz.show.show_run`), ``report``
 (:func:`mcchain.viz.report_page.write_report`); the benchmarks are scripts in ``benchmarks/``.
 A bad input (``SceneError``, ``RunError``, a bad
 flag) prints one line ``mcchain: error: <message>`` on stderr and exits with 2, having
@@ -30,12 +30,13 @@ from typing import NoReturn
 
 from mcchain.cli import commands
 from mcchain.cli.commands import EXIT_FAILED, EXIT_INTERRUPTED, HANDLERS, fail
-from mcchain.cli.parser import NAMED_ERRORS, UsageError, build_parser
 from mcchain.errors import McchainError, RunFailed
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mcchain`` console script; returns the exit code."""
+    from mcchain.cli.parser import NAMED_ERRORS, UsageError, build_parser
+
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
@@ -68,7 +69,7 @@ def console_main() -> NoReturn:
     written is lost. An exception :func:`main` does not handle exits the usual way.
 
     ``validate`` and ``run`` may run their kernels interpreted here
-    (:func:`mcchain.cli.commands._interpret_for`, :mod:`mcchain.first_run`), never when
+    (:func:`mcchain.cli.commands._interpret_for`, :mod:`mcchain.compiled.first_run`), never when
     :func:`main` is called in a process that may go on to solve.
     """
     commands._may_interpret = sys.argv[1:2] in (["validate"], ["run"])

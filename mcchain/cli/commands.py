@@ -27,14 +27,14 @@ def fail(message: str, code: int = EXIT_USAGE) -> int:
 
 
 def _cmd_cache(args: argparse.Namespace) -> int:
-    from mcchain import cache_report
+    from mcchain.compiled import report
 
     if args.cache_action == "status":
-        print("\n".join(cache_report.status_lines()))
+        print("\n".join(report.status_lines()))
     elif args.cache_action == "clear":
-        print("\n".join(cache_report.clear()))
+        print("\n".join(report.clear()))
     else:
-        from mcchain.compile_ahead import warm
+        from mcchain.compiled.ahead import warm
 
         for scene in args.scenes:
             print(warm(scene))
@@ -47,13 +47,14 @@ def _live_options(args: argparse.Namespace) -> Any:
     from pathlib import Path
 
     from mcchain.errors import RunError
-    from mcchain.viz.live import LiveOptions, parse_rerun_samples
 
     if args.rerun is None:
         for flag, value in (("--rerun-save", args.rerun_save), ("--rerun-spawn", args.rerun_spawn)):
             if value:
                 raise RunError(f"{flag}: requires --rerun SAMPLES")
         return None
+    from mcchain.viz.live import LiveOptions, parse_rerun_samples
+
     if args.rerun_save is not None and args.rerun_spawn:
         raise RunError("--rerun-spawn: cannot be combined with --rerun-save (one sink)")
     if args.rerun_save is not None and not args.rerun_save.strip():
@@ -63,8 +64,6 @@ def _live_options(args: argparse.Namespace) -> Any:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from mcchain import execution, runs
-
     progress = False if args.quiet else None
     live = _live_options(args)
     argv = ["mcchain", *sys.argv[1:]]
@@ -86,7 +85,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return fail(f"--extend: cannot be combined with {', '.join(conflicting)}")
         if args.samples is None:
             return fail("--extend: give the number of samples to add: --samples N")
-        result = execution.extend_run(
+        from mcchain.runner.plan import extend_run
+
+        result = extend_run(
             args.extend,
             args.samples,
             dask=args.dask,
@@ -110,7 +111,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         ]
         if conflicting:
             return fail(f"--resume: cannot be combined with {', '.join(conflicting)}")
-        result = execution.resume_run(
+        from mcchain.runner.plan import resume_run
+
+        result = resume_run(
             args.resume,
             remerge=args.remerge,
             dask=args.dask,
@@ -128,22 +131,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return fail("--run-dir: cannot be combined with --out")
         first_run = None
         if _may_interpret and args.dask is None:
-            from mcchain.first_run import choose
+            from mcchain.compiled.first_run import choose
 
             first_run = choose(args.scene, args.samples, args.seed)
         background_off = None
         if first_run is not None:
-            from mcchain.user_config import background_compile_off
+            from mcchain.cli.user_config import background_compile_off
 
             background_off = background_compile_off()
             if args.no_background_compile:
                 background_off = "--no-background-compile"
-        result = execution.start_run(
+        from mcchain.runner.plan import start_run
+
+        result = start_run(
             args.scene,
             samples=args.samples,
             seed=args.seed,
             chunk_size=args.chunk_size,
-            out=args.out or runs.DEFAULT_OUT,
+            out=args.out,
             run_dir=args.run_dir,
             dask=args.dask,
             threads=args.threads,
@@ -153,14 +158,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
             first_run=first_run,
             background_off=background_off,
         )
-    for line in result.summary():
+    from mcchain.runner.summary import run_summary, status_line
+
+    for line in run_summary(result.record):
         print(line)
     print(result.folder)
-    if result.all_failed:
+    samples = result.record["samples"]
+    if 0 < result.failed == samples:
         sys.stdout.flush()  # the folder, then the error line
-        samples = result.record["samples"]
         return fail(
-            f"every one of the {samples} samples failed ({result.counts_line()})", EXIT_ALL_FAILED
+            f"every one of the {samples} samples failed ({status_line(result.record)})",
+            EXIT_ALL_FAILED,
         )
     return 0
 
@@ -171,7 +179,7 @@ VALIDATE_COMPILED = "MCCHAIN_VALIDATE_COMPILED"
 _may_interpret = False
 """Set by :func:`mcchain.cli.console_main`: this process only validates or runs one scene, so its
 kernels may run interpreted (``validate``: :func:`_interpret_for`; ``run``:
-:mod:`mcchain.first_run`)."""
+:mod:`mcchain.compiled.first_run`)."""
 
 
 def _interpret_for(scene_path: Any) -> bool:
@@ -216,7 +224,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _validation_lines(scene_path: Any) -> list[str]:
     """What ``mcchain validate`` prints for a scene that passes its checks."""
-    from mcchain.job import default_loader, written_state
+    from mcchain.runner.job import default_loader
+    from mcchain.solvers.statics import written_state
 
     scene, model = default_loader(scene_path, None, None)
     name = getattr(getattr(scene, "scene", None), "name", scene_path)
@@ -239,7 +248,7 @@ def _disk_line(scene: Any, model: Any) -> str:
     """``validate``'s line on what a run of the scene writes (``mcchain run`` compares it
     with the free space; the free space is not printed here, so that the output depends on
     the scene only)."""
-    from mcchain.resources import estimate_disk
+    from mcchain.runner.resources import estimate_disk
 
     estimate = estimate_disk(scene, model, model.nsample, scene.storage.chunk_size)
     assert estimate is not None
@@ -247,7 +256,7 @@ def _disk_line(scene: Any, model: Any) -> str:
 
 
 def _cmd_runs(args: argparse.Namespace) -> int:
-    from mcchain.runs import format_runs, list_runs
+    from mcchain.runner.runs import format_runs, list_runs
 
     found = list_runs(args.out)
     if not found:
@@ -262,7 +271,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     from mcchain.ensemble.queries import parse_samples
     from mcchain.errors import RunError
-    from mcchain.viz.playback import show_run
+    from mcchain.viz.show import show_run
 
     if args.save is not None and Path(args.save).exists() and not args.force:
         raise RunError(f"--save: {args.save} already exists (add --force to overwrite it)")

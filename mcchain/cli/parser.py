@@ -314,7 +314,7 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
 
     The viewer flags are those of ``rr.script_add_args`` (``--save``, ``--serve``,
     ``--connect``/``--url``, ``--stdout``, ``--headless``) plus ``--spawn`` (the default),
-    which :func:`mcchain.viz.playback.show` hands to ``rr.script_setup``; they are declared
+    which :func:`mcchain.viz.show.show` hands to ``rr.script_setup``; they are declared
     here rather than by ``rr.script_add_args`` so that parsing does not import rerun.
     """
     from mcchain.ensemble.queries import DEFAULT_LIMIT
@@ -368,7 +368,7 @@ def add_show_arguments(parser: argparse.ArgumentParser) -> None:
 
 def resume_arguments(args: list[str]) -> list[str]:
     """The options of a ``mcchain run`` command line ``args`` that a resume takes too
-    (:func:`mcchain.first_run.run_compiled`)."""
+    (:func:`mcchain.compiled.first_run.run_compiled`)."""
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument("--threads")
     parser.add_argument("--quiet", action="store_true")

@@ -16,7 +16,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from mcchain.caches import mcchain_cache
+from mcchain.compiled.caches import mcchain_cache
 
 _GENERATOR_FILES = (
     "topology.py",
@@ -62,7 +62,7 @@ def copied_functions(*kernels: Any) -> str:
 
 def cache_dir() -> Path:
     """Folder of generated kernel modules: ``generated`` in mcchain's cache
-    (:func:`mcchain.caches.mcchain_cache`)."""
+    (:func:`mcchain.compiled.caches.mcchain_cache`)."""
     return mcchain_cache("generated")
 
 

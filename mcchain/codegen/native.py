@@ -40,7 +40,6 @@ from typing import Any
 import numpy as np
 from llvmlite import ir
 
-from mcchain.caches import mcchain_cache
 from mcchain.codegen.native_expressions import (
     ARRAY_FIELDS,
     F64,
@@ -51,6 +50,7 @@ from mcchain.codegen.native_expressions import (
     type_of_value,
 )
 from mcchain.codegen.native_translate import ModuleTranslator
+from mcchain.compiled.caches import mcchain_cache
 
 
 def ctypes_argument(ty: Type) -> Any:

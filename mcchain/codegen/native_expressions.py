@@ -13,13 +13,10 @@ from __future__ import annotations
 import ast
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from llvmlite import ir
-
-if TYPE_CHECKING:
-    from mcchain.codegen.native_translate import ModuleTranslator
 
 F64, I64, U32, BOOL = "f64", "i64", "u32", "bool"
 """Scalar types of the translated text."""
@@ -143,13 +140,33 @@ NPY_ARRAY_WRITEABLE = 0x0400
 """The flag of a writeable array in ``PyArrayObject.flags`` (NumPy's C API)."""
 
 
+class LoweringModule(Protocol):
+    """What a :class:`FunctionLowering` asks of the module it lowers into
+    (:class:`mcchain.codegen.native_translate.ModuleTranslator`, which imports this module:
+    named by its members here, so that the two modules form no import circle)."""
+
+    ir_module: ir.Module
+    functions: dict[str, ast.FunctionDef]
+    scalars: dict[str, float | int | bool]
+    tables: dict[str, tuple[float, ...]]
+    written: dict[tuple[str, tuple[Type, ...]], set[int]]
+
+    def constant_int(self, node: ast.expr) -> int: ...
+
+    def intrinsic(self, name: str, ty: ir.Type, nargs: int) -> ir.Function: ...
+
+    def table(self, name: str) -> _ArrayValue: ...
+
+    def specialize(self, name: str, argtypes: tuple[Type, ...]) -> tuple[ir.Function, Returned]: ...
+
+
 class FunctionLowering:
     """One function of the text as an LLVM function: its arguments, variables and
     expressions (the statements: :class:`mcchain.codegen.native_translate.FunctionTranslator`)."""
 
     def __init__(
         self,
-        module: ModuleTranslator,
+        module: LoweringModule,
         fn: ast.FunctionDef,
         argtypes: tuple[Type, ...],
         name: str,

@@ -51,6 +51,8 @@ from mcchain.codegen.schedule import INDEPENDENT_MARK, INTERLEAVE_CONSTANT
 class FunctionTranslator(FunctionLowering):
     """One specialisation of one function of the module: its IR function."""
 
+    module: ModuleTranslator
+
     def translate(self) -> ir.Function:
         self._statements(self.fn.body)
         if not self.builder.block.is_terminated:

@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     import xarray as xr
 
     from mcchain.decision.summary import RequirementSummary
-    from mcchain.job import Job
+    from mcchain.runner.job import Job
     from mcchain.scene.study import Requirement
 
 DEFAULT_TIGHTEN = 10.0
@@ -355,7 +355,7 @@ def check_run(
     again (see the module docstring). ``samples``: the spread count (default
     :func:`spread_count`); ``solve``: the chunk solver (default the real one)."""
     from mcchain.decision.summary import write_csv
-    from mcchain.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
+    from mcchain.runner.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
 
     if not (isinstance(tighten, (int, float)) and math.isfinite(tighten) and tighten >= 1):
         raise RunError(f"--tighten: must be a number >= 1, got {tighten!r}")
@@ -404,7 +404,7 @@ class _Resolver:
 
     def __init__(self, job: Job, scene: Any, solve: Any) -> None:
         from mcchain.decision.requirements import job_requirements
-        from mcchain.parallel import default_solve
+        from mcchain.runner.executors import default_solve
 
         self.job, self.scene = job, scene
         self.solve = solve or default_solve()
@@ -587,7 +587,7 @@ def _as_dataset(ds: xr.Dataset, index: np.ndarray, outputs: Mapping[str, np.ndar
 
 def _run_job(folder: Path, record: Mapping[str, Any]) -> Job:
     """The run's job as it ran (scene copy, count, seed, kernels)."""
-    from mcchain.execution import keep_kernels, recorded_job
+    from mcchain.runner.plan import keep_kernels, recorded_job
 
     return keep_kernels(recorded_job(folder, record), record.get("kernels"))
 

@@ -284,12 +284,12 @@ def confirm_run(
 ) -> ConfirmResult:
     """The confirming run (module docstring); every check happens before anything is
     written. Raises ``RunError`` (one line naming the argument) on bad input."""
-    from mcchain import execution
     from mcchain.decision.requirements import stored_requirements
     from mcchain.decision.sampled import sampled_parameters
     from mcchain.decision.summary import summarize
     from mcchain.ensemble.io import write_text_atomic
-    from mcchain.runs import (
+    from mcchain.runner import plan
+    from mcchain.runner.runs import (
         SCENE_COPY,
         check_new_run_dir,
         open_run,
@@ -298,6 +298,7 @@ def confirm_run(
         writable_folder,
         write_record,
     )
+    from mcchain.runner.summary import run_summary
 
     given = [
         flag
@@ -362,7 +363,7 @@ def confirm_run(
     existed = scene_path.exists()
     write_text_atomic(scene_path, text)
     try:
-        result = execution.start_run(
+        result = plan.start_run(
             scene_path,
             samples=samples,
             seed=seed,
@@ -385,6 +386,5 @@ def confirm_run(
     write_record(result.folder, new)
     with open_run(result.folder) as ds:
         summary = next(s for s in summarize(ds) if s.name == req.name)
-    return ConfirmResult(
-        result.folder, req.name, cuts, samples, seed, how_many, summary, tuple(result.summary())
-    )
+    lines = tuple(run_summary(result.record))
+    return ConfirmResult(result.folder, req.name, cuts, samples, seed, how_many, summary, lines)

@@ -152,9 +152,9 @@ def rare_run(
     docstring); every check happens before the run folder is made."""
     from mcchain.decision.subset import METHOD, parameters_of, subset_simulation
     from mcchain.decision.tables import write_csv
-    from mcchain.job import check_positive, prepare_job
-    from mcchain.provenance import software_versions
-    from mcchain.runs import (
+    from mcchain.runner.job import check_positive, prepare_job
+    from mcchain.runner.provenance import software_versions
+    from mcchain.runner.runs import (
         COMPLETED,
         SCENE_COPY,
         check_new_run_dir,

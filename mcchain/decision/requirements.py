@@ -315,7 +315,7 @@ class RunRequirements:
 
 
 def job_requirements(job: Any) -> RunRequirements | None:
-    """The requirements of a run's job (:class:`mcchain.job.Job`), or None without any."""
+    """The requirements of a run's job (:class:`mcchain.runner.job.Job`), or None without any."""
     requirements = tuple(getattr(job.scene, "requirement", None) or ())
     if not requirements:
         return None

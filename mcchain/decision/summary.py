@@ -554,7 +554,7 @@ def export_requirements(run: str | Path) -> list[Path]:
         RunError: the run has no requirements.
     """
     from mcchain.errors import RunError
-    from mcchain.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     with open_run(folder) as ds:  # closed after: xarray shares the file with later opens

@@ -22,11 +22,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError, SceneError
+from mcchain.runner.steps import Observer, RunState
 
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.job import Job, Loader
+    from mcchain.runner.job import Job, Loader
 
 log = logging.getLogger("mcchain")
 
@@ -52,18 +53,23 @@ def sequential_settings(attrs: Mapping[str, Any]) -> dict[str, Any] | None:
 
 
 @dataclass
-class Until:
-    """The ``grow`` of :func:`mcchain.chunk_execution.execute` for ``until = "decided"``."""
+class Until(Observer):
+    """``until = "decided"``: the run's observer that asks for another batch of samples while
+    a requirement is undecided (:meth:`more_samples`)."""
 
     batch: int
     max_count: int
 
-    def __call__(self, folder: Path, record: dict[str, Any], nsample: int) -> int | None:
+    def more_samples(self, run: RunState) -> int | None:
+        """Look at the part files of the run's first ``run.nsample`` samples: the count of
+        one more batch, or None (every requirement decided, or ``max_count`` reached). The
+        look is noted in ``run.json["until"]["looks"]``."""
         from mcchain.decision.stats import EMPTY, UNDECIDED
         from mcchain.ensemble.io import list_parts, open_parts
-        from mcchain.runs import PARTS
+        from mcchain.runner.runs import PARTS
 
-        with open_parts(list_parts(Path(folder) / PARTS)) as ds:
+        record, nsample = run.record, run.nsample
+        with open_parts(list_parts(Path(run.folder) / PARTS)) as ds:
             look = look_at(ds, nsample, self.batch)
         entry = record.setdefault("until", self.describe())
         looks = [item for item in entry.setdefault("looks", []) if item["samples"] != nsample]
@@ -156,7 +162,7 @@ def sequential_job(
     max_count = int(sample.until_max_count)
     if batch > max_count:
         raise RunError(f"--samples: {batch} is more than sample.max_count ({max_count})")
-    from mcchain.job import prepare_job
+    from mcchain.runner.job import prepare_job
 
     until = Until(batch, max_count)
     full = prepare_job(

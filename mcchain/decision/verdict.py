@@ -102,7 +102,7 @@ def run_verdict(run: str | Path) -> VerdictTable:
     from mcchain.decision.requirements import stored_requirements
     from mcchain.decision.summary import design_of, summarize
     from mcchain.decision.until import sequential_settings
-    from mcchain.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
+    from mcchain.runner.runs import COMPLETED, ENSEMBLE, open_run, read_record, resolve_run
 
     folder = resolve_run(run)
     record = read_record(folder)

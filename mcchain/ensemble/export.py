@@ -159,7 +159,7 @@ def write_csv(ds: xr.Dataset, path: Path) -> Path:
 def export_run(run: str | Path, out: str | Path | None = None) -> Path:
     """``mcchain export RUN --csv``: the per-sample table of a run folder (path or id under
     ``runs/``) into ``out`` (default ``RUN/export/samples.csv``); returns the file."""
-    from mcchain.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     ds = open_run(folder)

@@ -391,7 +391,7 @@ AXIS_OUTPUTS = {"time": "time", "cycle_phase": "phase"}
 STEPS_TAKEN = "steps_taken"
 """A solver output that is no ensemble variable: (sample,) int64, the integration steps each
 sample took (fixed-step methods: the steps to t_end; rk45: the accepted ones). The run
-machinery sums it into ``run.json``'s throughput (:mod:`mcchain.parallel`); it is not
+machinery sums it into ``run.json``'s throughput (:mod:`mcchain.runner.executors`); it is not
 stored (:func:`coerce_outputs` leaves it out)."""
 
 

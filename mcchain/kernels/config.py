@@ -22,7 +22,10 @@ import functools
 import math
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
+
+from mcchain.folders import temporary_cache, warn_fallback, writable
 
 INTERPRETED = False
 """True where :func:`interpret_kernels` took effect: the kernels are plain Python."""
@@ -81,13 +84,45 @@ def njit(*args: Any, **options: Any) -> Any:
 
 @functools.cache
 def numba_cache() -> str:
-    """Where numba caches the kernels (made writable first; see :mod:`mcchain.caches`)."""
-    from mcchain.caches import ensure_numba_cache
-
+    """Where numba caches the kernels, made writable before any kernel is decorated with
+    ``cache=True`` (:func:`ensure_numba_cache`)."""
     try:
         return ensure_numba_cache()
     except ImportError:  # generating kernel source needs these options, not numba itself
         return "none (numba is not importable)"
+
+
+def ensure_numba_cache() -> str:
+    """Make sure numba has a writable cache location before any kernel is decorated.
+
+    Numba tries ``NUMBA_CACHE_DIR``, then ``__pycache__`` beside each source, then its
+    user-wide folder, and raises at decoration when none can be written. This picks the
+    temporary folder (and warns) where the one it would use is not writable.
+
+    Returns:
+        The folder numba caches mcchain's kernels in, for messages.
+    """
+    from numba import config
+    from numba.misc.appdirs import AppDirs
+
+    configured = getattr(config, "CACHE_DIR", "")
+    if configured:
+        if writable(Path(configured)):
+            return str(configured)
+        fallback = temporary_cache("numba")
+        warn_fallback("NUMBA_CACHE_DIR", configured, fallback)
+        config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
+        return str(fallback)
+    in_tree = Path(__file__).parent / "__pycache__"
+    if writable(in_tree):
+        return "beside mcchain's sources (__pycache__)"
+    user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+    if writable(user_wide):
+        return str(user_wide)
+    fallback = temporary_cache("numba")
+    warn_fallback("NUMBA_CACHE_DIR", in_tree.parent, fallback)
+    config.CACHE_DIR = str(fallback)  # type: ignore[attr-defined]
+    return str(fallback)
 
 
 JIT = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")

@@ -24,8 +24,8 @@ from mcchain.contact import (
 from mcchain.errors import SceneError
 from mcchain.model import DRIVER_LAWS, GROUND, LOAD_LAWS, JointKind, Model, constraint_rows
 from mcchain.parameters import PARAMETERS, TABLE
-from mcchain.resources import check_memory
 from mcchain.scene.fields import GROUND_NAME
+from mcchain.scene.memory import check_memory
 from mcchain.scene.models import Scene
 from mcchain.scene.outputs import check_output_windows
 from mcchain.scene.paths import PARAM_SHAPES, ParamRef, parameter_slot, parse_path, quote_key

@@ -168,7 +168,7 @@ def _cached_design(
 
     import scipy
 
-    from mcchain.caches import mcchain_cache
+    from mcchain.compiled.caches import mcchain_cache
 
     rows = count if design == "lhs" else 0  # LHS strata depend on the count
     key = f"{design} {ncol} {rows} {seed} {start} {stop} scipy {scipy.__version__}"

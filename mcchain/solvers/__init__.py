@@ -36,7 +36,7 @@ def solve_chunk(
     """Run the scene's analyses on every sample of ``model``.
 
     1. Assembly of the initial state (always; ``assembled`` given: that state instead, as
-       :mod:`mcchain.compile_ahead` does to compile the rest without assembly).
+       :mod:`mcchain.compiled.ahead` does to compile the rest without assembly).
     2. ``[equilibrium]`` or ``[modes]``: Newton equilibrium, then the eigen step, which
        also decides ``stable``; ``omega``, ``damped_omega``, ``damping_ratio`` and
        ``mode_shape`` (unless ``shapes = false``) are stored only with ``[modes]``.

@@ -1,7 +1,7 @@
 """The output times of a run and the fixed-step schedule that reaches them.
 
 A plain module (no kernels, no code generator): the integrators (:mod:`.simulate`) step on
-this grid, and the disk estimate (:mod:`mcchain.resources`) counts its points.
+this grid, and the disk estimate (:mod:`mcchain.runner.resources`) counts its points.
 """
 
 from __future__ import annotations

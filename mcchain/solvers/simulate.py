@@ -460,7 +460,7 @@ def simulate(
         ``diverged_time``, ``singular_time``, ``contact_lost_time``.
     """
     settings = load_section(Simulate, "simulate", sim)
-    if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.job)
+    if settings.kernels == "auto":  # a run resolves it for all its samples (mcchain.runner.job)
         choice = choose_kernels(settings, model.ndof, model.nsample)
         settings = settings.model_copy(update={"kernels": choice.kernels})
     grid = output_times(settings)

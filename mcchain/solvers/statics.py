@@ -23,7 +23,7 @@ from mcchain.errors import SceneError
 from mcchain.kernels import assembly
 from mcchain.kernels import statics as kernels
 from mcchain.model import JointKind, Model
-from mcchain.scene.models import Equilibrium
+from mcchain.scene.models import Equilibrium, Scene
 from mcchain.solvers.damped import damped_modes
 from mcchain.solvers.threads import over_samples
 from mcchain.status import STATUS_DTYPE, Status
@@ -302,6 +302,15 @@ def _point_offsets(model: Model, body: int) -> np.ndarray:
 def _rotated(theta: float, points: np.ndarray) -> np.ndarray:
     c, s = np.cos(theta), np.sin(theta)
     return np.stack([c * points[:, 0] - s * points[:, 1], s * points[:, 0] + c * points[:, 1]], 1)
+
+
+def written_state(scene: Scene) -> tuple[Model, Assembled]:
+    """The scene as written (without ``[sample]``) compiled, and its assembled state: what
+    :func:`initial_state_warnings` compares."""
+    from mcchain.scene.compile import compile_model
+
+    written = compile_model(scene.model_copy(update={"sample": None}))
+    return written, assemble(written)
 
 
 def initial_state_warnings(model: Model, assembled: Assembled) -> list[str]:

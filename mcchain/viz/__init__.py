@@ -1,7 +1,8 @@
 """Looking at results: rerun playback of samples and report plots of an ensemble.
 
-* :mod:`mcchain.viz.playback` — ``mcchain show``: :func:`~mcchain.viz.playback.show_run`
-  and :func:`~mcchain.viz.playback.log_samples`;
+* :mod:`mcchain.viz.playback` — a sample in rerun: :func:`~mcchain.viz.playback.log_samples`,
+  the default layout and the recording's sink; :mod:`mcchain.viz.show` — ``mcchain show``:
+  :func:`~mcchain.viz.show.show_run`;
 * :mod:`mcchain.viz.live` — ``mcchain run --rerun``: the samples of each chunk streamed to
   rerun while the run computes them, drawn as ``mcchain show`` draws them;
 * :mod:`mcchain.viz.report` — ``mcchain report``: matplotlib PNGs and Sobol indices;

@@ -2,8 +2,9 @@
 
 * :class:`LiveOptions`, :func:`parse_rerun_samples`, :func:`check_live`: the ``--rerun``
   options, checked before anything is written;
-* :class:`LiveRun`: the stream of one run session, fed each solved chunk by
-  :func:`mcchain.chunk_execution.execute`; it records what it streamed in ``run.json``;
+* :class:`LiveRun`: the stream of one run session, an observer of the run's pipeline
+  (:class:`mcchain.runner.steps.Observer`) fed each solved chunk; it records what it
+  streamed in ``run.json``;
 * :class:`LiveStream`: the rerun side, logging the chosen samples of each chunk as
   ``mcchain show`` logs them (:mod:`mcchain.viz.playback`).
 
@@ -16,18 +17,18 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError
-from mcchain.runs import LIVE_RRD
+from mcchain.runner.runs import LIVE_RRD
+from mcchain.runner.steps import Observer, RunState, SolvedChunk
 
 if TYPE_CHECKING:
     import xarray as xr
 
-    from mcchain.job import Job
     from mcchain.model import Model
 
 log = logging.getLogger("mcchain")
@@ -94,61 +95,51 @@ def check_live(live: LiveOptions | None, nsample: int) -> None:
 # -- the stream of one run session -------------------------------------------------------------
 
 
-def live_summary(live: Mapping[str, Any]) -> str:
-    """The line ``mcchain run`` prints about a session's stream (its ``run.json`` entry)."""
-    streamed = ", ".join(map(str, live.get("streamed") or [])) or "none"
-    line = f"rerun: samples {streamed} streamed to {live.get('sink')}"
-    if live.get("computed_before"):
-        before = ", ".join(map(str, live["computed_before"]))
-        line += f"; {before} computed before this session (replay with mcchain show)"
-    if live.get("error"):
-        line += f"; stream stopped: {live['error']}"
-    return line
+class LiveRun(Observer):
+    """The rerun stream of one session (``--rerun``), an observer of the run's pipeline.
 
+    :meth:`on_start` creates the sink before the first chunk (a spawned viewer shows up at
+    once); :meth:`on_chunk_done` is handed each solved chunk on the thread where the results
+    arrive (the main thread: rerun recording and the chunk loop share it, never a numba
+    thread or a Dask worker), builds the chunk's Dataset with the registry as the part
+    writer does, and logs the chunk's selected samples with :class:`LiveStream`;
+    :meth:`on_chunks_done` completes the file, also after a failure or Ctrl-C. The stream
+    only reads the outputs: it never changes ``ensemble.nc``. A stream that fails (no
+    viewer, a full disk) is a warning in ``run.log`` and ``run.json`` and the run goes on
+    without it. rerun is imported here only, when ``--rerun`` is used.
 
-class LiveRun:
-    """The rerun stream of one session (``--rerun``).
-
-    :meth:`open` creates the sink before the first chunk (a spawned viewer shows up at once);
-    :meth:`observe` is handed each solved chunk on the thread where the results arrive (the
-    main thread: rerun recording and the chunk loop share it, never a numba thread or a Dask
-    worker), builds the chunk's Dataset with the registry as the part writer does, and logs
-    the chunk's selected samples with :class:`LiveStream`; :meth:`close`
-    completes the file, also after a failure or Ctrl-C. The stream only reads the outputs: it
-    never changes ``ensemble.nc``. A stream that fails (no viewer, a full disk) is a warning
-    in ``run.log`` and ``run.json`` and the run goes on without it. rerun is imported here
-    only, when ``--rerun`` is used.
-
-    ``info`` (the session's ``run.json["sessions"][-1]["rerun"]``) is kept up to date:
-    samples, sink, streamed, computed_before, seconds, error.
+    ``info`` (the session's ``run.json["sessions"][-1]["rerun"]``, from :meth:`on_start`)
+    is kept up to date: samples, sink, streamed, computed_before, seconds, error.
     """
 
-    def __init__(self, options: LiveOptions, job: Job, folder: Path, info: dict[str, Any]):
+    def __init__(self, options: LiveOptions) -> None:
         self.options = options
-        self.job = job
-        self.folder = folder
-        self.info = info
         self.stream: Any = None
-        info.update(
-            samples=list(options.samples),
+        self.info: dict[str, Any] = {}
+
+    @staticmethod
+    def default_path(folder: Path) -> Path:
+        """``live.rrd`` in the run folder, or the first free of ``live-2.rrd``, ...."""
+        path = folder / LIVE_RRD
+        k = 2
+        while path.exists():
+            path = folder / f"{Path(LIVE_RRD).stem}-{k}.rrd"
+            k += 1
+        return path
+
+    def on_start(self, run: RunState) -> None:
+        """Open the sink for the selected samples in ``run.todo`` (the chunks this session
+        computes)."""
+        self.info = run.session.setdefault("rerun", {})
+        self.info.update(
+            samples=list(self.options.samples),
             sink=None,
             streamed=[],
             computed_before=[],
             seconds=0.0,
             error=None,
         )
-
-    def _default_path(self) -> Path:
-        path = self.folder / LIVE_RRD
-        k = 2
-        while path.exists():
-            path = self.folder / f"{Path(LIVE_RRD).stem}-{k}.rrd"
-            k += 1
-        return path
-
-    def open(self, chunks: Sequence[tuple[int, int]]) -> None:
-        """Open the sink for the selected samples in ``chunks`` (those this session computes)."""
-        todo = [s for s in self.options.samples if any(a <= s < b for a, b in chunks)]
+        todo = [s for s in self.options.samples if any(a <= s < b for a, b in run.todo)]
         before = [s for s in self.options.samples if s not in todo]
         self.info["computed_before"] = before
         if before:
@@ -163,7 +154,7 @@ class LiveRun:
         if self.options.spawn:
             save, sink = None, "a spawned viewer"
         else:
-            save = Path(self.options.save) if self.options.save else self._default_path()
+            save = Path(self.options.save) if self.options.save else self.default_path(run.folder)
             sink = str(save)
         self.info["sink"] = sink
         t0 = time.perf_counter()
@@ -176,24 +167,26 @@ class LiveRun:
             self._fail(exc)
         self.info["seconds"] += time.perf_counter() - t0
 
-    def observe(self, outputs: dict[str, Any], start: int, stop: int) -> None:
-        """Log the selected samples of the solved chunk ``start:stop`` (if it holds any)."""
-        stream = self.stream
+    def on_chunk_done(self, run: RunState, chunk: SolvedChunk) -> None:
+        """Log the selected samples of the solved chunk (if it holds any)."""
+        stream, start, stop = self.stream, chunk.start, chunk.stop
         if stream is None or not any(start <= s < stop for s in stream.samples):
             return
         from mcchain.ensemble.registry import build_dataset
 
         t0 = time.perf_counter()
         try:
-            chunk = self.job.model.select(start, stop)
-            ds = build_dataset(outputs, chunk, start=start, history_dtype=self.job.history_dtype)
-            logged = stream.log_chunk(ds, chunk, start)
+            model = run.job.model.select(start, stop)
+            ds = build_dataset(
+                chunk.outputs, model, start=start, history_dtype=run.job.history_dtype
+            )
+            logged = stream.log_chunk(ds, model, start)
             self.info["streamed"] = self.info["streamed"] + [int(s) for s in logged]
         except Exception as exc:
             self._fail(exc)
         self.info["seconds"] += time.perf_counter() - t0
 
-    def close(self) -> None:
+    def on_chunks_done(self, run: RunState) -> None:
         """Flush and close the sink (a saved file is then complete)."""
         stream, self.stream = self.stream, None
         if stream is None:

@@ -311,7 +311,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     from mcchain.ensemble.describe import stored_model
     from mcchain.ensemble.queries import run_design
     from mcchain.errors import McchainError
-    from mcchain.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
     ds = open_run(folder)

@@ -41,7 +41,7 @@ SIMULATE_KEYS = (
 def read_record(folder: Path) -> dict[str, Any]:
     """``run.json`` of the run (``{}`` when it is missing or unreadable: the page says so)."""
     from mcchain.errors import RunError
-    from mcchain.runs import read_record as run_record
+    from mcchain.runner.runs import read_record as run_record
 
     try:
         found = run_record(folder)

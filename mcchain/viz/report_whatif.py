@@ -11,7 +11,8 @@ ensemble already supports; ``mcchain confirm`` decides it on fresh samples.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -21,7 +22,42 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from mcchain.decision.whatif import WhatIf
+
+class WhatIf(Protocol):
+    """What the figure reads of a row of ``whatif.csv`` (:class:`mcchain.decision.whatif.
+    WhatIf`, whose module draws this figure: named by its fields here, so that the two
+    modules form no import circle)."""
+
+    @property
+    def requirement(self) -> str: ...
+
+    @property
+    def parameter(self) -> str: ...
+
+    @property
+    def unit(self) -> str: ...
+
+    @property
+    def change(self) -> str: ...
+
+    @property
+    def share(self) -> float: ...
+
+    @property
+    def p_fail(self) -> float: ...
+
+    @property
+    def p_lower(self) -> float: ...
+
+    @property
+    def p_upper(self) -> float: ...
+
+    @property
+    def confidence(self) -> float: ...
+
+    @property
+    def target(self) -> float: ...
+
 
 STYLES = {
     "central": ("C0", "central range"),
@@ -34,7 +70,7 @@ FLOOR_SHARE = 0.01
 """The log axis starts at this share of the smallest positive value drawn (zeros sit there)."""
 
 
-def _panel(ax: Axes, rows: list[WhatIf]) -> None:
+def _panel(ax: Axes, rows: Sequence[WhatIf]) -> None:
     first = rows[0]
     positive = [v for r in rows for v in (r.p_fail, r.p_upper, r.target) if v > 0]
     floor = FLOOR_SHARE * min(positive)
@@ -71,7 +107,7 @@ def _panel(ax: Axes, rows: list[WhatIf]) -> None:
     panel_title(ax, f"{first.requirement}: {first.parameter}{unit} (bands: one-sided {level})")
 
 
-def whatif_figure(rows: list[WhatIf]) -> Figure:
+def whatif_figure(rows: Sequence[WhatIf]) -> Figure:
     """The figure of ``whatif.csv``'s rows (module docstring); rows must not be empty."""
     requirements = list(dict.fromkeys(r.requirement for r in rows))
     parameters = list(dict.fromkeys(r.parameter for r in rows))

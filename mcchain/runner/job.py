@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain import __version__
-from mcchain.errors import RunError
+from mcchain.errors import RunError, check_positive
 
 if TYPE_CHECKING:
     from mcchain.model import Model
-    from mcchain.resources import DiskEstimate
+    from mcchain.runner.resources import DiskEstimate
 
 Loader = Callable[[Path, "int | None", "int | None"], tuple[Any, "Model"]]
 """``loader(scene_path, samples, seed) -> (scene, model)``; raises ``SceneError``."""
@@ -41,13 +41,15 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
-        disk: what the run writes (:class:`mcchain.resources.DiskEstimate`; ``None`` for a
+        disk: what the run writes (:class:`mcchain.runner.resources.DiskEstimate`; ``None`` for a
             scene that is not a real one, the tests' fakes).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
         warnings: lines about the scene as written, e.g. a written position that assembly
             moved (:func:`mcchain.solvers.statics.initial_state_warnings`).
         notes: lines about choices made for the user, e.g. the loop kernels that
             ``[simulate] kernels = "auto"`` took (:func:`resolve_kernels`).
+        kernels: the path that integrates the time histories (``[simulate] kernels``,
+            resolved), None without ``[simulate]``.
     """
 
     scene: Any
@@ -64,6 +66,7 @@ class Job:
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    kernels: str | None = None
 
     def resized(self, nsample: int) -> Job:
         """The same job with ``nsample`` samples (a run that ``--extend`` or ``until`` grew):
@@ -92,7 +95,7 @@ class Job:
 def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[Any, Model]:
     """Load, compile and check a scene with the real scene module and statics checks."""
     from mcchain.scene import compile_model, load_scene
-    from mcchain.solvers.statics import check_scene, initial_state_warnings
+    from mcchain.solvers.statics import check_scene, initial_state_warnings, written_state
 
     scene = load_scene(path)
     model = compile_model(scene, nsample=samples, seed=seed, count_name="--samples")
@@ -107,15 +110,6 @@ def default_loader(path: Path, samples: int | None, seed: int | None) -> tuple[A
         check_requirements(scene, model)
     model.meta["warnings"] = initial_state_warnings(*written_state(scene))
     return scene, model
-
-
-def written_state(scene: Any) -> tuple[Model, Any]:
-    """The scene as written (without ``[sample]``) compiled, and its assembled state."""
-    from mcchain.scene import compile_model
-    from mcchain.solvers.statics import assemble
-
-    written = compile_model(scene.model_copy(update={"sample": None}))
-    return written, assemble(written)
 
 
 def _section(scene: Any, name: str) -> Any:
@@ -147,12 +141,6 @@ def _warnings(model: Model) -> list[str]:
     lines = model.meta.get("warnings") or []
     assert isinstance(lines, list)
     return [str(line) for line in lines]
-
-
-def check_positive(name: str, value: int | None) -> None:
-    """``value`` is ``None`` or an integer >= 1; else a :class:`RunError` naming ``name``."""
-    if value is not None and (not isinstance(value, int) or value < 1):
-        raise RunError(f"{name}: must be an integer >= 1, got {value!r}")
 
 
 def prepare_job(
@@ -194,7 +182,11 @@ def prepare_job(
         text = path.read_text(encoding="utf-8")
     name = getattr(_section(scene, "scene"), "name", None) or path.stem
     nsample = int(model.nsample)
-    from mcchain.resources import estimate_disk
+    settings = resolved_settings(scene, nsample, effective_seed)
+    warnings = _warnings(model)
+    notes = [note for note in (kernels_note, tolerance_note) if note is not None]
+    kernels = scene_kernels(scene)
+    from mcchain.runner.resources import estimate_disk
 
     return Job(
         scene=scene,
@@ -208,10 +200,18 @@ def prepare_job(
         compression=str(storage.compression),
         complevel=int(storage.complevel),
         disk=estimate_disk(scene, model, nsample, int(chunk)),
-        settings=resolved_settings(scene, nsample, effective_seed),
-        warnings=_warnings(model),
-        notes=[note for note in (kernels_note, tolerance_note) if note is not None],
+        settings=settings,
+        warnings=warnings,
+        notes=notes,
+        kernels=kernels,
     )
+
+
+def scene_kernels(scene: Any) -> str | None:
+    """The path that integrates the scene's time histories (``[simulate] kernels``), or None
+    without ``[simulate]``."""
+    sim = _section(scene, "simulate")
+    return None if sim is None else str(getattr(sim, "kernels", "lanes"))
 
 
 def resolve_kernels(scene: Any, model: Model, nsample: int) -> tuple[Any, str | None]:

@@ -1,9 +1,7 @@
 """What ``mcchain cache status`` and ``mcchain cache clear`` report: the files in mcchain's
-cache folders (:func:`mcchain.caches.mcchain_cache`) and numba's files of mcchain's kernels
-(:func:`mcchain.caches.numba_index_folder`), the versions and CPU the lane kernels are keyed by,
-and the background compile's state. Only the CLI imports this module: it reads the compiler
-and the background compile, which the plain folder helpers of :mod:`mcchain.caches` (imported
-by the kernels) must not.
+cache folders (:func:`mcchain.compiled.caches.mcchain_cache`) and numba's files of mcchain's
+kernels (:func:`mcchain.compiled.caches.numba_index_folder`), the versions and CPU the lane
+kernels are keyed by, and the background compile's state. Only the CLI imports this module.
 """
 
 from __future__ import annotations
@@ -11,12 +9,12 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from mcchain.caches import mcchain_cache, numba_index_folder
+from mcchain.compiled.caches import mcchain_cache, numba_index_folder
 
 MCCHAIN_FOLDERS = ("native", "generated", "compile", "designs")
 """The folders of mcchain's cache (:func:`mcchain_cache`): the lane kernels' machine code
 (:mod:`mcchain.codegen.native`) and text (where numba compiles it), the background
-compile's lock, record and log (:mod:`mcchain.compile_ahead`), the sample designs."""
+compile's lock, record and log (:mod:`mcchain.compiled.background`), the sample designs."""
 
 NUMBA_SUFFIXES = (".nbi", ".nbc")
 """numba's index and machine-code files (of mcchain's kernels in :func:`numba_index_folder`;
@@ -70,7 +68,7 @@ def status_lines() -> list[str]:
     cpu, _features = target_cpu()
     lines.append(f"lane kernels: compiled by {lane_compiler()}, for CPU {cpu}, {LMAX} lanes")
     lines.append("keyed by: " + ", ".join(key_versions()))
-    from mcchain.compile_ahead import read_background
+    from mcchain.compiled.background import read_background
 
     record = read_background()
     if record is not None:

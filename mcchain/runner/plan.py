@@ -1,17 +1,20 @@
-"""Starting, resuming and extending a run: the run folder and its ``run.json``.
+"""The plan stage of a run: starting, resuming and extending one.
 
-:func:`start_run` (``mcchain run SCENE``) prepares the job, creates the run folder and
-executes it; :func:`resume_run` (``mcchain run --resume RUN``) executes the chunks an
-interrupted run lacks; :func:`extend_run` (``--extend``) adds samples to a completed one.
-:func:`mcchain.chunk_execution.execute` is the part they share (see its docstring for the
-phases timed and the throughput recorded in ``run.json``).
+:func:`start_run` (``mcchain run SCENE``) checks everything, prepares the job (scene,
+model, resources, disk), creates the run folder and its ``run.json``; :func:`resume_run`
+(``mcchain run --resume RUN``) plans the chunks an interrupted run lacks; :func:`extend_run`
+(``--extend``) adds samples to a completed one. Each makes a
+:class:`mcchain.runner.pipeline.Plan` (the job, the folder, the observers in order:
+:func:`mcchain.runner.observers.observers_for`) and runs it
+(:func:`mcchain.runner.pipeline.run_pipeline`).
 
 Nothing here depends on timing: ``ensemble.nc`` holds no timestamps or host names, so the
 same scene and seed give a byte-identical file whatever the chunk size, thread count or
 scheduler, and a resumed run equals an uninterrupted one.
 
-This module imports only the standard library at import time; numpy, xarray, netCDF4,
-numba, the solvers and rerun are imported when a run executes.
+This module imports only the standard library at import time, and the modules of each
+stage when it comes (``mcchain runs`` and ``mcchain --help`` import it): numpy, xarray,
+netCDF4, numba, the solvers and rerun are imported when a run executes.
 """
 
 from __future__ import annotations
@@ -25,77 +28,18 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mcchain.chunk_execution import (
-    RunResult,
-    execute,
-    job_kernels,
-    missing_samples,
-    now,
-    run_chunks,
-)
-from mcchain.errors import McchainError, RunError
-from mcchain.job import Job, Loader, check_positive, prepare_job
-from mcchain.provenance import git_state, host_info, software_versions
-from mcchain.resources import check_disk
-from mcchain.runs import (
-    COMPLETED,
-    DEFAULT_OUT,
-    ENSEMBLE,
-    RUNNING,
-    SCENE_COPY,
-    check_new_run_dir,
-    create_run_folder,
-    is_locked,
-    read_record,
-    resolve_run,
-)
-from mcchain.viz.live import LiveOptions, check_live
+from mcchain.errors import McchainError, RunError, check_positive
+from mcchain.runner import DEFAULT_OUT
 
 if TYPE_CHECKING:
-    from mcchain.first_run import FirstRun
-    from mcchain.parallel import SolveFn
+    from mcchain.compiled.first_run import FirstRun
+    from mcchain.runner.job import Job, Loader
+    from mcchain.runner.pipeline import RunResult
+    from mcchain.runner.steps import Observer, SolveFn
+    from mcchain.viz.live import LiveOptions
 
 
 log = logging.getLogger("mcchain")
-
-
-def _new_record(job: Job, folder: Path, argv: Sequence[str], scene_path: Path) -> dict[str, Any]:
-    from mcchain.parallel import plan_chunks
-
-    return {
-        "id": folder.name,
-        "status": RUNNING,
-        "scene": job.scene_name,
-        "scene_file": str(scene_path.resolve()),
-        "samples": job.nsample,
-        "seed": job.seed,
-        "chunk_size": job.chunk_size,
-        "chunks": len(plan_chunks(job.nsample, job.chunk_size)),
-        "storage": {
-            "history_dtype": job.history_dtype,
-            "compression": job.compression,
-            "complevel": job.complevel,
-        },
-        "start": now(),
-        "end": None,
-        "argv": list(argv),
-        "versions": software_versions(),
-        "git": git_state(),
-        "host": host_info(),
-        "pid": os.getpid(),
-        "threads": None,
-        "scheduler": None,
-        "timings": {},
-        "wall_time": None,
-        "status_counts": None,
-        "throughput": {},
-        "merge": None,
-        "sessions": [],
-        "error": None,
-        "warnings": list(job.warnings),
-        "notes": list(job.notes),
-        "kernels": job_kernels(job),
-    }
 
 
 DAMAGED_ENSEMBLE = "ensemble.damaged.nc"
@@ -108,7 +52,7 @@ def start_run(
     samples: int | None = None,
     seed: int | None = None,
     chunk_size: int | None = None,
-    out: str | Path = DEFAULT_OUT,
+    out: str | Path | None = None,
     run_dir: str | Path | None = None,
     dask: str | None = None,
     threads: int | None = None,
@@ -121,94 +65,103 @@ def start_run(
     first_run: FirstRun | None = None,
     background_off: str | None = None,
 ) -> RunResult:
-    """Run a scene into a new run folder (``mcchain run``).
+    """Run a scene into a new run folder (``mcchain run``) under ``out`` (default
+    ``runs``), or exactly ``run_dir``.
 
     Every check (scene, kinematics, arguments, ``run_dir``, ``--rerun`` indices, the disk
-    space: :func:`mcchain.resources.check_disk`) happens before the folder is created: a
+    space: :func:`mcchain.runner.resources.check_disk`) happens before the folder is created: a
     bad input raises ``SceneError``/``RunError`` and writes nothing. ``rerun`` streams
     samples to rerun while the run goes (:class:`LiveOptions`).
 
-    ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.first_run`,
+    ``first_run``: this process runs the kernels interpreted (:mod:`mcchain.compiled.first_run`,
     the console script only): a background process compiles them for the next runs, and
     should the interpreted kernels raise, the process becomes the compiled run (or its
     resume, once the folder exists). ``background_off``: what switched that background
     compile off (``--no-background-compile``, the user's config file), or None
-    (:func:`mcchain.compile_ahead.why_not_background` has the other reasons).
+    (:func:`mcchain.compiled.background.why_not_background` has the other reasons).
     """
     t0 = time.perf_counter()
+    out = DEFAULT_OUT if out is None else out
     if run_dir is not None:
+        from mcchain.runner.runs import check_new_run_dir
+
         check_new_run_dir(run_dir)
     _check_threads(threads, dask)
-    ahead = None
     folder: Path | None = None
-    real = loader is None and solve is None and dask is None  # the real scene and kernels
-    interpreted = first_run is not None and real  # compiled in the background, after the checks
-    if real and not interpreted and Path(scene_path).is_file():
-        from mcchain.compile_ahead import CompileAhead
-        from mcchain.parallel import announce_compile
+    from mcchain.compiled.ready import Kernels
 
-        ahead = CompileAhead.start(Path(scene_path), seed, samples)
-        if ahead is not None:
-            announce_compile(ahead=ahead.process is not None)
+    kernels = Kernels.for_run(
+        scene_path,
+        seed,
+        samples,
+        compiled=loader is None and solve is None and dask is None,  # the real kernels, here
+        first_run=first_run,
+    )
     try:
+        from mcchain.runner.job import prepare_job
+
         job = prepare_job(
             scene_path, samples=samples, seed=seed, chunk_size=chunk_size, loader=loader
         )
-        from mcchain.decision.until import sequential_job
+        grow = None
+        if getattr(getattr(job.scene, "sample", None), "until", None) is not None:
+            from mcchain.decision.until import sequential_job
 
-        job, grow = sequential_job(
-            job, Path(scene_path), seed=seed, chunk_size=chunk_size, loader=loader
-        )
-        check_live(rerun, job.model.nsample)
+            job, grow = sequential_job(
+                job, Path(scene_path), seed=seed, chunk_size=chunk_size, loader=loader
+            )
+        if rerun is not None:
+            from mcchain.viz.live import check_live
+
+            check_live(rerun, job.model.nsample)
+        from mcchain.runner.resources import check_disk
+
         check_disk(job.disk, out if run_dir is None else run_dir)
-        if real:
-            from mcchain.compile_ahead import background_failure_note
-
-            failed = background_failure_note()
-            if failed is not None:
-                job.warnings.append(failed)
-        if interpreted:
-            from mcchain.compile_ahead import background_note
-
-            background = background_note(Path(scene_path), seed, samples, background_off)
-            assert first_run is not None
-            job.notes.append(first_run.note(job.nsample, background))
+        warnings, notes = kernels.after_checks(
+            job.kernels, job.nsample, scene_path, seed, samples, background_off
+        )
+        job.warnings.extend(warnings)
+        job.notes.extend(notes)
         for line in job.warnings:
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
+        from mcchain.runner.observers import observers_for
+
+        observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
         prepare_seconds = time.perf_counter() - t0
-        folder = create_run_folder(out, job.scene_name, run_dir)
-        with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
-            f.write(job.scene_text)
+        from mcchain.runner.runs import create_run
+
         argv = list(sys.argv if argv is None else argv)
-        record = _new_record(job, folder, argv, Path(scene_path))
+        folder, record = create_run(job, scene_path, argv, out, run_dir)
         if grow is not None:
             record["until"] = grow.describe()
-        return execute(
+        from mcchain.runner.pipeline import Plan, run_pipeline
+
+        plan = Plan(
             job,
             folder,
             record,
-            argv=argv,
+            record["versions"],
+            observers,
+            kernels,
             dask=dask,
             threads=threads,
             solve=solve,
-            progress=progress,
-            keep_parts=keep_parts,
+            argv=argv,
             prepare_seconds=prepare_seconds,
-            rerun=rerun,
-            compile_ahead=ahead,
-            grow=grow,
+            keep_parts=keep_parts,
         )
+        return run_pipeline(plan)
     except Exception as exc:
-        if not interpreted or isinstance(exc, (McchainError, OSError)):
+        if kernels.first_run is None or isinstance(exc, (McchainError, OSError)):
             raise
-        from mcchain.first_run import run_compiled
+        from mcchain.compiled.first_run import run_compiled
 
         run_compiled(resume=folder, reason=exc)
     finally:
-        if ahead is not None:
-            ahead.stop()
+        if kernels.ahead is not None:  # its helper, if the run failed before its warm-up
+            kernels.stop()
 
 
 def resume_run(
@@ -237,9 +190,22 @@ def resume_run(
     wrote first.
 
     A resume whose missing part files and merge would not fit in the free space is refused
-    before anything changes (:func:`mcchain.resources.check_disk`).
+    before anything changes (:func:`mcchain.runner.resources.check_disk`).
     """
+    from mcchain.decision.until import keep_sequential, sequential_job
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
+    from mcchain.runner.observers import observers_for
+    from mcchain.runner.resources import check_disk
+    from mcchain.runner.runs import (
+        COMPLETED,
+        ENSEMBLE,
+        SCENE_COPY,
+        is_locked,
+        missing_samples,
+        read_record,
+        resolve_run,
+    )
+    from mcchain.viz.live import check_live
 
     t0 = time.perf_counter()
     folder = resolve_run(run)
@@ -261,12 +227,8 @@ def resume_run(
         )
     grow = None
     if record.get("until") and record.get("extensions"):  # an until run extended since
-        from mcchain.decision.until import keep_sequential
-
         job = keep_sequential(job, record)
     elif record.get("until"):
-        from mcchain.decision.until import sequential_job
-
         job, grow = sequential_job(
             job,
             folder / SCENE_COPY,
@@ -281,21 +243,8 @@ def resume_run(
     check_disk(job.disk, folder, missing_samples(folder, record), retry="resume")
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
-    argv = list(sys.argv if argv is None else argv)
-    return execute(
-        job,
-        folder,
-        record,
-        argv=argv,
-        dask=dask,
-        threads=threads,
-        solve=solve,
-        progress=progress,
-        keep_parts=keep_parts,
-        prepare_seconds=time.perf_counter() - t0,
-        rerun=rerun,
-        grow=grow,
-    )
+    observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
+    return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
 
 
 def _check_threads(threads: int | None, dask: str | None) -> None:
@@ -307,7 +256,7 @@ def _check_threads(threads: int | None, dask: str | None) -> None:
             f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {dask!r}"
         )
     if dask is not None:
-        from mcchain.parallel import check_scheduler
+        from mcchain.runner.executors import check_scheduler
 
         check_scheduler(dask)
     if threads is not None and dask is None:
@@ -348,7 +297,20 @@ def extend_run(
     on one path. The old ``ensemble.nc`` stays in place until the merged one replaces it:
     an interrupted extension is completed by ``mcchain run --resume RUN``.
     """
+    from mcchain.decision.until import keep_sequential
     from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
+    from mcchain.runner.observers import observers_for
+    from mcchain.runner.resources import check_disk
+    from mcchain.runner.runs import (
+        COMPLETED,
+        ENSEMBLE,
+        is_locked,
+        now,
+        read_record,
+        resolve_run,
+        run_chunks,
+    )
+    from mcchain.viz.live import check_live
 
     t0 = time.perf_counter()
     check_positive("--samples", samples)
@@ -379,8 +341,6 @@ def extend_run(
             f"count); run the scene again with --samples {total}"
         )
     job = keep_kernels(job, record.get("kernels"))
-    from mcchain.decision.until import keep_sequential
-
     job = keep_sequential(job, record)
     check_live(rerun, total)
     check_disk(job.disk, folder, samples, retry="extend")
@@ -388,20 +348,45 @@ def extend_run(
     record["restarts"] = sorted({*record.get("restarts", []), old})
     record["samples"] = total
     record["chunks"] = len(run_chunks(record, job.chunk_size))
-    argv = list(sys.argv if argv is None else argv)
-    return execute(
+    observers = observers_for(job, progress=progress, rerun=rerun)
+    return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
+
+
+def _run_existing(
+    job: Job,
+    folder: Path,
+    record: dict[str, Any],
+    observers: Sequence[Observer],
+    t0: float,
+    dask: str | None,
+    threads: int | None,
+    solve: SolveFn | None,
+    argv: Sequence[str] | None,
+    keep_parts: bool,
+) -> RunResult:
+    """The pipeline of a run folder that exists (resumed or extended), whose checks passed
+    (since ``t0``): its kernels are loaded or compiled at the warm-up."""
+    from mcchain.compiled.ready import Kernels
+    from mcchain.runner.pipeline import Plan, run_pipeline
+    from mcchain.runner.provenance import software_versions
+
+    kernels = Kernels()
+    kernels.after_checks(job.kernels, job.nsample)
+    plan = Plan(
         job,
         folder,
         record,
-        argv=argv,
+        software_versions(),
+        observers,
+        kernels,
         dask=dask,
         threads=threads,
         solve=solve,
-        progress=progress,
-        keep_parts=keep_parts,
+        argv=list(sys.argv if argv is None else argv),
         prepare_seconds=time.perf_counter() - t0,
-        rerun=rerun,
+        keep_parts=keep_parts,
     )
+    return run_pipeline(plan)
 
 
 def recorded_job(
@@ -413,6 +398,9 @@ def recorded_job(
 ) -> Job:
     """The job of an existing run: its ``scene.toml`` with the recorded seed and chunk size,
     and ``samples`` samples (default the recorded count)."""
+    from mcchain.runner.job import prepare_job
+    from mcchain.runner.runs import SCENE_COPY
+
     return prepare_job(
         Path(folder) / SCENE_COPY,
         samples=int(record["samples"]) if samples is None else samples,
@@ -431,7 +419,8 @@ def keep_kernels(job: Job, kernels: str | None) -> Job:
         return job
     from dataclasses import replace
 
-    from mcchain.job import resolved_settings
+    from mcchain.runner.job import resolved_settings
 
     scene = job.scene.model_copy(update={"simulate": sim.model_copy(update={"kernels": kernels})})
-    return replace(job, scene=scene, settings=resolved_settings(scene, job.nsample, job.seed))
+    settings = resolved_settings(scene, job.nsample, job.seed)
+    return replace(job, scene=scene, settings=settings, kernels=kernels)

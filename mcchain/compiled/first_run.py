@@ -1,7 +1,7 @@
 """A first run on a cold cache: the kernels run interpreted while they compile for the next.
 
 A statics sweep's kernels take about 35 s of one core to compile (about 20 s on two, with
-:mod:`mcchain.compile_ahead`), where the Quick start's 10,000 samples then solve in 0.15 s.
+:mod:`mcchain.compiled.ahead`), where the Quick start's 10,000 samples then solve in 0.15 s.
 Interpreted as plain Python (:func:`mcchain.kernels.config.interpret_kernels`), the same
 kernels solve those samples in about 4-5 s, with the compiled kernels' bits: the same IEEE
 operations in the same order, libm's ``hypot`` in both (tested on every shipped scene, and
@@ -9,7 +9,7 @@ a run's ``ensemble.nc`` holds the same bytes either way, but for its attribute
 ``kernel_compiler``). So on a cold cache a small statics run is interpreted, and a detached
 process compiles the kernels into the cache meanwhile where it may (in an interactive
 terminal, outside CI and batch schedulers, not switched off:
-:func:`mcchain.compile_ahead.background_note`): the next run loads them. Which way a run
+:func:`mcchain.compiled.background.background_note`): the next run loads them. Which way a run
 went is in ``run.json`` (its notes, ``kernels_interpreted`` and ``kernel_compiler`` in its
 session) and in the ensemble's attribute ``kernel_compiler``.
 
@@ -20,7 +20,7 @@ that called :func:`mcchain.cli.main`). The run is interpreted when all of these 
 * the scene has no ``[simulate]`` (the generated lane kernels may fuse a multiply and an
   add, which Python does not: their bits would differ) and at most
   :data:`~mcchain.kernels.config.INTERPRET_MAX_COORDINATES` coordinates;
-* numba's cache lacks a statics kernel (:func:`mcchain.caches.kernels_cached`);
+* numba's cache lacks a statics kernel (:func:`mcchain.compiled.caches.kernels_cached`);
 * a probe, a few samples solved interpreted, projects the run's kernels within
   :data:`BUDGET_S`. The cost per sample spans four orders of magnitude (0.2 ms for a bar,
   6 s for a 16-bar chain): no formula in the size predicts it, so it is measured.
@@ -96,14 +96,14 @@ def choose(
     """Whether this run goes interpreted (see the module's docstring): a :class:`FirstRun`
     if so, None to go on compiled as usual. Where the probe says no, or where a background
     compile already running should end sooner than the run interpreted would (from when it
-    started and the length of the last one: :func:`mcchain.compile_ahead.
+    started and the length of the last one: :func:`mcchain.compiled.background.
     background_remaining`, on the clock ``now``), the process is replaced by the same
     command with compiled kernels (:func:`run_compiled`, after waiting for that compile),
     and this does not return."""
     switch = os.environ.get(ENV_SWITCH)
     if switch == "0":
         return None
-    from mcchain.caches import kernels_cached
+    from mcchain.compiled.caches import kernels_cached
     from mcchain.kernels.config import INTERPRET_MAX_COORDINATES
     from mcchain.scene import load_scene
 
@@ -133,7 +133,7 @@ def choose(
         run_compiled()
     if per_sample * count > BUDGET_S:
         run_compiled()
-    from mcchain.compile_ahead import background_remaining, wait_background
+    from mcchain.compiled.background import background_remaining, wait_background
 
     remaining = background_remaining(now)
     if remaining is not None and remaining < per_sample * count:

@@ -1,11 +1,12 @@
-"""Run folders: create, resolve, list and open runs; ``run.json``; the lock.
+"""Run folders: create, resolve, list and open runs; ``run.json``; the lock; the chunks a
+run has and lacks.
 
 A run folder ``runs/<timestamp>-<scene>/`` holds:
 
 * ``scene.toml`` — the scene text the run was made from (resume reads it back);
 * ``run.json`` — the experiment log: status ``RUNNING``/``COMPLETED``/``FAILED``, start
   and end, argv, versions, git commit, host, threads, wall time per phase, status counts,
-  throughput (see :func:`mcchain.chunk_execution.execute`);
+  throughput (see :mod:`mcchain.runner.pipeline`);
 * ``run.log`` — the log (one line per chunk, warnings, the traceback of a failure);
 * ``parts/part-<start>-<stop>.nc`` — finished chunks, each written atomically; deleted once
   merged;
@@ -14,8 +15,8 @@ A run folder ``runs/<timestamp>-<scene>/`` holds:
   samples, streamed chunk by chunk while the run goes (``live-2.rrd``, ... on a resume);
   it never changes ``ensemble.nc``.
 
-Making a run is :mod:`mcchain.execution`'s job (with :mod:`mcchain.job` and
-:mod:`mcchain.provenance`); this module only knows the folder.
+Making a run is the pipeline's job (:mod:`mcchain.runner`); this module only knows the
+folder.
 
 This module imports only the standard library at import time (``mcchain runs`` must stay
 fast); xarray and netCDF4 are imported when a run is opened or ``run.json`` written.
@@ -26,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import fcntl
+import itertools
 import json
 import logging
 import os
@@ -36,9 +38,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mcchain.errors import RunError
+from mcchain.runner import DEFAULT_OUT
 
 if TYPE_CHECKING:
     import xarray as xr
+
+    from mcchain.runner.job import Job
 
 log = logging.getLogger("mcchain")
 
@@ -54,7 +59,10 @@ PARTS = "parts"
 LOCK = ".lock"
 LIVE_RRD = "live.rrd"
 
-DEFAULT_OUT = "runs"
+
+def now() -> str:
+    """The local time with its UTC offset, to the second, as ``run.json`` records times."""
+    return _dt.datetime.now().astimezone().isoformat(timespec="seconds")
 
 
 # -- run folders -------------------------------------------------------------------------------
@@ -104,6 +112,58 @@ def create_run_folder(out: str | Path, scene_name: str, run_dir: str | Path | No
     raise RunError(f"--out: could not create a new run folder in {root}")
 
 
+def create_run(
+    job: Job,
+    scene_path: str | Path,
+    argv: Sequence[str],
+    out: str | Path = DEFAULT_OUT,
+    run_dir: str | Path | None = None,
+) -> tuple[Path, dict[str, Any]]:
+    """A new run of ``job``: its folder (:func:`create_run_folder`) holding the scene's
+    text as ``scene.toml``, and its ``run.json`` record before its first session (written
+    when the session begins)."""
+    from mcchain.runner.provenance import git_state, host_info, software_versions
+
+    folder = create_run_folder(out, job.scene_name, run_dir)
+    with open(folder / SCENE_COPY, "w", encoding="utf-8", newline="") as f:
+        f.write(job.scene_text)
+    record = {
+        "id": folder.name,
+        "status": RUNNING,
+        "scene": job.scene_name,
+        "scene_file": str(Path(scene_path).resolve()),
+        "samples": job.nsample,
+        "seed": job.seed,
+        "chunk_size": job.chunk_size,
+        "chunks": len(plan_chunks(job.nsample, job.chunk_size)),
+        "storage": {
+            "history_dtype": job.history_dtype,
+            "compression": job.compression,
+            "complevel": job.complevel,
+        },
+        "start": now(),
+        "end": None,
+        "argv": list(argv),
+        "versions": software_versions(),
+        "git": git_state(),
+        "host": host_info(),
+        "pid": os.getpid(),
+        "threads": None,
+        "scheduler": None,
+        "timings": {},
+        "wall_time": None,
+        "status_counts": None,
+        "throughput": {},
+        "merge": None,
+        "sessions": [],
+        "error": None,
+        "warnings": list(job.warnings),
+        "notes": list(job.notes),
+        "kernels": job.kernels,
+    }
+    return folder, record
+
+
 def resolve_run(run: str | Path) -> Path:
     """A run folder from a path or an id under ``runs/``."""
     path = Path(run)
@@ -149,9 +209,17 @@ def run_lock(folder: Path) -> Iterator[None]:
         os.close(fd)
 
 
-def drop_lock(folder: Path) -> None:
-    """Remove the lock file of a completed run, while :func:`run_lock` still holds it (a
-    completed run is never executed again, so no other process waits for it)."""
+def close_completed(folder: Path, keep_parts: bool = False) -> None:
+    """Remove the part files of a completed run (merged into ``ensemble.nc``; unless
+    ``keep_parts``) and its lock file, while :func:`run_lock` still holds it (a completed
+    run is never executed again, so no other process waits for it)."""
+    parts = Path(folder) / PARTS
+    if not keep_parts and parts.is_dir():
+        for name in os.listdir(parts):
+            if _PART_NAME.match(name):
+                (parts / name).unlink()
+        with contextlib.suppress(OSError):
+            parts.rmdir()
     with contextlib.suppress(FileNotFoundError):
         (Path(folder) / LOCK).unlink()
 
@@ -206,6 +274,89 @@ def run_log(folder: Path) -> Iterator[None]:
         log.removeHandler(handler)
         log.setLevel(previous)
         handler.close()
+
+
+# -- the chunks of a run ---------------------------------------------------------------------
+# A run's samples 0:nsample are cut into chunks of chunk_size, the cutting starting again at
+# every count the run had before it grew (--extend or an until batch: run.json["restarts"]),
+# so that the part files written before it grew are still chunks of its plan. The chunking
+# never changes the data.
+
+
+def plan_chunks(
+    nsample: int, chunk_size: int, restarts: Sequence[int] = ()
+) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``0:nsample`` in chunks of ``chunk_size``.
+
+    ``restarts``: sample indices where the chunking starts again (the sizes a run had before
+    ``--extend`` or an ``until`` batch added samples), so that the chunks a run computed
+    before it grew are still chunks of its plan.
+    """
+    if nsample < 1:
+        raise ValueError(f"nsample: must be >= 1, got {nsample}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size: must be >= 1, got {chunk_size}")
+    bounds = sorted({0, nsample, *(b for b in restarts if 0 < b < nsample)})
+    return [
+        (s, min(s + chunk_size, stop))
+        for begin, stop in itertools.pairwise(bounds)
+        for s in range(begin, stop, chunk_size)
+    ]
+
+
+def run_chunks(record: Mapping[str, Any], chunk_size: int) -> list[tuple[int, int]]:
+    """The chunks of a run: ``run.json["samples"]`` in chunks of ``chunk_size``, the chunking
+    starting again at every count the run had before it grew (``run.json["restarts"]``)."""
+    return plan_chunks(int(record["samples"]), chunk_size, record.get("restarts", ()))
+
+
+def extension_base(folder: Path, record: Mapping[str, Any]) -> int:
+    """How many samples an unfinished ``--extend`` keeps from ``ensemble.nc`` (0 if none:
+    no extension under way, or ``--remerge`` moved the file aside)."""
+    extensions = record.get("extensions") or []
+    if not extensions or "end" in extensions[-1] or not (Path(folder) / ENSEMBLE).exists():
+        return 0
+    return int(extensions[-1]["from"])
+
+
+def missing_chunks(
+    folder: Path, record: Mapping[str, Any], chunk_size: int, base: int = 0
+) -> list[tuple[int, int]]:
+    """The chunks of the run that have no part file yet and do not lie in the first ``base``
+    samples (those ``ensemble.nc`` holds before ``--extend`` adds to it); logged.
+
+    Raises:
+        RunError: part files that are no chunks of the run (another chunk size).
+    """
+    from mcchain.ensemble.io import list_parts
+
+    chunks = run_chunks(record, chunk_size)
+    todo = {c: c[1] > base for c in chunks}  # chunk -> not held by the extended ensemble.nc
+    for part in list_parts(Path(folder) / PARTS):
+        if (part.start, part.stop) not in todo:
+            raise RunError(
+                f"{Path(folder) / PARTS}: part files do not match chunk size {chunk_size}"
+            )
+        todo[part.start, part.stop] = False
+    missing = list(filter(todo.get, todo))  # in order
+    log.info(
+        "scene %s: %d samples, %d chunks of %d, %d to compute",
+        record.get("scene"),
+        chunks[-1][1],
+        len(chunks),
+        chunk_size,
+        len(missing),
+    )
+    return missing
+
+
+def missing_samples(folder: Path, record: Mapping[str, Any]) -> int:
+    """Samples of a run (``run.json["samples"]``) that neither a finished part file nor,
+    during an ``--extend``, the ``ensemble.nc`` it extends holds."""
+    from mcchain.ensemble.io import list_parts
+
+    held = sum(p.stop - p.start for p in list_parts(Path(folder) / PARTS))
+    return int(record["samples"]) - extension_base(folder, record) - held
 
 
 # -- reading -----------------------------------------------------------------------------------

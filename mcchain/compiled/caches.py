@@ -1,0 +1,84 @@
+"""Where compiled code is kept, and what happens when that place cannot be written.
+
+Three caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
+``__pycache__``, else numba's user-wide folder), and in ``MCCHAIN_CACHE_DIR``
+(:func:`mcchain_cache`) the machine code of the generated lane kernels (``native``,
+:mod:`mcchain.codegen.native`; ``generated``: their text, where numba compiles them) and the
+quasi-random sample designs drawn before (:func:`mcchain.scene.sampling.unit_design`). A
+cache that cannot be written (a read-only home or installation) never stops a run: the cache
+moves to the temporary folder, with one warning line on stderr, and kernels then compile once
+per machine boot instead of once per installation. That folder has a predictable name
+(``<tmp>/mcchain-<name>-<uid>``): it is used only if it is private to the user
+(:func:`not_private`), since another user who made it first could plant machine code in it.
+
+A plain module: it imports nothing of mcchain, so the kernels (:mod:`mcchain.kernels.config`)
+and the code generator both use it without a cycle. What ``mcchain cache status`` reports is
+in :mod:`mcchain.compiled.report`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from mcchain.folders import temporary_cache, warn_fallback, writable
+
+
+def mcchain_cache(name: str) -> Path:
+    """The folder ``name`` of mcchain's cache: under ``$MCCHAIN_CACHE_DIR``, else
+    ``~/.cache/mcchain`` (``<tmp>/mcchain-<name>-<uid>`` with a warning when that cannot be
+    written)."""
+    root = os.environ.get("MCCHAIN_CACHE_DIR")
+    if root:
+        path = Path(root)
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        path = Path(base) / "mcchain"
+    if writable(path / name):
+        return path / name
+    fallback = temporary_cache(name)
+    warn_fallback("MCCHAIN_CACHE_DIR", path, fallback)
+    return fallback
+
+
+def numba_index_folder() -> Path | None:
+    """The folder in which numba keeps the index files of mcchain's hand-written kernels
+    (``mcchain/kernels``), worked out as :func:`ensure_numba_cache` and numba's cache
+    locators choose it (``NUMBA_CACHE_DIR``, else ``__pycache__`` beside the sources, else
+    numba's user-wide folder, else the temporary one), without importing numba or a kernel
+    module. None on Windows, whose user-wide folder this does not look up."""
+    import hashlib
+
+    sources = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep + "kernels"
+    subpath = "kernels_" + hashlib.sha1(sources.encode()).hexdigest()
+    configured = os.environ.get("NUMBA_CACHE_DIR")
+    if configured:
+        root = Path(configured) if writable(Path(configured)) else temporary_cache("numba")
+        return root / subpath
+    in_tree = Path(sources) / "__pycache__"
+    if writable(in_tree):
+        return in_tree
+    if sys.platform == "win32":
+        return None
+    if sys.platform == "darwin":
+        user_wide = Path.home() / "Library" / "Caches" / "numba"
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        user_wide = Path(base) / "numba"
+    return (user_wide if writable(user_wide) else temporary_cache("numba")) / subpath
+
+
+def kernels_cached(kernels: list[str]) -> bool | None:
+    """Whether numba's cache holds an index for every kernel named in ``kernels``
+    (``"module.function"`` in ``mcchain.kernels``, e.g. ``"assembly.assemble_batch"``),
+    without importing numba or the kernels: a kernel module's import decorates its kernels,
+    which imports numba (0.4 s). None: cannot tell (Windows, :func:`numba_index_folder`).
+
+    An index names the function's first line, which this does not parse: any line counts.
+    A kernel edited since it was cached is compiled again however this answers."""
+    folder = numba_index_folder()
+    if folder is None:
+        return None
+    suffix = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
+    return all(any(folder.glob(f"{name}-*{suffix}")) for name in kernels)
