@@ -338,7 +338,8 @@ def report(counts: list[dict], times: list[dict], peaks: dict[str, Any],
             f"`{command}` (about an hour: every kernel compiled cold with counters, then timed). "
             f"Load average {load:.1f} when the timed runs started ({peaks.get('load', 0):.1f} at "
             "the ceilings'): the machine is shared (2 cores); the figures are best-of runs, "
-            "1 thread on CPU time, 2 threads on wall time.",
+            "the ceilings and the kernels on 1 thread on CPU time, the kernels on 2 threads on "
+            "wall time (their 2-thread fraction of the peak is low when the machine is busy).",
             "",
             "## Ceilings (measured here: `benchmarks/peak.py`)",
             "",
