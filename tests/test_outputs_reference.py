@@ -187,6 +187,34 @@ def test_ideal_copy__the_difference_of_two_separate_runs(method):
     assert 0.0 <= both["output_values"][0, 0] - np.max(np.abs(separate)) < 1e-12
 
 
+def test_rk45_lanes__a_sample_s_outputs_do_not_depend_on_its_lane():
+    """rk45 lanes take the next sample of their block when theirs is finished: the outputs
+    of a sample that starts in a lane after another one (reductions reset, its own row of
+    the window data) are those of the sample run alone, bit for bit."""
+    scene = load_scene_text(_text("rk45"))
+    model = compile_model(scene, nsample=5)
+    ideal = ideal_model(model)
+    start, start_ideal = assemble(model), assemble(ideal)
+    both = with_ideal_copy(model, ideal)
+    q = np.concatenate([start.q, start_ideal.q], 1)
+    v = np.concatenate([start.v, start_ideal.v], 1)
+
+    def run(first: int, stop: int, lanes: int | None) -> dict[str, np.ndarray]:
+        part = both.select(first, stop)
+        plan = output_plan(scene.output, model.select(first, stop), T_END)
+        return simulate(part, scene.simulate, q[first:stop], v[first:stop], lanes=lanes,
+                        outputs=plan)  # fmt: skip
+
+    alone = run(0, 1, None)
+    # one lane per group: 5 groups in at most 4 blocks (2 per thread, 1 or 2 threads), so a
+    # lane takes a second sample
+    shared = run(0, 5, 1)
+    assert np.isfinite(alone["output_values"]).all()
+    for i in range(5):
+        assert np.array_equal(shared["output_values"][i], alone["output_values"][0])
+        assert np.array_equal(shared["q"][i], alone["q"][0])
+
+
 PEAKS = """
 [[output]]
 name = "pin_peak"
