@@ -31,7 +31,7 @@ import signal
 import subprocess
 import sys
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -75,12 +75,19 @@ class FakeScene:
         data = {k: v for k, v in asdict(self).items() if k != "text"}
         return json.loads(json.dumps(data))
 
+    def model_copy(self, update: dict[str, Any]) -> FakeScene:
+        """As pydantic's (the warm-up shortens ``simulate``: runner.executors.warm_scene)."""
+        return replace(self, **update)
+
 
 @dataclass
 class FakeSimulate:
     t_end: float
     dt: float
     steps: int
+
+    def model_copy(self, update: dict[str, Any]) -> FakeSimulate:
+        return replace(self, **update)
 
 
 def fake_model(nsample: int, seed: int = 0, nbody: int = 2) -> Model:
