@@ -578,7 +578,9 @@ def _as_dataset(ds: xr.Dataset, index: np.ndarray, outputs: Mapping[str, np.ndar
             continue
         variables[name] = xr.Variable(dims, np.asarray(values), ds[name].attrs)
     coords = {
-        d: ds[d] for d in ds.coords if "sample" not in ds[d].dims and "time" not in ds[d].dims
+        d: ds[d]
+        for d in ds.coords
+        if not {"sample", "time", "history_sample"} & set(ds[d].dims)  # per-sample only
     }
     out = xr.Dataset(variables, coords={**coords, "sample": np.asarray(index)})
     out.attrs = dict(ds.attrs)

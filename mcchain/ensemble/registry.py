@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.histories import HISTORY_SAMPLE
 from mcchain.ensemble.spec import VariableSpec
 from mcchain.parameters import param_units
 from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
@@ -632,7 +633,10 @@ def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
         spec = VARIABLES.get(str(name)) or stored_output(str(name), var.attrs)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
-        if tuple(var.dims) != spec.dims:
+        dims = tuple(str(d) for d in var.dims)
+        if dims[:1] == (HISTORY_SAMPLE,):  # [storage] histories = "failed": a subset
+            dims = ("sample", *dims[1:])
+        if dims != spec.dims:
             raise ValueError(f"{name}: dims {tuple(var.dims)}, expected {spec.dims}")
         allowed: Sequence[np.dtype]
         if spec.dtype == "history" and history_dtype is None:

@@ -10,8 +10,8 @@ counts; a completed session then removes the merged parts and the lock.
 
 What a part file holds is the :class:`PartWriter`'s choice: the chunk's variables from the
 registry (:func:`mcchain.ensemble.registry.chunk_variables`) with the requirements'
-``requirement_met`` (:meth:`mcchain.decision.requirements.RunRequirements.add_to`); a
-storage option that keeps fewer variables belongs there too.
+``requirement_met`` (:meth:`mcchain.decision.requirements.RunRequirements.add_to`), and of
+the time histories those ``[storage] histories`` keeps (:mod:`mcchain.ensemble.histories`).
 
 This module imports only the standard library at import time.
 """
@@ -72,6 +72,7 @@ class PartWriter:
     requirements: RunRequirements | None = None
 
     def __call__(self, chunk: SolvedChunk) -> None:
+        from mcchain.ensemble.histories import drop_histories, keep_histories
         from mcchain.ensemble.io import write_part
         from mcchain.ensemble.registry import chunk_variables
 
@@ -80,6 +81,8 @@ class PartWriter:
         if self.requirements is not None:
             outputs = self.requirements.add_to(outputs)
             keywords = self.requirements.chunk_keywords()
+        if self.job.histories == "none":
+            outputs = drop_histories(outputs)
         variables = chunk_variables(
             outputs,
             self.job.model.select(chunk.start, chunk.stop),
@@ -88,6 +91,7 @@ class PartWriter:
             attrs=self.attrs,
             **keywords,
         )
+        variables = keep_histories(variables, self.job.histories)
         write_part(variables, self.parts_dir, chunk.start, chunk.stop)
 
 

@@ -186,6 +186,11 @@ class Storage(Section):
     chunk_size: Int = Field(
         default=1024, ge=1, description="samples per chunk; default 1024 (CLI --chunk-size)."
     )
+    histories: Literal["all", "none", "failed"] = Field(
+        default="all",
+        description='time histories stored: "all" (default), "none", or "failed" (the '
+        "samples that fail a requirement or carry a status flag).",
+    )
 
     @model_validator(mode="after")
     def _zlib_level(self) -> Storage:
