@@ -9,15 +9,16 @@
   has dims ``(history_sample, time, body, dof)``; ``ds.q.sel(history_sample=17)`` is
   sample 17's (:func:`sample_history` reads it in any mode, or says it was not stored).
 
-A variable is a time history when it has a ``time`` dimension. Write side:
-:func:`keep_histories` (the run's :class:`mcchain.runner.store.PartWriter`); read side:
-:func:`stored_samples`, :func:`sample_history`, :func:`history_dims`.
+A variable is a time history when it has a ``time`` dimension. Written by the run's
+:class:`mcchain.runner.store.PartWriter` (:func:`mcchain.runner.store.kept_histories`,
+with :func:`replay_mask`); read by :func:`stored_samples`, :func:`sample_history`,
+:func:`select_with_histories`, :func:`without_histories` and :func:`not_stored_reason`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,8 +26,6 @@ from mcchain.errors import RunError
 
 if TYPE_CHECKING:
     import xarray as xr
-
-    from mcchain.ensemble.registry import ChunkVariables
 
 HISTORY_MODES = ("all", "none", "failed")
 """The values of ``[storage] histories``."""
@@ -59,41 +58,6 @@ def replay_mask(status: np.ndarray, requirement_met: np.ndarray | None) -> np.nd
     return np.asarray(keep, dtype=bool)
 
 
-def drop_histories(outputs: Mapping[str, Any]) -> dict[str, Any]:
-    """A solver's outputs without the time histories and their ``time`` axis (``"none"``)."""
-    from mcchain.ensemble.registry import VARIABLES
-
-    return {
-        name: value
-        for name, value in outputs.items()
-        if name != "time" and not (name in VARIABLES and is_history(VARIABLES[name].dims))
-    }
-
-
-def keep_histories(chunk: ChunkVariables, mode: str) -> ChunkVariables:
-    """A part file's variables with the histories ``mode`` keeps (``"none"`` is done
-    before, by :func:`drop_histories`; ``"all"`` returns ``chunk``): for ``"failed"``, each
-    history's rows of the samples :func:`replay_mask` picks, along :data:`HISTORY_SAMPLE`."""
-    from mcchain.ensemble.registry import ChunkVariables
-
-    if mode not in HISTORY_MODES:
-        raise ValueError(f"storage.histories: must be one of {HISTORY_MODES}, got {mode!r}")
-    if mode != "failed":
-        return chunk
-    met = chunk.data_vars.get("requirement_met")
-    keep = replay_mask(chunk.data_vars["status"][1], None if met is None else met[1])
-    data_vars = {}
-    for name, (dims, values, attrs) in chunk.data_vars.items():
-        if is_history(dims):
-            dims, values = (HISTORY_SAMPLE, *dims[1:]), values[keep]
-        data_vars[name] = (dims, values, attrs)
-    coords = dict(chunk.coords)
-    if any(is_history(dims) for dims, _, _ in chunk.data_vars.values()):
-        ids = chunk.coords["sample"][1][keep]
-        coords[HISTORY_SAMPLE] = ((HISTORY_SAMPLE,), ids, dict(HISTORY_SAMPLE_ATTRS))
-    return ChunkVariables(coords, data_vars, chunk.attrs)
-
-
 # -- reading ---------------------------------------------------------------------------------
 
 
@@ -119,9 +83,9 @@ def stored_samples(ds: xr.Dataset) -> np.ndarray:
         return np.asarray(ds[HISTORY_SAMPLE].values, dtype=np.int64)
     if mode == "none":
         return np.empty(0, dtype=np.int64)
-    from mcchain.ensemble.queries import sample_ids
-
-    return sample_ids(ds)
+    if "sample" in ds.coords:
+        return np.asarray(ds["sample"].values, dtype=np.int64)
+    return np.arange(ds.sizes["sample"], dtype=np.int64)
 
 
 def history_dim(ds: xr.Dataset) -> str:

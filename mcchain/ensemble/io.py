@@ -392,7 +392,7 @@ def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
         yield b0, min(b0 + length, n)
 
 
-def _read_rows(
+def _read_samples(
     cache: _PartCache, starts: np.ndarray, stops: np.ndarray, name: str, b0: int, b1: int
 ) -> np.ndarray:
     """Rows ``b0:b1`` (along the variable's first, row dim) of variable ``name``, gathered
@@ -549,7 +549,7 @@ def merge_parts(
                         for t in along:
                             for b0 in range(w0, w1, min(t.step, window)):
                                 b1 = min(b0 + t.step, w1)
-                                block = _read_rows(cache, rows[:-1], rows[1:], t.name, b0, b1)
+                                block = _read_samples(cache, rows[:-1], rows[1:], t.name, b0, b1)
                                 t.var[b0:b1] = block
                                 bytes_in += block.nbytes
                 _set_attrs(dst, cache.attrs)
@@ -585,8 +585,10 @@ class DamagedEnsemble(RunError):
         )
 
 
-def open_ensemble(path: Path) -> xr.Dataset:
-    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks).
+def open_ensemble(path: Path, *, dask: bool = True) -> xr.Dataset:
+    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks;
+    ``dask=False``: xarray's own lazy arrays, without a task graph per variable, for a
+    reader of a few per-sample variables: the verdict a run prints).
 
     Raises:
         DamagedEnsemble: the file cannot be opened, or its per-sample ``status`` (read here,
@@ -595,7 +597,7 @@ def open_ensemble(path: Path) -> xr.Dataset:
     import xarray as xr
 
     try:
-        if _has_dask():
+        if dask and _has_dask():
             ds = xr.open_dataset(path, engine="netcdf4", chunks={})
         else:
             ds = xr.open_dataset(path, engine="netcdf4")

@@ -113,7 +113,7 @@ def verdict_lines(run: RunState) -> list[str]:
     from mcchain.ensemble.io import open_ensemble
     from mcchain.runner.runs import ENSEMBLE
 
-    ds = open_ensemble(run.folder / ENSEMBLE)
+    ds = open_ensemble(run.folder / ENSEMBLE, dask=False)
     try:
         sequential = sequential_settings(ds.attrs)
         return summary_lines(summarize(ds), allocations(ds), design_of(ds), sequential)
