@@ -71,6 +71,7 @@ def mcchain_run(tree: Path, scene: Path, samples: int, run_dir: Path) -> dict:
         "merge": record.get("merge", {}),
         "bytes": (run_dir / "ensemble.nc").stat().st_size,
         "verdict": [line for line in proc.stdout.splitlines() if line.startswith("requirement")],
+        "stdout": proc.stdout,
     }
 
 
