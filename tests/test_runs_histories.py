@@ -245,3 +245,13 @@ def test_histories__failed_dataset_reads_back_lazily(three) -> None:
         assert ds.q.dims[0] == HISTORY_SAMPLE
     finally:
         ds.close()
+
+
+def test_histories__check_of_a_light_run_equals_the_full_runs(three) -> None:
+    """``mcchain check`` re-solves the samples itself: a light run's check is the full
+    run's (it compares per-sample variables only)."""
+    from mcchain.decision.check import check_run
+
+    full, light = check_run(three["all"]), check_run(three["failed"])
+    assert [r.requirement for r in full.rows] == [r.requirement for r in light.rows] == ["pin"]
+    assert full.lines() == light.lines()

@@ -17,7 +17,7 @@ with :func:`replay_mask`); read by :func:`stored_samples`, :func:`sample_history
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Hashable, Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,7 +44,7 @@ HISTORY_SAMPLE_ATTRS = {
 }
 
 
-def is_history(dims: Iterable[str]) -> bool:
+def is_history(dims: Iterable[Hashable]) -> bool:
     """Whether a variable with ``dims`` is a time history."""
     return "time" in tuple(dims)
 

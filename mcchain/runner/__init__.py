@@ -44,10 +44,11 @@ Where a new part goes:
   (picklable), in the plan's ``solve_steps``; what it returns is what the store writes and
   the observers see. (Outputs relative to the ideal mechanism are part of the solve itself:
   :func:`mcchain.solvers.solve_chunk`.)
-* **Something about what is stored** (e.g. ``[storage] histories = "none" | "failed"``): the
-  store's :class:`~mcchain.runner.store.PartWriter`, which makes each part file's variables,
-  and the disk estimate that counts them (:func:`~mcchain.runner.resources.
-  stored_sample_bytes`).
+* **Something about what is stored** (as ``[storage] histories = "none" | "failed"``,
+  :func:`~mcchain.runner.store.kept_histories`): the store's
+  :class:`~mcchain.runner.store.PartWriter`, which makes each part file's variables, and the
+  disk estimate that counts them (:func:`~mcchain.runner.resources.stored_sample_bytes`);
+  what readers make of it, in :mod:`mcchain.ensemble.histories`.
 
 The modules import only the standard library at import time (``mcchain runs`` and
 ``mcchain --help`` never compile a kernel); each stage imports what it needs when it comes.
