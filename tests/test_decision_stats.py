@@ -301,9 +301,7 @@ def test_scipy_stats_free__bounds_cdf_and_ranks_bit_for_bit() -> None:
         for tail in (0.05, 0.025, 0.005):
             lower, upper = _beta_bound_arrays(k, np.full(k.shape, n), tail)
             ref_lower = np.where(k > 0, stats.beta.ppf(tail, np.maximum(k, 1), n - k + 1), 0.0)
-            ref_upper = np.where(
-                k < n, stats.beta.ppf(1 - tail, k + 1, np.maximum(n - k, 1)), 1.0
-            )
+            ref_upper = np.where(k < n, stats.beta.ppf(1 - tail, k + 1, np.maximum(n - k, 1)), 1.0)
             np.testing.assert_array_equal(lower, ref_lower)
             np.testing.assert_array_equal(upper, ref_upper)
             assert _beta_bounds(int(k[n // 2]), n, tail) == (lower[n // 2], upper[n // 2])

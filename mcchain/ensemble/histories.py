@@ -134,11 +134,6 @@ def sample_history(ds: xr.Dataset, name: str, sample: int) -> xr.DataArray:
     return ds[name].sel({dim: int(sample)})
 
 
-def full_histories(ds: xr.Dataset) -> bool:
-    """Whether ``ds`` holds every sample's time histories."""
-    return stored_mode(ds) == "all"
-
-
 def histories_setting(ds: xr.Dataset) -> str:
     """The ``[storage] histories`` the run was made with (its ``settings`` attribute;
     ``"all"`` for an ensemble from before the key)."""
