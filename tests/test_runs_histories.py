@@ -255,3 +255,24 @@ def test_histories__check_of_a_light_run_equals_the_full_runs(three) -> None:
     full, light = check_run(three["all"]), check_run(three["failed"])
     assert [r.requirement for r in full.rows] == [r.requirement for r in light.rows] == ["pin"]
     assert full.lines() == light.lines()
+
+
+@pytest.mark.parametrize(("limit", "kept"), [(1e9, 0), (1.0, 4)])
+def test_histories__failed_with_no_failure_and_with_all_failing(tmp_path, limit, kept) -> None:
+    """The edges: the first 4 samples carry no status flag; a limit none reaches keeps no
+    history (an empty history_sample), one every sample exceeds keeps them all."""
+    path = tmp_path / "edge.toml"
+    path.write_text(scene_text("failed").replace(f"max = {LIMIT}", f"max = {limit}"))
+    folder = plan.start_run(
+        path, samples=4, chunk_size=3, threads=1, run_dir=tmp_path / "edge", progress=False
+    ).folder
+    with runs.open_run(folder) as ds:
+        validate_dataset(ds)
+        assert (ds.status.values == 0).all()
+        assert ds.sizes[HISTORY_SAMPLE] == kept and ds.q.shape[0] == kept
+        assert stored_mode(ds) == "failed"
+        if kept:
+            same_bits(ds[HISTORY_SAMPLE].values, np.arange(4, dtype=np.int64), "kept")
+        else:
+            with pytest.raises(RunError, match="sample 2: time history not stored"):
+                sample_history(ds, "q", 2)

@@ -136,12 +136,13 @@ def sample_history(ds: xr.Dataset, name: str, sample: int) -> xr.DataArray:
 
 def histories_setting(ds: xr.Dataset) -> str:
     """The ``[storage] histories`` the run was made with (its ``settings`` attribute;
-    ``"all"`` for an ensemble from before the key)."""
+    ``"all"`` for an ensemble from before the key, and for a scene without ``[simulate]``,
+    which has no history to leave out)."""
     import json
 
     try:
-        settings = json.loads(str(ds.attrs.get("settings", "{}")))
-        value = settings["scene"]["storage"].get("histories", "all")
+        scene = json.loads(str(ds.attrs.get("settings", "{}")))["scene"]
+        value = scene["storage"].get("histories", "all") if scene.get("simulate") else "all"
     except (ValueError, KeyError, TypeError, AttributeError):
         return "all"
     return str(value) if value in HISTORY_MODES else "all"
