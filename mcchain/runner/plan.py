@@ -126,7 +126,7 @@ def start_run(
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
-        from mcchain.runner.observers import observers_for
+        from mcchain.runner.observers import observers_for, solve_steps_for
 
         observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
         prepare_seconds = time.perf_counter() - t0
@@ -148,6 +148,7 @@ def start_run(
             dask=dask,
             threads=threads,
             solve=solve,
+            solve_steps=solve_steps_for(job, solve),
             argv=argv,
             prepare_seconds=prepare_seconds,
             keep_parts=keep_parts,
@@ -367,6 +368,7 @@ def _run_existing(
     """The pipeline of a run folder that exists (resumed or extended), whose checks passed
     (since ``t0``): its kernels are loaded or compiled at the warm-up."""
     from mcchain.compiled.ready import Kernels
+    from mcchain.runner.observers import solve_steps_for
     from mcchain.runner.pipeline import Plan, run_pipeline
     from mcchain.runner.provenance import software_versions
 
@@ -382,6 +384,7 @@ def _run_existing(
         dask=dask,
         threads=threads,
         solve=solve,
+        solve_steps=solve_steps_for(job, solve),
         argv=list(sys.argv if argv is None else argv),
         prepare_seconds=time.perf_counter() - t0,
         keep_parts=keep_parts,

@@ -41,6 +41,9 @@ def run_summary(record: Mapping[str, Any]) -> list[str]:
             else ""
         ),
     ]
+    retried = (r.get("retries") or {}).get("line")
+    if retried:
+        lines.append(f"note: {retried}")
     until = r.get("until")
     if until and until.get("stopped"):
         looks = len(until.get("looks", []))
