@@ -12,6 +12,7 @@ solver with known failures (no kernels).
 from __future__ import annotations
 
 import filecmp
+import html
 import json
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ import numpy as np
 import pytest
 
 from mcchain.cli import main
+from mcchain.decision.verdict import run_verdict
 from mcchain.ensemble.registry import STEPS_TAKEN, VARIABLES
 from mcchain.runner import plan, runs
 from mcchain.runner.pipeline import RunResult
@@ -38,6 +40,7 @@ from mcchain.solvers.retry import (
     retry_counts,
 )
 from mcchain.status import ASSEMBLY_FAILED, DIVERGED, FAILURE_BITS
+from mcchain.viz.report_provenance import provenance_section
 
 REPO = Path(__file__).resolve().parents[1]
 LIMIT = 4500.0  # N, the pin-force limit of the requirement (about half the samples exceed it)
@@ -119,6 +122,12 @@ def test_retry__the_issue_scene_solved_exactly_as_at_the_tighter_tolerance(tmp_p
     assert any(line.startswith(note) for line in run_summary(record))
     assert "rtol 1e-07 -> 1e-08, atol 1e-10 -> 1e-11" in record["retries"]["line"]
     assert not any("retried" in line for line in run_summary(kept.record))
+    # What else reads status says so: the verdict table and the report page's provenance.
+    assert f"note: {record['retries']['line']}" in run_verdict(retried.folder).lines()
+    assert not any("retried" in line for line in run_verdict(kept.folder).lines())
+    with runs.open_run(retried.folder) as ds:
+        page = provenance_section(retried.folder, ds)
+    assert html.escape(record["retries"]["line"]) in page
 
 
 @pytest.mark.slow  # real solvers, a Dask LocalCluster

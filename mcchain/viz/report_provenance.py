@@ -129,6 +129,8 @@ def provenance_section(folder: Path, ds: xr.Dataset) -> str:
         rows.append(("run.json", "missing or unreadable: date, commit and host unknown"))
     said = [("warning", w) for w in record.get("warnings") or []]
     said += [("note", n) for n in record.get("notes") or []]
+    retried = (record.get("retries") or {}).get("line")  # failed samples solved again
+    said += [("note", retried)] if retried else []
     if said:
         printed = "".join(f'<li class="{kind}">{kind}: {esc(line)}</li>' for kind, line in said)
         printed = f"<ul>{printed}</ul>"
