@@ -227,7 +227,7 @@ def resume_run(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
     grow = None
-    if record.get("until") and record.get("extensions"):  # an until run extended since
+    if record.get("extensions"):  # extended since: judged by the confidence sequence
         job = keep_sequential(job, record)
     elif record.get("until"):
         job, grow = sequential_job(
@@ -342,15 +342,33 @@ def extend_run(
             f"count); run the scene again with --samples {total}"
         )
     job = keep_kernels(job, record.get("kernels"))
-    job = keep_sequential(job, record)
     check_live(rerun, total)
     check_disk(job.disk, folder, samples, retry="extend")
+    notes = [] if record.get("until") else extended_fixed_count_notes(job, record)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": now()})
     record["restarts"] = sorted({*record.get("restarts", []), old})
     record["samples"] = total
     record["chunks"] = len(run_chunks(record, job.chunk_size))
-    observers = observers_for(job, progress=progress, rerun=rerun)
+    job = keep_sequential(job, record)
+    from mcchain.runner.stale import Extension
+
+    observers = [*observers_for(job, progress=progress, rerun=rerun), Extension(old, notes)]
     return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
+
+
+def extended_fixed_count_notes(job: Job, record: Mapping[str, Any]) -> list[str]:
+    """The line an ``--extend`` of a fixed-count run with requirements prints (the first
+    extension only): its verdicts now come from the confidence sequence
+    (:func:`mcchain.decision.until.keep_sequential`)."""
+    if record.get("extensions") or not getattr(job.scene, "requirement", None):
+        return []
+    n = int(record["samples"])
+    return [
+        f"--extend: the verdicts of this run now come from its confidence sequence, looked at "
+        f"every {n} samples (the first look: the {n} it had): a Clopper-Pearson interval does "
+        "not hold for a run extended until it decides (optional stopping), the sequence holds "
+        "whenever it stops; its bounds are wider"
+    ]
 
 
 def _run_existing(

@@ -41,6 +41,8 @@ def run_summary(record: Mapping[str, Any]) -> list[str]:
             else ""
         ),
     ]
+    session = r["sessions"][-1] if r.get("sessions") else {}
+    lines += [f"note: {line}" for line in session.get("notes") or []]
     retried = (r.get("retries") or {}).get("line")
     if retried:
         lines.append(f"note: {retried}")

@@ -81,7 +81,12 @@ def _design(ds: xr.Dataset, settings: dict[str, Any], record: dict[str, Any]) ->
         return f"no [sample]: {n} identical instance(s)"
     text = f"{esc(sample.get('design', 'random'))}, {n} samples, seed {esc(settings.get('seed'))}"
     sequential = settings.get("sequential")
-    if isinstance(sequential, dict):
+    if isinstance(sequential, dict) and sequential.get("extended_from"):
+        text += (
+            f"; extended from {esc(sequential['extended_from'])} samples: verdicts by the "
+            "confidence sequence"
+        )
+    elif isinstance(sequential, dict):
         until = record.get("until") or {}
         looks = len(until.get("looks") or [])
         text += (
