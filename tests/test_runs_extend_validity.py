@@ -126,3 +126,27 @@ def test_move_stale__never_overwrites(tmp_path: Path) -> None:
     assert np.array_equal(
         sorted(p.name for p in (tmp_path / "stale").iterdir()), ["10-samples", "10-samples-2"]
     )
+
+
+def test_extend__interrupted_then_resumed_still_moves_the_stale_files(tmp_path: Path) -> None:
+    scene = write(tmp_path, "s.toml", scene_text(0.05, 0.01, until=""))
+    folder = plan.start_run(scene, chunk_size=32, run_dir=tmp_path / "r", progress=False).folder
+    export_requirements(folder)
+    calls = []
+
+    def failing_solve(model, scene):  # type: ignore[no-untyped-def]
+        from mcchain.solvers import solve_chunk
+
+        calls.append(model.nsample)
+        if len(calls) == 2:  # the second new chunk fails
+            raise RuntimeError("power cut")
+        return solve_chunk(model, scene)
+
+    with pytest.raises(RuntimeError, match="power cut"):
+        plan.extend_run(folder, 64, solve=failing_solve, progress=False)
+    assert (folder / "export" / "requirements.csv").exists()  # the old run is still whole
+    result = plan.resume_run(folder, progress=False)
+    assert (folder / "stale" / "64-samples" / "export" / "requirements.csv").exists()
+    assert any("moved to stale/64-samples/" in line for line in run_summary(result.record))
+    with runs.open_run(folder) as ds:
+        assert json.loads(ds.attrs["settings"])[SETTINGS_KEY]["extended_from"] == 64

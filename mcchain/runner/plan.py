@@ -245,6 +245,11 @@ def resume_run(
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
     observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
+    extension = (record.get("extensions") or [{}])[-1]
+    if extension and "end" not in extension:  # an interrupted --extend: its files go stale
+        from mcchain.runner.stale import Extension
+
+        observers.append(Extension(int(extension["from"])))
     return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
 
 
