@@ -151,7 +151,10 @@ def test_retry__retry_failed_must_be_a_boolean(
     assert main(["run", str(scene), "--run-dir", str(tmp_path / "r")]) == 2
     out, err = capsys.readouterr()
     assert out == "" and len(err.strip().splitlines()) == 1
-    assert err == "mcchain: error: simulate.retry_failed: expected true or false, got the string 'yes'\n"
+    assert (
+        err
+        == "mcchain: error: simulate.retry_failed: expected true or false, got the string 'yes'\n"
+    )
     assert not (tmp_path / "r").exists()
 
 
