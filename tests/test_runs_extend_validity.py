@@ -73,6 +73,7 @@ def test_extend__a_fixed_count_run_continues_under_its_confidence_sequence(
     assert int(row["samples"]) == 164
     assert float(row["p_lower"]) == pytest.approx(lower, rel=1e-12)
     assert float(row["p_upper"]) == pytest.approx(upper, rel=1e-12)
+    first_lower, first_upper = float(row["p_lower"]), float(row["p_upper"])
     table = run_verdict(result.folder).lines()
     assert any("since the run of 64 was extended" in line for line in table)
     # A second extension keeps the sequence (looks every 64 from the first) and moves the
@@ -83,8 +84,12 @@ def test_extend__a_fixed_count_run_continues_under_its_confidence_sequence(
     with runs.open_run(again.folder) as ds:
         failed = ds["requirement_met"].values[:, 0] == 0
         assert json.loads(ds.attrs["settings"])[SETTINGS_KEY]["extended_from"] == 64
+        assert json.loads(ds.attrs["settings"])[SETTINGS_KEY]["looks"] == [64, 164]
     (row,) = rows(export_requirements(again.folder)[0])
-    assert float(row["p_upper"]) == pytest.approx(sequential_bounds(failed, 64, 0.95, 0.01)[1])
+    lower, upper = sequential_bounds(failed, 64, 0.95, 0.01, [64, 164])  # 64 128 164 192 200
+    assert float(row["p_upper"]) == pytest.approx(upper, rel=1e-12)
+    assert float(row["p_lower"]) == pytest.approx(lower, rel=1e-12)
+    assert float(row["p_upper"]) <= first_upper and float(row["p_lower"]) >= first_lower
 
 
 def test_extend__an_until_run_keeps_its_sequence_and_its_check_goes_stale(

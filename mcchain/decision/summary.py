@@ -250,7 +250,8 @@ def summarize_requirement(
             lower, upper = confidence_sequence(np.asarray(k), np.asarray(m), confidence, target)
             return float(lower), float(upper)
 
-        lo, hi = sequential_bounds(failed, batch, confidence, target)
+        looks = sequential.get("looks") or ()
+        lo, hi = sequential_bounds(failed, batch, confidence, target, looks)
     side = quantile_side(requirement, values)
     if side == "max":
         level, limit, worst = 1 - _exact_decimal(target), requirement.max, math.inf

@@ -134,8 +134,13 @@ def keep_sequential(job: Job, record: Mapping[str, Any]) -> Job:
       before its first extension (``extended_from``). Extending a fixed-count run until its
       Clopper-Pearson interval decides is optional stopping: that interval then no longer
       holds (benchmarks/results/extend/bench.md measures it), the sequence does.
+
+    Extended, the entry also lists ``looks``: the counts the run had before it grew
+    (``run.json["restarts"]``: an ``until`` run's looks, each extension's start), so that
+    the running intersection continues over every look it was judged at and never widens.
     """
     until = record.get("until")
+    looks = sorted(int(n) for n in record.get("restarts") or ())
     if until:
         job.settings[SETTINGS_KEY] = {k: until[k] for k in ("method", "batch", "max_count")}
     elif record.get("extensions") and getattr(job.scene, "requirement", None):
@@ -146,6 +151,10 @@ def keep_sequential(job: Job, record: Mapping[str, Any]) -> Job:
             "max_count": None,
             "extended_from": first,
         }
+    else:
+        return job
+    if record.get("extensions"):  # where it was judged before each extension
+        job.settings[SETTINGS_KEY]["looks"] = looks
     return job
 
 
