@@ -40,37 +40,31 @@ from mcchain.solvers.retry import (
     retry_counts,
 )
 from mcchain.status import ASSEMBLY_FAILED, DIVERGED, FAILURE_BITS
+from mcchain.testing.scenes import config_text, with_lines
 from mcchain.viz.report_provenance import provenance_section
 
-REPO = Path(__file__).resolve().parents[1]
 LIMIT = 4500.0  # N, the pin-force limit of the requirement (about half the samples exceed it)
 
 
 def scene_text(rtol: float = 1e-7, atol: float = 1e-10, retry: bool | None = None) -> str:
     """configs/slider-crank-flores.toml with the clearance 0.010-0.027 mm, 16 samples."""
-    text = (REPO / "configs" / "slider-crank-flores.toml").read_text(encoding="utf-8")
-    lines = []
-    for line in text.splitlines():
-        key = line.split("=")[0].strip()
-        if key == "count":
-            line = "count = 16"
-        elif key == '"joint.B.clearance"':
-            line = '"joint.B.clearance" = { uniform = [1.0e-5, 2.7e-5] }'
-        elif key == "rtol":
-            line = f"rtol = {rtol!r}" + (
-                "" if retry is None else f"\nretry_failed = {str(retry).lower()}"
-            )
-        elif key == "atol":
-            line = f"atol = {atol!r}"
-        lines.append(line)
-    lines += [
+    retry_line = "" if retry is None else f"\nretry_failed = {str(retry).lower()}"
+    lines = {
+        "count": "count = 16",
+        '"joint.B.clearance"': '"joint.B.clearance" = { uniform = [1.0e-5, 2.7e-5] }',
+        "rtol": f"rtol = {rtol!r}{retry_line}",
+        "atol": f"atol = {atol!r}",
+    }
+    requirement = [
         "[[requirement]]",
         'name = "pin-force"',
         'output = "peak_contact_force"',
         'select = { joint = "B" }',
         f"max = {LIMIT!r}",
     ]
-    return "\n".join(lines) + "\n"
+    return (
+        with_lines(config_text("slider-crank-flores.toml"), lines) + "\n".join(requirement) + "\n"
+    )
 
 
 def run_of(folder: Path, name: str, text: str, **kwargs: Any) -> RunResult:
