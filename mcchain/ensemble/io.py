@@ -365,7 +365,9 @@ session's); run.json's sessions record every session's."""
 
 def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
     """Global attributes without the sample count (``sample_count``, ``settings``'
-    ``samples``): what the parts of one study share however far it was extended."""
+    ``samples``) and how the verdicts are judged (``settings``' ``sequential``, which an
+    ``--extend`` of a fixed-count run adds): what the parts of one study share however far
+    it was extended."""
     import json
 
     out = {key: value for key, value in attrs.items() if key != "sample_count"}
@@ -374,6 +376,7 @@ def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
             settings = json.loads(out["settings"])
             if isinstance(settings, dict):
                 settings.pop("samples", None)
+                settings.pop("sequential", None)
                 out["settings"] = json.dumps(settings, sort_keys=True)
     return out
 

@@ -325,6 +325,18 @@ VARIABLES: dict[str, VariableSpec] = {
             event_time=True,
         ),
         _v(
+            "solved_by",
+            _S,
+            "1",
+            "what solved the sample's time integration ([simulate] retry_failed): the scene's "
+            "settings, rtol/atol (or dt) / 10, / 100, radau at rtol/atol / 100, or nothing "
+            "(unsolved: flagged, NaN)",
+            "int8",
+            "simulate",
+            flag_values=np.array([0, 1, 2, 3, 4], dtype=np.int8),
+            flag_meanings="as_written tightened_10 tightened_100 radau unsolved",
+        ),
+        _v(
             "requirement_met",
             ("sample", "requirement"),
             "1",

@@ -68,6 +68,7 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
             if spec.analysis == "simulate"
             and spec.name not in ("joint_moment", "driver_force", "peak_driver_force")
             and (model.has_contact or spec.name not in _CONTACT_OUTPUTS)
+            and (spec.name != "solved_by" or getattr(sim, "retry_failed", False))
         }
         stored |= {"joint_moment"} if model.has_prismatic else set()
         stored |= {"driver_force", "peak_driver_force"} if model.has_slider_drivers else set()

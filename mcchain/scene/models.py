@@ -37,6 +37,7 @@ from pydantic import (
 
 from mcchain.scene.fields import (
     BodyRef,
+    Bool,
     Int,
     Num,
     Section,
@@ -138,6 +139,12 @@ class Simulate(Section):
     )
     max_newton: Int = Field(
         default=20, ge=1, description="Newton iterations of implicit steps; default 20."
+    )
+    retry_failed: Bool = Field(
+        default=True,
+        description="solve a sample whose time integration fails again, tighter (rtol and "
+        "atol, or dt, divided by 10, then 100), then by radau, before it counts as undefined "
+        "(stored per sample in solved_by); default true, false to keep the failure.",
     )
     kernels: Literal["auto", "lanes", "loop"] = Field(
         default="auto",
