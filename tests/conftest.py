@@ -48,9 +48,35 @@ kept one worker busy minutes after the other had finished; started first, the sh
 fill the gap. Order only: each file's tests run as they would alone."""
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Run :data:`LONGEST_FIRST`'s files first, in that order (a stable sort: the tests of a
-    file keep their order, the other files theirs)."""
+LONG_HINT = "python -m pytest -q --long -m long"
+"""The command that runs the long references alone (README, Development)."""
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--long",
+        action="store_true",
+        help=f"also run the long references (marked long; alone: {LONG_HINT})",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Leave out the long references unless ``--long`` is given (deselected, counted in the
+    summary and named at its end: never silently), then run :data:`LONGEST_FIRST`'s files
+    first, in that order (a stable sort: the tests of a file keep their order, the other
+    files theirs).
+
+    A test marked ``long`` repeats at length a check that a shorter test of the default run
+    makes too (e.g. the same integration over a tenth of the horizon): leaving it out drops
+    no behaviour from the default run, only the long horizon."""
+    if not config.getoption("--long"):
+        long = [item for item in items if item.get_closest_marker("long")]
+        if long:
+            config.hook.pytest_deselected(items=long)
+            items[:] = [item for item in items if not item.get_closest_marker("long")]
+            config.stash[_LONG_LEFT_OUT] = len(long)
+            if hasattr(config, "workeroutput"):  # an xdist worker: tell the controller
+                config.workeroutput["long_left_out"] = len(long)
 
     def rank(item: pytest.Item) -> int:
         name = item.path.name
@@ -59,15 +85,48 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=rank)
 
 
+_LONG_LEFT_OUT = pytest.StashKey[int]()
+
+
+@pytest.hookimpl(optionalhook=True)  # pytest-xdist's hook
+def pytest_testnodedown(node: Any, error: Any) -> None:
+    """xdist's controller: each worker collected the same tests and left out as many."""
+    left_out = getattr(node, "workeroutput", {}).get("long_left_out", 0)
+    if left_out:
+        node.config.stash[_LONG_LEFT_OUT] = left_out
+
+
+def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
+    left_out = config.stash.get(_LONG_LEFT_OUT, 0)
+    if left_out:
+        terminalreporter.write_line(
+            f"long references deselected: {left_out} (shorter tests check the same; "
+            f"run them: {LONG_HINT})"
+        )
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _temporary_mcchain_cache(tmp_path_factory: pytest.TempPathFactory) -> Any:
     """``MCCHAIN_CACHE_DIR`` in a temporary folder where the environment sets none (the
-    module's docstring); the processes the tests start inherit it."""
+    module's docstring); the processes the tests start inherit it.
+
+    One folder for the whole run, shared by its xdist workers (``pytest-N/mcchain-cache``,
+    beside the workers' own ``popen-gw*`` folders): a scene's lane kernels compiled by one
+    worker are loaded by the others instead of compiled again. Sharing is safe: every cache
+    file is written to a temporary name and renamed into place (:mod:`mcchain.codegen.cache`,
+    :mod:`mcchain.codegen.native`), so a reader sees a whole file or none, and two writers
+    of one key write the same bytes."""
     if os.environ.get("MCCHAIN_CACHE_DIR"):
         yield
         return
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # the run's folder (pytest-of-<user> is private to the user: mode 0700)
+        folder = tmp_path_factory.getbasetemp().parent / "mcchain-cache"
+        folder.mkdir(exist_ok=True)
+    else:
+        folder = tmp_path_factory.mktemp("mcchain-cache")
     with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path_factory.mktemp("mcchain-cache")))
+        patch.setenv("MCCHAIN_CACHE_DIR", str(folder))
         yield
 
 

@@ -22,6 +22,7 @@ import xarray as xr
 from mcchain.cli import main
 from mcchain.decision.check import CHECK_COLUMNS, check_run, spread_indices
 from mcchain.runner import plan, runs
+from mcchain.testing.scenes import config_text, with_lines
 
 pytestmark = pytest.mark.slow  # real solvers
 
@@ -31,19 +32,9 @@ LIMIT = 4500.0  # N: about half the samples' peak pin force is above it
 
 def scene_text(rtol: float = 1e-7, atol: float = 1e-10, requirement: bool = True) -> str:
     """configs/slider-crank-flores.toml cut to 6 ms, 24 samples, with a pin-force limit."""
-    text = (REPO / "configs" / "slider-crank-flores.toml").read_text(encoding="utf-8")
-    lines = []
-    for line in text.splitlines():
-        key = line.split("=")[0].strip()
-        if key == "t_end":
-            line = "t_end = 0.006"
-        elif key == "count":
-            line = "count = 24"
-        elif key == "rtol":
-            line = f"rtol = {rtol!r}"
-        elif key == "atol":
-            line = f"atol = {atol!r}"
-        lines.append(line)
+    keys = {"t_end": "0.006", "count": "24", "rtol": repr(rtol), "atol": repr(atol)}
+    replaced = {key: f"{key} = {value}" for key, value in keys.items()}
+    lines = with_lines(config_text("slider-crank-flores.toml"), replaced).splitlines()
     if requirement:
         lines += [
             "[[requirement]]",

@@ -57,12 +57,20 @@ def make_solver(fail_above: float | None) -> Any:
     return solve
 
 
-def scene_text() -> str:
+def scene_text(retry_failed: bool = False) -> str:
     doc = bar_scene_dict(
         sample={"count": COUNT, "seed": 5, "vary": {"body.bar.mass": {"uniform": [1.0, 3.0]}}},
         equilibrium=False,
         modes=False,
-        simulate={"t_end": 0.01, "dt": 1e-3, "method": "rk45", "rtol": RTOL, "atol": 1e-8},
+        # retry_failed = false: the run keeps its failures, for the check to re-solve them
+        simulate={
+            "t_end": 0.01,
+            "dt": 1e-3,
+            "method": "rk45",
+            "rtol": RTOL,
+            "atol": 1e-8,
+            "retry_failed": retry_failed,
+        },
     )
     doc["requirement"] = [
         {
@@ -76,9 +84,9 @@ def scene_text() -> str:
     return toml_text(doc)
 
 
-def make_run(tmp_path: Path, fail_above: float | None = None) -> Path:
+def make_run(tmp_path: Path, fail_above: float | None = None, retry: bool = False) -> Path:
     scene = tmp_path / "bar.toml"
-    scene.write_text(scene_text())
+    scene.write_text(scene_text(retry))
     return plan.start_run(
         scene, run_dir=tmp_path / "run", progress=False, solve=make_solver(fail_above)
     ).folder
@@ -269,3 +277,30 @@ def test_requirement_tolerance__tighter_only_where_the_scene_writes_none(tmp_pat
         loaded = load_scene_text(scene(simulate, output))
         same, note = requirement_tolerance(loaded)
         assert same is loaded and note is None
+
+
+def test_check__a_retried_sample_is_tightened_from_what_solved_it(tmp_path: Path) -> None:
+    """With ``retry_failed``, the samples with m > 2.9 diverge at RTOL and the run solves
+    them at RTOL / 10 (``solved_by`` 1). The check tightens each sample from the settings
+    that solved it: F = 10 re-solves those at RTOL / 100, the others at RTOL / 10; F = 1
+    gives back the run's own values, the retried ones included."""
+    from mcchain.solvers.retry import SOLVED_BY, TIGHTENED_10
+
+    folder = make_run(tmp_path, fail_above=2.9, retry=True)
+    m = masses(folder)
+    failed = m > 2.9
+    with runs.open_run(folder) as ds:
+        np.testing.assert_array_equal(ds[SOLVED_BY].values, np.where(failed, TIGHTENED_10, 0))
+        run_values = ds["peak_joint_force"].values[:, 0]
+    np.testing.assert_array_equal(run_values, np.where(failed, peak(m, RTOL / 10), peak(m, RTOL)))
+    same = check_run(folder, 1, samples=COUNT, solve=make_solver(2.9))
+    with xr.open_dataset(same.values) as tight:
+        np.testing.assert_array_equal(tight["peak_joint_force"].values[:, 0], run_values)
+    (row,) = rows_of(same.csv)
+    assert (row["flips"], float(row["abs_diff_max"])) == ("0", 0.0)
+    result = check_run(folder, 10, samples=COUNT, solve=make_solver(2.9))
+    with xr.open_dataset(result.values) as tight:
+        values = tight["peak_joint_force"].values[:, 0]
+    expected = np.where(failed, peak(m, RTOL / 100), peak(m, RTOL / 10))
+    np.testing.assert_array_equal(values, expected)
+    assert result.checks[0].run.undefined == 0 and result.checks[0].tightened.undefined == 0

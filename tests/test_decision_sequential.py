@@ -101,6 +101,8 @@ def test_confidence_sequence__bounds_are_where_the_martingale_reaches_one_over_a
 def test_sequential_bounds__the_running_intersection_over_the_looks() -> None:
     assert list(look_counts(1100, 512)) == [512, 1024, 1100]
     assert list(look_counts(1024, 512)) == [512, 1024]
+    # the counts an extended run was judged at before it grew join the looks, once each
+    assert list(look_counts(1300, 512, [200, 512, 1100, 1300])) == [200, 512, 1024, 1100, 1300]
     rng = np.random.default_rng(3)
     failed = rng.random(1500) < 0.02
     lower, upper = sequential_bounds(failed, 512, CONFIDENCE, TARGET)

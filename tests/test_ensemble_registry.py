@@ -50,6 +50,7 @@ EXTRAS = {
     "joint_moment": ("sample", "time", "joint"),
     "omega_cycle": ("sample", "phase", "mode"),
     "peak_driver_force": ("sample", "driver"),
+    "solved_by": ("sample",),
     "requirement_met": ("sample", "requirement"),
 }
 HISTORIES = {

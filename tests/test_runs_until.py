@@ -114,7 +114,7 @@ def test_until__stops_at_max_count_when_it_cannot_decide(tmp_path: Path) -> None
     assert result.record["samples"] == 200
     assert any("max_count 200 reached" in line for line in run_summary(result.record))
     # Extended by hand afterwards, it still reports its confidence sequence (valid at any
-    # count), now over the looks 64, 128, 192 and 256.
+    # count), continued over every look it was judged at: 64, 128, 192, 200 and 256.
     extended = plan.extend_run(result.folder, 56, progress=False).record
     assert extended["samples"] == 256 and extended["restarts"] == [64, 128, 192, 200]
     csv_path, *_ = export_requirements(result.folder)
@@ -122,7 +122,7 @@ def test_until__stops_at_max_count_when_it_cannot_decide(tmp_path: Path) -> None
         (row,) = list(csv.DictReader(f))
     with runs.open_run(result.folder) as ds:
         failed = ds["requirement_met"].values[:, 0] == 0
-    looks = np.array([64, 128, 192, 256])
+    looks = np.array([64, 128, 192, 200, 256])
     k = np.array([failed[:n].sum() for n in looks])
     lower, upper = confidence_sequence(k, looks, 0.95, 0.01)
     assert float(row["p_upper"]) == pytest.approx(upper.min(), rel=1e-12)

@@ -67,7 +67,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 from scipy.special import betainc, betaln
 
 UPPER = "upper"
@@ -172,8 +171,17 @@ def chain_key(x: np.ndarray, side: str) -> np.ndarray:
     if side == LOWER:
         return -x
     if side == BOTH:
-        return np.abs(stats.rankdata(x, method="average") - (x.size + 1) / 2.0)
+        return np.abs(mid_ranks(x) - (x.size + 1) / 2.0)
     raise ValueError(f"side: expected one of {SIDES}, got {side!r}")
+
+
+def mid_ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks 1..n of ``x``, tied values sharing the mean of their ranks (what
+    ``scipy.stats.rankdata(x, method="average")`` gives, without importing scipy.stats:
+    0.3-1 s of every verdict)."""
+    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
+    last = np.cumsum(counts)  # the rank of the last of each group of ties
+    return (last - (counts - 1) / 2.0)[inverse.reshape(-1)]
 
 
 @dataclass(frozen=True)

@@ -61,9 +61,6 @@ BAND = 3.0
 SMALL = 0.1
 """A flip share is small when below this fraction of the interval's width."""
 
-ADAPTIVE_METHODS = ("rk45", "radau")
-"""Methods whose accuracy is set by rtol/atol (the others by dt)."""
-
 CHECK_COLUMNS = (
     "requirement",
     "samples",
@@ -137,34 +134,28 @@ def spread_count(widths: Sequence[float], confidences: Sequence[float], nsample:
 
 
 def tightened_scene(scene: Any, factor: float) -> tuple[Any, str]:
-    """The scene with ``[simulate]`` ``factor`` times tighter, and what changed, in words."""
+    """The scene with ``[simulate]`` ``factor`` times tighter, and what changed, in words
+    (:func:`mcchain.solvers.retry.tightened_simulate`)."""
+    from mcchain.solvers.retry import tightened_simulate
+
     sim = getattr(scene, "simulate", None)
     if sim is None:
         raise RunError(
             "check: the run has no [simulate] (equilibria and modes are solved to Newton's "
             "tolerance): no time integration to tighten"
         )
-    if sim.method in ADAPTIVE_METHODS:
-        update = {"rtol": _divided(sim.rtol, factor), "atol": _divided(sim.atol, factor)}
-        said = f"rtol {sim.rtol:g} -> {update['rtol']:g}, atol {sim.atol:g} -> {update['atol']:g}"
-    else:
-        update = {"dt": _divided(sim.dt, factor)}
-        said = f"dt {sim.dt:g} -> {update['dt']:g} s"
-    return scene.model_copy(update={"simulate": sim.model_copy(update=update)}), said
+    tight, said = tightened_simulate(sim, factor)
+    return scene.model_copy(update={"simulate": tight}), said
 
 
 def tolerance_text(scene: Any) -> str:
     """The integration settings a scene runs at: ``rtol 1e-08, atol 1e-11`` or ``dt 1e-05 s``."""
+    from mcchain.solvers.retry import ADAPTIVE_METHODS
+
     sim = scene.simulate
     if sim.method in ADAPTIVE_METHODS:
         return f"rtol {sim.rtol:g}, atol {sim.atol:g}"
     return f"dt {sim.dt:g} s"
-
-
-def _divided(value: float, factor: float) -> float:
-    """``value / factor`` to 15 significant digits: 1e-10 / 10 is the 1e-11 the table
-    prints, not the 1.0000000000000001e-11 of binary division."""
-    return float(f"{value / factor:.15g}")
 
 
 def _differences(base: np.ndarray, tight: np.ndarray) -> tuple[float, float, float, float]:
@@ -367,8 +358,8 @@ def check_run(
         raise RunError(f"check: {run} is not completed (mcchain run --resume {run})")
     job = _run_job(folder, record)
     scene, changed = tightened_scene(job.scene, float(tighten))
-    solver = _Resolver(job, scene, solve)
     with open_run(folder) as ds:
+        solver = _Resolver(job, float(tighten), solve, _solved_by(ds))
         from mcchain.decision.requirements import stored_requirements
 
         requirements = stored_requirements(ds)
@@ -398,30 +389,50 @@ def check_run(
     )
 
 
-class _Resolver:
-    """Re-solves samples of a run at the tightened scene, chunk by chunk, keeping only the
-    per-sample outputs (and ``requirement_met``), and remembers what it solved."""
+def _solved_by(ds: xr.Dataset) -> np.ndarray | None:
+    """What solved each sample of a run that retried its failures (None: it did not)."""
+    from mcchain.solvers.retry import SOLVED_BY
 
-    def __init__(self, job: Job, scene: Any, solve: Any) -> None:
+    return ds[SOLVED_BY].values if SOLVED_BY in ds.data_vars else None
+
+
+class _Resolver:
+    """Re-solves samples of a run ``factor`` times tighter, chunk by chunk, keeping only the
+    per-sample outputs (and ``requirement_met``), and remembers what it solved. A sample a
+    retry solved (``solved_by``, :mod:`mcchain.solvers.retry`) is tightened from the
+    settings that solved it, the others from the scene's."""
+
+    def __init__(
+        self, job: Job, factor: float, solve: Any, solved_by: np.ndarray | None = None
+    ) -> None:
         from mcchain.decision.requirements import job_requirements
         from mcchain.runner.executors import default_solve
 
-        self.job, self.scene = job, scene
+        self.job, self.factor = job, factor
         self.solve = solve or default_solve()
         self.requirements = job_requirements(job)
+        self.solved_by = solved_by
         self.solved: dict[int, dict[str, np.ndarray]] = {}
 
     def add(self, index: np.ndarray) -> None:
+        from mcchain.solvers.retry import attempt_scene
+
+        todo = np.array([i for i in np.asarray(index).tolist() if i not in self.solved], int)
+        codes = np.zeros(todo.size, int) if self.solved_by is None else self.solved_by[todo]
+        for code in np.unique(codes).tolist():
+            scene, _ = tightened_scene(attempt_scene(self.job.scene, code), self.factor)
+            self._add(todo[codes == code], scene)
+
+    def _add(self, todo: np.ndarray, scene: Any) -> None:
         from mcchain.ensemble.outputs import model_output_variables
         from mcchain.ensemble.registry import VARIABLES, coerce_outputs
 
         specs = {**VARIABLES, **model_output_variables(self.job.model)}  # the [[output]]s too
-        todo = np.array([i for i in np.asarray(index).tolist() if i not in self.solved], int)
         step = max(int(self.job.chunk_size), 1)
         for start in range(0, todo.size, step):
             part = todo[start : start + step]
             out = coerce_outputs(
-                self.solve(self.job.model.take(part), self.scene), self.job.history_dtype,
+                self.solve(self.job.model.take(part), scene), self.job.history_dtype,
                 model_output_variables(self.job.model),
             )  # fmt: skip
             if self.requirements is not None:
@@ -578,7 +589,9 @@ def _as_dataset(ds: xr.Dataset, index: np.ndarray, outputs: Mapping[str, np.ndar
             continue
         variables[name] = xr.Variable(dims, np.asarray(values), ds[name].attrs)
     coords = {
-        d: ds[d] for d in ds.coords if "sample" not in ds[d].dims and "time" not in ds[d].dims
+        d: ds[d]
+        for d in ds.coords
+        if not {"sample", "time", "history_sample"} & set(ds[d].dims)  # per-sample only
     }
     out = xr.Dataset(variables, coords={**coords, "sample": np.asarray(index)})
     out.attrs = dict(ds.attrs)

@@ -31,6 +31,8 @@ not independent; its sequential interval is then an approximation, as its fixed-
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.special import betaln
 
@@ -130,30 +132,41 @@ def running_interval(
     return np.maximum.accumulate(lower, axis=-1), np.minimum.accumulate(upper, axis=-1)
 
 
-def look_counts(total: int, batch: int) -> np.ndarray:
-    """The sample counts at which an ``until`` run of ``total`` samples looked: every
-    ``batch`` samples, and ``total`` (the last look, also where ``max_count`` cut a batch)."""
+def look_counts(total: int, batch: int, looks: Sequence[int] = ()) -> np.ndarray:
+    """The sample counts at which a sequential run of ``total`` samples looked: every
+    ``batch`` samples, each count of ``looks`` below ``total`` (the counts a run had before
+    an ``--extend``, where it was judged; ``max_count`` cutting a batch) and ``total``, in
+    increasing order. The sequence holds at every count at once, so its running intersection
+    over any of them is valid; over every look taken it never widens after one."""
     if batch < 1 or total < 1:
         raise ValueError(f"batch and total must be >= 1, got {batch} and {total}")
-    counts = [*range(batch, total, batch), total]
-    return np.asarray(counts, dtype=np.int64)
+    counts = {*range(batch, total, batch), *(int(n) for n in looks if 0 < int(n) < total), total}
+    return np.asarray(sorted(counts), dtype=np.int64)
 
 
 def sequential_bounds(
-    failed: np.ndarray, batch: int, confidence: float, target: float
+    failed: np.ndarray,
+    batch: int,
+    confidence: float,
+    target: float,
+    looks: Sequence[int] = (),
 ) -> tuple[float, float]:
-    """The interval an ``until`` run reports for one requirement.
+    """The interval a sequential run (``until``, or an extended one) reports for one
+    requirement.
 
     Args:
         failed: (nsample,) bool, sample i failed the requirement, in sample order.
-        batch: samples per look (``[sample] count``).
+        batch: samples per look (``[sample] count``; an extended fixed-count run: the count
+            it had before).
         confidence, target: the requirement's.
+        looks: further counts the run was judged at (its ``sequential`` settings' ``looks``:
+            the counts before each ``--extend``).
 
     Returns:
         (p_lower, p_upper): :func:`running_interval` over the looks :func:`look_counts`.
     """
     failed = np.asarray(failed, dtype=bool)
-    looks = look_counts(failed.size, batch)
+    counts = look_counts(failed.size, batch, looks)
     cumulative = np.concatenate([[0], np.cumsum(failed)])
-    lower, upper = running_interval(cumulative[looks], looks, confidence, target)
+    lower, upper = running_interval(cumulative[counts], counts, confidence, target)
     return float(lower[-1]), float(upper[-1])

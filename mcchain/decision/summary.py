@@ -250,7 +250,8 @@ def summarize_requirement(
             lower, upper = confidence_sequence(np.asarray(k), np.asarray(m), confidence, target)
             return float(lower), float(upper)
 
-        lo, hi = sequential_bounds(failed, batch, confidence, target)
+        looks = sequential.get("looks") or ()
+        lo, hi = sequential_bounds(failed, batch, confidence, target, looks)
     side = quantile_side(requirement, values)
     if side == "max":
         level, limit, worst = 1 - _exact_decimal(target), requirement.max, math.inf
@@ -497,11 +498,18 @@ def validity_lines(
     if sequential is None and any(s.sequential for s in summaries):
         sequential = {"method": "confidence sequence", "batch": "a batch"}  # a caller without it
     if summaries and sequential is not None:
+        how = (
+            f"looked at every {sequential['batch']} samples since the run of "
+            f"{sequential['extended_from']} was extended (a Clopper-Pearson interval does not "
+            "hold for a run extended until it decides)"
+            if sequential.get("extended_from")
+            else f"samples added {sequential['batch']} at a time until decided"
+        )
         lines.append(
-            f"intervals: sequential ({sequential['method']}), samples added {sequential['batch']} "
-            "at a time until decided: each bound one-sided at the requirement's confidence C and "
-            "valid whenever the run stopped; PASS iff the upper bound <= target, FAIL iff the "
-            "lower bound > target: each verdict is wrong with probability at most 1 - C"
+            f"intervals: sequential ({sequential['method']}), {how}: each bound one-sided at "
+            "the requirement's confidence C and valid whenever the run stopped; PASS iff the "
+            "upper bound <= target, FAIL iff the lower bound > target: each verdict is wrong "
+            "with probability at most 1 - C"
             + ("" if design in EXACT_DESIGNS else f", APPROXIMATE for design {design!r}")
         )
     elif summaries:

@@ -125,12 +125,36 @@ def look_at(ds: xr.Dataset, nsample: int, batch: int) -> dict[str, Any]:
 
 
 def keep_sequential(job: Job, record: Mapping[str, Any]) -> Job:
-    """``job`` (an ``--extend`` of a run made with ``until``) with the run's ``sequential``
-    settings entry: the confidence sequence holds at every count, so the extended run still
-    reports it (its looks: every batch, then the total)."""
+    """``job`` (an ``--extend`` of a run, or its resume) with the ``sequential`` settings
+    entry that judges it by the confidence sequence, valid at every count whenever the run
+    stops:
+
+    * a run made with ``until``: its own entry (its looks: every batch, then the total);
+    * a fixed-count run with requirements, extended: looks every ``batch`` = the count it had
+      before its first extension (``extended_from``). Extending a fixed-count run until its
+      Clopper-Pearson interval decides is optional stopping: that interval then no longer
+      holds (benchmarks/results/extend/bench.md measures it), the sequence does.
+
+    Extended, the entry also lists ``looks``: the counts the run had before it grew
+    (``run.json["restarts"]``: an ``until`` run's looks, each extension's start), so that
+    the running intersection continues over every look it was judged at and never widens.
+    """
     until = record.get("until")
+    looks = sorted(int(n) for n in record.get("restarts") or ())
     if until:
         job.settings[SETTINGS_KEY] = {k: until[k] for k in ("method", "batch", "max_count")}
+    elif record.get("extensions") and getattr(job.scene, "requirement", None):
+        first = int(record["extensions"][0]["from"])
+        job.settings[SETTINGS_KEY] = {
+            "method": METHOD,
+            "batch": first,
+            "max_count": None,
+            "extended_from": first,
+        }
+    else:
+        return job
+    if record.get("extensions"):  # where it was judged before each extension
+        job.settings[SETTINGS_KEY]["looks"] = looks
     return job
 
 

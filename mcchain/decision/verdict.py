@@ -48,6 +48,8 @@ class VerdictTable:
     summaries: list[RequirementSummary]
     design: str | None
     sequential: Mapping[str, Any] | None
+    notes: Sequence[str] = ()
+    """``note:`` lines about the values counted (the failed samples a retry solved)."""
 
     @property
     def exit_code(self) -> int:
@@ -85,7 +87,10 @@ class VerdictTable:
             for row in table
         ]
         warnings = [w for s in self.summaries if (w := all_fail_warning(s)) is not None]
-        return text + warnings + validity_lines(self.summaries, self.design, self.sequential)
+        notes = [f"note: {line}" for line in self.notes]
+        return (
+            text + warnings + notes + validity_lines(self.summaries, self.design, self.sequential)
+        )
 
 
 def _verdict_word(s: RequirementSummary) -> str:
@@ -115,4 +120,6 @@ def run_verdict(run: str | Path) -> VerdictTable:
     with ds:
         if not stored_requirements(ds):
             raise RunError(f"verdict: {run} has no [[requirement]]: nothing to decide")
-        return VerdictTable(summarize(ds), design_of(ds), sequential_settings(ds.attrs))
+        retried = (record.get("retries") or {}).get("line")
+        notes = [retried] if retried else []
+        return VerdictTable(summarize(ds), design_of(ds), sequential_settings(ds.attrs), notes)

@@ -4,6 +4,9 @@
   variables (or a Dataset) from solver output dicts and validates Datasets.
 * :mod:`mcchain.ensemble.io` writes part files atomically and merges them by streaming into
   one compressed ``ensemble.nc``.
+* :mod:`mcchain.ensemble.histories`: which time histories a run stores (``[storage]
+  histories``: all, none, those of the failed samples along ``history_sample``) and how a
+  reader finds a sample's history or learns it was not stored.
 """
 
 from __future__ import annotations

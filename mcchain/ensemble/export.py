@@ -23,17 +23,21 @@ are not one number per sample).
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mcchain.ensemble.histories import not_stored_reason, without_histories
 from mcchain.ensemble.queries import dim_names, peak_abs_over_time
 from mcchain.status import Status
 
 if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
+
+log = logging.getLogger(__name__)
 
 PEAK_HISTORIES = ("joint_force", "contact_force", "driver_torque", "driver_force", "joint_moment")
 """Time histories exported as their largest stored |value| (vectors: the magnitude)."""
@@ -48,8 +52,15 @@ def _header(name: str, units: str | None) -> str:
 
 
 def sample_table(ds: xr.Dataset) -> pd.DataFrame:
-    """The per-sample table of ``ds`` (see the module docstring), in sample order."""
+    """The per-sample table of ``ds`` (see the module docstring), in sample order. A light
+    run (``[storage] histories = "none" | "failed"``) has no ``max_stored_*`` columns: the
+    histories they reduce are not stored for every sample (logged)."""
     import pandas as pd
+
+    not_stored = not_stored_reason(ds)
+    if not_stored is not None:
+        log.warning("export: no max_stored_* columns: %s", not_stored)
+        ds = without_histories(ds)
 
     columns = _Columns()
     columns["sample"] = np.asarray(ds["sample"].values)

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.histories import ROW_DIMS
 from mcchain.errors import RunError
 
 if TYPE_CHECKING:
@@ -301,7 +302,7 @@ class _PartCache:
                 self._fixed = {
                     name: var[:]
                     for name, var in nc.variables.items()
-                    if "sample" not in var.dimensions
+                    if not set(ROW_DIMS) & set(var.dimensions)
                 }
                 self.attrs = _attrs(nc) if self._given is None else dict(self._given)
                 if self._given is not None:
@@ -365,7 +366,9 @@ session's); run.json's sessions record every session's."""
 
 def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
     """Global attributes without the sample count (``sample_count``, ``settings``'
-    ``samples``): what the parts of one study share however far it was extended."""
+    ``samples``) and how the verdicts are judged (``settings``' ``sequential``, which an
+    ``--extend`` of a fixed-count run adds): what the parts of one study share however far
+    it was extended."""
     import json
 
     out = {key: value for key, value in attrs.items() if key != "sample_count"}
@@ -374,6 +377,7 @@ def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
             settings = json.loads(out["settings"])
             if isinstance(settings, dict):
                 settings.pop("samples", None)
+                settings.pop("sequential", None)
                 out["settings"] = json.dumps(settings, sort_keys=True)
     return out
 
@@ -392,18 +396,29 @@ def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
 
 
 def _read_samples(
-    cache: _PartCache, parts: Sequence[Part], starts: np.ndarray, name: str, b0: int, b1: int
+    cache: _PartCache, starts: np.ndarray, stops: np.ndarray, name: str, b0: int, b1: int
 ) -> np.ndarray:
-    """Samples ``b0:b1`` of variable ``name``, gathered from the parts that hold them."""
-    first = int(np.searchsorted(starts, b0, side="right")) - 1
+    """Rows ``b0:b1`` (along the variable's first, row dim) of variable ``name``, gathered
+    from the parts that hold them; part ``i`` holds rows ``starts[i]:stops[i]``."""
+    i = int(np.searchsorted(starts, b0, side="right")) - 1
+    while i < len(starts) - 1 and stops[i] <= b0:  # parts without rows of this dim
+        i += 1
     pieces = []
-    i = first
-    while i < len(parts) and parts[i].start < b1:
-        part = parts[i]
-        lo, hi = max(b0, part.start), min(b1, part.stop)
-        pieces.append(np.asarray(cache(i)[name][lo - part.start : hi - part.start]))
+    while i < len(starts) and starts[i] < b1:
+        lo, hi = max(b0, int(starts[i])), min(b1, int(stops[i]))
+        if hi > lo:
+            pieces.append(np.asarray(cache(i)[name][lo - starts[i] : hi - starts[i]]))
         i += 1
     return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+
+
+def _row_offsets(cache: _PartCache, parts: Sequence[Part], dim: str) -> np.ndarray:
+    """(nparts + 1,) where each part's rows of ``dim`` start in the merged file: the
+    samples' starts, or the running count of the histories a ``"failed"`` run kept."""
+    if dim == "sample":
+        return np.array([p.start for p in parts] + [parts[-1].stop], dtype=np.int64)
+    sizes = [cache(i).dimensions[dim].size for i in range(len(parts))]
+    return np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)])
 
 
 @dataclass
@@ -415,24 +430,25 @@ class _Target:
     per_sample: int
     length: int
     step: int
+    dim: str = "sample"
 
 
 def _create_variables(
     dst: netCDF4.Dataset, first: netCDF4.Dataset, options: Mapping[str, Any]
 ) -> list[_Target]:
     """Create every variable of ``dst`` like the first part's; copy the fixed ones."""
-    total = dst.dimensions["sample"].size
     targets = []
     for name, var in first.variables.items():
         dims = var.dimensions
-        if "sample" not in dims:
+        if not set(ROW_DIMS) & set(dims):
             copy = dst.createVariable(name, var.dtype, dims)
             _set_attrs(copy, _attrs(var))
             if var.size:
                 copy[:] = var[:]
             continue
-        if dims[0] != "sample":
-            raise MergeError(f"{name}: sample must be the first dim, got {dims}")
+        if dims[0] not in ROW_DIMS:
+            raise MergeError(f"{name}: {dims[0]} must be the first dim, got {dims}")
+        total = dst.dimensions[dims[0]].size
         inner = [dst.dimensions[d].size for d in dims[1:]]
         numeric = var.dtype is not str and np.dtype(var.dtype).kind in "biuf"
         itemsize = np.dtype(var.dtype).itemsize if numeric else 8
@@ -447,7 +463,7 @@ def _create_variables(
         if per_sample == 0 and numeric:
             continue
         step = length * max(WRITE_TARGET_BYTES // max(per_sample * length, 1), 1)
-        targets.append(_Target(name, target, per_sample, length, step))
+        targets.append(_Target(name, target, per_sample, length, step, dims[0]))
     return targets
 
 
@@ -514,28 +530,31 @@ def merge_parts(
         log.warning(note)
     out = Path(out)
     tmp = temporary_name(out)
-    starts = np.array([p.start for p in parts], dtype=np.int64)
     cache = _PartCache(parts, attrs)
     bytes_in = 0
     try:
         with _no_chunk_cache():
             first = cache(0)
+            offsets = {d: _row_offsets(cache, parts, d) for d in ROW_DIMS if d in first.dimensions}
             with netCDF4.Dataset(tmp, "w", format="NETCDF4") as dst:
                 dst.set_fill_off()
                 dst.set_auto_maskandscale(False)
                 for dim, obj in first.dimensions.items():
-                    dst.createDimension(dim, total if dim == "sample" else obj.size)
+                    dst.createDimension(dim, int(offsets[dim][-1]) if dim in offsets else obj.size)
                 targets = _create_variables(dst, first, options)
-                # Window by window, variable by variable: the order chunks are written in
-                # (hence the file's bytes) depends only on the layout and sample count.
-                window = max(WINDOW_SAMPLES, max((t.length for t in targets), default=1))
-                for w0, w1 in _blocks(total, window):
-                    for t in targets:
-                        for b0 in range(w0, w1, min(t.step, window)):
-                            b1 = min(b0 + t.step, w1)
-                            block = _read_samples(cache, parts, starts, t.name, b0, b1)
-                            t.var[b0:b1] = block
-                            bytes_in += block.nbytes
+                # Row dim by row dim, window by window, variable by variable: the order
+                # chunks are written in (hence the file's bytes) depends only on the layout
+                # and the row counts (samples; histories kept).
+                for dim, rows in offsets.items():
+                    along = [t for t in targets if t.dim == dim]
+                    window = max(WINDOW_SAMPLES, max((t.length for t in along), default=1))
+                    for w0, w1 in _blocks(int(rows[-1]), window):
+                        for t in along:
+                            for b0 in range(w0, w1, min(t.step, window)):
+                                b1 = min(b0 + t.step, w1)
+                                block = _read_samples(cache, rows[:-1], rows[1:], t.name, b0, b1)
+                                t.var[b0:b1] = block
+                                bytes_in += block.nbytes
                 _set_attrs(dst, cache.attrs)
         cache.close()
         commit_file(tmp, out)
@@ -569,8 +588,10 @@ class DamagedEnsemble(RunError):
         )
 
 
-def open_ensemble(path: Path) -> xr.Dataset:
-    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks).
+def open_ensemble(path: Path, *, dask: bool = True) -> xr.Dataset:
+    """A merged ensemble file as a lazy Dataset (Dask chunks along the file's chunks;
+    ``dask=False``: xarray's own lazy arrays, without a task graph per variable, for a
+    reader of a few per-sample variables: the verdict a run prints).
 
     Raises:
         DamagedEnsemble: the file cannot be opened, or its per-sample ``status`` (read here,
@@ -579,7 +600,7 @@ def open_ensemble(path: Path) -> xr.Dataset:
     import xarray as xr
 
     try:
-        if _has_dask():
+        if dask and _has_dask():
             ds = xr.open_dataset(path, engine="netcdf4", chunks={})
         else:
             ds = xr.open_dataset(path, engine="netcdf4")

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mcchain.ensemble.registry import VARIABLES
 from mcchain.errors import RunError
 from mcchain.status import Status
 
@@ -91,8 +92,22 @@ def parse_worst(text: str) -> tuple[str, int]:
 def peak_abs(ds: xr.Dataset, variable: str, block: int = PEAK_BLOCK) -> np.ndarray:
     """Peak ``|variable|`` of every sample over all its other axes (NaN if all NaN).
 
-    Reads ``block`` samples at a time, so a lazy ensemble is never loaded whole.
+    Reads ``block`` samples at a time, so a lazy ensemble is never loaded whole. A time
+    history that a light run (``[storage] histories``) kept for some samples only has a
+    peak for those (NaN for the others); one it kept for none is a :class:`RunError`.
     """
+    from mcchain.ensemble.histories import HISTORY_SAMPLE, not_stored_reason
+
+    if variable in VARIABLES and "time" in VARIABLES[variable].dims:
+        reason = not_stored_reason(ds)
+        if reason is not None and variable not in ds.data_vars:
+            raise RunError(f"--worst: {variable}: {reason}")
+        if reason is not None:
+            stored = ds[variable].rename({HISTORY_SAMPLE: "sample"})
+            at = positions(ds, ds[HISTORY_SAMPLE].values.tolist())
+            peak = np.full(ds.sizes["sample"], np.nan)
+            peak[at] = peak_abs(stored.to_dataset(), variable, block)
+            return peak
     if variable not in ds.data_vars or "sample" not in ds[variable].dims:
         choices = sorted(
             str(name)

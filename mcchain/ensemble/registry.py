@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.histories import HISTORY_SAMPLE
 from mcchain.ensemble.spec import VariableSpec
 from mcchain.parameters import param_units
 from mcchain.status import FLAG_MASKS, FLAG_MEANINGS, STATUS_DTYPE
@@ -323,6 +324,18 @@ VARIABLES: dict[str, VariableSpec] = {
             "float64",
             "simulate",
             event_time=True,
+        ),
+        _v(
+            "solved_by",
+            _S,
+            "1",
+            "what solved the sample's time integration ([simulate] retry_failed): the scene's "
+            "settings, rtol/atol (or dt) / 10, / 100, radau at rtol/atol / 100, or nothing "
+            "(unsolved: flagged, NaN)",
+            "int8",
+            "simulate",
+            flag_values=np.array([0, 1, 2, 3, 4], dtype=np.int8),
+            flag_meanings="as_written tightened_10 tightened_100 radau unsolved",
         ),
         _v(
             "requirement_met",
@@ -632,7 +645,10 @@ def validate_dataset(ds: xr.Dataset, history_dtype: str | None = None) -> None:
         spec = VARIABLES.get(str(name)) or stored_output(str(name), var.attrs)
         if spec is None:
             raise ValueError(f"{name}: not a declared ensemble variable")
-        if tuple(var.dims) != spec.dims:
+        dims = tuple(str(d) for d in var.dims)
+        if dims[:1] == (HISTORY_SAMPLE,):  # [storage] histories = "failed": a subset
+            dims = ("sample", *dims[1:])
+        if dims != spec.dims:
             raise ValueError(f"{name}: dims {tuple(var.dims)}, expected {spec.dims}")
         allowed: Sequence[np.dtype]
         if spec.dtype == "history" and history_dtype is None:

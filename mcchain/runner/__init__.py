@@ -36,18 +36,21 @@ Where a new part goes:
           def on_chunk_done(self, run, chunk):
               run.session["samples_seen"] += chunk.stop - chunk.start
 
-  (Marking the exports of a run stale after ``--extend`` is such an observer, with
-  ``on_merged``, in the list ``extend_run`` makes.)
+  (Moving the files made before an ``--extend`` aside is such an observer, with
+  ``on_merged``, in the list ``extend_run`` makes: :class:`mcchain.runner.stale.Extension`.)
 * **Something that completes a chunk's solve** where the solve runs (this process or a Dask
   worker), e.g. solving the failed samples of a chunk again at a tighter tolerance: a
   :data:`~mcchain.runner.steps.SolveStep`, ``step(model_chunk, scene, outputs) -> outputs``
-  (picklable), in the plan's ``solve_steps``; what it returns is what the store writes and
+  (picklable), in the plan's ``solve_steps`` (:func:`~mcchain.runner.observers.
+  solve_steps_for`; the retry of failed samples, :class:`mcchain.solvers.retry.RetryFailed`,
+  is one); what it returns is what the store writes and
   the observers see. (Outputs relative to the ideal mechanism are part of the solve itself:
   :func:`mcchain.solvers.solve_chunk`.)
-* **Something about what is stored** (e.g. ``[storage] histories = "none" | "failed"``): the
-  store's :class:`~mcchain.runner.store.PartWriter`, which makes each part file's variables,
-  and the disk estimate that counts them (:func:`~mcchain.runner.resources.
-  stored_sample_bytes`).
+* **Something about what is stored** (as ``[storage] histories = "none" | "failed"``,
+  :func:`~mcchain.runner.store.kept_histories`): the store's
+  :class:`~mcchain.runner.store.PartWriter`, which makes each part file's variables, and the
+  disk estimate that counts them (:func:`~mcchain.runner.resources.stored_sample_bytes`);
+  what readers make of it, in :mod:`mcchain.ensemble.histories`.
 
 The modules import only the standard library at import time (``mcchain runs`` and
 ``mcchain --help`` never compile a kernel); each stage imports what it needs when it comes.

@@ -41,6 +41,8 @@ class Job:
         seed: sampling seed (``None`` without ``[sample]``).
         chunk_size: samples per chunk (execution only: never changes the data).
         history_dtype, compression, complevel: ``[storage]`` settings.
+        histories: ``[storage] histories``: which time histories are stored
+            (:mod:`mcchain.ensemble.histories`).
         disk: what the run writes (:class:`mcchain.runner.resources.DiskEstimate`; ``None`` for a
             scene that is not a real one, the tests' fakes).
         settings: resolved settings stored in ``ensemble.nc`` (no execution details).
@@ -67,6 +69,7 @@ class Job:
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     kernels: str | None = None
+    histories: str = "all"
 
     def resized(self, nsample: int) -> Job:
         """The same job with ``nsample`` samples (a run that ``--extend`` or ``until`` grew):
@@ -204,6 +207,7 @@ def prepare_job(
         warnings=warnings,
         notes=notes,
         kernels=kernels,
+        histories=str(getattr(storage, "histories", "all")),
     )
 
 

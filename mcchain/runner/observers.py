@@ -21,6 +21,7 @@ from mcchain.runner.steps import Observer, RunState, SolvedChunk
 if TYPE_CHECKING:
     from mcchain.decision.until import Until
     from mcchain.runner.job import Job
+    from mcchain.runner.steps import SolveFn, SolveStep
     from mcchain.viz.live import LiveOptions
 
 log = logging.getLogger("mcchain")
@@ -44,9 +45,22 @@ def observers_for(
     observers.append(Progress(progress))
     if grow is not None:
         observers.append(grow)
+    if getattr(getattr(job.scene, "simulate", None), "retry_failed", False):
+        observers.append(RetryCounts())
     if getattr(job.scene, "requirement", None):
         observers.append(VerdictLines())
     return observers
+
+
+def solve_steps_for(job: Job, solve: SolveFn | None = None) -> list[SolveStep]:
+    """The solve steps of a run of ``job``, in order: the retry of failed samples
+    (``[simulate] retry_failed``, :class:`mcchain.solvers.retry.RetryFailed`, re-solving with
+    ``solve``, the plan's chunk solver)."""
+    if not getattr(getattr(job.scene, "simulate", None), "retry_failed", False):
+        return []
+    from mcchain.solvers.retry import RetryFailed
+
+    return [RetryFailed(solve)]
 
 
 class Progress(Observer):
@@ -90,6 +104,25 @@ class Progress(Observer):
             self._bar = None
 
 
+class RetryCounts(Observer):
+    """What solved the run's samples (``solved_by``, :mod:`mcchain.solvers.retry`), counted
+    over the merged ensemble into ``run.json["retries"]``, with the note line ``mcchain
+    run`` prints when a sample was retried."""
+
+    def on_merged(self, run: RunState) -> None:
+        from mcchain.ensemble.io import open_ensemble
+        from mcchain.runner.runs import ENSEMBLE
+        from mcchain.solvers.retry import SOLVED_BY, retry_counts
+
+        ds = open_ensemble(run.folder / ENSEMBLE)
+        try:
+            if SOLVED_BY in ds.data_vars:
+                solved_by = ds[SOLVED_BY].values
+                run.record["retries"] = retry_counts(solved_by, run.job.scene.simulate)
+        finally:
+            ds.close()
+
+
 class VerdictLines(Observer):
     """The requirements' answer in words (:func:`mcchain.decision.summary.summary_lines`),
     from the merged ensemble, in ``run.json["requirements"]`` (``mcchain run`` prints it,
@@ -113,7 +146,7 @@ def verdict_lines(run: RunState) -> list[str]:
     from mcchain.ensemble.io import open_ensemble
     from mcchain.runner.runs import ENSEMBLE
 
-    ds = open_ensemble(run.folder / ENSEMBLE)
+    ds = open_ensemble(run.folder / ENSEMBLE, dask=False)
     try:
         sequential = sequential_settings(ds.attrs)
         return summary_lines(summarize(ds), allocations(ds), design_of(ds), sequential)

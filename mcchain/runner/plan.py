@@ -126,7 +126,7 @@ def start_run(
             print(f"warning: {line}", file=sys.stderr)
         for line in job.notes:
             print(f"note: {line}", file=sys.stderr)
-        from mcchain.runner.observers import observers_for
+        from mcchain.runner.observers import observers_for, solve_steps_for
 
         observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
         prepare_seconds = time.perf_counter() - t0
@@ -148,6 +148,7 @@ def start_run(
             dask=dask,
             threads=threads,
             solve=solve,
+            solve_steps=solve_steps_for(job, solve),
             argv=argv,
             prepare_seconds=prepare_seconds,
             keep_parts=keep_parts,
@@ -226,7 +227,7 @@ def resume_run(
             f"{run}: scene.toml gives {job.nsample} samples, run.json {record['samples']}"
         )
     grow = None
-    if record.get("until") and record.get("extensions"):  # an until run extended since
+    if record.get("extensions"):  # extended since: judged by the confidence sequence
         job = keep_sequential(job, record)
     elif record.get("until"):
         job, grow = sequential_job(
@@ -244,6 +245,11 @@ def resume_run(
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
     observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
+    extension = (record.get("extensions") or [{}])[-1]
+    if extension and "end" not in extension:  # an interrupted --extend: its files go stale
+        from mcchain.runner.stale import Extension
+
+        observers.append(Extension(int(extension["from"])))
     return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
 
 
@@ -341,15 +347,33 @@ def extend_run(
             f"count); run the scene again with --samples {total}"
         )
     job = keep_kernels(job, record.get("kernels"))
-    job = keep_sequential(job, record)
     check_live(rerun, total)
     check_disk(job.disk, folder, samples, retry="extend")
+    notes = [] if record.get("until") else extended_fixed_count_notes(job, record)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": now()})
     record["restarts"] = sorted({*record.get("restarts", []), old})
     record["samples"] = total
     record["chunks"] = len(run_chunks(record, job.chunk_size))
-    observers = observers_for(job, progress=progress, rerun=rerun)
+    job = keep_sequential(job, record)
+    from mcchain.runner.stale import Extension
+
+    observers = [*observers_for(job, progress=progress, rerun=rerun), Extension(old, notes)]
     return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
+
+
+def extended_fixed_count_notes(job: Job, record: Mapping[str, Any]) -> list[str]:
+    """The line an ``--extend`` of a fixed-count run with requirements prints (the first
+    extension only): its verdicts now come from the confidence sequence
+    (:func:`mcchain.decision.until.keep_sequential`)."""
+    if record.get("extensions") or not getattr(job.scene, "requirement", None):
+        return []
+    n = int(record["samples"])
+    return [
+        f"--extend: the verdicts of this run now come from its confidence sequence, looked at "
+        f"every {n} samples (the first look: the {n} it had): a Clopper-Pearson interval does "
+        "not hold for a run extended until it decides (optional stopping), the sequence holds "
+        "whenever it stops; its bounds are wider"
+    ]
 
 
 def _run_existing(
@@ -367,6 +391,7 @@ def _run_existing(
     """The pipeline of a run folder that exists (resumed or extended), whose checks passed
     (since ``t0``): its kernels are loaded or compiled at the warm-up."""
     from mcchain.compiled.ready import Kernels
+    from mcchain.runner.observers import solve_steps_for
     from mcchain.runner.pipeline import Plan, run_pipeline
     from mcchain.runner.provenance import software_versions
 
@@ -382,6 +407,7 @@ def _run_existing(
         dask=dask,
         threads=threads,
         solve=solve,
+        solve_steps=solve_steps_for(job, solve),
         argv=list(sys.argv if argv is None else argv),
         prepare_seconds=time.perf_counter() - t0,
         keep_parts=keep_parts,

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mcchain.ensemble.histories import is_history
 from mcchain.ensemble.registry import VARIABLES
 from mcchain.errors import RunError
 
@@ -33,7 +34,9 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
     part file holds per sample (``model`` gives the sizes of the dims: bodies, joints,
     drivers, modes, sampled paths; ``[simulate]`` the output times, from
     :func:`mcchain.solvers.grid.output_times`). Mirrors what
-    :func:`mcchain.solvers.solve_chunk` returns; tests compare it with real part files."""
+    :func:`mcchain.solvers.solve_chunk` returns and ``[storage] histories`` keeps of it:
+    nothing of the histories with ``"none"``; all of them with ``"failed"``, an upper bound
+    (every sample may fail). Tests compare it with real part files."""
     nmode = max(int(model.nmode), 0)
     along = getattr(scene.modes, "along", None) if scene.modes is not None else None
     sizes = {
@@ -68,12 +71,18 @@ def stored_sample_bytes(scene: Any, model: Any) -> int:
             if spec.analysis == "simulate"
             and spec.name not in ("joint_moment", "driver_force", "peak_driver_force")
             and (model.has_contact or spec.name not in _CONTACT_OUTPUTS)
+            and (spec.name != "solved_by" or getattr(sim, "retry_failed", False))
         }
         stored |= {"joint_moment"} if model.has_prismatic else set()
         stored |= {"driver_force", "peak_driver_force"} if model.has_slider_drivers else set()
+    histories = getattr(scene.storage, "histories", "all")
     total = 8  # the int64 sample coordinate
+    if histories == "failed" and sim is not None:
+        total += 8  # the int64 history_sample coordinate, should the sample's be kept
     for name in stored:
         spec = VARIABLES[name]
+        if histories == "none" and is_history(spec.dims):
+            continue  # "failed" keeps a sample's histories when it fails: counted (a bound)
         count = 1
         for dim in spec.dims:
             count *= sizes[dim]

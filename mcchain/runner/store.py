@@ -10,8 +10,8 @@ counts; a completed session then removes the merged parts and the lock.
 
 What a part file holds is the :class:`PartWriter`'s choice: the chunk's variables from the
 registry (:func:`mcchain.ensemble.registry.chunk_variables`) with the requirements'
-``requirement_met`` (:meth:`mcchain.decision.requirements.RunRequirements.add_to`); a
-storage option that keeps fewer variables belongs there too.
+``requirement_met`` (:meth:`mcchain.decision.requirements.RunRequirements.add_to`), and of
+the time histories those ``[storage] histories`` keeps (:mod:`mcchain.ensemble.histories`).
 
 This module imports only the standard library at import time.
 """
@@ -26,7 +26,7 @@ import os
 import time
 import traceback
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -52,6 +52,7 @@ from mcchain.runner.steps import RunState
 if TYPE_CHECKING:
     from mcchain.decision.requirements import RunRequirements
     from mcchain.ensemble.io import MergeStats
+    from mcchain.ensemble.registry import ChunkVariables
     from mcchain.runner.executors import ExecutionStats
     from mcchain.runner.job import Job
     from mcchain.runner.steps import SolvedChunk
@@ -88,7 +89,43 @@ class PartWriter:
             attrs=self.attrs,
             **keywords,
         )
+        variables = kept_histories(variables, self.job.histories)
         write_part(variables, self.parts_dir, chunk.start, chunk.stop)
+
+
+def kept_histories(chunk: ChunkVariables, mode: str) -> ChunkVariables:
+    """A part file's variables with the time histories ``[storage] histories`` (``mode``)
+    keeps: all (``chunk`` itself); none (nor the ``time`` coordinate); or, for
+    ``"failed"``, each history's rows of the samples that
+    :func:`~mcchain.ensemble.histories.replay_mask` picks, along ``history_sample``."""
+    from mcchain.ensemble.histories import (
+        HISTORY_MODES,
+        HISTORY_SAMPLE,
+        HISTORY_SAMPLE_ATTRS,
+        is_history,
+        replay_mask,
+    )
+
+    if mode not in HISTORY_MODES:
+        raise ValueError(f"storage.histories: must be one of {HISTORY_MODES}, got {mode!r}")
+    if mode == "all":
+        return chunk
+    if mode == "none":
+        data_vars = {k: v for k, v in chunk.data_vars.items() if not is_history(v[0])}
+        coords = {k: v for k, v in chunk.coords.items() if not is_history(v[0])}
+        return replace(chunk, coords=coords, data_vars=data_vars)
+    met = chunk.data_vars.get("requirement_met")
+    keep = replay_mask(chunk.data_vars["status"][1], None if met is None else met[1])
+    data_vars = {}
+    for name, (dims, values, attrs) in chunk.data_vars.items():
+        if is_history(dims):
+            dims, values = (HISTORY_SAMPLE, *dims[1:]), values[keep]
+        data_vars[name] = (dims, values, attrs)
+    coords = dict(chunk.coords)
+    if any(is_history(dims) for dims, _, _ in chunk.data_vars.values()):
+        ids = chunk.coords["sample"][1][keep]
+        coords[HISTORY_SAMPLE] = ((HISTORY_SAMPLE,), ids, dict(HISTORY_SAMPLE_ATTRS))
+    return replace(chunk, coords=coords, data_vars=data_vars)
 
 
 class Store:

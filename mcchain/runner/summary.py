@@ -41,6 +41,11 @@ def run_summary(record: Mapping[str, Any]) -> list[str]:
             else ""
         ),
     ]
+    session = r["sessions"][-1] if r.get("sessions") else {}
+    lines += [f"note: {line}" for line in session.get("notes") or []]
+    retried = (r.get("retries") or {}).get("line")
+    if retried:
+        lines.append(f"note: {retried}")
     until = r.get("until")
     if until and until.get("stopped"):
         looks = len(until.get("looks", []))

@@ -23,6 +23,8 @@ Num = Annotated[float, Strict(), AllowInfNan(False)]
 """A finite number (TOML int or float)."""
 Int = Annotated[int, Strict()]
 """A TOML integer (a float such as 10.0 is refused)."""
+Bool = Annotated[bool, Strict()]
+"""A TOML boolean (``true``/``false``; a string such as ``"yes"`` or a number is refused)."""
 Vec2 = Annotated[list[Num], Field(min_length=2, max_length=2)]
 """Two finite numbers ``[x, y]``."""
 Points = Annotated[list[Vec2], Field(min_length=2, max_length=2)]

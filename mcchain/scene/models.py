@@ -37,6 +37,7 @@ from pydantic import (
 
 from mcchain.scene.fields import (
     BodyRef,
+    Bool,
     Int,
     Num,
     Section,
@@ -139,6 +140,12 @@ class Simulate(Section):
     max_newton: Int = Field(
         default=20, ge=1, description="Newton iterations of implicit steps; default 20."
     )
+    retry_failed: Bool = Field(
+        default=True,
+        description="solve a sample whose time integration fails again, tighter (rtol and "
+        "atol, or dt, divided by 10, then 100), then by radau, before it counts as undefined "
+        "(stored per sample in solved_by); default true, false to keep the failure.",
+    )
     kernels: Literal["auto", "lanes", "loop"] = Field(
         default="auto",
         description='"lanes": kernels generated for the scene\'s topology (fastest per step, '
@@ -185,6 +192,11 @@ class Storage(Section):
     )
     chunk_size: Int = Field(
         default=1024, ge=1, description="samples per chunk; default 1024 (CLI --chunk-size)."
+    )
+    histories: Literal["all", "none", "failed"] = Field(
+        default="all",
+        description='time histories stored: "all" (default), "none", or "failed" (the '
+        "samples that fail a requirement or carry a status flag).",
     )
 
     @model_validator(mode="after")

@@ -18,7 +18,8 @@
   (prismatic joint on the ground), and :data:`TELESCOPE_TEXT` — a prismatic joint between
   two moving bodies;
 * :func:`flores_pin_text` — ``configs/slider-crank-flores.toml`` as one instance: the piston
-  pin's clearance under the contact law (model auto), its ``[simulate]`` keys replaced.
+  pin's clearance under the contact law (model auto), its ``[simulate]`` keys replaced
+  (:func:`config_text` and :func:`with_lines`: a shipped scene with some lines replaced).
 
 :data:`SCENES` names them for :func:`scene_model`. Random scenes come from
 :mod:`mcchain.testing.factory`.
@@ -430,19 +431,25 @@ def flores_pin_text(
     Lankarani–Nikravesh e = 0.9, model auto) without its ``[sample]`` table. At the defaults
     (30 ms) the pin's link lets go at 9.9 ms and the journal impacts its bearing 6 times,
     re-seating twice (21.8 and 26.4 ms)."""
-    from pathlib import Path
-
-    config = Path(__file__).resolve().parents[2] / "configs" / "slider-crank-flores.toml"
-    text = config.read_text(encoding="utf-8").split("[sample]")[0]
+    text = config_text("slider-crank-flores.toml").split("[sample]")[0]
     keys = {"t_end": t_end, "clearance": clearance, "method": method, "rtol": rtol,
             "atol": atol, "output_dt": output_dt}  # fmt: skip
-    lines = []
-    for line in text.splitlines():
-        key = line.split("=")[0].strip()
-        if key in keys:
-            line = f"{key} = {keys[key]!r}".replace("'", '"')
-        lines.append(line)
-    return "\n".join(lines) + "\n"
+    return with_lines(text, {k: f"{k} = {v!r}".replace("'", '"') for k, v in keys.items()})
+
+
+def config_text(name: str) -> str:
+    """The text of the shipped scene ``configs/<name>``."""
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parents[2] / "configs" / name
+    return config.read_text(encoding="utf-8")
+
+
+def with_lines(text: str, lines: dict[str, str]) -> str:
+    """``text`` with every line whose key (the text before ``=``, stripped) is in ``lines``
+    replaced by ``lines[key]`` (one or more lines), e.g. ``{"count": "count = 16"}``."""
+    out = [lines.get(line.split("=")[0].strip(), line) for line in text.splitlines()]
+    return "\n".join(out) + "\n"
 
 
 def model_of(text: str, nsample: int | None = None, name: str = "<string>") -> Model:

@@ -72,6 +72,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.histories import not_stored_reason, without_histories
 from mcchain.ensemble.queries import dim_names
 from mcchain.status import Status, counts
 from mcchain.viz.contact import joint_models
@@ -537,6 +538,11 @@ def make_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = Report()
+    # A light run ([storage] histories = "none" | "failed"): the figures over every
+    # sample's history say why they are missing; the others read the per-sample variables.
+    not_stored = not_stored_reason(ds)
+    if not_stored is not None:
+        ds = without_histories(ds)
 
     def record(name: str, produced: Path | str) -> None:
         if isinstance(produced, Path):
@@ -561,15 +567,15 @@ def make_report(
             record(name, save_or_reason(peak_force_figure(ds, models), out / name))
         else:
             record(name, scatter(ds, result, out / name))
-    for name, found_figure in (
-        ("scatter_impact_count.png", impact_figure(ds)),
-        ("journal_orbit.png", orbit_figure(ds, model, models)),
-    ):
-        record(name, save_or_reason(found_figure, out / name))
     record(
-        "reaction_envelopes.png",
-        reaction_envelopes(ds, out / "reaction_envelopes.png", models),
+        "scatter_impact_count.png",
+        save_or_reason(impact_figure(ds), out / "scatter_impact_count.png"),
     )
+    for name, draw in (
+        ("journal_orbit.png", lambda path: save_or_reason(orbit_figure(ds, model, models), path)),
+        ("reaction_envelopes.png", lambda path: reaction_envelopes(ds, path, models)),
+    ):
+        record(name, not_stored if not_stored is not None else draw(out / name))
     record("contact_loss.png", contact_loss(ds, out / "contact_loss.png"))
     record("status_counts.png", status_counts(ds, out / "status_counts.png"))
     record(

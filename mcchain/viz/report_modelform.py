@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mcchain.contact import MODE_CONTACT, MODE_FREE, MODE_LINK
+from mcchain.ensemble.histories import histories_setting
 from mcchain.ensemble.queries import dim_names
 from mcchain.ensemble.units import with_units
 from mcchain.viz.figures import block
@@ -90,6 +91,10 @@ def peak_times(ds: xr.Dataset, requirement: Requirement) -> PeakTimes | str:
     if history is None:
         return f"{requirement.output} is not the peak of a stored history: no time to locate"
     if history not in ds.data_vars or "time" not in ds.dims:
+        light = histories_setting(ds)
+        if light != "all":
+            stored = f'[storage] histories = "{light}"'
+            return f"histories not stored ({stored}): the time of the peak is unknown"
         return f"the run stores no {history} history: the time of the peak is unknown"
     da = ds[history]
     select = {k: v for k, v in (requirement.select or {}).items() if k in da.dims}
@@ -248,6 +253,11 @@ def modelform_section(
         )
     if clearance and "time" in ds.dims:
         items += [joint_note(ds, k, str(m)) for k, m in clearance]
+    elif clearance and histories_setting(ds) != "all":
+        items.append(
+            "The share of the run's time each joint spent on the link, in contact and in free "
+            f'flight: histories not stored ([storage] histories = "{histories_setting(ds)}").'
+        )
     for requirement, failed in requirements:
         if requirement.output in STATICS_OUTPUTS and clearance:
             note = "a statics output: it rests on the link model."

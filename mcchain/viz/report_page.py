@@ -309,6 +309,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     ``out`` (default ``RUN/report``) and the page that carries them; the design comes from
     the ensemble's own settings."""
     from mcchain.ensemble.describe import stored_model
+    from mcchain.ensemble.histories import not_stored_reason, without_histories
     from mcchain.ensemble.queries import run_design
     from mcchain.errors import McchainError
     from mcchain.runner.runs import open_run, resolve_run, writable_folder
@@ -328,5 +329,7 @@ def write_report(run: str | Path, out: str | Path | None = None) -> Report:
     from mcchain.viz.contact import joint_models
 
     models = joint_models(ds, model)
+    if not_stored_reason(ds) is not None:  # a light run: the page reads per-sample variables
+        ds = without_histories(ds)
     report.written.append(write_index(folder, ds, target, report, models))
     return report

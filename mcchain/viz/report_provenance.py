@@ -81,7 +81,12 @@ def _design(ds: xr.Dataset, settings: dict[str, Any], record: dict[str, Any]) ->
         return f"no [sample]: {n} identical instance(s)"
     text = f"{esc(sample.get('design', 'random'))}, {n} samples, seed {esc(settings.get('seed'))}"
     sequential = settings.get("sequential")
-    if isinstance(sequential, dict):
+    if isinstance(sequential, dict) and sequential.get("extended_from"):
+        text += (
+            f"; extended from {esc(sequential['extended_from'])} samples: verdicts by the "
+            "confidence sequence"
+        )
+    elif isinstance(sequential, dict):
         until = record.get("until") or {}
         looks = len(until.get("looks") or [])
         text += (
@@ -129,6 +134,8 @@ def provenance_section(folder: Path, ds: xr.Dataset) -> str:
         rows.append(("run.json", "missing or unreadable: date, commit and host unknown"))
     said = [("warning", w) for w in record.get("warnings") or []]
     said += [("note", n) for n in record.get("notes") or []]
+    retried = (record.get("retries") or {}).get("line")  # failed samples solved again
+    said += [("note", retried)] if retried else []
     if said:
         printed = "".join(f'<li class="{kind}">{kind}: {esc(line)}</li>' for kind, line in said)
         printed = f"<ul>{printed}</ul>"

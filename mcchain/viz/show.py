@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mcchain.ensemble.histories import select_with_histories
 from mcchain.ensemble.queries import DEFAULT_LIMIT, select_samples
 from mcchain.errors import RunError
 from mcchain.viz.playback import APPLICATION_ID, DEFAULT_MAGNIFY, log_samples, make_blueprint
@@ -130,5 +131,6 @@ def show_run(
     if failed is not None:
         samples = [*samples, *failed_samples(ds, failed, limit or DEFAULT_LIMIT)]
     chosen = select_samples(ds, samples, worst=worst, status=status, limit=limit or DEFAULT_LIMIT)
-    show(ds, model, chosen, **options)
+    # A light run ([storage] histories) may not hold a chosen sample's history: say so.
+    show(select_with_histories(ds, chosen), model, chosen, **options)
     return chosen

@@ -1,0 +1,278 @@
+"""Light runs: ``[storage] histories = "all" | "none" | "failed"``, end to end.
+
+The scene is the turning clearance bar of the extend tests with a requirement on its peak
+pin force whose limit lies inside the sampled spread, so that some samples fail it and
+some meet it: the ``"failed"`` subset is then neither empty nor everything, and every
+comparison below could fail.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import json
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+
+from mcchain.ensemble.export import STORED_PREFIX, sample_table
+from mcchain.ensemble.histories import (
+    HISTORY_SAMPLE,
+    history_names,
+    replay_mask,
+    sample_history,
+    stored_mode,
+)
+from mcchain.ensemble.io import list_parts
+from mcchain.ensemble.registry import validate_dataset
+from mcchain.errors import RunError
+from mcchain.runner import plan, runs
+from mcchain.runner.resources import stored_sample_bytes
+from mcchain.scene import compile_model, load_scene
+from mcchain.testing.scenes import hanging_clearance_bar_text
+
+LIMIT = 780.0
+"""N: the peak pin force limit, inside the spread of the 24 samples' peaks (the journal
+rattles in its bearing: 518-1367 N; 5 samples diverge), so some fail and some meet it."""
+
+
+def scene_text(histories: str, count: int = 24) -> str:
+    return (
+        hanging_clearance_bar_text("light-bar", angular_velocity=1.0)
+        + f"""[equilibrium]
+[modes]
+[simulate]
+t_end = 0.02
+dt = 1e-4
+method = "rk4"
+output_dt = 1e-3
+[storage]
+histories = "{histories}"
+[sample]
+count = {count}
+seed = 11
+[sample.vary]
+"joint.O.clearance" = {{ uniform = [1e-4, 1e-3] }}
+"body.bar.mass" = {{ normal = [2.0, 0.02] }}
+[[requirement]]
+name = "pin"
+output = "peak_joint_force"
+select = {{ joint = "O" }}
+max = {LIMIT}
+"""
+    )
+
+
+def write_scene(folder: Path, histories: str, count: int = 24) -> Path:
+    path = folder / f"{histories}.toml"
+    path.write_text(scene_text(histories, count), encoding="utf-8")
+    return path
+
+
+def run(folder: Path, histories: str, name: str, **options: object) -> Path:
+    options = {"chunk_size": 10, "threads": 1, **options}
+    return plan.start_run(
+        write_scene(folder, histories),
+        run_dir=folder / name,
+        progress=False,
+        **options,  # type: ignore[arg-type]
+    ).folder
+
+
+def same_bits(a: np.ndarray, b: np.ndarray, name: str) -> None:
+    assert a.dtype == b.dtype and a.shape == b.shape, name
+    np.testing.assert_array_equal(
+        np.ascontiguousarray(a).view(np.uint8), np.ascontiguousarray(b).view(np.uint8), name
+    )
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The same 24 samples stored with each value of ``histories``."""
+    folder = tmp_path_factory.mktemp("light")
+    return {mode: run(folder, mode, mode) for mode in ("all", "none", "failed")}
+
+
+def test_histories__none_keeps_every_per_sample_variable_bit_for_bit(three) -> None:
+    with runs.open_run(three["all"]) as full, runs.open_run(three["none"]) as light:
+        validate_dataset(light)
+        assert stored_mode(full) == "all" and stored_mode(light) == "none"
+        histories = set(history_names(full))
+        assert {"q", "joint_force", "energy", "constraint_error"} <= histories
+        assert not set(history_names(light)) and "time" not in light.variables
+        assert set(light.data_vars) == set(full.data_vars) - histories
+        for name in light.variables:
+            same_bits(light[name].values, full[name].values, str(name))
+        assert json.loads(light.attrs["settings"])["scene"]["storage"]["histories"] == "none"
+    # (the slider-crank's sizes: benchmarks/bench_light.py; here headers dominate)
+    size = {mode: (three[mode] / "ensemble.nc").stat().st_size for mode in ("all", "none")}
+    assert size["none"] < size["all"]
+
+
+def test_histories__failed_keeps_those_of_the_failing_samples(three) -> None:
+    with runs.open_run(three["all"]) as full, runs.open_run(three["failed"]) as light:
+        validate_dataset(light)
+        met = full.requirement_met.values
+        status = full.status.values
+        expected = np.flatnonzero((met == 0).any(axis=1) | (status != 0))
+        assert 0 < expected.size < full.sizes["sample"]  # the limit splits the samples
+        np.testing.assert_array_equal(expected, replay_mask(status, met).nonzero()[0])
+        np.testing.assert_array_equal(light[HISTORY_SAMPLE].values, expected)
+        for name in history_names(full):
+            assert light[name].dims == (HISTORY_SAMPLE, *full[name].dims[1:])
+            stored = light[name].values
+            same_bits(stored, full[name].isel(sample=expected).values, name)
+        for name in set(light.variables) - set(history_names(light)) - {HISTORY_SAMPLE}:
+            same_bits(light[name].values, full[name].values, str(name))
+        s = int(expected[0])
+        same_bits(sample_history(light, "q", s).values, full.q.sel(sample=s).values, "q")
+        kept = set(expected.tolist())
+        other = next(i for i in range(full.sizes["sample"]) if i not in kept)
+        with pytest.raises(RunError, match=rf"sample {other}: time history not stored"):
+            sample_history(light, "q", other)
+
+
+def test_histories__byte_identical_whatever_the_chunks_and_threads(tmp_path: Path, three) -> None:
+    for mode in ("none", "failed"):
+        other = run(tmp_path, mode, f"{mode}-chunks", chunk_size=7, threads=2)
+        assert filecmp.cmp(three[mode] / "ensemble.nc", other / "ensemble.nc", shallow=False)
+
+
+@pytest.mark.slow
+def test_histories__byte_identical_on_dask(tmp_path: Path, three) -> None:
+    for mode in ("none", "failed"):
+        other = run(tmp_path, mode, f"{mode}-dask", chunk_size=5, threads=2, dask="local")
+        assert filecmp.cmp(three[mode] / "ensemble.nc", other / "ensemble.nc", shallow=False)
+
+
+def test_histories__failed_run_extended_equals_one_run(tmp_path: Path, three) -> None:
+    """``--extend`` merges the stored subset of the first samples with the new ones'."""
+    small = plan.start_run(
+        write_scene(tmp_path, "failed"), samples=13, chunk_size=10, threads=1,
+        run_dir=tmp_path / "small", progress=False,
+    ).folder  # fmt: skip
+    plan.extend_run(small, 11, progress=False, threads=1)
+    with runs.open_run(small) as extended, runs.open_run(three["failed"]) as whole:
+        assert set(extended.variables) == set(whole.variables)
+        for name in whole.variables:
+            same_bits(extended[name].values, whole[name].values, str(name))
+
+
+def test_histories__disk_estimate_counts_what_is_stored(tmp_path: Path) -> None:
+    """Bytes per sample of the part files: the estimate of ``"none"`` is exact; of
+    ``"failed"`` an upper bound that the histories of every sample reach."""
+    sizes = {}
+    for mode in ("all", "none", "failed"):
+        path = write_scene(tmp_path, mode)
+        scene = load_scene(path)
+        sizes[mode] = stored_sample_bytes(scene, compile_model(scene, nsample=24))
+    assert sizes["none"] < sizes["all"] < sizes["failed"] == sizes["all"] + 8
+    folder = run(tmp_path, "none", "parts", keep_parts=True)
+    for part in list_parts(folder / "parts"):
+        with netCDF4.Dataset(part.path) as nc:
+            data = sum(
+                v.size * v.dtype.itemsize
+                for v in nc.variables.values()
+                if "sample" in v.dimensions and v.name != "requirement_met"
+            )
+        assert data == sizes["none"] * (part.stop - part.start)
+
+
+def test_histories__export_has_no_stored_maxima_of_a_light_run(three) -> None:
+    with runs.open_run(three["all"]) as full, runs.open_run(three["failed"]) as light:
+        whole, table = sample_table(full), sample_table(light)
+    assert any(c.startswith(STORED_PREFIX) for c in whole.columns)
+    kept = [c for c in whole.columns if not c.startswith(STORED_PREFIX)]
+    assert list(table.columns) == kept
+    for column in kept:
+        assert whole[column].equals(table[column]), column
+
+
+def test_histories__report_says_the_history_figures_are_not_stored(three, tmp_path) -> None:
+    from mcchain.viz.report_page import write_report
+
+    for mode in ("none", "failed"):
+        report = write_report(three[mode], tmp_path / mode)
+        for figure in ("reaction_envelopes.png", "journal_orbit.png"):
+            assert report.skipped[figure].startswith("histories not stored"), figure
+        assert (tmp_path / mode / "omega_histogram.png").is_file()
+        page = (tmp_path / mode / "index.html").read_text()
+        assert "histories not stored" in page
+
+
+def test_histories__show_replays_a_stored_history_and_names_a_missing_one(three, tmp_path):
+    from mcchain.viz.show import show_run
+
+    with runs.open_run(three["failed"]) as light:
+        kept = light[HISTORY_SAMPLE].values.tolist()
+    missing = next(i for i in range(24) if i not in kept)
+    target = tmp_path / "kept.rrd"
+    assert show_run(three["failed"], [kept[0]], save=target) == [kept[0]]
+    assert target.stat().st_size > 0
+    with pytest.raises(RunError, match=rf"sample {missing}: time history not stored"):
+        show_run(three["failed"], [missing], save=tmp_path / "missing.rrd")
+    with pytest.raises(RunError, match='histories = "none"'):
+        show_run(three["none"], [0], save=tmp_path / "none.rrd")
+    with pytest.raises(RunError, match="--worst: contact_force: histories not stored"):
+        show_run(three["none"], worst="contact_force:1", save=tmp_path / "worst.rrd")
+
+
+def test_histories__bad_value_is_one_line_exit_2_nothing_written(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    path = tmp_path / "bad.toml"
+    path.write_text(scene_text("all").replace('histories = "all"', 'histories = "some"'))
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
+    proc = subprocess.run(
+        [sys.executable, "-m", "mcchain.cli", "run", str(path), "--out", str(tmp_path / "runs")],
+        capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 2 and proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "storage.histories" in lines[0] and "some" in lines[0], lines
+    assert not (tmp_path / "runs").exists()
+
+
+def test_histories__failed_dataset_reads_back_lazily(three) -> None:
+    """xarray opens the subset as its own dimension; its coordinate is the sample index."""
+    ds = xr.open_dataset(three["failed"] / "ensemble.nc")
+    try:
+        assert ds[HISTORY_SAMPLE].attrs["long_name"].startswith("global sample index")
+        assert ds.q.dims[0] == HISTORY_SAMPLE
+    finally:
+        ds.close()
+
+
+def test_histories__check_of_a_light_run_equals_the_full_runs(three) -> None:
+    """``mcchain check`` re-solves the samples itself: a light run's check is the full
+    run's (it compares per-sample variables only)."""
+    from mcchain.decision.check import check_run
+
+    full, light = check_run(three["all"]), check_run(three["failed"])
+    assert [r.requirement for r in full.rows] == [r.requirement for r in light.rows] == ["pin"]
+    assert full.lines() == light.lines()
+
+
+@pytest.mark.parametrize(("limit", "kept"), [(1e9, 0), (1.0, 4)])
+def test_histories__failed_with_no_failure_and_with_all_failing(tmp_path, limit, kept) -> None:
+    """The edges: the first 4 samples carry no status flag; a limit none reaches keeps no
+    history (an empty history_sample), one every sample exceeds keeps them all."""
+    path = tmp_path / "edge.toml"
+    path.write_text(scene_text("failed").replace(f"max = {LIMIT}", f"max = {limit}"))
+    folder = plan.start_run(
+        path, samples=4, chunk_size=3, threads=1, run_dir=tmp_path / "edge", progress=False
+    ).folder
+    with runs.open_run(folder) as ds:
+        validate_dataset(ds)
+        assert (ds.status.values == 0).all()
+        assert ds.sizes[HISTORY_SAMPLE] == kept and ds.q.shape[0] == kept
+        assert stored_mode(ds) == "failed"
+        if kept:
+            same_bits(ds[HISTORY_SAMPLE].values, np.arange(4, dtype=np.int64), "kept")
+        else:
+            with pytest.raises(RunError, match="sample 2: time history not stored"):
+                sample_history(ds, "q", 2)
