@@ -129,6 +129,7 @@ def start_run(
         from mcchain.runner.observers import observers_for, solve_steps_for
 
         observers = observers_for(job, progress=progress, rerun=rerun, grow=grow)
+        solve_steps = solve_steps_for(job, solve)
         prepare_seconds = time.perf_counter() - t0
         from mcchain.runner.runs import create_run
 
@@ -148,7 +149,7 @@ def start_run(
             dask=dask,
             threads=threads,
             solve=solve,
-            solve_steps=solve_steps_for(job, solve),
+            solve_steps=solve_steps,
             argv=argv,
             prepare_seconds=prepare_seconds,
             keep_parts=keep_parts,
