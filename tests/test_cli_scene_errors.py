@@ -66,6 +66,14 @@ CASES = {
         "scale it "
         "with the mass or sample it, not both",
     ),
+    "a switch written as a string": (
+        BAR.replace("[modes]\n", '[modes]\nshapes = "yes"\n'),
+        "modes.shapes: expected true or false, got the string 'yes'",
+    ),
+    "a switch written as a number": (
+        BAR.replace("mass = 2.0", "mass = 2.0\nscale_inertia = 1"),
+        "body.bar.scale_inertia: expected true or false, got 1",
+    ),
     "loop driven twice": (
         fourbar_text() + '[[driver]]\nbody = "rocker"\nomega = 5.0\n[equilibrium]\n',
         "driver.rocker: the mechanism has 1 degree(s) of freedom (9 coordinates, 4 joints of "

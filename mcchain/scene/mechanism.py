@@ -16,6 +16,7 @@ from mcchain.contact import HERTZ_EXPONENT, LAW_CODES, ContactStart, LawName
 from mcchain.parameters import unset_value
 from mcchain.scene.fields import (
     BodyRef,
+    Bool,
     Name,
     Num,
     Points,
@@ -48,7 +49,7 @@ class Body(Section):
     name: Name = Field(description="unique body name (not ``ground``); required.")
     mass: Num = Field(gt=0, description="mass m, kg; required, > 0.")
     inertia: Num = Field(gt=0, description="centroidal moment of inertia J, kg m²; required.")
-    scale_inertia: bool = Field(
+    scale_inertia: Bool = Field(
         default=False,
         description="true: a sampled mass carries the inertia with it, J = J_written · m / "
         "m_written in every instance (the same shape and size, only denser or lighter); "

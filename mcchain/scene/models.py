@@ -77,7 +77,7 @@ class Modes(Section):
     """``[modes]``: eigenpulsations about the equilibrium. The equilibrium is computed for
     them even without ``[equilibrium]`` (which then only sets the Newton settings)."""
 
-    shapes: bool = Field(
+    shapes: Bool = Field(
         default=True,
         description="store the mode shapes (mode_shape); default true, false to skip them.",
     )
