@@ -8,9 +8,9 @@ bounded minimisation (``scipy.optimize.minimize_scalar``, method ``bounded``), s
 the continuous one to the integrator's accuracy. The same procedure, at a tight tolerance,
 is the dense reference the tests compare the kernels' peaks against.
 
-scipy.optimize is imported at the first peak to locate, not before: its import costs
-0.2-0.9 s of CPU, more than a warm run's kernels take to load, and steps that show no local
-maximum (a warm-up's few steps, a monotone force) never need it.
+scipy.optimize is imported at the first peak located, where it is used (its import costs
+0.2-0.9 s of CPU, more than a warm run's kernels take to load): with
+:func:`mcchain.solvers.radau.locate_root`, the only places of a run that import it.
 """
 
 from __future__ import annotations

@@ -51,12 +51,21 @@ def locate_root(f: Callable[[float], float], t_old: float, t: float) -> float:
     """The root of ``f`` in the bracket [t_old, t] (s; ``f`` changes sign over it), to
     :data:`EVENT_XTOL`, by scipy's ``brentq`` (as solve_ivp locates its events).
 
-    scipy.optimize is imported here, on the first root a run locates: its import costs
-    0.2-0.9 s of CPU (scipy.fft, scipy.special, linprog, ...), more than a warm run's kernels
-    take to load, and a run without an event or a re-seat never needs it."""
+    scipy.optimize is imported here, where it is used (as by the peaks,
+    :mod:`mcchain.solvers.peaks`): its import costs 0.2-0.9 s of CPU (scipy.fft,
+    scipy.special, linprog, ...), more than a warm run's kernels take to load."""
     from scipy.optimize import brentq
 
     return float(brentq(f, t_old, t, xtol=EVENT_XTOL, rtol=EVENT_XTOL))
+
+
+def _event_on_step(
+    event: Callable[[float, np.ndarray], float],
+    step: tuple[float, float, np.ndarray, np.ndarray],
+    t: float,
+) -> float:
+    """``event`` at t (s) on the dense output of one accepted ``step`` (:class:`_Dense`)."""
+    return float(event(t, _Dense.piece(t, step)))
 
 
 class RadauRun(Protocol):
@@ -538,9 +547,7 @@ class _Sample:
             for e, event in enumerate(events):
                 if not _crosses(g[e], g_new[e], getattr(event, "direction", 0.0)):
                     continue
-                root = locate_root(
-                    lambda tt, ev=event, step=step: ev(tt, _Dense.piece(tt, step)), t_old, t
-                )
+                root = locate_root(functools.partial(_event_on_step, event, step), t_old, t)
                 if found is None or root < found[0]:
                     found = (root, e)
             stop = t if found is None else found[0]
