@@ -3,7 +3,8 @@
     python benchmarks/bench_warm.py --before REF [--after REF] [--rounds 3]
 
 Runs ``mcchain run`` on the Flores slider-crank (4 samples, 2 ms) with ``method = "radau"``
-(``bench_speed.radau_scene``) and as shipped (``rk45``), warm (each tree with its own caches,
+(``bench_speed.radau_scene``) and as shipped (``rk45``), and on the README's quick start
+(``configs/clearance-sweep.toml``), warm (each tree with its own caches,
 warmed first), in a fresh process that times inside the run, in wall and CPU seconds: the
 warm-up (``Kernels.warm``), every numba cache load in it (``Dispatcher._compile_for_args``,
 with the index check and unpickling and the dispatcher's own work around the load), every LLVM
@@ -27,7 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from bench_speed import OUT, _env, export, radau_scene
+from bench_speed import OUT, REPO, _env, export, radau_scene
 
 PROBE = r"""
 import builtins, collections, json, sys, time
@@ -169,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     scenes["rk45"].write_text(
         scenes["radau"].read_text().replace('method = "radau"', 'method = "rk45"')
     )
+    scenes["quick start"] = REPO / "configs" / "clearance-sweep.toml"
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for name, tree in trees.items():  # warm the caches (compiles are not timed)
         for scene in scenes.values():
@@ -223,7 +225,7 @@ def report(
     args: argparse.Namespace,
 ) -> str:
     loads = ", ".join(f"{r['load']:.1f}" for runs in rows.values() for r in runs)
-    methods = sorted({m for m, _ in rows}, key=["radau", "rk45"].index)
+    methods = sorted({m for m, _ in rows}, key=["radau", "rk45", "quick start"].index)
     head = " | ".join(f"{m} {n}" for m in methods for n in ("before", "after"))
     lines = [
         "# Warm start: where a warm run's kernel warm-up goes",
