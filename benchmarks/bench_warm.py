@@ -232,7 +232,8 @@ def report(
         "",
         f"`python benchmarks/bench_warm.py --before {args.before} --after {args.after} "
         f'--rounds {args.rounds}` (Flores slider-crank, 4 samples, 2 ms, `method = "radau"` '
-        "and as shipped, `rk45`; best of the rounds, trees alternating; CPU seconds are the "
+        "and as shipped, `rk45`; the quick start, `configs/clearance-sweep.toml`, 10,000 "
+        "statics instances; best of the rounds, trees alternating; CPU seconds are the "
         f"process's or, for the parts, the main thread's); load averages {loads}.",
         "",
         f"| figure | {head} |",
