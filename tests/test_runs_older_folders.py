@@ -95,6 +95,7 @@ def test_extend__a_folder_of_another_version_is_refused_before_anything_runs(
     before = folder_digest(folder)
     assert main(["run", "--extend", str(folder), "--samples", "8"]) == 2
     out, err = capsys.readouterr()
+    assert out == ""
     assert len(err.strip().splitlines()) == 1, err
     assert err.startswith(f"mcchain: error: --extend: {folder.name} was written by another")
     assert 'settings.scene.storage.histories: absent there, "all" here' in err
