@@ -127,10 +127,11 @@ def test_tabulated_plan__only_for_outputs_whose_rate_is_in_the_state():
     model = compile_model(scene)
     q, v, _status = _ideal_start(scene)
     plan = output_plan(scene.output, model, scene.simulate.t_end)
-    tabulated = tabulated_plan(ideal_model(model), q[:1], v[:1], scene.simulate, plan)
+    ideal = ideal_model(model.select(0, 1))
+    tabulated = tabulated_plan(ideal, q[:1], v[:1], scene.simulate, plan)
     assert tabulated is not None
     k = plan.names.index("slider_error")
     assert plan.spec[k, 0] == OUTPUT_POSITION and tabulated.spec[k, 3] == -2
     velocity = [o.model_copy(update={"of": "velocity"}) for o in scene.output]
     plan = output_plan(velocity, model, scene.simulate.t_end)
-    assert tabulated_plan(ideal_model(model), q[:1], v[:1], scene.simulate, plan) is None
+    assert tabulated_plan(ideal, q[:1], v[:1], scene.simulate, plan) is None

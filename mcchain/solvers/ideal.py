@@ -24,6 +24,13 @@ is as accurate as the mechanism's own integration (4e-15 m against the closed-fo
 slider-crank at rk45's rtol 1e-13), and costs about the mechanism's own integration again:
 1.9–2.5× the run without it on the shipped slider-crank and four-bar
 (benchmarks/results/outputs).
+
+Where the ideal mechanism is the same for every sample (:func:`shared_ideal`: no sampled
+parameter reaches it, as a tolerance sweep of the clearances) and the relative outputs are
+positions or angles, ``rk45`` integrates it once per chunk instead, alone and tighter, and
+the lanes read it from a table (:func:`tabulated_plan`; every chunk computes the same table
+from the same start, so the run does not depend on the chunking). The mechanism's own
+integration is unchanged; the output moves by the copy's own integration error.
 """
 
 from __future__ import annotations
@@ -233,11 +240,41 @@ def tabulated_plan(
     """``plan`` with the ideal mechanism's quantities in tables (``ref`` =
     :data:`~mcchain.codes.OUTPUT_TABULATED_REFERENCE`, the knots after the data columns:
     :func:`mcchain.kernels.outputs.reference_signal`), from one integration of ``ideal``
-    (one sample, start state ``q``, ``v`` (1, 3 nbody), as ``sim`` says but by rk45 at
+    (a model of one sample, start state ``q``, ``v`` (1, 3 nbody), as ``sim`` says but by rk45 at
     :data:`REFERENCE_RTOL`/:data:`REFERENCE_ATOL` or the scene's if tighter, stored every knot).
     None (integrate the ideal copy instead) for a relative output of another kind than
     :data:`TABULATED_KINDS`, per-sample data rows that differ, a failed integration, or
     too many knots."""
+    key = _table_key(ideal, q, v, sim, plan)
+    if key not in _TABLES:
+        _TABLES.clear()  # one run's table: every chunk of the run asks for the same
+        _TABLES[key] = _tabulated(ideal, q, v, sim, plan)
+    return _TABLES[key]
+
+
+_TABLES: dict[str, OutputPlan | None] = {}
+"""The last table made (:func:`tabulated_plan`), by :func:`_table_key` of what made it."""
+
+
+def _table_key(ideal: Model, q: np.ndarray, v: np.ndarray, sim: Any, plan: OutputPlan) -> str:
+    """A digest of everything a table is made from: the ideal mechanism's parameters as its
+    kernels read them, its start, the settings and the plan."""
+    import hashlib
+
+    from mcchain.codegen.topology import Topology, pack_parameters
+
+    digest = hashlib.sha256()
+    topology = Topology.from_model(ideal)
+    for part in (pack_parameters(ideal, topology), q, v, plan.spec, plan.data[:1]):
+        digest.update(np.ascontiguousarray(part).tobytes())
+    digest.update(repr(topology).encode())
+    digest.update(sim.model_dump_json().encode())
+    return digest.hexdigest()
+
+
+def _tabulated(
+    ideal: Model, q: np.ndarray, v: np.ndarray, sim: Any, plan: OutputPlan
+) -> OutputPlan | None:
     from mcchain.kernels.outputs import REFERENCE_HEAD, REFERENCE_WIDTH, reference_knots
     from mcchain.solvers.simulate import simulate
 
@@ -254,7 +291,7 @@ def tabulated_plan(
             update={"perturb": {}, "method": "rk45", "output_dt": t_end / knots,
                     "rtol": min(sim.rtol, REFERENCE_RTOL), "atol": min(sim.atol, REFERENCE_ATOL)}
         )  # fmt: skip
-        run = simulate(ideal.select(0, 1), settings, q, v, history_dtype=np.float64)
+        run = simulate(ideal, settings, q, v, history_dtype=np.float64)
         if run["status"][0] & FAILURE_BITS:
             return None
         tables = []

@@ -53,7 +53,9 @@ def simulate_outputs(
     (returned by name, sample first). With a ``relative_to = "ideal"`` output the model is
     integrated with its ideal copy (``reference_start``: the copy's start state, assembled or
     at its equilibrium, before ``[simulate] perturb``, which both receive), and the arrays
-    are cut back to the mechanism's own."""
+    are cut back to the mechanism's own; with ``rk45`` and one ideal mechanism for every
+    sample, that one is integrated once and read from tables instead
+    (:func:`mcchain.solvers.ideal.tabulated_plan`)."""
     from mcchain.solvers.ideal import (
         ideal_model,
         main_part,
@@ -76,7 +78,8 @@ def simulate_outputs(
     tabulated = None
     if sim.method == "rk45" and shared_ideal(ideal, qi, vi, status):
         first = int(np.flatnonzero((status & FAILURE_BITS) == 0)[0])
-        tabulated = tabulated_plan(ideal, qi[first : first + 1], vi[first : first + 1], sim, plan)
+        one = slice(first, first + 1)
+        tabulated = tabulated_plan(ideal.take(one), qi[one], vi[one], sim, plan)
     if tabulated is not None:  # one ideal for every sample: integrated once, read from tables
         history = simulate(
             model, sim.model_copy(update={"perturb": {}}), q, v, status=status,
