@@ -135,3 +135,33 @@ def test_tabulated_plan__only_for_outputs_whose_rate_is_in_the_state():
     velocity = [o.model_copy(update={"of": "velocity"}) for o in scene.output]
     plan = output_plan(velocity, model, scene.simulate.t_end)
     assert tabulated_plan(ideal, q[:1], v[:1], scene.simulate, plan) is None
+
+
+def _run(tmp_path, name: str, **options):
+    from mcchain.runner import plan
+
+    path = tmp_path / "scene.toml"
+    if not path.exists():
+        text = config_text("slider-crank-requirement.toml")
+        lines = {"t_end": "t_end = 0.004", "count": "count = 6"}
+        lines["window"] = "window = [0.002, 0.004]"
+        path.write_text(with_lines(text, lines), encoding="utf-8")
+    options = {"chunk_size": 6, "threads": 1, **options}
+    return plan.start_run(path, run_dir=tmp_path / name, progress=False, **options).folder
+
+
+def test_tabulated_ideal__runs_byte_identical_whatever_the_chunks_and_threads(tmp_path):
+    import filecmp
+
+    one = _run(tmp_path, "one")
+    other = _run(tmp_path, "chunks", chunk_size=4, threads=2)
+    assert filecmp.cmp(one / "ensemble.nc", other / "ensemble.nc", shallow=False)
+
+
+@pytest.mark.slow
+def test_tabulated_ideal__runs_byte_identical_on_dask(tmp_path):
+    import filecmp
+
+    one = _run(tmp_path, "one")
+    other = _run(tmp_path, "dask", chunk_size=2, threads=2, dask="local")
+    assert filecmp.cmp(one / "ensemble.nc", other / "ensemble.nc", shallow=False)
