@@ -340,3 +340,21 @@ def replace_clearances(model, clearances):
     values = np.broadcast_to(values, (len(clearances), values.shape[-1])).copy()
     values[:, model.joint_names.index("B")] = clearances
     return replaced(model, joint_clearance=values)
+
+
+def test_histories__a_live_stream_gets_the_histories_that_none_does_not_store(tmp_path) -> None:
+    """``--rerun`` on a ``"none"`` scene: the solver still computes the histories (the stream
+    shows them), the store still drops them (``Job.histories`` stays ``"none"``)."""
+    from mcchain.runner.job import prepare_job
+    from mcchain.solvers import solve_chunk
+
+    job = prepare_job(write_scene(tmp_path, "none", count=2))
+    live = job.with_solved_histories()
+    assert live.histories == "none" and live.scene.storage.histories == "all"
+    assert live.settings == job.settings  # what the file says of the scene: unchanged
+    assert (
+        prepare_job(write_scene(tmp_path, "all", count=2)).with_solved_histories().histories
+        == "all"
+    )
+    light, full = solve_chunk(job.model, job.scene), solve_chunk(live.model, live.scene)
+    assert light["q"].shape[1] == 0 and full["q"].shape[1] == len(full["time"]) > 1
