@@ -114,6 +114,7 @@ def start_run(
             from mcchain.viz.live import check_live
 
             check_live(rerun, job.model.nsample)
+            job = job.with_solved_histories()
         from mcchain.runner.resources import check_disk
 
         check_disk(job.disk, out if run_dir is None else run_dir)
@@ -243,6 +244,8 @@ def resume_run(
     job = keep_kernels(job, record.get("kernels"))
     check_same_study(job, folder, "--resume")
     check_live(rerun, job.nsample)
+    if rerun is not None:
+        job = job.with_solved_histories()
     check_disk(job.disk, folder, missing_samples(folder, record), retry="resume")
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
@@ -351,6 +354,8 @@ def extend_run(
     job = keep_kernels(job, record.get("kernels"))
     check_same_study(job, folder, "--extend")
     check_live(rerun, total)
+    if rerun is not None:
+        job = job.with_solved_histories()
     check_disk(job.disk, folder, samples, retry="extend")
     notes = [] if record.get("until") else extended_fixed_count_notes(job, record)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": now()})
