@@ -101,7 +101,7 @@ def run_radau(run: RadauRun, flat: tuple[np.ndarray, ...], singular_pivot: float
     from mcchain.kernels.explicit import nan_history
 
     run.rejected_steps[:] = -1  # the rejected attempts are not counted
-    n, ntime = run.model.nsample, len(run.time)
+    n, ntime = run.model.nsample, flat[-1].shape[1]
     contact = (
         (run.contact_history, run.contact_summary)
         if run.contact_history is not None and run.contact_summary is not None
