@@ -26,12 +26,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -52,20 +54,26 @@ def scene_with(histories: str, folder: Path) -> Path:
     return path
 
 
-def mcchain_run(tree: Path, scene: Path, samples: int, run_dir: Path) -> dict:
-    """``mcchain run`` of ``tree`` as a user starts it; wall seconds and run.json."""
+def mcchain_run(
+    tree: Path, scene: Path, samples: int, run_dir: Path, extra: Sequence[str] = ()
+) -> dict:
+    """``mcchain run`` of ``tree`` as a user starts it (``extra``: more arguments); wall
+    seconds, the child's user CPU seconds and run.json."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     command = [sys.executable, "-m", "mcchain.cli", "run", str(scene)]
-    command += ["--samples", str(samples), "--run-dir", str(run_dir)]
+    command += ["--samples", str(samples), "--run-dir", str(run_dir), *extra]
     load = os.getloadavg()[0]
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
     t0 = time.perf_counter()
     proc = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tree)
     wall = time.perf_counter() - t0
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime - cpu0
     if proc.returncode not in (0, 1, 4):  # a verdict's exit codes are 0, 1 and 4... (run: 0)
         raise RuntimeError(f"{command}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
     record = json.loads((run_dir / "run.json").read_text())
     return {
         "wall": wall,
+        "cpu": cpu,
         "load": load,
         "timings": record["timings"],
         "merge": record.get("merge", {}),

@@ -90,6 +90,11 @@ OUTPUT_KINDS = {
     "driver_force": OUTPUT_DRIVER,
 }
 """``[[output]] of`` -> kind code."""
+OUTPUT_TABULATED_REFERENCE = -2
+"""The ``ref`` of a ``relative_to = "ideal"`` output whose ideal mechanism is the same for
+every sample: its quantity is read from a table in the output's data
+(:func:`mcchain.kernels.outputs.reference_signal`), not from an ideal copy's items (≥ 0;
+−1: no reference)."""
 OUTPUT_WITH_RATE = (
     OUTPUT_POSITION,
     OUTPUT_VELOCITY,

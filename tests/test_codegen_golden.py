@@ -29,27 +29,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "cf9caef9c1e24beaae949cc30cbd8f9ae5f853fee2615e16f49ec9cf465c820b",
-        "rk4-projection": "b41fa620a3d1299b2ad3136bc037f5b1725e444adf9bdbe3337a414281bb7ce7",
-        "rk45": "a41e6853e8fe0a0955900502fc3794a79115a6cd5f7fd15c42746aeb9853cd72",
+        "rk4": "69c46904f00256f6e8d208ee4499c4707446558695b3f24ec4b07483a49049e0",
+        "rk4-projection": "efe50a7f213c141540b21a347d02f4f3140142939449b71354355effcdc9aaf7",
+        "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "f0580999bc5d885ad1a4ac163f48a6c76ae4e6063f97dba36ee86de7fb98da72",
-        "rk4-projection": "7f82216fa75ee752e532e36c85c7ba197d03c315a861e740af3845f6a9190f79",
-        "rk45": "81518a07385fd3b8b4c19f8bcd3b24e0107dd1cf24a2c629221c3a52be318ee6",
+        "rk4": "aa44bda6cbb8b42dff271bab4d0a9ab1a5a19a53a08df92bf1b206f6c2e189b1",
+        "rk4-projection": "2c35ef6dc4c403da40c4e7602a5b7a26b1ae9dea4c1b12982388bb51505c81bf",
+        "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "268f9360dbc54ee3e8e2ff30a19d72c0827a2d881a1dbf6bdc79287755e8a93a",
-        "rk4-projection": "5db67614beeb4df64a1c523b8ef950289fa0a11657c2943bedd9c1ad2a253ef2",
-        "rk45": "c1191d58bccf793ced10232ec139f145cd2793cfd6171eb50e2708249cbe52a7",
+        "rk4": "3f6e46fb22d51d2d11642a4a2b4865267b88bc3efc9fb13fcf00ef45f107e160",
+        "rk4-projection": "a86272bca8b0ad62efba16a963ae63cb256233de510343b27f55f72f3be2e6a5",
+        "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "975da64197cb3a5959ad01fee57ae59277c2657083673d5c14d66905547bc5ee",
-        "rk4-projection": "f00c8d7785f9613567b6e2a0409a6e9fe2f133c5fdb3221bc286f1c93262da0a",
-        "rk45": "3a47af4fa29652d7ad7d260e0c4533cee21f66b88f6f7846723dbb093f734ad2",
+        "rk4": "5b2904b36fa7fc60a25c767c01c0ac300647333afb8610ae064f85dc66a623f7",
+        "rk4-projection": "56cf6937c01e2858b84afeb4e1ae5b746222869e7b85bf28bd8409f105e8d88d",
+        "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }
 

@@ -276,3 +276,85 @@ def test_histories__failed_with_no_failure_and_with_all_failing(tmp_path, limit,
         else:
             with pytest.raises(RunError, match="sample 2: time history not stored"):
                 sample_history(ds, "q", 2)
+
+
+@pytest.mark.parametrize(
+    "method",
+    ["rk45", "rk4", "rk4-loop", "rk4-projection", "generalized-alpha", "radau"],
+)
+def test_simulate__without_histories_every_per_sample_value_is_the_same(method) -> None:
+    """``simulate(histories=False)`` (what ``"none"`` runs): the histories come back with 0
+    times, nothing stored, and every per-sample value (status, peaks, contact summaries,
+    outputs, step counts) is bitwise that of the run that stores them, on every path, with
+    the pin's impacts and a sample failed on entry (its values NaN) in the batch."""
+    from mcchain.scene import load_scene_text
+    from mcchain.solvers.output_plan import output_plan
+    from mcchain.solvers.simulate import simulate
+    from mcchain.solvers.statics import assemble
+    from mcchain.status import ASSEMBLY_FAILED
+    from mcchain.testing.scenes import flores_pin_text, with_lines
+
+    name, kernels = (method[:-5], "loop") if method.endswith("-loop") else (method, "auto")
+    fixed = name != "rk45" and name != "radau"
+    text = flores_pin_text(t_end=0.012, method=name, rtol=1e-8, atol=1e-11, output_dt=1e-4)
+    text = with_lines(text, {"dt": f"dt = {1e-6 if fixed else 1e-7!r}"})
+    text += '\n[[output]]\nname = "pin"\nof = "joint_force"\njoint = "B"\n'
+    text += 'component = "magnitude"\nreduce = "max"\n'
+    scene = load_scene_text(text)
+    model = compile_model(scene, nsample=4)
+    model = replace_clearances(model, [1e-4, 2e-4, 5e-4, 3e-4])
+    sim = scene.simulate.model_copy(update={"kernels": kernels})
+    start = assemble(model)
+    status = start.status.copy()
+    status[3] |= ASSEMBLY_FAILED
+    plan = output_plan(scene.output, model, sim.t_end)
+    runs = [
+        simulate(model, sim, start.q, start.v, status=status.copy(), diagnostics=True,
+                 outputs=plan, histories=histories)
+        for histories in (True, False)
+    ]  # fmt: skip
+    full, light = runs
+    assert set(full) == set(light)
+    for key, value in full.items():
+        if key == "time":
+            assert light[key].shape == (0,)
+        elif value.ndim >= 2 and value.shape[1] == len(full["time"]) and key in HISTORY_KEYS:
+            assert light[key].shape == (value.shape[0], 0, *value.shape[2:]), key
+        else:
+            assert light[key].dtype == value.dtype and light[key].tobytes() == value.tobytes(), key
+    assert np.isfinite(full["output_values"][:3]).all() and np.isnan(full["output_values"][3])
+
+
+HISTORY_KEYS = frozenset(
+    ("q", "v", "joint_force", "contact_force", "driver_torque", "driver_force", "joint_moment",
+     "constraint_error", "energy", "penetration", "contact_mode")
+)  # fmt: skip
+"""The time histories :func:`mcchain.solvers.simulate.simulate` returns."""
+
+
+def replace_clearances(model, clearances):
+    """``model`` with the piston pin's clearance of each sample (m)."""
+    from dataclasses import replace as replaced
+
+    values = np.array(model.joint_clearance, dtype=float)
+    values = np.broadcast_to(values, (len(clearances), values.shape[-1])).copy()
+    values[:, model.joint_names.index("B")] = clearances
+    return replaced(model, joint_clearance=values)
+
+
+def test_histories__a_live_stream_gets_the_histories_that_none_does_not_store(tmp_path) -> None:
+    """``--rerun`` on a ``"none"`` scene: the solver still computes the histories (the stream
+    shows them), the store still drops them (``Job.histories`` stays ``"none"``)."""
+    from mcchain.runner.job import prepare_job
+    from mcchain.solvers import solve_chunk
+
+    job = prepare_job(write_scene(tmp_path, "none", count=2))
+    live = job.with_solved_histories()
+    assert live.histories == "none" and live.scene.storage.histories == "all"
+    assert live.settings == job.settings  # what the file says of the scene: unchanged
+    assert (
+        prepare_job(write_scene(tmp_path, "all", count=2)).with_solved_histories().histories
+        == "all"
+    )
+    light, full = solve_chunk(job.model, job.scene), solve_chunk(live.model, live.scene)
+    assert light["q"].shape[1] == 0 and full["q"].shape[1] == len(full["time"]) > 1

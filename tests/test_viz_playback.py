@@ -269,6 +269,32 @@ def test_show_command__usage_error_is_one_line_naming_the_command(
     assert "mcchain show: argument --spawn: not allowed with" in capsys.readouterr().err
 
 
+def test_show__without_a_display_the_viewer_is_refused_before_anything_starts(
+    synthetic: tuple[xr.Dataset, Any],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """On a headless Linux machine the spawned viewer dies and its recording is lost: the
+    default sink (and --rerun-spawn of a run) is refused in one line naming what to use."""
+    ds, model = synthetic
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(show.sys, "platform", "linux")
+    monkeypatch.setattr(show, "open_inputs", lambda run: (ds, model))
+    spawned: list[Any] = []
+    monkeypatch.setattr("rerun.script_setup", lambda *a, **k: spawned.append(a))
+    assert cli.main(["show", "RUN", "--samples", "0"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and spawned == []
+    assert err.startswith("mcchain: error: show: no display to open the rerun viewer on")
+    assert "--save FILE.rrd" in err and len(err.strip().splitlines()) == 1
+    assert cli.main(["run", "SCENE.toml", "--rerun", "0", "--rerun-spawn"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mcchain: error: --rerun-spawn: no display") and spawned == []
+    monkeypatch.setenv("DISPLAY", ":0")
+    assert show.viewer_cannot_spawn("show") is None
+
+
 def show_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser()
     parser_module.add_show_arguments(parser)

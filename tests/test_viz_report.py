@@ -444,3 +444,36 @@ def test_reaction_envelopes__say_they_are_stored_points_and_mark_the_peaks() -> 
     for k, ax in enumerate(fig.axes[:2]):  # |f O|, |f A|
         marks = sorted(line.get_ydata()[0] for line in ax.get_lines()[1:])
         np.testing.assert_allclose(marks, np.nanquantile(peaks[:, k], [0.5, 0.95]))
+
+
+def test_method_rows__every_simulate_setting_in_effect_as_the_scene_writes_it() -> None:
+    from mcchain.viz.report_provenance import _method
+
+    simulate = {
+        "method": "rk45",
+        "t_end": 0.024,
+        "dt": 1e-7,
+        "output_dt": 1e-5,
+        "start": "scene",
+        "perturb": {},
+        "rtol": 1e-7,
+        "atol": 1e-10,
+        "baumgarte": None,
+        "rho_inf": 0.8,
+        "max_newton": 20,
+        "constraint_tolerance": 1e-6,
+        "retry_failed": False,
+        "kernels": "lanes",
+    }
+    ((name, row),) = _method({"simulate": simulate})
+    assert name == "[simulate]"
+    assert "retry_failed = false" in row and "start = scene" in row
+    # what rk45 does not read, or what was left at "none", is not listed
+    assert "rho_inf" not in row and "max_newton" not in row
+    assert "perturb" not in row and "baumgarte" not in row
+    implicit = dict(simulate, method="generalized-alpha", baumgarte=[5.0, 5.0])
+    implicit["perturb"] = {"body.crank.angle": 0.01}
+    ((_, row),) = _method({"simulate": implicit})
+    assert "rho_inf = 0.8" in row and "max_newton = 20" in row
+    assert "baumgarte = [5.0, 5.0] 1/s" in row
+    assert "perturb = {&quot;body.crank.angle&quot;: 0.01}" in row

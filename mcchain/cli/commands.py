@@ -59,6 +59,12 @@ def _live_options(args: argparse.Namespace) -> Any:
         raise RunError("--rerun-spawn: cannot be combined with --rerun-save (one sink)")
     if args.rerun_save is not None and not args.rerun_save.strip():
         raise RunError("--rerun-save: expected a file name")
+    if args.rerun_spawn:
+        from mcchain.viz.show import viewer_cannot_spawn
+
+        refusal = viewer_cannot_spawn("--rerun-spawn")
+        if refusal is not None:
+            raise refusal
     save = Path(args.rerun_save) if args.rerun_save is not None else None
     return LiveOptions(parse_rerun_samples(args.rerun), save=save, spawn=bool(args.rerun_spawn))
 

@@ -272,7 +272,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         ]
     event += ["if ok and evt < 0.999:", "    ok = False", "    fac = evt"]
     b["contact_event"] = "\n".join(event)
-    b["contact_dead"] = "for it in range(iout[l], nout):\n    out_ct[sl, it, :] = np.nan"
+    b["contact_dead"] = "for it in range(iout[l], out_ct.shape[1]):\n    out_ct[sl, it, :] = np.nan"
     marks = []
     for j in range(len(joints)):
         marks += [

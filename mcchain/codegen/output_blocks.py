@@ -25,6 +25,7 @@ from mcchain.codes import (
     OUTPUT_CONTACT_FORCE,
     OUTPUT_JOINT_FORCE,
     OUTPUT_PENETRATION,
+    OUTPUT_TABULATED_REFERENCE,
     OUTPUT_WIDTH,
 )
 
@@ -108,7 +109,7 @@ def _feed(
             em.constraint_values(t="tf", v="v")  # Φ̇ of a clearance row: δ̇
     angles: set[int] = set()
     for k, (kind, component, item, ref, _reduce, _rate) in enumerate(outputs):
-        values = []
+        values: list[tuple[str, ...]] = []
         for tag, index in (("m", item), ("r", ref)):
             if index < 0:
                 continue
@@ -116,9 +117,14 @@ def _feed(
                 angles.add(index)
                 em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
                                      f"o{index}"))  # fmt: skip
-            values.append(_signal(em, topo, kind, component if ref < 0 or component < 2 else -2,
+            values.append(_signal(em, topo, kind, component if ref == -1 or component < 2 else -2,
                                   index, k, f"{tag}{k}"))  # fmt: skip
-        if ref < 0:
+        if ref == OUTPUT_TABULATED_REFERENCE:  # the ideal mechanism's, the same for all
+            em.emit(f"rfx{k}, rfy{k}, rrx{k}, rry{k} = reference_signal(ot_in, {k}, tf)")
+            pick = "y" if component == 1 else "x"
+            tabulated = (f"rfx{k}", f"rfy{k}", f"rrx{k}", f"rry{k}")
+            values.append(tabulated if component == 2 else (f"rf{pick}{k}", f"rr{pick}{k}"))
+        if ref == -1:
             (f, r) = values[0]
         elif component < 2:
             f, r = f"({values[0][0]}) - ({values[1][0]})", f"({values[0][1]}) - ({values[1][1]})"
@@ -194,7 +200,8 @@ def output_functions(with_hermite: bool) -> str:
     Hermite interpolant, which the contact functions do not bring."""
     from mcchain.kernels import contact, outputs
 
-    names = ("FA", "FB", "FC", "FD", "RD", "HI", "LO", "S1", "S2", "CROSS", "SPAN")
+    names = ("FA", "FB", "FC", "FD", "RD", "HI", "LO", "S1", "S2", "CROSS", "SPAN",
+             "REFERENCE_HEAD", "REFERENCE_WIDTH")  # fmt: skip
     constants = [f"{name} = {getattr(outputs, name)!r}" for name in names]
     constants += [f"{name} = {getattr(outputs, name)!r}" for name in
                   ("GL_X0", "GL_X1", "GL_W0", "GL_W1")]  # fmt: skip
@@ -211,6 +218,7 @@ def output_functions(with_hermite: bool) -> str:
         outputs.cubic_feed,
         outputs.output_last,
         outputs.output_value,
+        outputs.reference_signal,
     ]
     for kernel in kernels:
         source = inspect.getsource(kernel.py_func)

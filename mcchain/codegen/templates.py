@@ -207,7 +207,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 for l in range(nl):
                     @@track_fixup
                 @@outputs_c
-                if n == nstep or n % out_every == 0:
+                if out_q.shape[1] > 0 and (n == nstep or n % out_every == 0):
                     it = nout - 1 if n == nstep else n // out_every
                     group_outputs_SUFFIX(
                         W, 0, nl, s0, it, t, LAMCROW, out_q, out_v, out_jf, out_cf,
@@ -344,7 +344,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
         for l in range(nl):
             @@track_fixup
         @@outputs_feed
-        if nland > 0:
+        if nland > 0 and out_q.shape[1] > 0:  # none without histories (0 times)
             group_outputs_landed_SUFFIX(
                 W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT
             )

@@ -382,6 +382,58 @@ def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def study_differences(
+    ours: Mapping[str, Any], theirs: Mapping[str, Any], *, most: int = 6
+) -> list[str]:
+    """What makes two sets of global attributes two studies (as the merge compares them,
+    :func:`study_attributes` without the session's): one phrase per differing attribute, or
+    per differing key of the ``settings`` and ``versions`` JSON (``scene.simulate.retry_failed:
+    absent there, true here``); at most ``most`` phrases, then how many more."""
+    import json
+
+    def flat(value: Any, prefix: str) -> dict[str, Any]:
+        if isinstance(value, dict):
+            out: dict[str, Any] = {}
+            for key, item in value.items():
+                out.update(flat(item, f"{prefix}.{key}" if prefix else str(key)))
+            return out
+        return {prefix: value}
+
+    def decoded(attrs: Mapping[str, Any]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in study_attributes(attrs).items():
+            if key in SESSION_ATTRIBUTES:
+                continue
+            parsed = None
+            if key in ("settings", "versions") and isinstance(value, str):
+                with suppress(ValueError):
+                    parsed = json.loads(value)
+            out.update(flat(parsed, key) if isinstance(parsed, dict) else {key: value})
+        return out
+
+    here, there = decoded(ours), decoded(theirs)
+    phrases = []
+    for key in sorted(set(here) | set(there)):
+        if key in here and key in there and _same(here[key], there[key]):
+            continue
+        shown = [
+            "absent" if key not in side else json.dumps(side[key], default=str)[:60]
+            for side in (there, here)
+        ]
+        phrases.append(f"{key}: {shown[0]} there, {shown[1]} here")
+    if len(phrases) > most:
+        phrases = [*phrases[:most], f"{len(phrases) - most} more"]
+    return phrases
+
+
+def file_attributes(path: Path) -> dict[str, Any]:
+    """The global attributes of a netCDF file (an ensemble or a part)."""
+    import netCDF4
+
+    with netCDF4.Dataset(path) as nc:
+        return _attrs(nc)
+
+
 def _attrs(obj: Any) -> dict[str, Any]:
     return {key: obj.getncattr(key) for key in obj.ncattrs()}
 

@@ -557,7 +557,10 @@ def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, 
     """The outputs of sample ``s`` at history index ``it``: the state, the reactions from λ
     (a joint under the law: F_n ≥ 0, clipped at its switch from the link), the driver
     torques, max |Φ|, the energy (with the contacts' elastic energy), δ and each contact-law
-    joint's mode."""
+    joint's mode. Nothing where the histories hold no time (``[storage] histories =
+    "none"``: arrays of 0 times)."""
+    if it >= out_q.shape[1]:
+        return
     ndof = q.shape[0]
     joint_forces(km, s, q, lam, jf, cf)
     for j in range(cst.shape[0]):

@@ -474,6 +474,61 @@ def output_signals(km, s, spec, data, q, v, qdd, lam, jf, cf, f_out, r_out):
         )  # fmt: skip
 
 
+REFERENCE_HEAD = 7
+"""Columns of an output's data (:data:`mcchain.solvers.output_plan.DATA_COLUMNS`) before its
+tabulated reference (:func:`reference_signal`): the five columns, the knot count, the
+nominal knot step (s)."""
+REFERENCE_WIDTH = 5
+"""Values of the tabulated reference per knot: t (s), the quantity's x and y (or a scalar
+and 0), their rates."""
+
+
+@njit(**JIT)
+def reference_signal(data, k, t):
+    """The ideal mechanism's quantity of output ``k`` (a point's x and y, or an angle and 0)
+    and their rates at time ``t`` (s), from the table in ``data[0, k, REFERENCE_HEAD:]``
+    (:data:`REFERENCE_WIDTH` values a knot, ascending in t; the knot count in column 5 and
+    the nominal step in column 6): the cubic Hermite interpolant of the knots' values and
+    rates on the interval that holds t (the first or last one outside the knots)."""
+    n = int(data[0, k, 5])
+    j = min(max(int(t / data[0, k, 6]), 0), n - 2)
+    while j > 0 and t < data[0, k, REFERENCE_HEAD + REFERENCE_WIDTH * j]:
+        j -= 1
+    while j < n - 2 and t >= data[0, k, REFERENCE_HEAD + REFERENCE_WIDTH * (j + 1)]:
+        j += 1
+    a = REFERENCE_HEAD + REFERENCE_WIDTH * j
+    b = a + REFERENCE_WIDTH
+    h = data[0, k, b] - data[0, k, a]
+    theta = (t - data[0, k, a]) / h
+    x, rx = _hermite(theta, data[0, k, a + 1], data[0, k, a + 3], data[0, k, b + 1],
+                     data[0, k, b + 3], h)  # fmt: skip
+    y, ry = _hermite(theta, data[0, k, a + 2], data[0, k, a + 4], data[0, k, b + 2],
+                     data[0, k, b + 4], h)  # fmt: skip
+    return x, y, rx, ry
+
+
+@njit(**JIT)
+def reference_knots(q, v, body, sx, sy, kind, table):
+    """The knots of a tabulated reference (:func:`reference_signal`) from a history: at each
+    time i, the quantity ``kind`` (a position: the point (sx, sy) of ``body``; an angle) of
+    the state q, v (ntime, 3 nbody) and its rates, into ``table[i, 1:5]`` (x, y, ẋ, ẏ; an
+    angle: θ, 0, ω, 0), by :func:`body_signal` (column 0, the times, is the caller's)."""
+    i = 3 * body
+    for it in range(q.shape[0]):
+        th = q[it, i + 2]
+        c, sn = math.cos(th), math.sin(th)
+        for component in range(2):
+            if kind == OUTPUT_ANGLE and component == 1:
+                value, rate = 0.0, 0.0
+            else:
+                value, rate = body_signal(
+                    kind, component, c, sn, q[it, i], q[it, i + 1], th, v[it, i], v[it, i + 1],
+                    v[it, i + 2], 0.0, 0.0, 0.0, sx, sy,
+                )  # fmt: skip
+            table[it, 1 + component] = value
+            table[it, 3 + component] = rate
+
+
 @njit(**JIT)
 def outputs_feed(s, ot, spec, data, t, f, r):
     """Feed every output of sample ``s`` its signal ``f`` and rate ``r`` (nout,) at time

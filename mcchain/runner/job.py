@@ -79,6 +79,17 @@ class Job:
         settings = {**self.settings, **resolved_settings(self.scene, nsample, self.seed)}
         return replace(self, nsample=int(nsample), settings=settings)
 
+    def with_solved_histories(self) -> Job:
+        """The same job whose solver computes every time history even where ``[storage]
+        histories = "none"`` stores none (``histories`` is kept: the store drops them): a
+        ``--rerun`` stream shows the histories of its samples. Without ``"none"``: itself."""
+        storage = getattr(self.scene, "storage", None)
+        if getattr(storage, "histories", "all") != "none":
+            return self
+        assert storage is not None
+        solved = storage.model_copy(update={"histories": "all"})
+        return replace(self, scene=self.scene.model_copy(update={"storage": solved}))
+
     def attributes(self, versions: Mapping[str, str]) -> dict[str, Any]:
         """Global attributes of ``ensemble.nc`` (and of every part file)."""
         return {

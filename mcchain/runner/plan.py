@@ -114,6 +114,7 @@ def start_run(
             from mcchain.viz.live import check_live
 
             check_live(rerun, job.model.nsample)
+            job = job.with_solved_histories()
         from mcchain.runner.resources import check_disk
 
         check_disk(job.disk, out if run_dir is None else run_dir)
@@ -241,7 +242,10 @@ def resume_run(
             nsample=job.nsample,
         )
     job = keep_kernels(job, record.get("kernels"))
+    check_same_study(job, folder, "--resume")
     check_live(rerun, job.nsample)
+    if rerun is not None:
+        job = job.with_solved_histories()
     check_disk(job.disk, folder, missing_samples(folder, record), retry="resume")
     if remerge and ensemble.exists():
         os.replace(ensemble, folder / DAMAGED_ENSEMBLE)
@@ -348,7 +352,10 @@ def extend_run(
             f"count); run the scene again with --samples {total}"
         )
     job = keep_kernels(job, record.get("kernels"))
+    check_same_study(job, folder, "--extend")
     check_live(rerun, total)
+    if rerun is not None:
+        job = job.with_solved_histories()
     check_disk(job.disk, folder, samples, retry="extend")
     notes = [] if record.get("until") else extended_fixed_count_notes(job, record)
     record.setdefault("extensions", []).append({"from": old, "to": total, "start": now()})
@@ -360,6 +367,37 @@ def extend_run(
 
     observers = [*observers_for(job, progress=progress, rerun=rerun), Extension(old, notes)]
     return _run_existing(job, folder, record, observers, t0, dask, threads, solve, argv, keep_parts)
+
+
+def check_same_study(job: Job, folder: Path, flag: str) -> None:
+    """Refuse, before anything is computed, to add samples to a run whose files this
+    version would not write alike: the merge compares the parts' study attributes
+    (settings with every default resolved, software versions), so a run begun by another
+    mcchain (whose settings lack a key added since) or under other package versions would
+    be refused only after the new chunks were computed — and their samples would not be
+    computed the way the run's were.
+
+    Raises:
+        RunError: naming the attributes or settings keys that differ.
+    """
+    from mcchain.ensemble.io import file_attributes, list_parts, study_differences
+    from mcchain.runner.provenance import software_versions
+    from mcchain.runner.runs import ENSEMBLE, PARTS
+
+    written = [folder / ENSEMBLE] if (folder / ENSEMBLE).exists() else []
+    written += [part.path for part in list_parts(folder / PARTS)[:1]]
+    if not written:
+        return
+    differences = study_differences(
+        job.attributes(software_versions()), file_attributes(written[0])
+    )
+    if differences:
+        raise RunError(
+            f"{flag}: {folder.name} was written by another mcchain or other packages than "
+            f"run here ({'; '.join(differences)}): its new samples would not be computed as "
+            "its samples were; continue it with the versions that began it, or run its "
+            "scene.toml again"
+        )
 
 
 def extended_fixed_count_notes(job: Job, record: Mapping[str, Any]) -> list[str]:

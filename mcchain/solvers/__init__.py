@@ -110,6 +110,8 @@ def solve_chunk(
         else:
             q_start, v_start = assembled.q, assembled.v
         storage = np.dtype(scene.storage.history_dtype)
+        # "none" stores no history: the solver computes none (0 times), the store drops them
+        histories = scene.storage.histories != "none"
         if timed:
             from mcchain.solvers.outputs import simulate_outputs
 
@@ -120,7 +122,7 @@ def solve_chunk(
                 status |= ideal.status(at_equilibrium)
             history = simulate_outputs(
                 model, timed, scene.simulate, q_start, v_start, start, status,
-                history_dtype=storage, diagnostics=True,
+                history_dtype=storage, diagnostics=True, histories=histories,
             )  # fmt: skip
         else:
             history = simulate(
@@ -131,6 +133,7 @@ def solve_chunk(
                 history_dtype=storage,
                 status=status,
                 diagnostics=True,
+                histories=histories,
             )
         status |= history.pop("status")
         out[STEPS_TAKEN] = history.pop("steps")

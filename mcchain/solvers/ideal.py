@@ -24,17 +24,28 @@ is as accurate as the mechanism's own integration (4e-15 m against the closed-fo
 slider-crank at rk45's rtol 1e-13), and costs about the mechanism's own integration again:
 1.9–2.5× the run without it on the shipped slider-crank and four-bar
 (benchmarks/results/outputs).
+
+Where the ideal mechanism is the same for every sample (:func:`shared_ideal`: no sampled
+parameter reaches it, as a tolerance sweep of the clearances) and the relative outputs are
+positions or angles, ``rk45`` integrates it once per chunk instead, alone and tighter, and
+the lanes read it from a table (:func:`tabulated_plan`; every chunk computes the same table
+from the same start, so the run does not depend on the chunking). The mechanism's own
+integration is unchanged; the output moves by the copy's own integration error.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from mcchain.codes import OUTPUT_ANGLE, OUTPUT_POSITION, OUTPUT_TABULATED_REFERENCE
 from mcchain.contact import START_LINK
 from mcchain.model import GROUND, JointKind, Model, constraint_rows
+from mcchain.solvers.output_plan import OutputPlan
+from mcchain.status import FAILURE_BITS
 
 _ITEMS = {
     "body": ("body_mass", "body_inertia"),
@@ -188,4 +199,141 @@ _ITEM_AXIS = {
 }
 """Where each solver array of a time history has its body/joint/driver axis."""
 
-__all__ = ["ideal_model", "main_part", "with_ideal_copy"]
+REFERENCE_RTOL = 1e-12
+"""``rtol`` of the one integration of a shared ideal mechanism (or the scene's, if tighter)."""
+REFERENCE_ATOL = 1e-14
+"""``atol`` of it, m and rad (or the scene's, if tighter)."""
+KNOTS_PER_OUTPUT_STEP = 4
+"""Knots of a tabulated reference per ``output_dt`` at first (doubled until its interpolant
+is accurate enough: :data:`INTERPOLATION_SHARE`)."""
+MAX_KNOTS = 1 << 20
+"""Knots past which a reference is not tabulated (the ideal copy is integrated instead)."""
+INTERPOLATION_SHARE = 1e-2
+"""The interpolation error allowed on a tabulated reference, as a share of the scene's
+``atol``: the cubic Hermite's, h⁴ max|f⁗| / 384, estimated from the knots' fourth
+differences."""
+TABULATED_KINDS = (OUTPUT_POSITION, OUTPUT_ANGLE)
+"""Output kinds whose ideal quantity and rate a tabulated reference holds (their rate is
+in the state; the others keep the ideal copy)."""
+
+
+def shared_ideal(ideal: Model, q: np.ndarray, v: np.ndarray, status: np.ndarray) -> bool:
+    """Whether the ideal mechanism (:func:`ideal_model`) is the same for every sample: the
+    parameters its lane kernels read (:func:`mcchain.codegen.topology.pack_parameters` of its
+    topology) and its start state ``q``, ``v`` (nsample, 3 nbody) equal, bit for bit, over
+    the samples without a failure bit in ``status`` (at least one). No sampled parameter
+    then reaches it (a clearance, a contact law's restitution); a sampled length, mass,
+    load or driver speed does."""
+    from mcchain.codegen.topology import Topology, pack_parameters
+
+    alive = (status & FAILURE_BITS) == 0
+    if not alive.any():
+        return False
+    columns = np.vstack([pack_parameters(ideal, Topology.from_model(ideal)), q.T, v.T])
+    columns = columns[:, alive]
+    return bool((columns.view(np.uint64) == columns[:, :1].view(np.uint64)).all())
+
+
+def tabulated_plan(
+    ideal: Model, q: np.ndarray, v: np.ndarray, sim: Any, plan: OutputPlan
+) -> OutputPlan | None:
+    """``plan`` with the ideal mechanism's quantities in tables (``ref`` =
+    :data:`~mcchain.codes.OUTPUT_TABULATED_REFERENCE`, the knots after the data columns:
+    :func:`mcchain.kernels.outputs.reference_signal`), from one integration of ``ideal``
+    (a model of one sample, start state ``q``, ``v`` (1, 3 nbody), as ``sim`` says but by rk45 at
+    :data:`REFERENCE_RTOL`/:data:`REFERENCE_ATOL` or the scene's if tighter, stored every knot).
+    None (integrate the ideal copy instead) for a relative output of another kind than
+    :data:`TABULATED_KINDS`, per-sample data rows that differ, a failed integration, or
+    too many knots."""
+    key = _table_key(ideal, q, v, sim, plan)
+    if key not in _TABLES:
+        _TABLES.clear()  # one run's table: every chunk of the run asks for the same
+        _TABLES[key] = _tabulated(ideal, q, v, sim, plan)
+    return _TABLES[key]
+
+
+_TABLES: dict[str, OutputPlan | None] = {}
+"""The last table made (:func:`tabulated_plan`), by :func:`_table_key` of what made it."""
+
+
+def _table_key(ideal: Model, q: np.ndarray, v: np.ndarray, sim: Any, plan: OutputPlan) -> str:
+    """A digest of everything a table is made from: the ideal mechanism's parameters as its
+    kernels read them, its start, the settings and the plan."""
+    import hashlib
+
+    from mcchain.codegen.topology import Topology, pack_parameters
+
+    digest = hashlib.sha256()
+    topology = Topology.from_model(ideal)
+    for part in (pack_parameters(ideal, topology), q, v, plan.spec, plan.data[:1]):
+        digest.update(np.ascontiguousarray(part).tobytes())
+    digest.update(repr(topology).encode())
+    digest.update(sim.model_dump_json().encode())
+    return digest.hexdigest()
+
+
+def _tabulated(
+    ideal: Model, q: np.ndarray, v: np.ndarray, sim: Any, plan: OutputPlan
+) -> OutputPlan | None:
+    from mcchain.kernels.outputs import REFERENCE_HEAD, REFERENCE_WIDTH, reference_knots
+    from mcchain.solvers.simulate import simulate
+
+    relative = [k for k in range(len(plan.names)) if plan.spec[k, 3] >= 0]
+    if any(int(plan.spec[k, 0]) not in TABULATED_KINDS for k in relative):
+        return None
+    data = plan.data
+    if data.shape[0] > 1 and not (data == data[:1]).all():
+        return None
+    t_end = float(sim.t_end)
+    knots = KNOTS_PER_OUTPUT_STEP * max(1, math.ceil(t_end / sim.output_step))
+    while knots <= MAX_KNOTS:
+        settings = sim.model_copy(
+            update={"perturb": {}, "method": "rk45", "output_dt": t_end / knots,
+                    "rtol": min(sim.rtol, REFERENCE_RTOL), "atol": min(sim.atol, REFERENCE_ATOL)}
+        )  # fmt: skip
+        run = simulate(ideal, settings, q, v, history_dtype=np.float64)
+        if run["status"][0] & FAILURE_BITS:
+            return None
+        tables = []
+        for k in relative:
+            table = np.zeros((len(run["time"]), REFERENCE_WIDTH))
+            table[:, 0] = run["time"]
+            kind, body = int(plan.spec[k, 0]), int(plan.spec[k, 2])  # the same body in it
+            qh = run["q"][0].reshape(len(run["time"]), -1)
+            vh = run["v"][0].reshape(len(run["time"]), -1)
+            reference_knots(qh, vh, body, data[0, k, 0], data[0, k, 1], kind, table)
+            tables.append(table)
+        if all(_interpolation_error(t) <= INTERPOLATION_SHARE * sim.atol for t in tables):
+            break
+        knots *= 2
+    else:
+        return None
+    width = REFERENCE_HEAD + REFERENCE_WIDTH * len(run["time"])
+    tabulated = np.zeros((1, len(plan.names), width))
+    tabulated[0, :, : data.shape[2]] = data[0]
+    spec = plan.spec.copy()
+    for k, table in zip(relative, tables, strict=True):
+        spec[k, 3] = OUTPUT_TABULATED_REFERENCE
+        tabulated[0, k, 5] = len(table)
+        tabulated[0, k, 6] = t_end / knots
+        tabulated[0, k, REFERENCE_HEAD:] = table.reshape(-1)
+    return OutputPlan(plan.names, spec, tabulated, plan.relative)
+
+
+def _interpolation_error(table: np.ndarray) -> float:
+    """The cubic Hermite's error on the knots of ``table`` (uniform in t), estimated as
+    max |Δ⁴f| / 384 of x and y (rounding counted: at least 64 ulp of the largest value)."""
+    values = table[:, 1:3]
+    if len(values) < 5:
+        return math.inf
+    fourth = np.abs(np.diff(values, n=4, axis=0)).max()
+    return max(fourth / 384.0, 64.0 * np.finfo(float).eps * float(np.abs(values).max()))
+
+
+__all__ = [
+    "ideal_model",
+    "main_part",
+    "shared_ideal",
+    "tabulated_plan",
+    "with_ideal_copy",
+]

@@ -53,10 +53,19 @@ def simulate_outputs(
     (returned by name, sample first). With a ``relative_to = "ideal"`` output the model is
     integrated with its ideal copy (``reference_start``: the copy's start state, assembled or
     at its equilibrium, before ``[simulate] perturb``, which both receive), and the arrays
-    are cut back to the mechanism's own."""
-    from mcchain.solvers.ideal import ideal_model, main_part, with_ideal_copy
+    are cut back to the mechanism's own; with ``rk45`` and one ideal mechanism for every
+    sample, that one is integrated once and read from tables instead
+    (:func:`mcchain.solvers.ideal.tabulated_plan`)."""
+    from mcchain.solvers.ideal import (
+        ideal_model,
+        main_part,
+        shared_ideal,
+        tabulated_plan,
+        with_ideal_copy,
+    )
     from mcchain.solvers.simulate import simulate
     from mcchain.solvers.start import start_state
+    from mcchain.status import FAILURE_BITS
 
     plan = output_plan(outputs, model, float(sim.t_end))
     if not plan.relative:
@@ -66,6 +75,17 @@ def simulate_outputs(
     ideal = ideal_model(model)
     q, v, status = start_state(model, sim, q_start, v_start, status)
     qi, vi, status = start_state(ideal, sim, *reference_start, status)
+    tabulated = None
+    if sim.method == "rk45" and shared_ideal(ideal, qi, vi, status):
+        first = int(np.flatnonzero((status & FAILURE_BITS) == 0)[0])
+        one = slice(first, first + 1)
+        tabulated = tabulated_plan(ideal.take(one), qi[one], vi[one], sim, plan)
+    if tabulated is not None:  # one ideal for every sample: integrated once, read from tables
+        history = simulate(
+            model, sim.model_copy(update={"perturb": {}}), q, v, status=status,
+            outputs=tabulated, **kwargs,
+        )  # fmt: skip
+        return _with_values(history, plan)
     both = with_ideal_copy(model, ideal)
     history = simulate(
         both,

@@ -104,12 +104,13 @@ def _allocate(model: Model, ntime: int, dtype: Any) -> dict[str, np.ndarray]:
     }
 
 
-def _flat_outputs(out: dict[str, np.ndarray], n: int, ntime: int) -> tuple[np.ndarray, ...]:
+def _flat_outputs(out: dict[str, np.ndarray]) -> tuple[np.ndarray, ...]:
     """Views of the history arrays in the layout the kernels write: (sample, time, k)."""
+    n, ntime, nbody = out["q"].shape[:3]
     return (
-        out["q"].reshape(n, ntime, -1),
-        out["v"].reshape(n, ntime, -1),
-        out["joint_force"].reshape(n, ntime, -1),
+        out["q"].reshape(n, ntime, 3 * nbody),
+        out["v"].reshape(n, ntime, 3 * nbody),
+        out["joint_force"].reshape(n, ntime, 2 * out["joint_force"].shape[2]),
         out["contact_force"],
         out["driver_torque"],
         out["constraint_error"],
@@ -153,6 +154,12 @@ class _Run:
     # values (sample, nout), every method.
     plan: Any = None
     output_values: np.ndarray | None = None
+
+    @property
+    def stored(self) -> int:
+        """The output times the history arrays hold: all of ``time``, or 0 (``histories``
+        off: the kernels store nothing, every per-sample value is the same)."""
+        return int(self.out["energy"].shape[1])
 
     @property
     def groups(self) -> int:
@@ -214,7 +221,7 @@ def _run_erk(run: _Run, project: bool) -> None:
         P, Q0, V0, run.time, run.dt, run.last_step, nstep, run.every, RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         project, project, PROJECTION_TOLERANCE, s.max_newton, run.lanes,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *run.contact_args(),
+        *_flat_outputs(run.out), *run.contact_args(),
         run.peaks, *run.lane_output_args(), run.status, run.t_div, run.t_sing, run.t_cl,
         min_block=1,
     )  # fmt: skip
@@ -245,7 +252,7 @@ def _run_rk4_loop(run: _Run) -> None:
         run.time, run.dt, run.last_step, nstep, run.every, run.model.ncon,
         *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
+        *_flat_outputs(run.out), *_loop_contact_args(run),
         run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
     )  # fmt: skip
 
@@ -255,7 +262,7 @@ def _loop_contact_args(run: _Run) -> tuple[np.ndarray, np.ndarray]:
     same dimensions for a model without contact-law joints (one compiled signature)."""
     if run.contact_history is None or run.contact_summary is None:
         n = run.model.nsample
-        return np.zeros((n, len(run.time), 0)), np.zeros((n, 0))
+        return np.zeros((n, run.stored, 0)), np.zeros((n, 0))
     return run.contact_history, run.contact_summary
 
 
@@ -283,7 +290,7 @@ def _run_rk45(run: _Run) -> None:
         P, Q0, V0, 0.0, run.time, min(s.dt, s.output_step), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
-        run.lanes, *_flat_outputs(run.out, run.model.nsample, len(run.time)),
+        run.lanes, *_flat_outputs(run.out),
         *run.contact_args(), run.peaks, *run.lane_output_args(), run.status, run.t_div,
         run.t_sing, run.t_cl, run.steps, run.rejected_steps, run.evaluations, min_block=1,
         per_thread=ADAPTIVE_BLOCKS_PER_THREAD,
@@ -296,7 +303,7 @@ def _run_radau(run: _Run) -> None:
     (:mod:`.radau`)."""
     from mcchain.solvers.radau import run_radau
 
-    run_radau(run, _flat_outputs(run.out, run.model.nsample, len(run.time)), SINGULAR_PIVOT)
+    run_radau(run, _flat_outputs(run.out), SINGULAR_PIVOT)
 
 
 def _run_generalized_alpha(run: _Run) -> None:
@@ -312,7 +319,7 @@ def _run_generalized_alpha(run: _Run) -> None:
         run.last_step, run.nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
         coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
         SINGULAR_PIVOT, s.max_newton,
-        *_flat_outputs(run.out, run.model.nsample, len(run.time)), *_loop_contact_args(run),
+        *_flat_outputs(run.out), *_loop_contact_args(run),
         run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
         run.evaluations, min_block=1,
     )  # fmt: skip
@@ -353,7 +360,7 @@ def _peak_outputs(model: Model, peaks: np.ndarray) -> dict[str, np.ndarray]:
 def _contact_outputs(run: _Run, history_dtype: Any) -> dict[str, np.ndarray]:
     """The contact-law outputs by ensemble variable, every joint (the others: NaN, or -1
     for the integer ones), from the lane kernels' contact arrays."""
-    model, n, ntime = run.model, run.model.nsample, len(run.time)
+    model, n, ntime = run.model, run.model.nsample, run.stored
     assert run.contact_history is not None and run.contact_summary is not None
     joints = np.flatnonzero(model.joint_model)
     pen = np.full((n, ntime, model.njoint), np.nan, dtype=history_dtype)
@@ -421,6 +428,7 @@ def simulate(
     lanes: int | None = None,
     diagnostics: bool = False,
     outputs: Any = None,
+    histories: bool = True,
 ) -> dict[str, np.ndarray]:
     """Integrate every sample of ``model`` as ``sim`` (the ``[simulate]`` section) says.
 
@@ -454,6 +462,11 @@ def simulate(
         outputs: the ``[[output]]``s to track (:class:`mcchain.solvers.output_plan.OutputPlan`,
             for this model: with a relative one, the model carries its ideal copy); their
             values are returned as ``output_values`` (sample, nout), NaN for a failed sample.
+        histories: False: no time history is stored (``[storage] histories = "none"``):
+            ``time`` and every history come back with 0 times (shape (nsample, 0, ...)),
+            nothing allocated, filled or written for them; every per-sample value (status,
+            peaks, contact summaries, outputs, diagnostics) is the same, bit for bit (the
+            steps still land on every output time).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
@@ -468,7 +481,8 @@ def simulate(
     q, v, status = start_state(model, settings, q_start, v_start, status)
     if model.has_contact:  # each contact-law joint starts where its journal is
         model = replace(model, joint_start=start_modes(model, q))
-    out = _allocate(model, len(time), history_dtype)
+    stored = len(time) if histories else 0
+    out = _allocate(model, stored, history_dtype)
     n = model.nsample
     ncj = int(np.count_nonzero(model.joint_model))
     run = _Run(
@@ -492,7 +506,7 @@ def simulate(
         lanes=None if lanes is None else int(lanes),
     )
     if ncj:
-        run.contact_history = np.full((n, len(time), 2 * ncj), np.nan)
+        run.contact_history = np.full((n, stored, 2 * ncj), np.nan)
         run.contact_summary = np.full((n, len(CONTACT_SUMMARY) * ncj), np.nan)
     run.peaks = np.full((n, model.njoint + model.ndriver), np.nan)
     from mcchain.solvers.output_plan import empty_plan
@@ -501,7 +515,7 @@ def simulate(
     run.output_values = np.full((n, len(run.plan.names)), np.nan)
     if n:
         METHODS[settings.method].run(run)
-    result = {"time": time, **out, **_peak_outputs(model, run.peaks)}
+    result = {"time": time[:stored], **out, **_peak_outputs(model, run.peaks)}
     if model.has_prismatic:
         result.update(_prismatic_moments(model, result["contact_force"]))
     if model.has_slider_drivers:

@@ -30,12 +30,23 @@ SIMULATE_KEYS = (
     ("t_end", "s"),
     ("dt", "s"),
     ("output_dt", "s"),
+    ("start", ""),
+    ("perturb", ""),
     ("rtol", ""),
     ("atol", ""),
+    ("baumgarte", "1/s"),
+    ("rho_inf", ""),
+    ("max_newton", ""),
     ("constraint_tolerance", "m"),
+    ("retry_failed", ""),
     ("kernels", ""),
 )
 """``[simulate]`` settings the page lists (key, CF units; "" for a number or a name)."""
+ONLY_FOR_METHODS = {
+    "rho_inf": ("generalized-alpha",),
+    "max_newton": ("generalized-alpha", "radau"),
+}
+"""Settings that only some methods read: the page lists them for those methods alone."""
 
 
 def read_record(folder: Path) -> dict[str, Any]:
@@ -51,7 +62,12 @@ def read_record(folder: Path) -> dict[str, Any]:
 
 
 def _setting(value: Any, units: str) -> str:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not units:
+    """One setting as the scene writes it (TOML's true/false, lists and tables as JSON)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list | tuple | dict):
+        return esc(json.dumps(value)) + (f" {esc(units)}" if units else "")
+    if not isinstance(value, int | float) or not units:
         return esc(value)
     return esc(with_units(float(value), units))
 
@@ -64,10 +80,12 @@ def _method(scene: dict[str, Any]) -> list[tuple[str, str]]:
             rows.append((f"[{section}]", esc(json.dumps(given)) if given else "defaults"))
     simulate = scene.get("simulate")
     if simulate:
+        method = simulate.get("method")
         items = [
             f"{key} = {_setting(simulate[key], units)}"
             for key, units in SIMULATE_KEYS
-            if simulate.get(key) is not None
+            if simulate.get(key) not in (None, {})
+            and method in ONLY_FOR_METHODS.get(key, (method,))
         ]
         rows.append(("[simulate]", "; ".join(items)))
     return rows

@@ -13,6 +13,8 @@ with that status). The model of the samples is rebuilt from what the ensemble st
 
 from __future__ import annotations
 
+import os
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import SimpleNamespace
@@ -29,6 +31,21 @@ if TYPE_CHECKING:
     import xarray as xr
 
     from mcchain.model import Model
+
+
+def viewer_cannot_spawn(flag: str) -> RunError | None:
+    """Why a spawned rerun viewer cannot open here, as the error to raise for ``flag`` (the
+    option that asked for it), or ``None``: on Linux the viewer is a desktop window and needs
+    a display; without one the spawned process dies and the recording is lost."""
+    if not sys.platform.startswith("linux"):
+        return None
+    if any(os.environ.get(name) for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+        return None
+    return RunError(
+        f"{flag}: no display to open the rerun viewer on (neither DISPLAY nor WAYLAND_DISPLAY "
+        "is set): save the recording with --save FILE.rrd (then `rerun FILE.rrd` where there "
+        "is a display) or serve a web viewer with --serve"
+    )
 
 
 def open_inputs(run: str | Path) -> tuple[xr.Dataset, Model]:
@@ -73,13 +90,21 @@ def show(
         save=None if save is None else str(save),
         stdout=bool(stdout),
     )
+    spawned = not (headless or connect or serve or stdout or rr_args.save is not None)
+    refusal = viewer_cannot_spawn("show") if spawned else None
+    if refusal is not None:
+        raise refusal
     if rr_args.save is not None:
         Path(rr_args.save).parent.mkdir(parents=True, exist_ok=True)
     magnify = float(magnify or DEFAULT_MAGNIFY)
     blueprint = make_blueprint(ds, model, samples, magnify)
     rec = rr.script_setup(rr_args, APPLICATION_ID, default_blueprint=blueprint)
-    with rec:
-        log_samples(ds, model, samples, rec, magnify=magnify, force_scale=force_scale)
+    try:
+        with rec:
+            log_samples(ds, model, samples, rec, magnify=magnify, force_scale=force_scale)
+    except RuntimeError as exc:  # rerun's flush: the viewer never answered
+        where = "the spawned viewer" if spawned else f"the viewer at {url or 'the default url'}"
+        raise RunError(f"show: {where} could not be reached: {exc}") from None
     rr.script_teardown(rr_args)
 
 
