@@ -160,7 +160,7 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
             *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
             *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
             *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
-            *(probe + [f"{at('chkc')} = phimax + prb * 0.0"] if checked else []),
+            *([*probe, f"{at('chkc')} = phimax + prb * 0.0"] if checked else []),
             f"{at('sgc')} = sing",
         )
         for k, j in cj.items():
