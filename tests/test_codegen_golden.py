@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "81efd6703754cb718849a53a3f3a523ce62c3d0d8542bf9e94ec94bb7599d498",
-        "rk4-projection": "83325912cf1c7c9c9b962a4763af693a57aa74fe24c8d1ce190565b03f882c45",
+        "rk4": "cf9caef9c1e24beaae949cc30cbd8f9ae5f853fee2615e16f49ec9cf465c820b",
+        "rk4-projection": "b41fa620a3d1299b2ad3136bc037f5b1725e444adf9bdbe3337a414281bb7ce7",
         "rk45": "a41e6853e8fe0a0955900502fc3794a79115a6cd5f7fd15c42746aeb9853cd72",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "6f2953608864cafc0b984a7fc28cdf1458c651e23c6b1506294badd7c72a4000",
-        "rk4-projection": "bb4da3c30bc53f57ec2efc13b1789142f42263d060b3ba5f3012d44b5f921581",
+        "rk4": "f0580999bc5d885ad1a4ac163f48a6c76ae4e6063f97dba36ee86de7fb98da72",
+        "rk4-projection": "7f82216fa75ee752e532e36c85c7ba197d03c315a861e740af3845f6a9190f79",
         "rk45": "81518a07385fd3b8b4c19f8bcd3b24e0107dd1cf24a2c629221c3a52be318ee6",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "991b53d9aa5aba23b970bdce114e18db07e8d77e7acf6849fbc44114be9a7f60",
-        "rk4-projection": "2c48ef647fa9ae6b69f9f7d425af51efc58afc18c8715a6a9e91b11bf1fdadcb",
+        "rk4": "268f9360dbc54ee3e8e2ff30a19d72c0827a2d881a1dbf6bdc79287755e8a93a",
+        "rk4-projection": "5db67614beeb4df64a1c523b8ef950289fa0a11657c2943bedd9c1ad2a253ef2",
         "rk45": "c1191d58bccf793ced10232ec139f145cd2793cfd6171eb50e2708249cbe52a7",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "e6d106496300d748f392011e2e1b48a308e3e1461980dcace125f8d33c903cc7",
-        "rk4-projection": "5bd2fbcf99c034390e32590eb8c7db642bdfc6dc8465aeecb23599499b0a1506",
+        "rk4": "975da64197cb3a5959ad01fee57ae59277c2657083673d5c14d66905547bc5ee",
+        "rk4-projection": "f00c8d7785f9613567b6e2a0409a6e9fe2f133c5fdb3221bc286f1c93262da0a",
         "rk45": "3a47af4fa29652d7ad7d260e0c4533cee21f66b88f6f7846723dbb093f734ad2",
     },
 }

@@ -153,23 +153,19 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     em.acceleration(t="ts")
     block("accel_stage")
 
-    # The current stage's rows; a fixed step's checks read max |Φ| (chkc) of its first stage
-    # only: its other stages (store_stage_inner) leave it out.
-    for checked in (True, False):
-        em.emit(
-            *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
-            *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
-            *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
-            *([*probe, f"{at('chkc')} = phimax + prb * 0.0"] if checked else []),
-            f"{at('sgc')} = sing",
-        )
-        for k, j in cj.items():
-            em.emit(
-                f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}"
-            )
-        if cj:
-            em.emit(f"{at('wcc')} = wc2")
-        block("store_stage" if checked else "store_stage_inner")
+    em.emit(
+        *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
+        *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
+        *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
+        *probe,
+        f"{at('chkc')} = phimax + prb * 0.0",
+        f"{at('sgc')} = sing",
+    )
+    for k, j in cj.items():
+        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}")
+    if cj:
+        em.emit(f"{at('wcc')} = wc2")
+    block("store_stage")
     if cj:
         em.emit(f"{at('wca')} = max({at('wca')}, {at('wcc')})")
     block("contact_stage_max")
@@ -256,11 +252,6 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
         *(f"{at('av', i)} = {at('av', i)} * keep + bh * qdd{i}" for i in range(ndof)),
     )
     block("accumulate")
-    em.emit(
-        *(f"{at('aq', i)} = bh * v{i}" for i in range(ndof)),
-        *(f"{at('av', i)} = bh * qdd{i}" for i in range(ndof)),
-    )
-    block("accumulate_first")
     for i in range(ndof):
         em.emit(
             f"q{i} = {at('q', i)} + ah * {at('kqc', i)}",

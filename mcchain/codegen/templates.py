@@ -163,33 +163,19 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 ts = t + cc[s] * hn
                 # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one,
                 # and the step's increment is accumulated as the stages go.
+                ah = A[s, s - 1] * hn if s > 0 else 0.0
                 bh = bw[s] * hn
-                if s > 0:
-                    ah = A[s, s - 1] * hn
-                    # 1.0 that LLVM cannot see: increment · keep + bh · k fuses keep's product
-                    # (exact) and rounds bh · k apart, as the stages always have; increment
-                    # + bh · k would fuse bh · k and move every ensemble by an ulp.
-                    keep = 1.0 + 0.0 * hn
-                    for l in range(nl):  # lanes: schedule
-                        @@load_params
-                        @@load_stage_sub
-                        @@accel_stage
-                        @@store_stage_inner
-                        @@contact_stage_max
-                        @@accumulate
-                        @[sga] = @[sga] + sing
-                    continue
-                # The first stage apart: at the state itself (no increment), the increment
-                # restarted by a store, and max |Φ| with the accelerations' probe (read only
-                # by the checks below) computed here alone.
+                keep = 0.0 if s == 0 else 1.0
                 for l in range(nl):  # lanes: schedule
                     @@load_params
-                    @@load_state
+                    @@load_stage_sub
                     @@accel_stage
                     @@store_stage
                     @@contact_stage_max
-                    @@accumulate_first
+                    @@accumulate
                     @[sga] = @[sga] + sing
+                if s > 0:
+                    continue
                 # Failures, once per step at its start: max |Φ| of the state, and rank loss in
                 # any stage since the last check (so a singular stage is flagged at the end of
                 # its step). Every lane's checks at once (row att: a lane whose status may
