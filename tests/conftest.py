@@ -33,19 +33,31 @@ os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 LONGEST_FIRST = (
     "test_contact_start.py",  # first compiles: assembly, radau, the loop kernels, generalized-α
     "test_native.py",  # numba's compile of lane modules (the reference of the native compiler)
+    "test_runs_pipeline.py",  # end to end through the command line, Dask, kills, 10⁵ samples
+    "test_outputs_reference.py",  # minimal-coordinate (sympy, scipy) references
     "test_compile_ahead.py",  # a cold run in a process of its own, on an empty cache
-    "test_runs_pipeline.py",  # end to end through the command line, Dask and kills
-    "test_radau.py",
-    "test_simulate_accuracy.py",  # orders and radau against references
-    "test_simulate_methods.py",
+    "test_runs_histories.py",
     "test_validate_interpreted.py",
-    "test_simulate_stability.py",
-    "test_cli_mistakes.py",
+    "test_simulate_methods.py",
+    "test_outputs_scene.py",
+    "test_scene_configs.py",
+    "test_peaks.py",
+    "test_simulate_accuracy.py",
+    "test_simulate_grid.py",
+    "test_slider_drivers.py",
+    "test_contact_dynamics.py",
+    "test_decision_allocation.py",
+    "test_viz_report_page.py",
+    "test_decision_requirements.py",
+    "test_decision_subset.py",
 )
-"""Test files in the order they start, before all others (alphabetical). ``-n auto --dist
-loadfile`` hands each worker the next file when it is free: the longest files started last
-kept one worker busy minutes after the other had finished; started first, the short files
-fill the gap. Order only: each file's tests run as they would alone."""
+"""Test files in the order they start, before all others (in collection order), ranked by
+the CPU time of a cold run (benchmarks/results/ci/ci.md). ``--dist loadfile`` hands each
+worker the next file when it is free: the longest files started last kept one worker busy
+minutes after the other had finished; started first, the short files fill the gap. xdist
+itself would reorder files by their number of tests (its ``--loadscope-reorder``, on by
+default, which ran the few-test long files last): pyproject's ``--no-loadscope-reorder``
+keeps this order. Order only: each file's tests run as they would alone."""
 
 
 LONG_HINT = "python -m pytest -q --long -m long"

@@ -243,6 +243,7 @@ def test_cache_status_and_clear(tmp_path: Path, monkeypatch, mcchain) -> None:
     (native / f"mcchain_gen_rk45_{digest}-adaptive_run-abc.bin").write_bytes(b"x" * 2000)
     (native / f"mcchain_gen_rk45_{digest}-adaptive_run-def.bin").write_bytes(b"x" * 1000)
     (caches.mcchain_cache("generated") / "mcchain_gen_x.py").write_text("x = 1\n")
+    (caches.mcchain_cache("lane-text") / "mcchain_gen_rk45-0123.txt").write_text("x = 1\n")
     numba_folder = caches.numba_index_folder()
     assert numba_folder is not None
     numba_folder.mkdir(parents=True)
@@ -259,6 +260,7 @@ def test_cache_status_and_clear(tmp_path: Path, monkeypatch, mcchain) -> None:
     assert cleared.returncode == 0, cleared.stderr
     assert f"native: removed 2 files, 0.0 MB from {native}" in cleared.stdout.splitlines()
     assert not any(native.iterdir()) and not any(caches.mcchain_cache("generated").iterdir())
+    assert not any(caches.mcchain_cache("lane-text").iterdir())
     assert [p.name for p in numba_folder.iterdir()] == ["other.pyc"]
 
 
@@ -268,3 +270,60 @@ def test_cache_warm__a_bad_scene_is_one_line_and_compiles_nothing(tmp_path: Path
     (tmp_path / "bad.toml").write_text("[scene]\nname = 3\n")
     assert_usage_error(mcchain("cache", "warm", "bad.toml", cwd=tmp_path), "scene.name")
     assert_usage_error(mcchain("cache", cwd=tmp_path), "{status,warm,clear}")
+
+
+def test_generated_text__made_once_then_read_and_remade_for_another_key_or_source(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second call reads the text the first made (make is not called); another key, or
+    mcchain's sources edited (another digest), make it again; a file of the cache that
+    cannot be decoded is made again too."""
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    made: list[str] = []
+
+    def make(text: str):
+        return lambda: made.append(text) or text
+
+    assert caches.generated_text("gen", "key a", make("A")) == "A"
+    assert caches.generated_text("gen", "key a", make("stale")) == "A"
+    assert made == ["A"]
+    assert caches.generated_text("gen", "key b", make("B")) == "B"
+    monkeypatch.setattr(caches, "sources_digest", lambda: "an edited source")
+    assert caches.generated_text("gen", "key a", make("A2")) == "A2"
+    assert made == ["A", "B", "A2"]
+    files = sorted((tmp_path / "lane-text").iterdir())
+    assert len(files) == 3 and all(p.name.startswith("gen-") for p in files)
+    for path in files:
+        path.write_bytes(b"\xff\xfe broken")
+    assert caches.generated_text("gen", "key b", make("B")) == "B"
+    assert made[-1] == "B"
+
+
+def test_sources_digest__changes_with_any_source_of_the_package(tmp_path: Path) -> None:
+    """The digest of a copy of the package changes when one of its files changes."""
+    import shutil
+
+    copy = tmp_path / "mcchain"
+    shutil.copytree(REPO / "mcchain", copy, ignore=shutil.ignore_patterns("__pycache__"))
+    code = "from mcchain.compiled.caches import sources_digest; print(sources_digest())"
+
+    def digest() -> str:
+        env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+        return subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, check=True,
+                              capture_output=True, text=True).stdout.strip()  # fmt: skip
+
+    before = digest()
+    assert before == caches.sources_digest()  # the same files: the same digest
+    with (copy / "contact.py").open("a") as fh:
+        fh.write("\n# edited\n")
+    assert digest() != before
+
+
+def test_evict_oldest__only_the_files_of_its_pattern(tmp_path: Path) -> None:
+    """Above the size, the least recently used files of the pattern go, never ``keep``."""
+    for i, name in enumerate(("a.txt", "b.txt", "c.txt", "d.bin")):
+        (tmp_path / name).write_bytes(b"x" * 100)
+        os.utime(tmp_path / name, (1000 + i, 1000 + i))
+    removed = caches.evict_oldest(tmp_path, 150, keep=tmp_path / "a.txt", pattern="*.txt")
+    assert [p.name for p in removed] == ["b.txt", "c.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "d.bin"]

@@ -752,3 +752,26 @@ def test_random_programs__the_bits_of_numba(source, x, k):
     NativeModule(source, "mcchain_test_random").prog(xs, ks, mine)
     _numba(source, "prog")(xs, ks, ref)
     _assert_same_bits(mine, ref)
+
+
+def test_lane_kernels__a_warm_process_reads_the_text_without_generating_it(
+    tmp_path, monkeypatch
+) -> None:
+    """The first process generates the text (and keeps it); the next one (an empty
+    ``_MODULES``) reads that text — exactly what the generator gives — and generates none."""
+    from mcchain.codegen.topology import Topology
+
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(generate, "_MODULES", {})
+    topo = Topology.from_model(scene_model("double_pendulum"))
+    first = generate.lane_kernels(topo, "rk4")
+    assert first.source == generate.generate_source(topo, "rk4")
+
+    def generated(*args: Any, **kwargs: Any) -> str:
+        raise AssertionError("a warm process generated the lane text again")
+
+    monkeypatch.setattr(generate, "_MODULES", {})
+    monkeypatch.setattr(generate, "generate_source", generated)
+    again = generate.lane_kernels(topo, "rk4")
+    assert again is not first and again.source == first.source
+    assert [p.suffix for p in (tmp_path / "lane-text").iterdir()] == [".txt"]

@@ -64,7 +64,10 @@ def quartic_omega(mass: np.ndarray, clearance: np.ndarray) -> np.ndarray:
 def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> None:
     proc = mcchain("run", CLEARANCE_BAR, "--samples", "300", "--chunk-size", "64", cwd=tmp_path)
     folder = tmp_path / last_line(proc)
-    assert proc.stderr == ""  # no progress bar when stderr is not a terminal
+    # No progress bar when stderr is not a terminal: nothing but, on a cold cache, the
+    # compile notice (mcchain.compiled.ready), whichever test ran first.
+    notice = ("compiling the kernels of this scene", "kernels ready in ")
+    assert [line for line in proc.stderr.splitlines() if not line.startswith(notice)] == []
     assert folder.parent == tmp_path / "runs" and folder.name.endswith("-clearance-bar")
     record = json.loads((folder / "run.json").read_text())
     assert record["status"] == "COMPLETED" and record["chunks"] == 5

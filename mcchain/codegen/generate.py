@@ -10,6 +10,7 @@ holding only the functions that variant's entry points call.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import os
@@ -33,12 +34,14 @@ from mcchain.codegen.layout import (
     ROW_MEANINGS,
     Layout,
     row_length,
+    target_cpu,
 )
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import INTERLEAVE_CONSTANT, schedule_lane_loops
 from mcchain.codegen.topology import Topology
 from mcchain.codegen.tracking import tracking_blocks, tracking_functions
+from mcchain.compiled.caches import generated_text
 from mcchain.contact import (
     CONTACT_STEP_LIMIT,
     RESEAT_NEWTON,
@@ -535,7 +538,12 @@ def lane_kernels(topo: Topology, variant: str, outputs: Signature = ()) -> LaneK
     module = _MODULES.get((topo, variant, outputs))
     if module is None:
         prefix = "mcchain_gen_" + variant.replace("-", "_")
-        source = generate_source(topo, variant, outputs=outputs)
+        # A warm run reads the text made before (generating it costs more than loading
+        # its machine code): keyed by all that shapes it besides mcchain's sources.
+        key = repr((dataclasses.astuple(topo), variant, outputs, LMAX, target_cpu()))
+        source = generated_text(
+            prefix, key, lambda: generate_source(topo, variant, outputs=outputs)
+        )
         if os.environ.get("MCCHAIN_LANE_COMPILER") == "numba" or not _native_usable():
             from mcchain.kernels.config import numba_cache
 

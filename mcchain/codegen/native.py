@@ -32,7 +32,6 @@ import hashlib
 import os
 import pickle
 import re
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -50,7 +49,7 @@ from mcchain.codegen.native_expressions import (
     type_of_value,
 )
 from mcchain.codegen.native_translate import ModuleTranslator
-from mcchain.compiled.caches import mcchain_cache
+from mcchain.compiled.caches import evict_oldest, mcchain_cache, write_atomically
 
 
 def ctypes_argument(ty: Type) -> Any:
@@ -142,29 +141,6 @@ def key_versions() -> tuple[str, ...]:
         f"python {sys.version.split()[0]} {sys.implementation.cache_tag}",
         f"numpy {np.__version__}",
     )
-
-
-def evict_oldest(folder: Path, max_bytes: int, keep: Path | None = None) -> list[Path]:
-    """Remove the machine-code files of ``folder`` used least recently (modification time,
-    touched at every load) until they hold at most ``max_bytes``; never ``keep`` (the file
-    just written). Returns the files removed."""
-    files = []
-    for path in folder.glob("*.bin"):
-        with contextlib.suppress(OSError):
-            info = path.stat()
-            files.append((info.st_mtime, info.st_size, path))
-    total = sum(size for _, size, _ in files)
-    removed = []
-    for _, size, path in sorted(files):
-        if total <= max_bytes:
-            break
-        if path == keep:
-            continue
-        with contextlib.suppress(OSError):
-            path.unlink()
-            removed.append(path)
-            total -= size
-    return removed
 
 
 def _fingerprint_function() -> Callable[[Any], Any]:
@@ -272,7 +248,7 @@ class NativeModule:
             library.add_ir_module(translator.ir_module)
             library.finalize()
             library.get_pointer_to_function(symbol)
-            _write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
+            write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
             evict_oldest(path.parent, CACHE_MAX_BYTES, keep=path)
         address = library.get_pointer_to_function(symbol)
         if not address:
@@ -307,13 +283,3 @@ def _contract(module: ir.Module) -> None:
     from numba.core.fastmathpass import rewrite_module
 
     rewrite_module(module, FastMathOptions({"contract"}))
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except OSError:
-        pass  # an unwritable cache: the next process compiles again

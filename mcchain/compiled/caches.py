@@ -3,8 +3,10 @@
 Three caches: numba's machine code (``NUMBA_CACHE_DIR``, else beside the sources in
 ``__pycache__``, else numba's user-wide folder), and in ``MCCHAIN_CACHE_DIR``
 (:func:`mcchain_cache`) the machine code of the generated lane kernels (``native``,
-:mod:`mcchain.codegen.native`; ``generated``: their text, where numba compiles them) and the
-quasi-random sample designs drawn before (:func:`mcchain.scene.sampling.unit_design`). A
+:mod:`mcchain.codegen.native`; ``generated``: their text, where numba compiles them), their
+text as generated (``lane-text``, :func:`generated_text`: a warm run reads it instead of
+generating it again) and the quasi-random sample designs drawn before
+(:func:`mcchain.scene.sampling.unit_design`). A
 cache that cannot be written (a read-only home or installation) never stops a run: the cache
 moves to the temporary folder, with one warning line on stderr, and kernels then compile once
 per machine boot instead of once per installation. That folder has a predictable name
@@ -18,8 +20,13 @@ in :mod:`mcchain.compiled.report`.
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
 import os
 import sys
+import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 from mcchain.folders import temporary_cache, warn_fallback, writable
@@ -82,3 +89,77 @@ def kernels_cached(kernels: list[str]) -> bool | None:
         return None
     suffix = f".py{sys.version_info[0]}{sys.version_info[1]}.nbi"
     return all(any(folder.glob(f"{name}-*{suffix}")) for name in kernels)
+
+
+def write_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file renamed onto it, so that a reader
+    never sees it half written; a cache that cannot be written is passed over silently (the
+    next process makes the data again)."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def evict_oldest(
+    folder: Path, max_bytes: int, keep: Path | None = None, pattern: str = "*.bin"
+) -> list[Path]:
+    """Remove the files ``pattern`` of ``folder`` used least recently (modification time,
+    touched at every load) until they hold at most ``max_bytes``; never ``keep`` (the file
+    just written). Returns the files removed."""
+    files = []
+    for path in folder.glob(pattern):
+        with contextlib.suppress(OSError):
+            info = path.stat()
+            files.append((info.st_mtime, info.st_size, path))
+    total = sum(size for _, size, _ in files)
+    removed = []
+    for _, size, path in sorted(files):
+        if total <= max_bytes:
+            break
+        if path == keep:
+            continue
+        with contextlib.suppress(OSError):
+            path.unlink()
+            removed.append(path)
+            total -= size
+    return removed
+
+
+@functools.cache
+def sources_digest() -> str:
+    """Hash of every ``.py`` file of the mcchain package (paths and bytes): whatever mcchain
+    generates from its own code is keyed by it, so an edited source never meets a text made
+    by the old one (6 ms for the whole package)."""
+    package = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+TEXT_MAX_BYTES = 64 << 20
+"""Size above which the least recently used generated texts are removed."""
+
+
+def generated_text(name: str, key: str, make: Callable[[], str]) -> str:
+    """The text ``make()`` returns, kept in mcchain's cache (``lane-text``) under ``name`` and
+    the hash of ``key`` (everything besides mcchain's sources that ``make`` reads: a
+    topology, a variant, the target CPU) and :func:`sources_digest`: a warm run reads the
+    text instead of making it again (the Flores slider-crank's rk45 lane text: 0.13 s of CPU
+    once the generator is imported, 0.7 s with its first call's imports)."""
+    folder = mcchain_cache("lane-text")
+    digest = hashlib.sha256(f"{key}\0{sources_digest()}".encode()).hexdigest()[:24]
+    path = folder / f"{name}-{digest}.txt"
+    with contextlib.suppress(OSError, UnicodeDecodeError):
+        text = path.read_text(encoding="utf-8")
+        with contextlib.suppress(OSError):
+            os.utime(path)  # recently used: the last to be evicted
+        return text
+    text = make()
+    write_atomically(path, text.encode("utf-8"))
+    evict_oldest(folder, TEXT_MAX_BYTES, keep=path, pattern="*.txt")
+    return text

@@ -11,9 +11,10 @@ from pathlib import Path
 
 from mcchain.compiled.caches import mcchain_cache, numba_index_folder
 
-MCCHAIN_FOLDERS = ("native", "generated", "compile", "designs")
+MCCHAIN_FOLDERS = ("native", "generated", "lane-text", "compile", "designs")
 """The folders of mcchain's cache (:func:`mcchain_cache`): the lane kernels' machine code
-(:mod:`mcchain.codegen.native`) and text (where numba compiles it), the background
+(:mod:`mcchain.codegen.native`) and text (where numba compiles it; as generated, read by warm
+runs: :func:`mcchain.compiled.caches.generated_text`), the background
 compile's lock, record and log (:mod:`mcchain.compiled.background`), the sample designs."""
 
 NUMBA_SUFFIXES = (".nbi", ".nbc")

@@ -7,6 +7,10 @@ maximum, the maximum is located on the solver's dense output over the two steps 
 bounded minimisation (``scipy.optimize.minimize_scalar``, method ``bounded``), so the peak is
 the continuous one to the integrator's accuracy. The same procedure, at a tight tolerance,
 is the dense reference the tests compare the kernels' peaks against.
+
+scipy.optimize is imported at the first peak located, where it is used (its import costs
+0.2-0.9 s of CPU, more than a warm run's kernels take to load): with
+:func:`mcchain.solvers.radau.locate_root`, the only places of a run that import it.
 """
 
 from __future__ import annotations
@@ -32,8 +36,6 @@ def dense_peaks(
     ``dense(t)`` (the state y at t; scipy's ``OdeSolution``). ``values`` (nts, npk): the
     quantities at ``ts`` where the caller has them already (default: evaluated here); a NaN
     column is not tracked."""
-    from scipy.optimize import minimize_scalar
-
     ts = np.asarray(ts, dtype=float)
     if len(ts) == 0:
         return
@@ -56,6 +58,8 @@ def dense_peaks(
 
             def negative(t: float, k: int = k) -> float:
                 return -float(quantities(t, dense(t))[k])
+
+            from scipy.optimize import minimize_scalar  # here: see the module's docstring
 
             found = minimize_scalar(
                 negative, bounds=(lo, hi), method="bounded",

@@ -47,6 +47,27 @@ EVENT_XTOL = 4.0 * float(np.finfo(float).eps)
 """brentq's absolute and relative tolerance on an event's time (solve_ivp's)."""
 
 
+def locate_root(f: Callable[[float], float], t_old: float, t: float) -> float:
+    """The root of ``f`` in the bracket [t_old, t] (s; ``f`` changes sign over it), to
+    :data:`EVENT_XTOL`, by scipy's ``brentq`` (as solve_ivp locates its events).
+
+    scipy.optimize is imported here, where it is used (as by the peaks,
+    :mod:`mcchain.solvers.peaks`): its import costs 0.2-0.9 s of CPU (scipy.fft,
+    scipy.special, linprog, ...), more than a warm run's kernels take to load."""
+    from scipy.optimize import brentq
+
+    return float(brentq(f, t_old, t, xtol=EVENT_XTOL, rtol=EVENT_XTOL))
+
+
+def _event_on_step(
+    event: Callable[[float, np.ndarray], float],
+    step: tuple[float, float, np.ndarray, np.ndarray],
+    t: float,
+) -> float:
+    """``event`` at t (s) on the dense output of one accepted ``step`` (:class:`_Dense`)."""
+    return float(event(t, _Dense.piece(t, step)))
+
+
 class RadauRun(Protocol):
     """What :func:`run_radau` reads and writes of a run (``mcchain.solvers.simulate``'s):
     the model and settings, the start state (nsample, ndof), the output times (ntime,), the
@@ -246,8 +267,6 @@ class _Sample:
         (located on the step ``last_step`` where the criterion turned true; reset where it
         is false at the step's end), from the accelerations the stepper evaluated last, at
         (t, y)."""
-        from scipy.optimize import brentq
-
         cl, cst, step = self.cl, self.cst, self.last_step
         self.run.steps[self.i] += 1  # q̈, λ, cst: at (t, y), where the stepper left them
         if self.spec.shape[0]:
@@ -263,9 +282,8 @@ class _Sample:
                 t_old = step[0]
                 margin = functools.partial(self.step_margin, j, step)
                 self.ready_since[j] = (
-                    t_old if margin(t_old) > 0.0
-                    else float(brentq(margin, t_old, t, xtol=EVENT_XTOL, rtol=EVENT_XTOL))
-                )  # fmt: skip
+                    t_old if margin(t_old) > 0.0 else locate_root(margin, t_old, t)
+                )
         return 1.0
 
     def signals(
@@ -491,8 +509,6 @@ class _Sample:
     def segment(self, t: float, y: np.ndarray, written: int) -> _Segment:
         """Integrate from (t, y) to the first event or t_end, writing the output times from
         index ``written`` on that the steps pass (solve_ivp's loop around its solver)."""
-        from scipy.optimize import brentq
-
         from mcchain.kernels import radau as kr
 
         run, i, st = self.run, self.i, self.stepper
@@ -531,10 +547,7 @@ class _Sample:
             for e, event in enumerate(events):
                 if not _crosses(g[e], g_new[e], getattr(event, "direction", 0.0)):
                     continue
-                root = float(brentq(
-                    lambda tt, ev=event, step=step: ev(tt, _Dense.piece(tt, step)), t_old, t,
-                    xtol=EVENT_XTOL, rtol=EVENT_XTOL,
-                ))  # fmt: skip
+                root = locate_root(functools.partial(_event_on_step, event, step), t_old, t)
                 if found is None or root < found[0]:
                     found = (root, e)
             stop = t if found is None else found[0]
