@@ -34,9 +34,9 @@ from pathlib import Path
 
 import numba
 
-REPO = Path(__file__).resolve().parents[1]
-SCENE = REPO / "configs" / "slider-crank-requirement.toml"
-RESULTS = REPO / "benchmarks" / "results" / "verdict"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from profile_verdict import REPO, light_scene, write_result
+
 OUTPUTS = "mcchain/kernels/outputs.py"
 
 
@@ -58,7 +58,6 @@ def main() -> None:
     import mcchain.codegen.generate as generate
     import mcchain.codegen.output_blocks as output_blocks
     from mcchain.codegen.emitter import Emitter
-    from mcchain.scene import compile_model, load_scene_text
     from mcchain.solvers import solve_chunk
 
     old_source = subprocess.run(["git", "show", f"{args.before}:{OUTPUTS}"], cwd=REPO,
@@ -92,11 +91,7 @@ def main() -> None:
     # the variants differ in text, not in what the lane-text cache keys on: generate each
     generated_text = generate.generated_text
     generate.generated_text = lambda name, key, make: make()
-    text = SCENE.read_text("utf-8").replace(
-        "\n[sample]", '\n[storage]\nhistories = "none"\n\n[sample]'
-    )
-    scene = load_scene_text(text)
-    model = compile_model(scene, nsample=args.samples)
+    scene, model = light_scene(args.samples)
     alone = scene.model_copy(update={"output": [o for o in scene.output if o.relative_to is None]})
     none = scene.model_copy(update={"output": []})
     variants = {
@@ -155,11 +150,7 @@ def main() -> None:
         lines.append(f"\n{what}: before / after, repeat by repeat: "
                      f"{', '.join(f'{r:.2f}' for r in ratios)}; median "
                      f"{statistics.median(ratios):.3f}")  # fmt: skip
-    when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-    text = f"`{command}` ({os.cpu_count()} cores, {when})\n\n" + "\n".join(lines) + "\n"
-    print(text)
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "output_feed.md").write_text(text, "utf-8")
+    write_result(command, lines, "output_feed.md")
 
 
 if __name__ == "__main__":
