@@ -187,11 +187,17 @@ def main() -> None:
     lines += ["", *per_step_part(scene, model, args.repeats)]
     _, chunk = light_scene(1024)
     lines += ["", *threads_part(scene, chunk)]
+    write_result(command, lines, "profile.md")
+
+
+def write_result(command: str, lines: list[str], name: str) -> None:
+    """Print ``lines`` under the command, the cores and the time, and save them as ``name``
+    in :data:`RESULTS`."""
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     text = f"`{command}` ({os.cpu_count()} cores, {when})\n\n" + "\n".join(lines) + "\n"
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "profile.md").write_text(text, "utf-8")
+    (RESULTS / name).write_text(text, "utf-8")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import pytest
 
 from mcchain.codes import OUTPUT_REDUCTIONS, OUTPUT_WIDTH
 from mcchain.kernels import outputs as ko
+from mcchain.kernels.config import JIT, njit
 
 W0, W1 = 0.123, 2.71
 """A window whose ends fall inside steps, s."""
@@ -202,3 +203,66 @@ def test_body_signal__point_kinematics_against_finite_differences():
         value, rate = ko.body_signal(2, component, *state(t), sx, sy)
         assert value == ko.body_signal(1, component, *state(t), sx, sy)[1]
         assert math.isnan(rate)
+
+
+@njit(**JIT)
+def _cubic_window_in_full(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, w1,
+                          threshold, reduce):  # fmt: skip
+    """ko.cubic_window as it was before its shortcut (slopes and hermite_window always),
+    compiled as it is: the reference the shortcut must match bit for bit."""
+    t0 = ta if interval == 0 else (tb if interval == 1 else tc)
+    t1 = tb if interval == 0 else (tc if interval == 1 else td)
+    f0 = fa if interval == 0 else (fb if interval == 1 else fc)
+    f1 = fb if interval == 0 else (fc if interval == 1 else fd)
+    r0 = ko._newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t0)
+    r1 = ko._newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t1)
+    gate_hi = 1.0
+    gate_lo = 1.0
+    if interval == 1:
+        gate_hi = 1.0 if fb >= fa and fc >= fd and (fb > fa or fc > fd) else 0.0
+        gate_lo = 1.0 if fb <= fa and fc <= fd and (fb < fa or fc < fd) else 0.0
+    top = max(max(fa, fb), max(fc, fd))
+    low = min(min(fa, fb), min(fc, fd))
+    spread = top - low
+    ko.hermite_window(
+        W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, reduce, gate_hi, gate_lo,
+        low - spread, top + spread,
+    )  # fmt: skip
+
+
+def test_cubic_window__the_shortcut_without_slopes_is_bit_identical():
+    """A middle step with neither gate open, whole in the window, skips the slopes: the
+    state must be the full path's byte for byte, for every reduction, on monotone, flat,
+    tied, signed-zero and NaN data, and windows that cut the step or hold it exactly."""
+    rng = np.random.default_rng(37)
+    values = [0.0, -0.0, 1.0, -1.0, 2.5, math.nan, math.inf, -math.inf]
+    checked = shortcut = 0
+    for _ in range(4000):
+        t = np.cumsum(rng.uniform(1e-6, 1e-3, 4)) + rng.choice([0.0, 0.002])
+        if rng.random() < 0.5:
+            f = rng.choice(values, 4)
+        else:
+            f = np.sort(rng.normal(size=4)) * rng.choice([1.0, -1.0])
+        w0, w1 = (
+            rng.choice([0.0, t[1], t[1] - 1e-7, t[1] + 1e-7, 0.002]),
+            rng.choice([math.inf, t[2], t[2] - 1e-7, t[2] + 1e-7, 0.024]),
+        )
+        reduce_code = int(rng.integers(0, 8))
+        threshold = float(rng.choice([0.0, 1.0, -0.5]))
+        for interval in (0, 1, 2):
+            state = np.zeros(3 * OUTPUT_WIDTH)
+            ko.outputs_start(state, 1, 3)
+            state[1 + 3 * ko.HI] = rng.choice([-math.inf, 0.5, math.nan])
+            state[1 + 3 * ko.LO] = rng.choice([math.inf, -0.5, math.nan])
+            expected = state.copy()
+            points = [x for pair in zip(t, f, strict=True) for x in pair]
+            rest = (interval, w0, w1, threshold, reduce_code)
+            ko.cubic_window(state, 1, 3, *points, *rest)
+            _cubic_window_in_full(expected, 1, 3, *points, *rest)
+            assert state.tobytes() == expected.tobytes()
+            checked += 1
+            fa, fb, fc, fd = f
+            shortcut += interval == 1 and reduce_code in (0, 1, 2, 5) and t[1] >= w0 and (
+                t[2] <= w1) and not (fb >= fa and fc >= fd and (fb > fa or fc > fd)) and not (
+                fb <= fa and fc <= fd and (fb < fa or fc < fd))  # fmt: skip
+    assert shortcut > 500  # the shortcut was taken often, not only the full path
