@@ -134,11 +134,9 @@ def sources_digest() -> str:
     """Hash of every ``.py`` file of the mcchain package (paths and bytes): whatever mcchain
     generates from its own code is keyed by it, so an edited source never meets a text made
     by the old one (6 ms for the whole package)."""
-    package = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
-        h.update(str(path.relative_to(package)).encode() + b"\0" + path.read_bytes() + b"\0")
-    return h.hexdigest()
+    from mcchain.kernels.config import package_sources_digest
+
+    return package_sources_digest()
 
 
 TEXT_MAX_BYTES = 64 << 20

@@ -87,9 +87,92 @@ def numba_cache() -> str:
     """Where numba caches the kernels, made writable before any kernel is decorated with
     ``cache=True`` (:func:`ensure_numba_cache`)."""
     try:
-        return ensure_numba_cache()
+        where = ensure_numba_cache()
     except ImportError:  # generating kernel source needs these options, not numba itself
         return "none (numba is not importable)"
+    drop_stale_kernels()
+    return where
+
+
+KERNEL_SOURCE_DIRS = ("", "kernels", "codegen", "testing")
+"""Folders of the mcchain package (relative; "" the top level: codes, status, contact) whose
+``.py`` files the numba kernels are compiled from, callees and constants included."""
+KERNEL_STAMP = "mcchain-kernel-sources.sha256"
+"""File beside numba's cache files of a folder: the digest of the sources they came from."""
+
+
+def package_sources_digest(patterns: tuple[str, ...] = ("**/*.py",)) -> str:
+    """Hash of the mcchain package's files matching ``patterns`` (relative glob patterns;
+    paths and bytes, in sorted order)."""
+    import hashlib
+
+    package = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for pattern in patterns:
+        for path in sorted(package.glob(pattern)):
+            h.update(str(path.relative_to(package)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def kernel_sources_digest() -> str:
+    """Hash of the ``.py`` files of :data:`KERNEL_SOURCE_DIRS` (paths and bytes)."""
+    return package_sources_digest(tuple(f"{d}/*.py" if d else "*.py" for d in KERNEL_SOURCE_DIRS))
+
+
+def kernel_cache_folders() -> list[Path]:
+    """Where numba keeps the cached kernels of each folder of :data:`KERNEL_SOURCE_DIRS`
+    (its own locators' rule: ``NUMBA_CACHE_DIR``, beside the sources, or user-wide)."""
+    from numba import config
+    from numba.core.caching import _CacheLocator
+    from numba.misc.appdirs import AppDirs
+
+    package = Path(__file__).resolve().parents[1]
+    sources = [package / folder / "x.py" for folder in KERNEL_SOURCE_DIRS]
+    configured = getattr(config, "CACHE_DIR", "")
+    in_tree = package / "kernels" / "__pycache__"
+    if not configured and writable(in_tree):
+        return [source.parent / "__pycache__" for source in sources]
+    root = configured or AppDirs(appname="numba", appauthor=False).user_cache_dir
+    return [Path(root) / _CacheLocator.get_suitable_cache_subpath(str(s)) for s in sources]
+
+
+def drop_stale_kernels() -> int:
+    """Remove numba's cached kernels compiled from other sources than these.
+
+    Numba checks a cached function against its own file's time stamp only, yet a kernel
+    holds the code of the functions it calls (inlined from other files) and the constants it
+    reads: after an edit of a callee, or an update that leaves a caller's file alone, it
+    would load the old callee's machine code (with 0-length histories, stores past the end
+    of an array). A digest of every kernel source is kept beside the cache files; when it
+    differs, mcchain's cached kernels are removed (numba compiles them again). Returns the
+    number of files removed."""
+    import os
+
+    digest = kernel_sources_digest()
+    removed = 0
+    for folder in kernel_cache_folders():
+        stamp = folder / KERNEL_STAMP
+        try:
+            if stamp.read_text(encoding="ascii").strip() == digest:
+                continue
+        except OSError:  # no stamp: a cache of an older mcchain, or none yet
+            pass
+        if not folder.is_dir():
+            continue
+        for path in folder.iterdir():
+            if path.suffix in (".nbi", ".nbc"):
+                try:
+                    path.unlink()
+                    removed += 1
+                except OSError:  # another process removed it, or it is not ours to remove
+                    pass
+        try:
+            temporary = folder / f".{KERNEL_STAMP}.{os.getpid()}"
+            temporary.write_text(digest + "\n", encoding="ascii")
+            os.replace(temporary, stamp)
+        except OSError:  # read-only cache: numba falls back as ensure_numba_cache says
+            pass
+    return removed
 
 
 def ensure_numba_cache() -> str:
