@@ -246,10 +246,14 @@ def tabulated_plan(
     :data:`TABULATED_KINDS`, per-sample data rows that differ, a failed integration, or
     too many knots."""
     key = _table_key(ideal, q, v, sim, plan)
-    if key not in _TABLES:
-        _TABLES.clear()  # one run's table: every chunk of the run asks for the same
-        _TABLES[key] = _tabulated(ideal, q, v, sim, plan)
-    return _TABLES[key]
+    try:
+        return _TABLES[key]
+    except KeyError:  # (not a test then a read: a chunk of another run may clear it meanwhile)
+        pass
+    table = _tabulated(ideal, q, v, sim, plan)
+    _TABLES.clear()  # one run's table: every chunk of the run asks for the same
+    _TABLES[key] = table
+    return table
 
 
 _TABLES: dict[str, OutputPlan | None] = {}
