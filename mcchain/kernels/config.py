@@ -85,7 +85,8 @@ def njit(*args: Any, **options: Any) -> Any:
 @functools.cache
 def numba_cache() -> str:
     """Where numba caches the kernels, made writable before any kernel is decorated with
-    ``cache=True`` (:func:`ensure_numba_cache`)."""
+    ``cache=True`` (:func:`ensure_numba_cache`), its kernels of other sources dropped
+    (:func:`drop_stale_kernels`); once per process."""
     try:
         where = ensure_numba_cache()
     except ImportError:  # generating kernel source needs these options, not numba itself
