@@ -11,12 +11,20 @@ right-hand side is formed here by forward differences over the n = 2 ndof state 
 (scipy's ``num_jac`` adapts its increments; only the Newton iteration's convergence depends
 on it, never the accepted solution's accuracy).
 
-The driver (:mod:`mcchain.solvers.radau`) calls :func:`radau_start` at the start of each
-segment between events, then :func:`radau_step` once per accepted step, and locates events
-and writes outputs on the step's dense output :func:`radau_dense`.
+The driver (:mod:`mcchain.solvers.radau`) calls one compiled entry, :func:`radau_kernel`:
+``START`` (:func:`radau_start`) at the start of each segment between events, ``STEP``
+(:func:`radau_step`) once per accepted step, and ``EVALUATE`` (:func:`radau_evaluate`) for
+the accelerations its events, outputs and peaks read; it locates events and writes outputs
+on the step's dense output :func:`radau_dense`.
 
-Both leave the accelerations' outputs (q̈, λ and the contact state in ``acc``) at the
-state they end at, for the driver's step hook. The stepper's scalars live in ``state``
+One entry, and the right-hand side :func:`_rhs` compiled on its own (not inlined): numba
+links a callee's code into each compiled caller and keeps it in that caller's cache file, so
+three entries held the index-1 accelerations three times, and every inlined call site once
+more (4.1 MB of cache files, which a warm run parses at every load; one entry: see
+``benchmarks/results/speed/warm.md``).
+
+START and STEP leave the accelerations' outputs (q̈, λ and the contact state in ``acc``) at
+the state they end at, for the driver's step hook. The stepper's scalars live in ``state``
 (:data:`NSTATE`,), indexed by the constants below.
 """
 
@@ -71,19 +79,24 @@ JACOBIAN_INCREMENT = EPS**0.5
 """Forward-difference increment relative to max(|y_k|, the largest |y| of its half)."""
 
 # state entries
-T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV, T_FAIL = range(10)
-NSTATE = 10
+(T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV, T_FAIL,
+ CONSTRAINT_ERROR) = range(11)  # fmt: skip
+NSTATE = 11
 """H_ABS_OLD and ERROR_OLD are NaN where scipy's are None; CURRENT_JAC, LU_OK, SOL_OK are
 0/1 flags; NFEV counts right-hand-side evaluations (the Jacobian's not included); T_FAIL is
-the time of a singular evaluation."""
+the time of a singular evaluation; CONSTRAINT_ERROR is what the last EVALUATE returned."""
 
 ACCEPTED, TOO_SMALL_STEP, SINGULAR_EVALUATION = 0, 1, 2
-"""What :func:`radau_step` returns."""
+"""What :func:`radau_kernel` returns."""
+
+START, STEP, EVALUATE = 0, 1, 2
+"""What :func:`radau_kernel` does (its ``op``)."""
 
 
-@njit(**INLINE)
+@njit(**JIT)
 def _rhs(km, s, t, y, f_out, balpha2, bbeta2, tau, acc):
-    """f = (v, q̈) at (t, y = (q, v)); False when S lost rank (see index1_acceleration)."""
+    """f = (v, q̈) at (t, y = (q, v)); max |Φ|, < 0 (or NaN) where S lost rank (see
+    index1_acceleration). Not inlined: one copy of the accelerations serves every call."""
     minv, cols, first, cst, row_law, B, S, F, g, phi, qdd, lam = acc
     n = qdd.shape[0]
     err = index1_acceleration(
@@ -93,13 +106,19 @@ def _rhs(km, s, t, y, f_out, balpha2, bbeta2, tau, acc):
     for k in range(n):
         f_out[k] = y[n + k]
         f_out[n + k] = qdd[k]
+    return err
+
+
+@njit(**INLINE)
+def _regular(err):
+    """Whether an evaluation's max |Φ| says S kept its rank (NaN says it did not)."""
     return err >= 0.0
 
 
 @njit(**JIT)
 def radau_rhs(km, s, t, y, f_out, balpha2, bbeta2, tau, acc):
-    """:func:`_rhs` on its own (the driver's hooks and the tests)."""
-    return _rhs(km, s, t, y, f_out, balpha2, bbeta2, tau, acc)
+    """:func:`_rhs` on its own, True where S kept its rank (the tests)."""
+    return _regular(_rhs(km, s, t, y, f_out, balpha2, bbeta2, tau, acc))
 
 
 @njit(**JIT)
@@ -123,7 +142,7 @@ def radau_jacobian(km, s, t, y, f, J_out, work_y, work_f, balpha2, bbeta2, tau, 
         step = JACOBIAN_INCREMENT * max(abs(y[j]), floor, 1e-300)
         work_y[j] = y[j] + step
         step = work_y[j] - y[j]
-        if not _rhs(km, s, t, work_y, work_f, balpha2, bbeta2, tau, acc):
+        if not _regular(_rhs(km, s, t, work_y, work_f, balpha2, bbeta2, tau, acc)):
             return False
         for k in range(half, n):
             J_out[k, j] = (work_f[k] - f[k]) / step
@@ -182,7 +201,7 @@ def radau_start(km, s, t0, t_bound, y, f, J, rtol, atol, state, work_y, work_f, 
     state[LU_OK] = 0.0
     state[SOL_OK] = 0.0
     state[NFEV] += 1.0
-    if not _rhs(km, s, t0, y, f, balpha2, bbeta2, tau, acc):
+    if not _regular(_rhs(km, s, t0, y, f, balpha2, bbeta2, tau, acc)):
         state[T_FAIL] = t0
         return SINGULAR_EVALUATION
     interval = abs(t_bound - t0)
@@ -199,7 +218,7 @@ def radau_start(km, s, t0, t_bound, y, f, J, rtol, atol, state, work_y, work_f, 
     for k in range(n):
         work_y[k] = y[k] + h0 * f[k]
     state[NFEV] += 1.0
-    if not _rhs(km, s, t0 + h0, work_y, work_f, balpha2, bbeta2, tau, acc):
+    if not _regular(_rhs(km, s, t0 + h0, work_y, work_f, balpha2, bbeta2, tau, acc)):
         state[T_FAIL] = t0 + h0
         return SINGULAR_EVALUATION
     d2 = 0.0
@@ -318,7 +337,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
             for k in range(n):
                 F[0, k] = y[k] + work_f[k]
             state[NFEV] += 1.0
-            if not _rhs(km, s, t, F[0], F[2], balpha2, bbeta2, tau, acc):
+            if not _regular(_rhs(km, s, t, F[0], F[2], balpha2, bbeta2, tau, acc)):
                 state[T_FAIL] = t
                 return SINGULAR_EVALUATION
             for k in range(n):
@@ -343,7 +362,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
         y_old[k] = y[k]
         y[k] = y[k] + Z[2, k]
     state[NFEV] += 1.0
-    if not _rhs(km, s, t_new, y, f, balpha2, bbeta2, tau, acc):
+    if not _regular(_rhs(km, s, t_new, y, f, balpha2, bbeta2, tau, acc)):
         state[T_FAIL] = t_new
         return SINGULAR_EVALUATION
     if recompute_jac:
@@ -368,6 +387,34 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
     return ACCEPTED
 
 
+@njit(**JIT)
+def radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc):
+    """q̈, λ and the contact state (in ``acc``) at (t, y), y (n,) = (q, v), for the driver's
+    events, outputs and peaks: ACCEPTED, max |Φ| (< 0 or NaN: S lost rank, see
+    index1_acceleration) in state[CONSTRAINT_ERROR]; f = (v, q̈) into the scratch
+    ``work_f``. Not counted in NFEV."""
+    state[CONSTRAINT_ERROR] = _rhs(km, s, t, y, work_f, balpha2, bbeta2, tau, acc)
+    return ACCEPTED
+
+
+@njit(**JIT)
+def radau_kernel(op, t, km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
+                 rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau, acc):  # fmt: skip
+    """The driver's one compiled entry: ``op`` START (:func:`radau_start` of a segment at
+    (t, y) towards ``t_bound``), STEP (:func:`radau_step` towards ``t_bound``; ``t`` unread)
+    or EVALUATE (:func:`radau_evaluate` at (t, y); the stepper's arrays untouched but the
+    scratch ``work_f``). Arrays as :func:`radau_step`'s; returns what the operation
+    returns."""
+    if op == START:
+        return radau_start(km, s, t, t_bound, y, f, J, rtol, atol, state, work_y, work_f,
+                           balpha2, bbeta2, tau, acc)  # fmt: skip
+    if op == STEP:
+        return radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
+                          rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau,
+                          acc)  # fmt: skip
+    return radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc)
+
+
 @njit(**INLINE)
 def _collocation(km, s, t, y, h, Z, W, F, scale, tol, LUr, piv_r, LUc, piv_c, state, work_f,
                  work_c, balpha2, bbeta2, tau, acc):  # fmt: skip
@@ -389,7 +436,7 @@ def _collocation(km, s, t, y, h, Z, W, F, scale, tol, LUr, piv_r, LUc, piv_c, st
             for k in range(n):
                 work_f[k] = y[k] + Z[i, k]
             state[NFEV] += 1.0
-            if not _rhs(km, s, t + h * C[i], work_f, F[i], balpha2, bbeta2, tau, acc):
+            if not _regular(_rhs(km, s, t + h * C[i], work_f, F[i], balpha2, bbeta2, tau, acc)):
                 state[T_FAIL] = t + h * C[i]
                 return -1, k_iter + 1, rate
             for k in range(n):

@@ -3,7 +3,9 @@ slow, independent reference of every method, with and without contact-law joints
 them, one segment and no events).
 
 The steps are :mod:`mcchain.kernels.radau` (scipy's Radau, compiled, on the index-1
-accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`); this driver does
+accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`, all through its one
+entry :func:`~mcchain.kernels.radau.radau_kernel`, the accelerations this driver reads
+included); this driver does
 what ``scipy.integrate.solve_ivp`` did around them: evaluates the events after each accepted
 step, locates a crossing on the step's dense output (``brentq``, as solve_ivp), writes the
 outputs at the output times the step passed from its dense output, and starts a new
@@ -181,15 +183,17 @@ class _Sample:
         mass_diagonal(self.km, i, self.minv)
         self.minv = 1.0 / self.minv
         self.cst = np.zeros((len(self.joints), cl.NCST))
-        cl.contact_start(self.km, i, self.cst)
+        if len(self.joints):  # (without contact-law joints: nothing to start, nor to load)
+            cl.contact_start(self.km, i, self.cst)
         self.alpha2, self.beta2 = 2.0 * run.settings.gains[0], run.settings.gains[1] ** 2
         # per joint: the located instant its re-seat criterion began to hold (NaN: not now)
         self.ready_since = [math.nan] * len(self.joints)
         self.last_step: tuple[float, float, np.ndarray, np.ndarray] | None = None
         self.step_penetration: list[np.ndarray] = []  # δ at the segment's step ends (the hook)
         self.free_since = [math.nan] * len(self.joints)
-        # the compiled stepper's arrays (mcchain.kernels.radau.radau_step)
+        # the compiled stepper's arrays (mcchain.kernels.radau.radau_kernel)
         n = 2 * ndof
+        self.kr = kr
         self.acc = (self.minv, self.cols, self.first, self.cst, self.row_law, self.B, self.S,
                     self.F, self.g, self.phi, self.qdd, self.lam)  # fmt: skip
         self.stepper = dict(
@@ -200,28 +204,34 @@ class _Sample:
         )  # fmt: skip
         self.state = np.zeros(kr.NSTATE)
         self.work = (np.zeros(n), np.zeros(n), np.zeros(n, complex))
+        self.tolerances = (float(run.settings.rtol), float(run.settings.atol))
+        order = ("f", "J", "LUr", "piv_r", "LUc", "piv_c", "Z", "W", "F", "y_old", "Q")
+        # radau_kernel's arguments after y, in its order
+        self.kernel_arrays = (
+            *(self.stepper[k] for k in order), *self.tolerances, self.state, *self.work,
+            self.alpha2, self.beta2, self.pivot, self.acc,
+        )  # fmt: skip
         self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
         # [[output]]s: their state, and the signals at the segment's step ends (the hook)
         from mcchain.kernels.outputs import output_state
 
         self.spec, self.data, _values = run.output_args()
-        self.ot, self.oscratch = output_state(self.km, self.spec.shape[0])
+        if self.spec.shape[0]:  # (without [[output]]s: no state, and no kernel to load)
+            self.ot, self.oscratch = output_state(self.km, self.spec.shape[0])
         self.step_signals: list[tuple[float, np.ndarray, np.ndarray]] = []
 
     # -- the right-hand side and the step hook ---------------------------------------------
+    def kernel(self, op: int, t: float, t_bound: float, y: np.ndarray) -> int:
+        """:func:`mcchain.kernels.radau.radau_kernel` ``op`` of this sample at (t, y) (the
+        stepper's y, or a state (2 ndof,) to evaluate) towards ``t_bound``; its code."""
+        return int(self.kr.radau_kernel(op, t, self.km, self.i, t_bound, y, *self.kernel_arrays))
+
     def accelerations(self, t: float, y: np.ndarray) -> float:
         """q̈ and λ into ``qdd``, ``lam`` at (t, y) with the present modes; max |Φ| (< 0:
         rank loss, see index1_acceleration)."""
-        from mcchain.kernels.explicit import index1_acceleration
-
-        q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
-        return float(
-            index1_acceleration(
-                self.km, self.i, q, v, t, self.alpha2, self.beta2, self.pivot, self.minv,
-                self.cols, self.first, self.cst, self.row_law, self.B, self.S, self.F, self.g,
-                self.phi, self.qdd, self.lam,
-            )
-        )  # fmt: skip
+        kr = self.kr
+        self.kernel(kr.EVALUATE, float(t), float(t), np.ascontiguousarray(y, dtype=float))
+        return float(self.state[kr.CONSTRAINT_ERROR])
 
     def in_contact(self) -> np.ndarray:
         """Which contact-law joints are in contact under the law in the present modes (INS:
@@ -498,13 +508,17 @@ class _Sample:
         if fail_bit:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
-        nan_history(i, written, *self.flat)
+        if written < self.flat[-1].shape[1]:  # times left unwritten (loaded only then)
+            nan_history(i, written, *self.flat)
         assert run.peaks is not None
         run.peaks[i] = np.nan if fail_bit else self.peaks
-        from mcchain.kernels.outputs import outputs_finish
+        if self.spec.shape[0]:
+            from mcchain.kernels.outputs import outputs_finish
 
-        outputs_finish(i, bool(fail_bit), self.ot, self.spec, self.data, run.output_args()[2])
-        finish_contact(self.km, i, int(run.status[i]), written, cst, *self.contact, run.peaks)
+            values = run.output_args()[2]
+            outputs_finish(i, bool(fail_bit), self.ot, self.spec, self.data, values)
+        if len(self.joints):
+            finish_contact(self.km, i, int(run.status[i]), written, cst, *self.contact, run.peaks)
 
     def segment(self, t: float, y: np.ndarray, written: int) -> _Segment:
         """Integrate from (t, y) to the first event or t_end, writing the output times from
@@ -512,15 +526,10 @@ class _Sample:
         from mcchain.kernels import radau as kr
 
         run, i, st = self.run, self.i, self.stepper
-        rtol, atol = float(run.settings.rtol), float(run.settings.atol)
         t_end, times = float(run.time[-1]), run.time
         events, kinds = self.events()
         y = np.array(y, dtype=float)
-        model_args = (self.alpha2, self.beta2, self.pivot, self.acc)
-        code = kr.radau_start(
-            self.km, i, t, t_end, y, st["f"], st["J"], rtol, atol, self.state, *self.work[:2],
-            *model_args,
-        )  # fmt: skip
+        code = self.kernel(kr.START, t, t_end, y)
         if code != kr.ACCEPTED:
             return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
         self.last_step = None
@@ -530,11 +539,7 @@ class _Sample:
         run.steps[i] -= 1  # the hook's call at the segment's start
         dense = _Dense(t)
         while t < t_end:
-            code = kr.radau_step(
-                self.km, i, t_end, y, st["f"], st["J"], st["LUr"], st["piv_r"], st["LUc"],
-                st["piv_c"], st["Z"], st["W"], st["F"], st["y_old"], st["Q"], rtol, atol,
-                self.state, *self.work, *model_args,
-            )  # fmt: skip
+            code = self.kernel(kr.STEP, t, t_end, y)
             if code == kr.SINGULAR_EVALUATION:
                 return _Segment(written, SINGULAR, float(self.state[kr.T_FAIL]))
             if code != kr.ACCEPTED:
