@@ -128,3 +128,56 @@ def test_radau__slider_crank_free_flight_time_agrees_with_rk45_and_the_history()
     assert abs(times[0] - times[1]) < FREE_FLIGHT_TOL
     separations = [out["first_separation_time"][0, pin] for out in (radau, rk45)]
     assert abs(separations[0] - separations[1]) < FREE_FLIGHT_TOL
+
+
+def test_radau_kernel__evaluations_between_steps_leave_the_steps_unchanged():
+    """The driver evaluates the accelerations (EVALUATE: its events, outputs and peaks)
+    between steps, at states off the solution, through the entry that steps: the steps taken
+    with such evaluations between them are those taken without, bit for bit (an evaluation
+    writes the accelerations and the scratch ``work_f``, which a step sets before it reads
+    them), and an evaluation gives f = (v, q̈) and max |Φ| at the state it is given."""
+    from mcchain.kernels import radau as kr
+    from mcchain.kernels.clearance import NCST, contact_start
+    from mcchain.kernels.forces import mass_diagonal
+    from mcchain.solvers.simulate import SINGULAR_PIVOT
+
+    scene = load_scene_text(flores_pin_text(t_end=0.002, method="radau", rtol=1e-7, atol=1e-10))
+    model = compile_model(scene)
+    start = assemble(model)
+    y0 = np.concatenate([start.q[0], start.v[0]])
+    km, (cols, first) = model.kernel_model(), model.constraint_pattern()
+    ncon, ndof, n = model.ncon, model.ndof, 2 * model.ndof
+    alpha, beta = scene.simulate.gains
+    off = y0 + 1e-6 * np.random.default_rng(5).standard_normal(n)  # Φ ≠ 0 there, at t = 0
+
+    def steps(evaluate_between: bool) -> list[tuple[int, bytes]]:
+        minv = np.zeros(ndof)
+        mass_diagonal(km, 0, minv)
+        cst = np.zeros((int(np.count_nonzero(model.joint_model)), NCST))
+        contact_start(km, 0, cst)
+        acc = (1.0 / minv, cols, first, cst, np.zeros((ncon, 3)), np.zeros((ncon, ndof)),
+               np.zeros((ncon, ncon)), np.zeros(ndof), np.zeros(ncon), np.zeros(ncon),
+               np.zeros(ndof), np.zeros(ncon))  # fmt: skip
+        y, state = y0.copy(), np.zeros(kr.NSTATE)
+        arrays = (
+            np.zeros(n), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n, np.int64),
+            np.zeros((n, n), complex), np.zeros(n, np.int64), np.zeros((3, n)),
+            np.zeros((3, n)), np.zeros((3, n)), np.zeros(n), np.zeros((n, 3)), 1e-7, 1e-10,
+            state, np.zeros(n), np.zeros(n), np.zeros(n, complex), 2.0 * alpha, beta * beta,
+            SINGULAR_PIVOT, *acc,
+        )  # fmt: skip
+        work_f = arrays[15]
+        taken = [(kr.radau_kernel(kr.START, 0.0, km, 0, 0.002, y, *arrays), b"")]
+        for _ in range(12):
+            if evaluate_between:
+                assert kr.radau_kernel(kr.EVALUATE, 0.0, km, 0, 0.0, off, *arrays) == 0
+                np.testing.assert_array_equal(work_f[:ndof], off[ndof:])
+                assert 0.0 < state[kr.CONSTRAINT_ERROR] < 1e-4
+            code = kr.radau_kernel(kr.STEP, 0.0, km, 0, 0.002, y, *arrays)
+            stepper = state[: kr.CONSTRAINT_ERROR]  # (the last slot: what EVALUATE returned)
+            taken.append((code, y.tobytes() + stepper.tobytes() + arrays[10].tobytes()))
+        return taken
+
+    plain = steps(evaluate_between=False)
+    assert [code for code, _ in plain] == [kr.ACCEPTED] * 13
+    assert steps(evaluate_between=True) == plain

@@ -1,6 +1,7 @@
 """A warm run loads what it uses: scipy.optimize (0.2-0.9 s of CPU to import) only where a
 root or a peak is located, the radau kernels of the retry ladder only when a retry reaches
-them — and then they load on demand and solve as a run that started with them.
+them — and then they load on demand and solve as a run that started with them; a radau
+solve loads one compiled radau entry and no kernel that has nothing to do.
 
 Each check runs in a fresh interpreter (what a run imported is what ``sys.modules`` holds
 there); the values are compared with the same solve in this process.
@@ -108,3 +109,65 @@ def test_warm_imports__locate_root_is_brentq_at_the_event_tolerance() -> None:
     root = locate_root(lambda t: t * t - 2.0, 1.0, 2.0)
     assert abs(root - np.sqrt(2.0)) <= 2.0 * EVENT_XTOL * np.sqrt(2.0)
     assert locate_root(lambda t: t - 1.0, 1.0, 2.0) == 1.0  # a root at the bracket's end
+
+
+RADAU_KERNELS = [
+    ("mcchain.kernels.clearance", "contact_start"),
+    ("mcchain.kernels.clearance", "record_stage0"),
+    ("mcchain.kernels.explicit", "finish_contact"),
+    ("mcchain.kernels.explicit", "write_outputs"),
+    ("mcchain.kernels.forces", "mass_diagonal"),
+    ("mcchain.kernels.peaks", "peak_values"),
+    ("mcchain.kernels.radau", "radau_kernel"),
+]
+"""The kernels a radau solve of the slider-crank (no [[output]], no failure) loads from
+numba's cache: one radau entry (start, step and the driver's evaluations), not radau_start,
+radau_step and index1_acceleration, each holding the accelerations' code; not nan_history
+(no time left unwritten), nor the outputs' kernels (no [[output]])."""
+
+
+@pytest.mark.slow  # two fresh interpreters load the kernels (2-5 s each)
+def test_warm_imports__a_radau_solve_loads_one_radau_entry_and_no_idle_kernel(
+    tmp_path: Path,
+) -> None:
+    """The kernels loaded from numba's cache inside ``run_radau`` (a fresh interpreter, after
+    one that filled the cache): :data:`RADAU_KERNELS`, each a cache hit, each once."""
+    scene_path = tmp_path / "radau.toml"
+    scene_path.write_text(slider_crank("radau"), encoding="utf-8")
+    code = f"""
+import numba.core.caching as caching
+from mcchain.scene import compile_model, load_scene
+from mcchain.solvers import radau, solve_chunk
+
+loads, inside = [], [False]
+load = caching.Cache.load_overload
+
+
+def recorded(self, sig, target_context):
+    found = load(self, sig, target_context)
+    if inside[0]:
+        loads.append((self._py_func.__module__, self._py_func.__name__, found is not None))
+    return found
+
+
+run_radau = radau.run_radau
+
+
+def traced(*args):
+    inside[0] = True
+    try:
+        run_radau(*args)
+    finally:
+        inside[0] = False
+
+
+caching.Cache.load_overload = recorded
+radau.run_radau = traced
+scene = load_scene({str(scene_path)!r})
+out = solve_chunk(compile_model(scene), scene, with_modes=False)
+assert (out["status"] == 0).all(), out["status"]
+print(sorted(loads))
+"""
+    fresh(code)  # fills the cache where it lacks a kernel
+    loaded = fresh(code)[-1]
+    assert loaded == str(sorted((module, name, True) for module, name in RADAU_KERNELS))

@@ -18,10 +18,9 @@ the accelerations its events, outputs and peaks read; it locates events and writ
 on the step's dense output :func:`radau_dense`.
 
 One entry, and the right-hand side :func:`_rhs` compiled on its own (not inlined): numba
-links a callee's code into each compiled caller and keeps it in that caller's cache file, so
-three entries held the index-1 accelerations three times, and every inlined call site once
-more (4.1 MB of cache files, which a warm run parses at every load; one entry: see
-``benchmarks/results/speed/warm.md``).
+links a callee's code into each compiled caller and keeps it in that caller's cache file,
+which a warm run loads and parses again, so three entries held the index-1 accelerations
+three times, and each inlined call site once more (``benchmarks/results/speed/warm.md``).
 
 START and STEP leave the accelerations' outputs (q̈, λ and the contact state in ``acc``) at
 the state they end at, for the driver's step hook. The stepper's scalars live in ``state``
@@ -387,7 +386,7 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
     return ACCEPTED
 
 
-@njit(**JIT)
+@njit(**INLINE)
 def radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc):
     """q̈, λ and the contact state (in ``acc``) at (t, y), y (n,) = (q, v), for the driver's
     events, outputs and peaks: ACCEPTED, max |Φ| (< 0 or NaN: S lost rank, see
@@ -399,12 +398,18 @@ def radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc):
 
 @njit(**JIT)
 def radau_kernel(op, t, km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
-                 rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau, acc):  # fmt: skip
+                 rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau, minv, cols,
+                 first, cst, row_law, work_B, work_S, work_F, work_g, work_phi, qdd_out,
+                 lam_out):  # fmt: skip
     """The driver's one compiled entry: ``op`` START (:func:`radau_start` of a segment at
     (t, y) towards ``t_bound``), STEP (:func:`radau_step` towards ``t_bound``; ``t`` unread)
     or EVALUATE (:func:`radau_evaluate` at (t, y); the stepper's arrays untouched but the
-    scratch ``work_f``). Arrays as :func:`radau_step`'s; returns what the operation
-    returns."""
+    scratch ``work_f``). Arrays as :func:`radau_step`'s, then the accelerations' (``acc``,
+    as :func:`mcchain.kernels.explicit.index1_acceleration` takes them) one by one, not as
+    a tuple, which numba takes from Python more slowly (the driver evaluates about 4 times
+    a step). Returns what the operation returns."""
+    acc = (minv, cols, first, cst, row_law, work_B, work_S, work_F, work_g, work_phi, qdd_out,
+           lam_out)  # fmt: skip
     if op == START:
         return radau_start(km, s, t, t_bound, y, f, J, rtol, atol, state, work_y, work_f,
                            balpha2, bbeta2, tau, acc)  # fmt: skip

@@ -209,7 +209,7 @@ class _Sample:
         # radau_kernel's arguments after y, in its order
         self.kernel_arrays = (
             *(self.stepper[k] for k in order), *self.tolerances, self.state, *self.work,
-            self.alpha2, self.beta2, self.pivot, self.acc,
+            self.alpha2, self.beta2, self.pivot, *self.acc,
         )  # fmt: skip
         self.peaks = np.zeros(model.njoint + model.ndriver)  # mcchain.kernels.peaks' order
         # [[output]]s: their state, and the signals at the segment's step ends (the hook)
@@ -228,9 +228,10 @@ class _Sample:
 
     def accelerations(self, t: float, y: np.ndarray) -> float:
         """q̈ and λ into ``qdd``, ``lam`` at (t, y) with the present modes; max |Φ| (< 0:
-        rank loss, see index1_acceleration)."""
-        kr = self.kr
-        self.kernel(kr.EVALUATE, float(t), float(t), np.ascontiguousarray(y, dtype=float))
+        rank loss, see index1_acceleration). (The entry called as directly as it can be:
+        the driver's most frequent call.)"""
+        kr, y = self.kr, np.ascontiguousarray(y, dtype=float)
+        kr.radau_kernel(kr.EVALUATE, t, self.km, self.i, t, y, *self.kernel_arrays)
         return float(self.state[kr.CONSTRAINT_ERROR])
 
     def in_contact(self) -> np.ndarray:
