@@ -10,16 +10,18 @@ warm-up (``Kernels.warm``), every numba cache load in it (``Dispatcher._compile_
 with the index check and unpickling and the dispatcher's own work around the load), every LLVM
 library load (numba's and the generated lane kernels', with the parse of the bitcode numba
 keeps beside the object code to link it into later compiles), every
-first import in it (top-level imports only) and the scipy imports before it. The trees and
-scenes alternate round by round; each figure is the best of the rounds. Then the floor: a
-minimal cached ``@njit`` function's load in a fresh process (numba's import, the first load,
-which initialises numba's target context, and each further load). Writes
-``benchmarks/results/speed/warm.md``.
+first import in it (top-level imports only) and the scipy imports before it; the size of
+the numba cache files it loaded. The trees and scenes alternate round by round; each figure
+is the best of the rounds. Then the floor: a minimal cached ``@njit`` function's load in a
+fresh process (numba's import, the first load, which initialises numba's target context,
+and each further load). Appends a dated section to ``benchmarks/results/speed/warm.md``
+(the earlier ones stay: each says what it compared).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import subprocess
@@ -58,6 +60,16 @@ timed(caching.IndexDataCacheFile, "_load_index", "index")
 timed(caching.IndexDataCacheFile, "_load_data", "unpickle")
 timed(codegen.CPUCodegen, "unserialize_library", "llvm")
 timed(codegen.ll, "parse_bitcode", "bitcode")
+loaded_bytes = [0]
+load_data = caching.IndexDataCacheFile._load_data
+
+def sized(self, name):
+    if phase[0] == "warmup":
+        import os
+        loaded_bytes[0] += os.path.getsize(os.path.join(self._cache_path, name))
+    return load_data(self, name)
+
+caching.IndexDataCacheFile._load_data = sized
 real_import = builtins.__import__
 depth = [0]
 imports = {"prepare": [], "warmup": []}
@@ -100,6 +112,7 @@ timings = json.load(open(folder + "/run.json"))["timings"]
 def total(kind, phase_name, pick):
     return sum(x[pick] for x in imports[phase_name] if x[0].startswith(kind))
 out = {"timings": timings, "warmup_cpu": cpu.get("warmup", 0.0), "parts": dict(parts),
+       "loaded_mb": loaded_bytes[0] / 1e6,
        "imports": [x for x in imports["warmup"] if x[1] > 0.005],
        "import_cpu": sum(x[2] for x in imports["warmup"]),
        "scipy_before_cpu": total("scipy", "prepare", 2),
@@ -190,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     text = report(rows, floors, args)
     print(text)
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "warm.md").write_text(text)
+    earlier = (OUT / "warm.md").read_text() if (OUT / "warm.md").exists() else ""
+    (OUT / "warm.md").write_text(earlier.rstrip("\n") + "\n\n" + text if earlier else text)
     return 0
 
 
@@ -207,6 +221,7 @@ FIGURES: list[tuple[str, Any]] = [
     ("warm-up, CPU s", lambda r: r["warmup_cpu"]),
     ("… numba cache loads (count)", lambda r: _count(r, "dispatcher")),
     ("… numba cache loads, CPU s", lambda r: _part(r, "dispatcher")),
+    ("… … numba cache files loaded, MB", lambda r: r.get("loaded_mb", 0.0)),
     ("… … index check and unpickle, CPU s", lambda r: _part(r, "index") + _part(r, "unpickle")),
     ("… … dispatcher around the load, CPU s", lambda r: _part(r, "dispatcher") - _part(r, "load")),
     ("… LLVM library loads, numba's and the lane kernels' (count)", lambda r: _count(r, "llvm")),
@@ -228,7 +243,7 @@ def report(
     methods = sorted({m for m, _ in rows}, key=["radau", "rk45", "quick start"].index)
     head = " | ".join(f"{m} {n}" for m in methods for n in ("before", "after"))
     lines = [
-        "# Warm start: where a warm run's kernel warm-up goes",
+        f"## Warm start: where a warm run's kernel warm-up goes ({datetime.date.today()})",
         "",
         f"`python benchmarks/bench_warm.py --before {args.before} --after {args.after} "
         f'--rounds {args.rounds}` (Flores slider-crank, 4 samples, 2 ms, `method = "radau"` '
