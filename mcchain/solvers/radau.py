@@ -183,7 +183,7 @@ class _Sample:
         mass_diagonal(self.km, i, self.minv)
         self.minv = 1.0 / self.minv
         self.cst = np.zeros((len(self.joints), cl.NCST))
-        if len(self.joints):  # (without contact-law joints: nothing to start, nor to load)
+        if len(self.joints):  # without contact-law joints it has nothing to do: not loaded
             cl.contact_start(self.km, i, self.cst)
         self.alpha2, self.beta2 = 2.0 * run.settings.gains[0], run.settings.gains[1] ** 2
         # per joint: the located instant its re-seat criterion began to hold (NaN: not now)
@@ -216,7 +216,7 @@ class _Sample:
         from mcchain.kernels.outputs import output_state
 
         self.spec, self.data, _values = run.output_args()
-        if self.spec.shape[0]:  # (without [[output]]s: no state, and no kernel to load)
+        if self.spec.shape[0]:  # without [[output]]s: no output state, no kernel loaded
             self.ot, self.oscratch = output_state(self.km, self.spec.shape[0])
         self.step_signals: list[tuple[float, np.ndarray, np.ndarray]] = []
 
@@ -228,8 +228,8 @@ class _Sample:
 
     def accelerations(self, t: float, y: np.ndarray) -> float:
         """q̈ and λ into ``qdd``, ``lam`` at (t, y) with the present modes; max |Φ| (< 0:
-        rank loss, see index1_acceleration). (The entry called as directly as it can be:
-        the driver's most frequent call.)"""
+        rank loss, see index1_acceleration). The driver's most frequent call: the entry is
+        called directly, not through :meth:`kernel`."""
         kr, y = self.kr, np.ascontiguousarray(y, dtype=float)
         kr.radau_kernel(kr.EVALUATE, t, self.km, self.i, t, y, *self.kernel_arrays)
         return float(self.state[kr.CONSTRAINT_ERROR])
@@ -509,7 +509,7 @@ class _Sample:
         if fail_bit:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
-        if written < self.flat[-1].shape[1]:  # times left unwritten (loaded only then)
+        if written < self.flat[-1].shape[1]:  # times left unwritten: loaded only then
             nan_history(i, written, *self.flat)
         assert run.peaks is not None
         run.peaks[i] = np.nan if fail_bit else self.peaks
