@@ -6,12 +6,10 @@ rk45 on ``configs/slider-crank-requirement.toml`` with ``[storage] histories = "
 thread, CPU ns per accepted sample-step, each variant once per repeat, alternating. The
 variants are texts of the generated lane module, made from this tree's and edited:
 
-- **as shipped** (this tree) and **before**: every change below put back as ``--before``
-  has it;
-- one change at a time put back (what each one saves, paired): ``hermite_window``
-  (``--before``'s text: without the Bézier-hull shortcut and with the two divisions of a
-  step inside the window), ``reference_signal`` (the ideal's x read with both columns of
-  its table interpolated), ``row`` (the feed's row of ``ot_in`` by an integer division);
+- **as shipped** (this tree) and **before**: every change of ``changes`` put back as
+  ``--before`` has it (today one: ``hermite_window``, ``--before``'s text: without the
+  Bézier-hull shortcut and with the two divisions of a step inside the window); with
+  several changes, each one put back alone too (what each one saves, paired);
 - for scale (wrong values, the same steps: outputs do not steer the step): **no relative
   output** (``slider_error`` left out), **no [[output]]**.
 
@@ -28,7 +26,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
-import re
 import statistics
 import subprocess
 import sys
@@ -47,7 +44,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default="main", help="commit of the 'before' outputs.py")
     parser.add_argument("--samples", type=int, default=256)
-    parser.add_argument("--repeats", type=int, default=6)
+    parser.add_argument("--repeats", type=int, default=10)
     args = parser.parse_args()
     command = "python benchmarks/profile_verdict_feed.py " + " ".join(sys.argv[1:])
 
@@ -63,23 +60,8 @@ def main() -> None:
         old, new = function_text(old_source, name), function_text(new_source, name)
         return lambda source: source.replace(new, old) if new in source else source
 
-    def reference_back(source: str) -> str:
-        """The feed's ideal x read by --before's ``reference_signal`` (both columns)."""
-        source = function_back("reference_signal")(source)
-        return re.sub(r"\n( *)rf(\d+), rr\2 = reference_component\(ot_in, \2, tf, 0\)",
-                      r"\n\1rfx\2, rfy\2, rrx\2, rry\2 = reference_signal(ot_in, \2, tf)"
-                      r"\n\1rf\2, rr\2 = rfx\2, rrx\2", source)  # fmt: skip
-
-    def row_back(source: str) -> str:
-        """The feed's row of ot_in as --before computed it (an integer division)."""
-        return re.sub(r"row = (int\(W\[\d+ \+ l\]\))\n( *)row = row if row < .*\n",
-                      r"row = (\1) % ot_in.shape[0]\n", source)  # fmt: skip
-
-    changes = {
-        "hermite_window": function_back("hermite_window"),
-        "reference_signal": reference_back,
-        "row": row_back,
-    }
+    changes = {"hermite_window": function_back("hermite_window")}
+    """Each change of this tree to the feed, as a function that puts it back in a text."""
 
     def all_back(source: str) -> str:
         for change in changes.values():
@@ -107,7 +89,11 @@ def main() -> None:
     variants = {
         "as shipped": (scene, same),
         "before": (scene, all_back),
-        **{f"as shipped, {name} as before": (scene, change) for name, change in changes.items()},
+        **{
+            f"as shipped, {name} as before": (scene, change)
+            for name, change in changes.items()
+            if len(changes) > 1
+        },
         "no relative output": (alone, same),
         "no [[output]]": (none, same),
     }
