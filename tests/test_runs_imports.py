@@ -45,3 +45,30 @@ def test_light_module__imports_only_the_standard_library(module: str) -> None:
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
     assert proc.stdout.splitlines()[-1] == "[]"
+
+
+@pytest.mark.slow  # a fresh interpreter loads the kernels (2-5 s)
+def test_run__without_dask_imports_no_dask_scheduler(tmp_path: Path) -> None:
+    """A run on this machine (no ``--dask``) reads its merged ensemble back for the retry
+    counts and the verdict lines without a Dask graph: computing one looked for a scheduler
+    and imported distributed, 0.7 s of every run (xarray itself imports dask and dask.array,
+    for its type checks)."""
+    from mcchain.testing.scenes import config_text, with_lines
+
+    scene = tmp_path / "slider.toml"
+    two_samples = with_lines(config_text("slider-crank-requirement.toml"), {"count": "count = 2"})
+    scene.write_text(two_samples)
+    code = (
+        "import sys\n"
+        "from mcchain.runner import plan\n"
+        f"result = plan.start_run({str(scene)!r}, run_dir={str(tmp_path / 'run')!r},"
+        " progress=False)\n"
+        "print(result.record['requirements'][0].split(':')[0])\n"
+        "print(sorted(m for m in ('distributed',) if m in sys.modules))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    *_, requirement, imported = proc.stdout.splitlines()
+    assert requirement.startswith("requirement ") and imported == "[]"

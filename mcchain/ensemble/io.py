@@ -448,20 +448,31 @@ def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
 
 
 def _read_samples(
-    cache: _PartCache, starts: np.ndarray, stops: np.ndarray, name: str, b0: int, b1: int
+    cache: _PartCache,
+    starts: np.ndarray,
+    stops: np.ndarray,
+    name: str,
+    b0: int,
+    b1: int,
+    *,
+    descending: bool = False,
 ) -> np.ndarray:
     """Rows ``b0:b1`` (along the variable's first, row dim) of variable ``name``, gathered
-    from the parts that hold them; part ``i`` holds rows ``starts[i]:stops[i]``."""
+    from the parts that hold them; part ``i`` holds rows ``starts[i]:stops[i]``. The parts
+    are opened last first when ``descending`` (the rows come back in order either way)."""
     i = int(np.searchsorted(starts, b0, side="right")) - 1
     while i < len(starts) - 1 and stops[i] <= b0:  # parts without rows of this dim
         i += 1
-    pieces = []
+    spans = []
     while i < len(starts) and starts[i] < b1:
         lo, hi = max(b0, int(starts[i])), min(b1, int(stops[i]))
         if hi > lo:
-            pieces.append(np.asarray(cache(i)[name][lo - starts[i] : hi - starts[i]]))
+            spans.append((i, lo - int(starts[i]), hi - int(starts[i])))
         i += 1
-    return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+    order = reversed(spans) if descending else spans
+    pieces = {i: np.asarray(cache(i)[name][lo:hi]) for i, lo, hi in order}
+    rows = [pieces[i] for i, _, _ in spans]
+    return rows[0] if len(rows) == 1 else np.concatenate(rows)
 
 
 def _row_offsets(cache: _PartCache, parts: Sequence[Part], dim: str) -> np.ndarray:
@@ -596,17 +607,29 @@ def merge_parts(
                 targets = _create_variables(dst, first, options)
                 # Row dim by row dim, window by window, variable by variable: the order
                 # chunks are written in (hence the file's bytes) depends only on the layout
-                # and the row counts (samples; histories kept).
+                # and the row counts (samples; histories kept). Every other variable walks
+                # its window backwards: a window spans more parts than the cache keeps
+                # open when the compute chunks are small, and a least-recently-used cache
+                # swept forwards again and again reopens every part for every variable
+                # (then most of a merge is spent opening files), while a sweep back and
+                # forth finds all but the turn's far end still open.
+                backwards = False
                 for dim, rows in offsets.items():
                     along = [t for t in targets if t.dim == dim]
                     window = max(WINDOW_SAMPLES, max((t.length for t in along), default=1))
                     for w0, w1 in _blocks(int(rows[-1]), window):
                         for t in along:
-                            for b0 in range(w0, w1, min(t.step, window)):
-                                b1 = min(b0 + t.step, w1)
-                                block = _read_samples(cache, rows[:-1], rows[1:], t.name, b0, b1)
+                            blocks = [
+                                (b0, min(b0 + t.step, w1))
+                                for b0 in range(w0, w1, min(t.step, window))
+                            ]
+                            for b0, b1 in reversed(blocks) if backwards else blocks:
+                                block = _read_samples(
+                                    cache, rows[:-1], rows[1:], t.name, b0, b1, descending=backwards
+                                )
                                 t.var[b0:b1] = block
                                 bytes_in += block.nbytes
+                            backwards = not backwards
                 _set_attrs(dst, cache.attrs)
         cache.close()
         commit_file(tmp, out)

@@ -114,7 +114,7 @@ class RetryCounts(Observer):
         from mcchain.runner.runs import ENSEMBLE
         from mcchain.solvers.retry import SOLVED_BY, retry_counts
 
-        ds = open_ensemble(run.folder / ENSEMBLE)
+        ds = open_ensemble(run.folder / ENSEMBLE, dask=False)  # one small variable
         try:
             if SOLVED_BY in ds.data_vars:
                 solved_by = ds[SOLVED_BY].values

@@ -218,7 +218,7 @@ def resume_run(
     ensemble = folder / ENSEMBLE
     if record.get("status") == COMPLETED and ensemble.exists() and not remerge:
         try:
-            open_ensemble(ensemble).close()
+            open_ensemble(ensemble, dask=False).close()
         except DamagedEnsemble as exc:
             raise RunError(f"{run}: already completed, but {exc}") from None
         raise RunError(f"{run}: already completed")
@@ -335,7 +335,7 @@ def extend_run(
             f"--extend: {run} is not completed (complete it first: mcchain run --resume {run})"
         )
     try:
-        open_ensemble(ensemble).close()
+        open_ensemble(ensemble, dask=False).close()
     except DamagedEnsemble as exc:
         raise RunError(f"--extend: {exc}") from None
     _check_threads(threads, dask)
