@@ -1,4 +1,4 @@
-"""How accurate is the slider-crank verdict's integration (issue 37, item 6)? rk45 on
+r"""How accurate is the slider-crank verdict's integration (issue 37, item 6)? rk45 on
 ``configs/slider-crank-requirement.toml`` (``[storage] histories = "none"``), in process,
 against a tight reference of the same samples.
 
@@ -8,27 +8,34 @@ which is the more accurate one. So each variant is compared with a reference: th
 samples at tolerances several decades tighter (rk45, and radau, an independent integrator),
 whose own convergence is shown by two tight tolerances against each other.
 
-Variants (``--variants``, names below; the scene's rtol/atol unless a name says otherwise):
+Variants (``--variants``, the names of :data:`VARIANTS`; the scene's rtol/atol unless a
+name says otherwise):
 
 * ``landing``: steps that land on every output time (``output_dt`` 1e-5 s: at most 10 µs),
-  as shipped before this study;
-* ``free``: steps as the error control chooses them (the output grid read from the
-  Dormand-Prince dense output, or none at all: with ``histories = "none"`` nothing is
-  stored, so the per-sample values are those of a run whose only output time is t_end);
-* ``landing-1e-10`` / ``free-1e-10``, ``free-1e-11``, ``free-1e-12``: rk45 at rtol 1e-10,
-  1e-11, 1e-12 (atol 1000 times smaller);
-* ``radau-1e-10``: radau at rtol 1e-10, atol 1e-13.
+  as shipped;
+* ``free``: steps as the error control chooses them (the output grid would be read from the
+  Dormand-Prince dense output; with ``histories = "none"`` nothing is stored, so the
+  per-sample values are those of a run whose only output time is t_end);
+* ``free-1e-N`` / ``landing-1e-N``: rk45 at rtol 1e-N, atol 1e-(N+3); ``radau-1e-N``: radau
+  likewise.
 
-Per variant against ``--reference``: per-sample errors of ``slider_error`` (m, absolute),
-``peak_contact_force`` at the pin and ``pin_force_after_startup`` (relative to the
-reference's value), median, p90 and max; and per requirement what the user reads: failures,
-P(fail) with its one-sided bounds at the requirement's confidence, the verdict, and the
-samples whose pass/fail differs from the reference's.
+Per variant against each of ``--references``: per-sample errors of ``slider_error`` (m,
+absolute), ``peak_contact_force`` at the pin and ``pin_force_after_startup`` (relative to the
+reference's value), median, p90 and max, the samples whose status differs; and per
+requirement what the user reads: failures, P(fail) with its one-sided bounds at the
+requirement's confidence, the verdict, and the samples whose pass/fail differs from the
+reference's. The commands of ``benchmarks/results/verdict/accuracy.md``:
 
-    python benchmarks/accuracy_verdict.py --samples 256
+    python benchmarks/accuracy_verdict.py --samples 1024 \
+        --variants landing,free,landing-1e-8,free-1e-8,free-1e-9,free-1e-10,free-1e-11,\
+free-1e-12,landing-1e-12,free-1e-13 --references free-1e-13,free-1e-12 --out accuracy_1024.md
+    python benchmarks/accuracy_verdict.py --samples 32 \
+        --variants landing,free,free-1e-12,free-1e-13,radau-1e-10,radau-1e-11 \
+        --references free-1e-13,radau-1e-11 --out accuracy_radau.md
 
-Results (with the command, the load average and the CPU seconds of each variant) go to
-``benchmarks/results/verdict/accuracy.md``.
+Results (with the command, the load average, the steps, rejections, evaluations and CPU
+seconds of each variant) go to ``benchmarks/results/verdict/`` under ``--out``; the
+reading of them is ``accuracy.md`` there.
 """
 
 from __future__ import annotations
@@ -170,7 +177,7 @@ def tables(scene: Any, model: Any, results: dict[str, Any], reference: str) -> l
         steps, rejected = values["steps"].sum(), values["rejected_steps"].sum()
         share = f"{rejected / (steps + rejected) * 100:.1f} %" if rejected >= 0 else "–"
         lines.append(
-            f"| `{name}` | {sim.rtol:g}, {sim.atol:g} | {steps / steps.size:.0f} | {share} | "
+            f"| `{name}` | {sim.rtol:g}, {sim.atol:g} | {values['steps'].mean():.0f} | {share} | "
             f"{values['evaluations'].mean():.0f} | {cpu:.2f} | "
             + " | ".join(
                 "(reference)"
