@@ -24,7 +24,6 @@ Results (with the command and the load average) go to ``benchmarks/results/verdi
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import statistics
 import subprocess
@@ -36,7 +35,7 @@ from pathlib import Path
 import numba
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from profile_output_feed import OUTPUTS, function_text
+from profile_output_feed import OUTPUTS, function_text, results_digest
 from profile_verdict import REPO, light_scene, write_result
 
 
@@ -121,11 +120,7 @@ def main() -> None:
             cpu = time.process_time() - t0
             costs[name].append(cpu / out["steps_taken"].sum() * 1e9)
             steps[name].add(int(out["steps_taken"].sum()))
-            digest = hashlib.sha256()
-            for key in sorted(out):
-                if key != "time":
-                    digest.update(key.encode() + out[key].tobytes())
-            digests[name].add(digest.hexdigest()[:16])
+            digests[name].add(results_digest(out))
     generate.generate_source = generate_source
     generate.generated_text = generated_text
 
