@@ -47,6 +47,15 @@ def function_text(source: str, name: str) -> str:
     return match.group(0)
 
 
+def results_digest(out: dict) -> str:
+    """The first 16 hex digits of the SHA-256 of a solved chunk's arrays but ``time``."""
+    digest = hashlib.sha256()
+    for key in sorted(out):
+        if key != "time":
+            digest.update(key.encode() + out[key].tobytes())
+    return digest.hexdigest()[:16]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default="main", help="commit of the 'before' outputs.py")
@@ -125,11 +134,7 @@ def main() -> None:
             out = solve_chunk(model, variant)
             cpu = time.process_time() - t0
             costs[name].append(cpu / out["steps_taken"].sum() * 1e9)
-            digest = hashlib.sha256()
-            for key in sorted(out):
-                if key != "time":
-                    digest.update(key.encode() + out[key].tobytes())
-            digests[name].add(digest.hexdigest()[:16])
+            digests[name].add(results_digest(out))
     generate.generate_source = generate_source
     generate.generated_text = generated_text
 

@@ -266,3 +266,114 @@ def test_cubic_window__the_shortcut_without_slopes_is_bit_identical():
                 t[2] <= w1) and not (fb >= fa and fc >= fd and (fb > fa or fc > fd)) and not (
                 fb <= fa and fc <= fd and (fb < fa or fc < fd))  # fmt: skip
     assert shortcut > 500  # the shortcut was taken often, not only the full path
+
+
+@njit(**JIT)
+def _hermite_window_in_full(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold,
+                            reduce, gate_hi, gate_lo, cap_lo, cap_hi):  # fmt: skip
+    """ko.hermite_window's extremes as they were before its shortcuts (the critical points
+    always sought, the clipped ends always divided): the reference the shortcuts must match
+    bit for bit (reductions max, min, max_abs, range)."""
+    h = t1 - t0
+    lo_t = max(t0, w0)
+    hi_t = min(t1, w1)
+    if not (h > 0.0 and hi_t > lo_t):
+        return
+    ta = (lo_t - t0) / h
+    tb = (hi_t - t0) / h
+    if tb > 1.0:
+        tb = 1.0
+    fa = f0
+    if ta > 0.0:
+        fa, _slope = ko._hermite(ta, f0, r0, f1, r1, h)
+    fb = f1
+    if tb < 1.0:
+        fb, _slope = ko._hermite(tb, f0, r0, f1, r1, h)
+    W[base + ko.SPAN * stride] += hi_t - lo_t
+    rise = f1 - f0
+    qa = 3.0 * h * (r0 + r1) - 6.0 * rise
+    qb = 6.0 * rise - 4.0 * h * r0 - 2.0 * h * r1
+    qc = h * r0
+    u1 = math.nan
+    u2 = math.nan
+    if qa == 0.0:
+        if qb != 0.0:
+            u1 = -qc / qb
+    else:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc >= 0.0:
+            root = math.sqrt(disc)
+            qq = -0.5 * (qb + root) if qb >= 0.0 else -0.5 * (qb - root)
+            u1 = qq / qa
+            if qq != 0.0:
+                u2 = qc / qq
+    if u2 < u1:
+        u1, u2 = u2, u1
+    hi = max(W[base + ko.HI * stride], max(fa, fb))
+    lo = min(W[base + ko.LO * stride], min(fa, fb))
+    if u1 > ta and u1 < tb:
+        v1, _slope = ko._hermite(u1, f0, r0, f1, r1, h)
+        if gate_hi == 1.0:
+            hi = max(hi, min(v1, cap_hi))
+        if gate_lo == 1.0:
+            lo = min(lo, max(v1, cap_lo))
+    if u2 > ta and u2 < tb:
+        v2, _slope = ko._hermite(u2, f0, r0, f1, r1, h)
+        if gate_hi == 1.0:
+            hi = max(hi, min(v2, cap_hi))
+        if gate_lo == 1.0:
+            lo = min(lo, max(v2, cap_lo))
+    W[base + ko.HI * stride] = hi
+    W[base + ko.LO * stride] = lo
+
+
+def test_hermite_window__the_hull_shortcut_is_bit_identical():
+    """Extremes of a step whose Bézier hull lies inside the running extremes skip the
+    critical points, and a step inside the window skips the divisions: the state must be
+    the full path's byte for byte, for every extreme reduction, gates and caps, on steps
+    whose interpolant just reaches, just misses or overshoots the running extremes (its
+    critical point a few ulp from them), flat, signed-zero, NaN and infinite data, and
+    windows that cut the step or hold it exactly."""
+    rng = np.random.default_rng(38)
+    specials = [0.0, -0.0, 1.0, -1.0, math.nan, math.inf, -math.inf]
+    shortcut = 0
+    for _ in range(8000):
+        t0 = float(rng.choice([0.0, 0.002, rng.uniform(0.0, 0.01)]))
+        t1 = t0 + float(rng.uniform(1e-7, 1e-3))
+        h = t1 - t0
+        if rng.random() < 0.15:
+            f0, r0, f1, r1 = (float(x) for x in rng.choice(specials, 4))
+        else:
+            f0, f1 = (float(x) for x in rng.normal(size=2) * 10.0 ** rng.integers(-6, 3))
+            r0, r1 = (float(x) for x in rng.normal(size=2) * abs(f1 - f0 + 1e-9) / h * 3)
+        # the interpolant's true maximum and minimum on a fine grid: running extremes set
+        # just above or below them (by a few ulp) or far away
+        theta = np.linspace(0.0, 1.0, 257)
+        curve = np.array([ko._hermite(x, f0, r0, f1, r1, h)[0] for x in theta])
+        finite = curve[np.isfinite(curve)]
+        top, low = (float(finite.max()), float(finite.min())) if finite.size else (0.0, 0.0)
+        ulp = float(np.spacing(max(abs(top), abs(low), 1e-300)))
+        # ... or a few hundred ulp from the Bézier hull, where the shortcut's test flips
+        c1, c2 = f0 + h * r0 / 3.0, f1 - h * r1 / 3.0
+        hull = (max(f0, f1, c1, c2), min(f0, f1, c1, c2))
+        near = int(rng.integers(-400, 400))
+        state = np.zeros(3 * OUTPUT_WIDTH)
+        ko.outputs_start(state, 1, 3)
+        state[1 + 3 * ko.HI] = float(rng.choice([-math.inf, top + ulp * rng.integers(-40, 40),
+                                                  hull[0] + ulp * near, top + abs(top) + 1.0,
+                                                  math.nan]))  # fmt: skip
+        state[1 + 3 * ko.LO] = float(rng.choice([math.inf, low + ulp * rng.integers(-40, 40),
+                                                  hull[1] - ulp * near, low - abs(low) - 1.0,
+                                                  math.nan]))  # fmt: skip
+        w0 = float(rng.choice([0.0, t0, t0 + 0.3 * h, t1 + 1e-9]))
+        w1 = float(rng.choice([math.inf, t1, t0 + 0.7 * h, 0.024]))
+        code = int(rng.choice([0, 1, 2, 5]))
+        gate_hi, gate_lo = float(rng.integers(0, 2)), float(rng.integers(0, 2))
+        cap_lo, cap_hi = (-math.inf, math.inf) if rng.random() < 0.7 else (low - 1e-3, top)
+        expected = state.copy()
+        rest = (t0, f0, r0, t1, f1, r1, w0, w1, 0.0, code, gate_hi, gate_lo, cap_lo, cap_hi)
+        ko.hermite_window(state, 1, 3, *rest)
+        _hermite_window_in_full(expected, 1, 3, *rest)
+        assert state.tobytes() == expected.tobytes(), rest
+        shortcut += bool(hull[0] < expected[1 + 3 * ko.HI] and hull[1] > expected[1 + 3 * ko.LO])
+    assert shortcut > 300  # the hull inside the extremes often: not only the full path

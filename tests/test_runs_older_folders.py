@@ -17,7 +17,7 @@ import netCDF4
 import pytest
 
 from mcchain.cli import main
-from mcchain.ensemble.io import study_differences
+from mcchain.ensemble.study import study_differences
 from mcchain.runner import plan, runs
 
 SCENE = """

@@ -204,7 +204,7 @@ def output_functions(with_hermite: bool) -> str:
              "REFERENCE_HEAD", "REFERENCE_WIDTH")  # fmt: skip
     constants = [f"{name} = {getattr(outputs, name)!r}" for name in names]
     constants += [f"{name} = {getattr(outputs, name)!r}" for name in
-                  ("GL_X0", "GL_X1", "GL_W0", "GL_W1")]  # fmt: skip
+                  ("GL_X0", "GL_X1", "GL_W0", "GL_W1", "THIRD", "HULL_ROUNDING")]  # fmt: skip
     constants.append(f"OUTPUT_WIDTH = {OUTPUT_WIDTH!r}")
     parts = ["\n".join(constants)]
     kernels = [contact._hermite] if with_hermite else []

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mcchain.ensemble.histories import ROW_DIMS
+from mcchain.ensemble.study import SESSION_ATTRIBUTES, attributes_of, same_values, study_attributes
 from mcchain.errors import RunError
 
 if TYPE_CHECKING:
@@ -304,7 +305,7 @@ class _PartCache:
                     for name, var in nc.variables.items()
                     if not set(ROW_DIMS) & set(var.dimensions)
                 }
-                self.attrs = _attrs(nc) if self._given is None else dict(self._given)
+                self.attrs = attributes_of(nc) if self._given is None else dict(self._given)
                 if self._given is not None:
                     self._check_attrs(nc, self._parts[index].path.name)
             elif index not in self._checked:
@@ -317,20 +318,20 @@ class _PartCache:
         if _layout(nc) != self._layout:
             raise MergeError(f"{name_of}: variables differ from the first part")
         for name, value in self._fixed.items():
-            if not _same(nc[name][:], value):
+            if not same_values(nc[name][:], value):
                 raise MergeError(f"{name_of}: {name} differs from the first part")
         self._check_attrs(nc, name_of)
 
     def _check_attrs(self, nc: netCDF4.Dataset, name_of: str) -> None:
         # What ran a session's chunks is provenance, not the study: parts written by a
         # session that ran interpreted and by one that ran compiled hold the same values.
-        attrs, expected = _attrs(nc), self.attrs
+        attrs, expected = attributes_of(nc), self.attrs
         attrs = {key: value for key, value in attrs.items() if key not in SESSION_ATTRIBUTES}
         expected = {key: value for key, value in expected.items() if key not in SESSION_ATTRIBUTES}
         if self._given is not None:  # the run grew since the part was written
             attrs, expected = study_attributes(attrs), study_attributes(expected)
         if set(attrs) != set(expected) or not all(
-            _same(value, expected[key]) for key, value in attrs.items()
+            same_values(value, expected[key]) for key, value in attrs.items()
         ):
             raise MergeError(f"{name_of}: global attributes differ")
 
@@ -356,90 +357,6 @@ def check_tiling(parts: Sequence[Part], nsample: int | None = None) -> int:
     if nsample is not None and position != nsample:
         raise MergeError(f"parts cover samples 0:{position}, expected 0:{nsample}")
     return position
-
-
-SESSION_ATTRIBUTES = ("kernel_compiler",)
-"""Global attributes that say how a session ran, not what the study is: not compared
-between parts. The merged file carries the first part's (a run that grew: the merging
-session's); run.json's sessions record every session's."""
-
-
-def study_attributes(attrs: Mapping[str, Any]) -> dict[str, Any]:
-    """Global attributes without the sample count (``sample_count``, ``settings``'
-    ``samples``) and how the verdicts are judged (``settings``' ``sequential``, which an
-    ``--extend`` of a fixed-count run adds): what the parts of one study share however far
-    it was extended."""
-    import json
-
-    out = {key: value for key, value in attrs.items() if key != "sample_count"}
-    if isinstance(out.get("settings"), str):
-        with suppress(ValueError):
-            settings = json.loads(out["settings"])
-            if isinstance(settings, dict):
-                settings.pop("samples", None)
-                settings.pop("sequential", None)
-                out["settings"] = json.dumps(settings, sort_keys=True)
-    return out
-
-
-def study_differences(
-    ours: Mapping[str, Any], theirs: Mapping[str, Any], *, most: int = 6
-) -> list[str]:
-    """What makes two sets of global attributes two studies (as the merge compares them,
-    :func:`study_attributes` without the session's): one phrase per differing attribute, or
-    per differing key of the ``settings`` and ``versions`` JSON (``scene.simulate.retry_failed:
-    absent there, true here``); at most ``most`` phrases, then how many more."""
-    import json
-
-    def flat(value: Any, prefix: str) -> dict[str, Any]:
-        if isinstance(value, dict):
-            out: dict[str, Any] = {}
-            for key, item in value.items():
-                out.update(flat(item, f"{prefix}.{key}" if prefix else str(key)))
-            return out
-        return {prefix: value}
-
-    def decoded(attrs: Mapping[str, Any]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for key, value in study_attributes(attrs).items():
-            if key in SESSION_ATTRIBUTES:
-                continue
-            parsed = None
-            if key in ("settings", "versions") and isinstance(value, str):
-                with suppress(ValueError):
-                    parsed = json.loads(value)
-            out.update(flat(parsed, key) if isinstance(parsed, dict) else {key: value})
-        return out
-
-    here, there = decoded(ours), decoded(theirs)
-    phrases = []
-    for key in sorted(set(here) | set(there)):
-        if key in here and key in there and _same(here[key], there[key]):
-            continue
-        shown = [
-            "absent" if key not in side else json.dumps(side[key], default=str)[:60]
-            for side in (there, here)
-        ]
-        phrases.append(f"{key}: {shown[0]} there, {shown[1]} here")
-    if len(phrases) > most:
-        phrases = [*phrases[:most], f"{len(phrases) - most} more"]
-    return phrases
-
-
-def file_attributes(path: Path) -> dict[str, Any]:
-    """The global attributes of a netCDF file (an ensemble or a part)."""
-    import netCDF4
-
-    with netCDF4.Dataset(path) as nc:
-        return _attrs(nc)
-
-
-def _attrs(obj: Any) -> dict[str, Any]:
-    return {key: obj.getncattr(key) for key in obj.ncattrs()}
-
-
-def _same(a: Any, b: Any) -> bool:
-    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
 
 
 def _blocks(n: int, length: int) -> Iterator[tuple[int, int]]:
@@ -505,7 +422,7 @@ def _create_variables(
         dims = var.dimensions
         if not set(ROW_DIMS) & set(dims):
             copy = dst.createVariable(name, var.dtype, dims)
-            _set_attrs(copy, _attrs(var))
+            _set_attrs(copy, attributes_of(var))
             if var.size:
                 copy[:] = var[:]
             continue
@@ -522,7 +439,7 @@ def _create_variables(
             kwargs.pop("shuffle", None)
         chunks = (length, *[max(n, 1) for n in inner])
         target = dst.createVariable(name, var.dtype, dims, chunksizes=chunks, **kwargs)
-        _set_attrs(target, _attrs(var))
+        _set_attrs(target, attributes_of(var))
         if per_sample == 0 and numeric:
             continue
         step = length * max(WRITE_TARGET_BYTES // max(per_sample * length, 1), 1)

@@ -380,7 +380,8 @@ def check_same_study(job: Job, folder: Path, flag: str) -> None:
     Raises:
         RunError: naming the attributes or settings keys that differ.
     """
-    from mcchain.ensemble.io import file_attributes, list_parts, study_differences
+    from mcchain.ensemble.io import list_parts
+    from mcchain.ensemble.study import file_attributes, study_differences
     from mcchain.runner.provenance import software_versions
     from mcchain.runner.runs import ENSEMBLE, PARTS
 
