@@ -115,15 +115,16 @@ RADAU_KERNELS = [
     ("mcchain.kernels.clearance", "contact_start"),
     ("mcchain.kernels.clearance", "record_stage0"),
     ("mcchain.kernels.explicit", "finish_contact"),
+    ("mcchain.kernels.explicit", "index1_acceleration"),
     ("mcchain.kernels.explicit", "write_outputs"),
     ("mcchain.kernels.forces", "mass_diagonal"),
     ("mcchain.kernels.peaks", "peak_values"),
     ("mcchain.kernels.radau", "radau_kernel"),
 ]
 """The kernels a radau solve of the slider-crank (no [[output]], no failure) loads from
-numba's cache: one radau entry (start, step and the driver's evaluations), not radau_start,
-radau_step and index1_acceleration, each holding the accelerations' code; not nan_history
-(no time left unwritten), nor the outputs' kernels (no [[output]])."""
+numba's cache: one stepping entry (start and step), not radau_start and radau_step, each
+holding the accelerations' code, and the accelerations the driver evaluates between steps;
+not nan_history (no time left unwritten), nor the outputs' kernels (no [[output]])."""
 
 
 @pytest.mark.slow  # two fresh interpreters load the kernels (2-5 s each)

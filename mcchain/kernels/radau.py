@@ -12,15 +12,18 @@ right-hand side is formed here by forward differences over the n = 2 ndof state 
 on it, never the accepted solution's accuracy).
 
 The driver (:mod:`mcchain.solvers.radau`) calls one compiled entry, :func:`radau_kernel`:
-``START`` (:func:`radau_start`) at the start of each segment between events, ``STEP``
-(:func:`radau_step`) once per accepted step, and ``EVALUATE`` (:func:`radau_evaluate`) for
-the accelerations its events, outputs and peaks read; it locates events and writes outputs
-on the step's dense output :func:`radau_dense`.
+``START`` (:func:`radau_start`) at the start of each segment between events and ``STEP``
+(:func:`radau_step`) once per accepted step; it evaluates the accelerations its events,
+outputs and peaks read with :func:`mcchain.kernels.explicit.index1_acceleration` itself
+(about 4 times a step: an entry of 20 arguments, where this one's 38 cost 1.6 µs more a
+call from Python), and locates events and writes outputs on the step's dense output
+:func:`radau_dense`.
 
-One entry, and the right-hand side :func:`_rhs` compiled on its own (not inlined): numba
-links a callee's code into each compiled caller and keeps it in that caller's cache file,
-which a warm run loads and parses again, so three entries held the index-1 accelerations
-three times, and each inlined call site once more (``benchmarks/results/speed/warm.md``).
+One stepping entry, and the right-hand side :func:`_rhs` compiled on its own (not inlined):
+numba links a callee's code into each compiled caller and keeps it in that caller's cache
+file, which a warm run loads and parses again, so two stepping entries held the index-1
+accelerations twice, and each inlined call site once more
+(``benchmarks/results/speed/warm.md``).
 
 START and STEP leave the accelerations' outputs (q̈, λ and the contact state in ``acc``) at
 the state they end at, for the driver's step hook. The stepper's scalars live in ``state``
@@ -78,17 +81,17 @@ JACOBIAN_INCREMENT = EPS**0.5
 """Forward-difference increment relative to max(|y_k|, the largest |y| of its half)."""
 
 # state entries
-(T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV, T_FAIL,
- CONSTRAINT_ERROR) = range(11)  # fmt: skip
-NSTATE = 11
+(T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV,
+ T_FAIL) = range(10)  # fmt: skip
+NSTATE = 10
 """H_ABS_OLD and ERROR_OLD are NaN where scipy's are None; CURRENT_JAC, LU_OK, SOL_OK are
 0/1 flags; NFEV counts right-hand-side evaluations (the Jacobian's not included); T_FAIL is
-the time of a singular evaluation; CONSTRAINT_ERROR is what the last EVALUATE returned."""
+the time of a singular evaluation."""
 
 ACCEPTED, TOO_SMALL_STEP, SINGULAR_EVALUATION = 0, 1, 2
 """What :func:`radau_kernel` returns."""
 
-START, STEP, EVALUATE = 0, 1, 2
+START, STEP = 0, 1
 """What :func:`radau_kernel` does (its ``op``)."""
 
 
@@ -386,38 +389,24 @@ def radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, 
     return ACCEPTED
 
 
-@njit(**INLINE)
-def radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc):
-    """q̈, λ and the contact state (in ``acc``) at (t, y), y (n,) = (q, v), for the driver's
-    events, outputs and peaks: ACCEPTED, max |Φ| (< 0 or NaN: S lost rank, see
-    index1_acceleration) in state[CONSTRAINT_ERROR]; f = (v, q̈) into the scratch
-    ``work_f``. Not counted in NFEV."""
-    state[CONSTRAINT_ERROR] = _rhs(km, s, t, y, work_f, balpha2, bbeta2, tau, acc)
-    return ACCEPTED
-
-
 @njit(**JIT)
 def radau_kernel(op, t, km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
                  rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau, minv, cols,
                  first, cst, row_law, work_B, work_S, work_F, work_g, work_phi, qdd_out,
                  lam_out):  # fmt: skip
-    """The driver's one compiled entry: ``op`` START (:func:`radau_start` of a segment at
-    (t, y) towards ``t_bound``), STEP (:func:`radau_step` towards ``t_bound``; ``t`` unread)
-    or EVALUATE (:func:`radau_evaluate` at (t, y); the stepper's arrays untouched but the
-    scratch ``work_f``). Arrays as :func:`radau_step`'s, then the accelerations' (``acc``,
-    as :func:`mcchain.kernels.explicit.index1_acceleration` takes them) one by one, not as
-    a tuple, which numba takes from Python more slowly (the driver evaluates about 4 times
-    a step). Returns what the operation returns."""
+    """The driver's one compiled stepping entry: ``op`` START (:func:`radau_start` of a
+    segment at (t, y) towards ``t_bound``) or STEP (:func:`radau_step` towards ``t_bound``;
+    ``t`` unread). Arrays as :func:`radau_step`'s, then the accelerations' (``acc``, as
+    :func:`mcchain.kernels.explicit.index1_acceleration` takes them) one by one, not as a
+    tuple, which numba takes from Python more slowly. Returns what the operation returns."""
     acc = (minv, cols, first, cst, row_law, work_B, work_S, work_F, work_g, work_phi, qdd_out,
            lam_out)  # fmt: skip
     if op == START:
         return radau_start(km, s, t, t_bound, y, f, J, rtol, atol, state, work_y, work_f,
                            balpha2, bbeta2, tau, acc)  # fmt: skip
-    if op == STEP:
-        return radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
-                          rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau,
-                          acc)  # fmt: skip
-    return radau_evaluate(km, s, t, y, state, work_f, balpha2, bbeta2, tau, acc)
+    return radau_step(km, s, t_bound, y, f, J, LUr, piv_r, LUc, piv_c, Z, W, F, y_old, Q,
+                      rtol, atol, state, work_y, work_f, work_c, balpha2, bbeta2, tau,
+                      acc)  # fmt: skip
 
 
 @njit(**INLINE)

@@ -228,11 +228,17 @@ class _Sample:
 
     def accelerations(self, t: float, y: np.ndarray) -> float:
         """q̈ and λ into ``qdd``, ``lam`` at (t, y) with the present modes; max |Φ| (< 0:
-        rank loss, see index1_acceleration). The driver's most frequent call: the entry is
-        called directly, not through :meth:`kernel`."""
-        kr, y = self.kr, np.ascontiguousarray(y, dtype=float)
-        kr.radau_kernel(kr.EVALUATE, t, self.km, self.i, t, y, *self.kernel_arrays)
-        return float(self.state[kr.CONSTRAINT_ERROR])
+        rank loss, see index1_acceleration). The driver's most frequent call (about 4 times
+        a step): index1_acceleration itself, whose 20 arguments numba takes from Python
+        1.6 µs faster than the stepping entry's 38."""
+        from mcchain.kernels.explicit import index1_acceleration
+
+        q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
+        return float(
+            index1_acceleration(
+                self.km, self.i, q, v, t, self.alpha2, self.beta2, self.pivot, *self.acc
+            )
+        )
 
     def in_contact(self) -> np.ndarray:
         """Which contact-law joints are in contact under the law in the present modes (INS:
