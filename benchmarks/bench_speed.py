@@ -164,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     sections = args.only.split(",")
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-speed-"))
+    work.mkdir(parents=True, exist_ok=True)  # a --work folder not made yet
     trees = {"before": export(args.before, work), "after": export(args.after, work)}
     caches = {k: work / f"cache-{k}" for k in trees}
     radau = radau_scene(work)
