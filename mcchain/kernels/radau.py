@@ -81,8 +81,7 @@ JACOBIAN_INCREMENT = EPS**0.5
 """Forward-difference increment relative to max(|y_k|, the largest |y| of its half)."""
 
 # state entries
-(T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV,
- T_FAIL) = range(10)  # fmt: skip
+T_NOW, H_ABS, H_ABS_OLD, ERROR_OLD, CURRENT_JAC, LU_OK, SOL_OK, T_OLD, NFEV, T_FAIL = range(10)
 NSTATE = 10
 """H_ABS_OLD and ERROR_OLD are NaN where scipy's are None; CURRENT_JAC, LU_OK, SOL_OK are
 0/1 flags; NFEV counts right-hand-side evaluations (the Jacobian's not included); T_FAIL is

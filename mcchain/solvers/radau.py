@@ -3,9 +3,8 @@ slow, independent reference of every method, with and without contact-law joints
 them, one segment and no events).
 
 The steps are :mod:`mcchain.kernels.radau` (scipy's Radau, compiled, on the index-1
-accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`, all through its one
-entry :func:`~mcchain.kernels.radau.radau_kernel`, the accelerations this driver reads
-included); this driver does
+accelerations of :func:`mcchain.kernels.explicit.index1_acceleration`, through its one
+stepping entry :func:`~mcchain.kernels.radau.radau_kernel`); this driver does
 what ``scipy.integrate.solve_ivp`` did around them: evaluates the events after each accepted
 step, locates a crossing on the step's dense output (``brentq``, as solve_ivp), writes the
 outputs at the output times the step passed from its dense output, and starts a new
@@ -222,8 +221,8 @@ class _Sample:
 
     # -- the right-hand side and the step hook ---------------------------------------------
     def kernel(self, op: int, t: float, t_bound: float, y: np.ndarray) -> int:
-        """:func:`mcchain.kernels.radau.radau_kernel` ``op`` of this sample at (t, y) (the
-        stepper's y, or a state (2 ndof,) to evaluate) towards ``t_bound``; its code."""
+        """:func:`mcchain.kernels.radau.radau_kernel` ``op`` (START, STEP) of this sample at
+        (t, y), y the stepper's state (2 ndof,), towards ``t_bound``; its code."""
         return int(self.kr.radau_kernel(op, t, self.km, self.i, t_bound, y, *self.kernel_arrays))
 
     def accelerations(self, t: float, y: np.ndarray) -> float:
