@@ -20,12 +20,13 @@ fresh process; the two trees alternate round by round so that both see the same 
 * ``verdict``: a warm ``mcchain run`` of ``configs/slider-crank-requirement.toml`` (4,096
   samples, its verdict), end to end and its phases, 2 threads.
 
-Writes ``benchmarks/results/speed/speed.md``.
+Appends its table to ``benchmarks/results/speed/speed.md`` (earlier runs and readings kept).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import re
@@ -100,6 +101,14 @@ for th in (2, 1):
 out["load"] = os.getloadavg()[0]
 print(json.dumps(out))
 """
+
+
+def append_results(path: Path, text: str) -> None:
+    """Append ``text`` (a section with its own heading) to the results file ``path``: the
+    sections of earlier runs, and the readings written under them, are kept."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    earlier = path.read_text("utf-8") if path.exists() else ""
+    path.write_text(earlier.rstrip("\n") + "\n\n" + text if earlier else text, "utf-8")
 
 
 def export(ref: str, parent: Path) -> Path:
@@ -196,8 +205,7 @@ def main(argv: list[str] | None = None) -> int:
             add("mujoco:reference", json.loads(out.stdout.splitlines()[-1]))
     text = report(results, args, trees)
     print(text)
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "speed.md").write_text(text)
+    append_results(OUT / "speed.md", text)
     return 0
 
 
@@ -208,7 +216,7 @@ def _best(rows: list[dict[str, Any]], key: str) -> float:
 def report(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace,
            trees: dict[str, Path]) -> str:  # fmt: skip
     lines = [
-        "# Issue 37: before and after, side by side",
+        f"## Issue 37: before and after, side by side ({datetime.date.today()})",
         "",
         f"`python benchmarks/bench_speed.py --before {args.before} --after {args.after} "
         f"--rounds {args.rounds} --repeats {args.repeats} --only {args.only}`; best of each "

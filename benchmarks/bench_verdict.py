@@ -13,7 +13,9 @@ difference. ``--threads`` is passed to ``mcchain run`` (the machine's 2 cores by
 
     python benchmarks/bench_verdict.py --before main --repeats 3
 
-Results (table and JSON, with the command) go to ``benchmarks/results/verdict/``.
+Results go to ``benchmarks/results/verdict/``: the table, with the command, appended to
+``verdict.md`` (the earlier runs and their readings kept), the last run's JSON in
+``verdict.json``.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_light import REPO, export_tree, mcchain_run, scene_with
+from bench_speed import append_results
 
 RESULTS = REPO / "benchmarks" / "results" / "verdict"
 
@@ -160,9 +163,12 @@ def main() -> None:
     rows, check = run_variants(args, work)
     text = table(rows, check, args)
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-    header = f"`{command}` ({os.cpu_count()} cores, {when}, before = {args.before[:10]})\n\n"
+    header = (
+        f"## bench_verdict, {when}\n\n"
+        f"`{command}` ({os.cpu_count()} cores, {when}, before = {args.before[:10]})\n\n"
+    )
     print(header + text)
-    (RESULTS / "verdict.md").write_text(header + text + "\n", "utf-8")
+    append_results(RESULTS / "verdict.md", header + text + "\n")
     (RESULTS / "verdict.json").write_text(
         json.dumps({"command": command, "runs": rows, "check": check}, indent=1), "utf-8"
     )

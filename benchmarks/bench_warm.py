@@ -30,7 +30,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from bench_speed import OUT, REPO, _env, export, radau_scene
+from bench_speed import OUT, REPO, _env, append_results, export, radau_scene
 
 PROBE = r"""
 import builtins, collections, json, sys, time
@@ -202,9 +202,7 @@ def main(argv: list[str] | None = None) -> int:
             setattr(args, ref, f"{getattr(args, ref)} (at {head or 'no commit'})")
     text = report(rows, floors, args)
     print(text)
-    OUT.mkdir(parents=True, exist_ok=True)
-    earlier = (OUT / "warm.md").read_text() if (OUT / "warm.md").exists() else ""
-    (OUT / "warm.md").write_text(earlier.rstrip("\n") + "\n\n" + text if earlier else text)
+    append_results(OUT / "warm.md", text)
     return 0
 
 
