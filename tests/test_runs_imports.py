@@ -31,6 +31,15 @@ LIGHT = (
 """Modules that import only the standard library (and each other) at import time."""
 
 
+def fresh(code: str) -> list[str]:
+    """The lines ``code`` prints in a fresh interpreter running this tree."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    return proc.stdout.splitlines()
+
+
 @pytest.mark.parametrize("module", LIGHT)
 def test_light_module__imports_only_the_standard_library(module: str) -> None:
     """Imported alone in a fresh interpreter: no third-party module gets loaded."""
@@ -40,11 +49,7 @@ def test_light_module__imports_only_the_standard_library(module: str) -> None:
         "print(sorted({m.split('.')[0] for m in set(sys.modules) - before}"
         " - set(sys.stdlib_module_names) - {'mcchain'}))"
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    assert proc.stdout.splitlines()[-1] == "[]"
+    assert fresh(code)[-1] == "[]"
 
 
 @pytest.mark.slow  # a fresh interpreter loads the kernels (2-5 s)
@@ -66,9 +71,5 @@ def test_run__without_dask_imports_no_dask_scheduler(tmp_path: Path) -> None:
         "print(result.record['requirements'][0].split(':')[0])\n"
         "print(sorted(m for m in ('distributed',) if m in sys.modules))"
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    *_, requirement, imported = proc.stdout.splitlines()
+    *_, requirement, imported = fresh(code)
     assert requirement.startswith("requirement ") and imported == "[]"
