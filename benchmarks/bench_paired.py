@@ -4,7 +4,8 @@ The texts (``generate_source(topology, "rk4")``) come from two source trees (a f
 commit exported with ``git archive``), each generated in a process of its own; this process
 compiles both (:class:`mcchain.codegen.native.NativeModule`) and calls their ``erk_run``
 alternately on the same arguments (captured from one ``simulate`` call of this tree; fresh
-copies each call), one thread, CPU time. Per round, the after/before ratio of the two calls
+copies each call; the histories in float64, so that every changed bit shows), one
+thread, CPU time. Per round, the after/before ratio of the two calls
 (the order alternates between rounds); the median of the rounds is the figure: across
 processes the same tree's best-of times spread 53-64 ns on the shared machine, which hides
 a few per cent.
@@ -57,8 +58,9 @@ def _text(tree: str, scratch: Path) -> str:
     env = dict(os.environ, PYTHONPATH=str(folder.resolve()))
     env["MCCHAIN_CACHE_DIR"] = str(scratch / "cache")
     out = subprocess.run(
-        [sys.executable, "-c", _GENERATE], env=env, capture_output=True, text=True, check=True
-    )
+        [sys.executable, "-c", _GENERATE], env=env, capture_output=True, text=True,
+        check=True, cwd=scratch,  # not the caller's folder, which `-c` puts first on the path
+    )  # fmt: skip
     return out.stdout
 
 
@@ -79,7 +81,7 @@ def _captured_call(samples: int, steps: int) -> tuple[int, tuple[Any, ...]]:
 
     simulate_module.over_samples = capture
     try:
-        simulate_module.simulate(model, sim)
+        simulate_module.simulate(model, sim, history_dtype=np.float64)  # every bit shows
     finally:
         simulate_module.over_samples = real
     return captured[0]

@@ -163,13 +163,16 @@ class SchurComplement:
                     lower[i].add(j)
 
         for j in range(n):
-            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
-            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
-            self.emit(
-                f"D{j} = {dj}",
-                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
-                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
-            )
+            if len(lower[j]) == 1:
+                self._single_pivot(j, min(lower[j]), S[j, j])
+            else:
+                prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
+                dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
+                self.emit(
+                    f"D{j} = {dj}",
+                    f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
+                    f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
+                )
             for i in range(j + 1, n):
                 if (i, j) not in L:
                     continue
@@ -182,6 +185,21 @@ class SchurComplement:
         self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
         self._L = L
         self._lower = lower
+
+    def _single_pivot(self, j: int, k: int, sjj: str) -> None:
+        """Pivot j of a column whose only earlier entry is L_jk: d_j = N_j / d_k with
+        N_j = S_jj d_k − E_jk², so 1/d_j = d_k / N_j divides without waiting for 1/d_k
+        (the stage's chain of divisions is one shorter). The drop test d_j ≤ tau S_jj is
+        N_j ≤ tau S_jj d_k (d_k > 0 where pivot k is kept); a dropped pivot k counts as
+        d_k = 1, E_jk = 0, so that d_j = S_jj exactly, as L_jk = 0 gives."""
+        self.emit(
+            f"Dp{j}_{k} = D{k} if okp{k} > 0.0 else 1.0",
+            f"Ep{j}_{k} = E{j}_{k} if okp{k} > 0.0 else 0.0",
+            f"N{j} = {sjj} * Dp{j}_{k} - Ep{j}_{k} * Ep{j}_{k}",
+            f"okp{j} = (N{j} > tau * {sjj} * Dp{j}_{k}) * 1.0",
+            f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
+            f"D{j} = N{j} / Dp{j}_{k}",  # for a next such column (else dead code)
+        )
 
     def schur_solve(self, rhs: str, out: str) -> None:
         """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
