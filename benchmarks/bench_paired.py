@@ -10,9 +10,9 @@ thread, CPU time. Per round, the after/before ratio of the two calls
 processes the same tree's best-of times spread 53-64 ns on the shared machine, which hides
 a few per cent.
 
-Also the bits: every output array of the two texts compared (NaN at the same places; the
-largest difference relative to the array's largest magnitude; the largest distance in ulps
-of the array's dtype).
+Also the bits: every output array of the two texts compared (NaN at the same places; per
+array that differs, its largest difference relative to its largest magnitude and the
+largest distance of an element in ulps of itself).
 
     python benchmarks/bench_paired.py --before main [--after .] [--rounds 12] [--samples 512]
         [--steps 2000]
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -100,13 +101,17 @@ def _call(module: Any, groups: int, args: tuple[Any, ...]) -> tuple[float, list[
     return spent, [a for a in fresh if isinstance(a, np.ndarray)]
 
 
-def _bits(before: list[np.ndarray], after: list[np.ndarray]) -> tuple[int, float, int, bool]:
-    """Arrays that differ, the largest relative difference, the largest ulp distance, and
-    whether NaN fall at the same places."""
-    differ, rel, ulp, same_nan = 0, 0.0, 0, True
-    for a, b in zip(before, after, strict=True):
+def _bits(
+    before: list[np.ndarray], after: list[np.ndarray], names: list[str]
+) -> tuple[list[str], bool]:
+    """Per output array that differs: its name, the largest difference relative to its
+    largest magnitude and the largest distance in ulps of its dtype; and whether NaN fall
+    at the same places in all of them."""
+    notes, same_nan = [], True
+    for a, b, name in zip(before, after, names, strict=True):
         if a.dtype.kind != "f":
-            differ += int(not np.array_equal(a, b))
+            if not np.array_equal(a, b):
+                notes.append(f"{name} differs")
             continue
         nan_a, nan_b = np.isnan(a), np.isnan(b)
         same_nan &= bool(np.array_equal(nan_a, nan_b))
@@ -114,15 +119,22 @@ def _bits(before: list[np.ndarray], after: list[np.ndarray]) -> tuple[int, float
         x, y = a[ok], b[ok]
         if np.array_equal(x.view(np.uint8), y.view(np.uint8)):
             continue
-        differ += 1
         scale = float(np.max(np.abs(x))) or 1.0
-        rel = max(rel, float(np.max(np.abs(x - y))) / scale)
+        rel = float(np.max(np.abs(x - y))) / scale
         ints = np.int64 if a.dtype == np.float64 else np.int32
         xi, yi = x.view(ints).astype(np.int64), y.view(ints).astype(np.int64)
         xi = np.where(xi < 0, np.iinfo(ints).min - xi, xi)  # ordered as the floats
         yi = np.where(yi < 0, np.iinfo(ints).min - yi, yi)
-        ulp = max(ulp, int(np.max(np.abs(xi - yi))))
-    return differ, rel, ulp, same_nan
+        notes.append(f"{name} {rel:.1e} ({int(np.max(np.abs(xi - yi)))} ulp)")
+    return notes, same_nan
+
+
+def _array_names(text: str, args: tuple[Any, ...]) -> list[str]:
+    """The names ``erk_run`` gives its array arguments (from its ``def`` in ``text``)."""
+    params = re.search(r"def erk_run\(([^)]*)\)", text, flags=re.S)
+    assert params is not None
+    names = [p.strip() for p in params.group(1).split(",")][2:]  # after g_start, g_stop
+    return [n for n, a in zip(names, args, strict=True) if isinstance(a, np.ndarray)]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -143,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     modules = [NativeModule(text, f"paired_{i}") for i, text in enumerate(texts)]
     groups, call_args = _captured_call(args.samples, args.steps)
     outputs = [_call(m, groups, call_args)[1] for m in modules]  # compiles, then the bits
-    differ, rel, ulp, same_nan = _bits(*outputs)
+    notes, same_nan = _bits(*outputs, _array_names(texts[1], call_args))
     units = args.samples * (args.steps + 1)
     ratios, times = [], [[], []]
     for r in range(args.rounds):
@@ -163,10 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         f"\npaired after/before: median {np.median(ratios):.3f} (rounds "
         f"{', '.join(f'{x:.3f}' for x in ratios)})"
     )
-    print(
-        f"bits: {differ} output arrays differ; largest relative difference {rel:.2e}, "
-        f"{ulp} ulp; NaN at the same places: {same_nan}"
-    )
+    print(f"bits: {'; '.join(notes) or 'identical'}; NaN at the same places: {same_nan}")
     return 0
 
 
