@@ -105,6 +105,11 @@ class SchurComplement:
     rows: Callable[[], list[dict[int, Coef]]]
     _reload: Callable[[str], str]
     _row_law: Callable[[int], str | None]
+    parallel_pivots = False
+    """Whether a pivot whose column has one earlier entry divides beside that entry's pivot
+    (:meth:`_single_pivot`) rather than after it: a few per cent of the rk4 lanes' time, and
+    the bits of 1/d_j (a few ulp; benchmarks/results/roofline/reading.md, 2026-11-29 third
+    stop). The generator sets it for the fixed-step variants only."""
 
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"
@@ -163,7 +168,7 @@ class SchurComplement:
                     lower[i].add(j)
 
         for j in range(n):
-            if len(lower[j]) == 1:
+            if self.parallel_pivots and len(lower[j]) == 1:
                 self._single_pivot(j, min(lower[j]), S[j, j])
             else:
                 prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
