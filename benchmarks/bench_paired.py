@@ -80,7 +80,8 @@ def _captured_call(samples: int, steps: int) -> tuple[int, tuple[Any, ...]]:
     real = simulate_module.over_samples
 
     def capture(kernel: Any, count: int, *args: Any, **kwargs: Any) -> None:
-        captured.append((count, tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)))
+        copies = tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)
+        captured.append((count, copies))
         real(kernel, count, *args, **kwargs)
 
     simulate_module.over_samples = capture
