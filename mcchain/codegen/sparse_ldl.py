@@ -107,9 +107,9 @@ class SchurComplement:
     _row_law: Callable[[int], str | None]
     parallel_pivots = False
     """Whether a pivot whose column has one earlier entry divides beside that entry's pivot
-    (:meth:`_single_pivot`) rather than after it: a few per cent of the rk4 lanes' time, and
-    the bits of 1/d_j (a few ulp; benchmarks/results/roofline/reading.md, 2026-11-29 third
-    stop). The generator sets it for the fixed-step variants only."""
+    (:meth:`_single_pivot`) rather than after it: a shorter chain of divisions, other bits
+    of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
+    gives: benchmarks/results/roofline/reading.md)."""
 
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"
@@ -203,7 +203,8 @@ class SchurComplement:
             f"N{j} = {sjj} * Dp{j}_{k} - Ep{j}_{k} * Ep{j}_{k}",
             f"okp{j} = (N{j} > tau * {sjj} * Dp{j}_{k}) * 1.0",
             f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
-            f"D{j} = N{j} / Dp{j}_{k}",  # for a next such column (else dead code)
+            # d_j for a next such column (else dead code): a product, not one more division
+            f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
         )
 
     def schur_solve(self, rhs: str, out: str) -> None:
