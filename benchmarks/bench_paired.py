@@ -1,23 +1,24 @@
 """Two generated rk4 lane texts of the clearance double pendulum side by side in one process.
 
 The texts (``generate_source(topology, "rk4")``) come from two source trees (a folder, or a
-commit exported with ``git archive``), each generated in a process of its own; this process
-compiles both (:class:`mcchain.codegen.native.NativeModule`) and calls their ``erk_run``
-alternately on the same arguments (captured from one ``simulate`` call of this tree; fresh
-copies each call; the histories in float64, so that every changed bit shows), one
-thread, CPU time. Per round, the after/before ratio of the two calls
-(the order alternates between rounds); the median of the rounds is the figure: across
-processes the same tree's best-of times spread 53-64 ns on the shared machine, which hides
-a few per cent.
+commit exported with ``git archive``), each generated in a process of its own, or from a
+``.py`` file (a text edited by hand: a what-if); this process compiles both
+(:class:`mcchain.codegen.native.NativeModule`) and calls their ``erk_run`` alternately on
+the same arguments (captured from one ``simulate`` call of this tree, so both texts must
+take this tree's arguments; fresh copies each call; the histories in float64, so that
+every changed bit shows), one thread, CPU time. Per round, the after/before ratio of the
+two calls (the order alternates between rounds); the median of the rounds is the figure:
+across processes the same tree's best-of times spread 53-64 ns on the shared machine,
+which hides a few per cent, and under load single rounds spread ±10-25 %.
 
 Also the bits: every output array of the two texts compared (NaN at the same places; per
 array that differs, its largest difference relative to its largest magnitude and the
 largest distance of an element in ulps of itself).
 
-    python benchmarks/bench_paired.py --before main [--after .] [--rounds 12] [--samples 512]
+    python benchmarks/bench_paired.py --before main [--after .] [--rounds 100] [--samples 256]
         [--steps 2000]
 
-Prints a Markdown table (paste it into benchmarks/results/roofline/reading.md).
+Prints its figures (the readings of them: benchmarks/results/roofline/reading.md).
 """
 
 from __future__ import annotations
@@ -142,8 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--before", required=True, help="a folder, a commit or a .py text")
     parser.add_argument("--after", default=str(REPO), help="a folder, a commit or a .py text")
-    parser.add_argument("--rounds", type=int, default=12)
-    parser.add_argument("--samples", type=int, default=512)
+    parser.add_argument("--rounds", type=int, default=100)
+    parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--steps", type=int, default=2000)
     args = parser.parse_args(argv)
     import numba
