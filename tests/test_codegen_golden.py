@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "69c46904f00256f6e8d208ee4499c4707446558695b3f24ec4b07483a49049e0",
-        "rk4-projection": "efe50a7f213c141540b21a347d02f4f3140142939449b71354355effcdc9aaf7",
+        "rk4": "8209da0139cee160e2eee41b137684225919e68359a71ad5f8141a8c46946592",
+        "rk4-projection": "61bdb7aab91de129f3a4475f12b6901e35e2a9ea1710e9cfa66b72dc9660d9eb",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "aa44bda6cbb8b42dff271bab4d0a9ab1a5a19a53a08df92bf1b206f6c2e189b1",
-        "rk4-projection": "2c35ef6dc4c403da40c4e7602a5b7a26b1ae9dea4c1b12982388bb51505c81bf",
+        "rk4": "6ea818882d5bc684c28028a51681f12a6b9d468895ee3ebb7e1cc9bbb6ed4bf9",
+        "rk4-projection": "853bc83b5dd552beaea704e8be2087da8767c9c16a8e8bf6b10e90a6a1e8740d",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "3f6e46fb22d51d2d11642a4a2b4865267b88bc3efc9fb13fcf00ef45f107e160",
-        "rk4-projection": "a86272bca8b0ad62efba16a963ae63cb256233de510343b27f55f72f3be2e6a5",
+        "rk4": "b7be2b4edacc60884853374a3712fdced087a6ed2d6b837317bd530392c8478d",
+        "rk4-projection": "fe30bb36a562cde8ea23cd76b9050ec871c836a20bc14cca21bd78fb2ef47855",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "5b2904b36fa7fc60a25c767c01c0ac300647333afb8610ae064f85dc66a623f7",
-        "rk4-projection": "56cf6937c01e2858b84afeb4e1ae5b746222869e7b85bf28bd8409f105e8d88d",
+        "rk4": "1aa9b3d662cc8c38b859f035e84796a0bf26aeacdb764f6431c29056e41b8a2b",
+        "rk4-projection": "19533a1487eb68d6d46573415457edfca82c8c7a920a3a9ab6ccbeb8c3e39145",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

@@ -105,6 +105,11 @@ class SchurComplement:
     rows: Callable[[], list[dict[int, Coef]]]
     _reload: Callable[[str], str]
     _row_law: Callable[[int], str | None]
+    parallel_pivots = False
+    """Whether a pivot whose column has one earlier entry divides beside that entry's pivot
+    (:meth:`_single_pivot`) rather than after it: a shorter chain of divisions, other bits
+    of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
+    gives: benchmarks/results/roofline/reading.md)."""
 
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"
@@ -163,13 +168,16 @@ class SchurComplement:
                     lower[i].add(j)
 
         for j in range(n):
-            prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
-            dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
-            self.emit(
-                f"D{j} = {dj}",
-                f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
-                f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
-            )
+            if self.parallel_pivots and len(lower[j]) == 1:
+                self._single_pivot(j, min(lower[j]), S[j, j])
+            else:
+                prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
+                dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
+                self.emit(
+                    f"D{j} = {dj}",
+                    f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
+                    f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
+                )
             for i in range(j + 1, n):
                 if (i, j) not in L:
                     continue
@@ -182,6 +190,22 @@ class SchurComplement:
         self.emit("sing = 0.0", *(f"sing = sing + (1.0 - okp{j})" for j in range(n)))
         self._L = L
         self._lower = lower
+
+    def _single_pivot(self, j: int, k: int, sjj: str) -> None:
+        """Pivot j of a column whose only earlier entry is L_jk: d_j = N_j / d_k with
+        N_j = S_jj d_k − E_jk², so 1/d_j = d_k / N_j divides without waiting for 1/d_k
+        (the stage's chain of divisions is one shorter). The drop test d_j ≤ tau S_jj is
+        N_j ≤ tau S_jj d_k (d_k > 0 where pivot k is kept); a dropped pivot k counts as
+        d_k = 1, E_jk = 0, so that d_j = S_jj exactly, as L_jk = 0 gives."""
+        self.emit(
+            f"Dp{j}_{k} = D{k} if okp{k} > 0.0 else 1.0",
+            f"Ep{j}_{k} = E{j}_{k} if okp{k} > 0.0 else 0.0",
+            f"N{j} = {sjj} * Dp{j}_{k} - Ep{j}_{k} * Ep{j}_{k}",
+            f"okp{j} = (N{j} > tau * {sjj} * Dp{j}_{k}) * 1.0",
+            f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
+            # d_j for a next such column (else dead code): a product, not one more division
+            f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
+        )
 
     def schur_solve(self, rhs: str, out: str) -> None:
         """Solve S x = ``{rhs}{r}`` with the factors of :meth:`schur_factor`: ``{out}{r}``."""
