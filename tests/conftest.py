@@ -33,11 +33,11 @@ os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 LONGEST_FIRST = (
     "test_contact_start.py",  # first compiles: assembly, radau, the loop kernels, generalized-α
     "test_native.py",  # numba's compile of lane modules (the reference of the native compiler)
-    "test_runs_pipeline.py",  # end to end through the command line, Dask, kills, 10⁵ samples
+    "test_runs_pipeline.py",  # end to end through the command line, Dask, kills, memory
     "test_outputs_reference.py",  # minimal-coordinate (sympy, scipy) references
-    "test_compile_ahead.py",  # a cold run in a process of its own, on an empty cache
     "test_runs_histories.py",
     "test_validate_interpreted.py",
+    "test_compile_ahead.py",  # a cold run in a process of its own, on an empty cache
     "test_simulate_methods.py",
     "test_outputs_scene.py",
     "test_scene_configs.py",
