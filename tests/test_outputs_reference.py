@@ -202,8 +202,10 @@ def test_rk45_lanes__a_sample_s_outputs_do_not_depend_on_its_lane():
     def run(first: int, stop: int, lanes: int | None) -> dict[str, np.ndarray]:
         part = both.select(first, stop)
         plan = output_plan(scene.output, model.select(first, stop), T_END)
+        # float64 histories, as _solved's: the lane entry compiled there (an entry compiles
+        # per type of its arrays: float32 would compile the module once more, 5 s cold)
         return simulate(part, scene.simulate, q[first:stop], v[first:stop], lanes=lanes,
-                        outputs=plan)  # fmt: skip
+                        outputs=plan, history_dtype=np.float64)  # fmt: skip
 
     alone = run(0, 1, None)
     # one lane per group: 5 groups in at most 4 blocks (2 per thread, 1 or 2 threads), so a
