@@ -14,6 +14,7 @@ set by numba and clear here.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import pickle
@@ -226,6 +227,70 @@ def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, mo
     assert out.tolist() == again.tolist() == third.tolist()
     assert out[:2].tolist() == [2, 1]
     assert pickle.loads(files[0].read_bytes())[1] == "object"
+
+
+def test_machine_code__a_process_finding_the_entry_s_turn_taken_loads_what_it_wrote(
+    tmp_path, monkeypatch
+):
+    """Two processes wanting the same entry at once (two test workers; a local Dask
+    cluster's workers at a run's start) compile it once: here the test holds the entry's
+    compile turn while a second process asks for the entry, writes the machine code
+    (compiled beforehand in another folder) and gives the turn up; the second process
+    then loads it: 0 compiles, 1 load, whether it asked before or after the file came.
+    The lock file is gone afterwards."""
+    import fcntl
+    import shutil
+    import subprocess
+    import time
+    from pathlib import Path
+
+    if not Path("/proc/locks").is_file():
+        pytest.skip("needs Linux's /proc/locks to see the second process wait")
+    monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path / "first"))
+    NativeModule(SOURCE, "mcchain_test_turn").integers(7, 3, np.zeros(10, np.int64))
+    (compiled,) = (tmp_path / "first" / "native").iterdir()
+    shared = tmp_path / "shared" / "native"
+    shared.mkdir(parents=True)
+    lock = shared / (compiled.stem + ".lock")
+    script = f"""
+import json
+import numpy as np
+from mcchain.codegen import native
+module = native.NativeModule({SOURCE!r}, "mcchain_test_turn")
+print("asking", flush=True)
+out = np.zeros(10, np.int64)
+module.integers(7, 3, out)
+print(json.dumps({{**native.COUNTS, "out": out[:2].tolist()}}))
+"""
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(repo), "MCCHAIN_CACHE_DIR": str(shared.parent)}
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # the turn: taken by "another process", this test
+    child = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, env=env,
+    )  # fmt: skip
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline() == "asking\n"
+        # Written once the child waits for the turn (Linux lists a blocked flock in
+        # /proc/locks with "->"): without the turn, it would have compiled by then.
+        waiting = f" {child.pid} "
+        inode = f":{os.fstat(fd).st_ino} "
+        while child.poll() is None and not any(
+            "->" in line and waiting in line and inode in line
+            for line in Path("/proc/locks").read_text().splitlines()
+        ):
+            time.sleep(0.005)
+        shutil.copyfile(compiled, shared / "written.tmp")
+        os.replace(shared / "written.tmp", shared / compiled.name)
+    finally:
+        os.unlink(lock)  # as compile_turn ends a turn
+        os.close(fd)
+    out, err = child.communicate(timeout=300)
+    assert child.returncode == 0, err[-2000:]
+    assert json.loads(out) == {"compiled": 0, "loaded": 1, "out": [2, 1]}
+    assert sorted(path.name for path in shared.iterdir()) == [compiled.name]
 
 
 def test_machine_code__an_unwritable_cache_compiles_into_a_temporary_one(

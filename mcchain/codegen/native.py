@@ -49,7 +49,7 @@ from mcchain.codegen.native_expressions import (
     type_of_value,
 )
 from mcchain.codegen.native_translate import ModuleTranslator
-from mcchain.compiled.caches import evict_oldest, mcchain_cache, write_atomically
+from mcchain.compiled.caches import compile_turn, evict_oldest, mcchain_cache, write_atomically
 
 
 def ctypes_argument(ty: Type) -> Any:
@@ -226,34 +226,51 @@ class NativeModule:
         digest = hashlib.sha256(key.encode()).hexdigest()[:24]
         path = mcchain_cache("native") / f"{self.name}-{name}-{digest}.bin"
         symbol = f"{self.name}.{name}.{digest}"  # unique in the process's JIT engine
-        library = None
-        if path.exists():
-            try:
-                library = codegen.unserialize_library(pickle.loads(path.read_bytes()))
-                with contextlib.suppress(OSError):
-                    os.utime(path)  # recently used: the last to be evicted
-                COUNTS["loaded"] += 1
-            except Exception:
-                library = None  # a stale or partial file: compile again
+        library = _load_library(codegen, path)
         if library is None:
-            COUNTS["compiled"] += 1
-            # Symbols unique in the process's JIT engine, which holds every library.
-            translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
-            translator.entry(name, argtypes, symbol)
-            _prefer_register_width(translator.ir_module)
-            if self.contract:
-                _contract(translator.ir_module)
-            library = codegen.create_library(f"{self.name}.{name}")
-            library.enable_object_caching()
-            library.add_ir_module(translator.ir_module)
-            library.finalize()
-            library.get_pointer_to_function(symbol)
-            write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
+            # Another process compiling the same entry (a test worker, a Dask worker at a
+            # run's start) holds this turn: wait for it, then read what it wrote.
+            with compile_turn(path.with_suffix(".lock")):
+                library = _load_library(codegen, path)
+                if library is None:
+                    library = self._compile(codegen, name, argtypes, symbol)
+                    write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
             evict_oldest(path.parent, CACHE_MAX_BYTES, keep=path)
         address = library.get_pointer_to_function(symbol)
         if not address:
             raise RuntimeError(f"{symbol} missing from its compiled library")
         return library, address
+
+    def _compile(self, codegen: Any, name: str, argtypes: tuple[Type, ...], symbol: str) -> Any:
+        """Entry point ``name`` for ``argtypes`` compiled now, as the library ``symbol``."""
+        COUNTS["compiled"] += 1
+        # Symbols unique in the process's JIT engine, which holds every library.
+        translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
+        translator.entry(name, argtypes, symbol)
+        _prefer_register_width(translator.ir_module)
+        if self.contract:
+            _contract(translator.ir_module)
+        library = codegen.create_library(f"{self.name}.{name}")
+        library.enable_object_caching()
+        library.add_ir_module(translator.ir_module)
+        library.finalize()
+        library.get_pointer_to_function(symbol)
+        return library
+
+
+def _load_library(codegen: Any, path: Path) -> Any:
+    """The library cached at ``path``, or None where there is none or it cannot be read (a
+    stale or partial file: compiled again)."""
+    if not path.exists():
+        return None
+    try:
+        library = codegen.unserialize_library(pickle.loads(path.read_bytes()))
+    except Exception:
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used: the last to be evicted
+    COUNTS["loaded"] += 1
+    return library
 
 
 def _target_data(codegen: Any) -> Any:

@@ -26,7 +26,7 @@ import hashlib
 import os
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from mcchain.folders import temporary_cache, warn_fallback, writable
@@ -102,6 +102,36 @@ def write_atomically(path: Path, data: bytes) -> None:
         os.replace(tmp, path)
     except OSError:
         pass
+
+
+@contextlib.contextmanager
+def compile_turn(path: Path) -> Iterator[None]:
+    """Run the block holding the exclusive lock (``flock``) of the lock file ``path``,
+    created if missing: processes that would compile the same cache file at once (two test
+    workers, the worker processes of a local Dask cluster at a run's start) take turns, and
+    the later one finds the file the first wrote instead of compiling it again. Where no
+    lock can be taken (no ``fcntl``, a cache folder on NFS without locks, an unwritable
+    folder) the block runs without one, as two compiles at once did: the same file twice.
+
+    The lock file is removed when the turn ends (no file left per cache entry): a process
+    that opened it before then still takes its turn after this one, on the removed file,
+    and finds the cache file written; one arriving later makes a new lock file. At worst
+    (a turn that wrote nothing) two processes compile the same file, never a wrong one."""
+    try:
+        import fcntl
+
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        os.close(fd)  # releases the lock
 
 
 def evict_oldest(
