@@ -216,6 +216,9 @@ def test_run__stores_the_grid_and_counts_the_steps_taken(tmp_path: Path, fourbar
     scene = tmp_path / "fourbar.toml"
     section = f"[simulate]\nt_end = {T_TURN!r}\ndt = {DT!r}\noutput_dt = {OUTPUT_DT!r}\n"
     text = fourbar_text().replace("clearance = 1e-4\n", "") + SAMPLED
+    # float64 histories, as test_simulate_methods' crank turn on this four-bar: its lane
+    # entries, compiled once (an entry compiles per type of its arrays)
+    text += '[storage]\nhistory_dtype = "float64"\n'
     scene.write_text(text + section + f'method = "{method}"\nkernels = "lanes"\n')
     result = plan.start_run(scene, out=tmp_path / "runs", progress=False)
     throughput = json.loads((result.folder / "run.json").read_text())["throughput"]

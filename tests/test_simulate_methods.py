@@ -287,7 +287,8 @@ def test_diagnostics__fixed_step_counts_are_exact(method):
     model = scene_model("clearance_bar", nsample=2)
     sim = dict(t_end=0.05, dt=1e-3, method=method, max_newton=20)
     status = np.array([0, ASSEMBLY_FAILED], np.uint32)
-    res = simulate(model, sim, status=status, diagnostics=True)
+    # float64 histories as the other clearance-bar tests: their lane entries, compiled once
+    res = simulate(model, sim, status=status, diagnostics=True, history_dtype=np.float64)
     nstep = 50
     assert res["status"][0] == 0
     for key in DIAGNOSTICS:
@@ -309,15 +310,15 @@ def test_diagnostics__rk45_counts_attempts_and_fsal_stages(monkeypatch):
 
     model = scene_model("clearance_bar")
     sim = dict(t_end=0.05, dt=0.05, output_dt=0.05, method="rk45", rtol=1e-9, atol=1e-11)
-    res = simulate(model, sim, diagnostics=True)
+    res = simulate(model, sim, diagnostics=True, history_dtype=np.float64)  # as above
     steps, rejected = int(res["steps"][0]), int(res["rejected_steps"][0])
     attempts = steps + rejected
     assert res["status"][0] == 0 and steps > 5 and rejected > 0
     assert res["evaluations"][0] == 1 + (DOPRI5.nstage - 1) * attempts
     monkeypatch.setattr(simulate_module, "ADAPTIVE_MAX_STEPS", attempts)
-    assert simulate(model, sim)["status"][0] == 0
+    assert simulate(model, sim, history_dtype=np.float64)["status"][0] == 0
     monkeypatch.setattr(simulate_module, "ADAPTIVE_MAX_STEPS", attempts - 1)
-    assert simulate(model, sim)["status"][0] & DIVERGED
+    assert simulate(model, sim, history_dtype=np.float64)["status"][0] & DIVERGED
 
 
 ONE_TURN = 2.0 * np.pi / 20.0  # s: one turn of the four-bar's crank at 20 rad/s
