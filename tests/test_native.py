@@ -232,8 +232,8 @@ def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, mo
 def test_machine_code__a_process_finding_the_entry_s_turn_taken_loads_what_it_wrote(
     tmp_path, monkeypatch
 ):
-    """Two processes wanting the same entry at once (two test workers; a local Dask
-    cluster's workers at a run's start) compile it once: here the test holds the entry's
+    """Two processes wanting the same entry at once (two test workers; commands started
+    side by side on a cold cache) compile it once: here the test holds the entry's
     compile turn while a second process asks for the entry, writes the machine code
     (compiled beforehand in another folder) and gives the turn up; the second process
     then loads it: 0 compiles, 1 load, whether it asked before or after the file came.

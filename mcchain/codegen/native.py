@@ -228,8 +228,8 @@ class NativeModule:
         symbol = f"{self.name}.{name}.{digest}"  # unique in the process's JIT engine
         library = _load_library(codegen, path)
         if library is None:
-            # Another process compiling the same entry (a test worker, a Dask worker at a
-            # run's start) holds this turn: wait for it, then read what it wrote.
+            # Another process compiling the same entry (a command started beside this one, a
+            # test worker) holds this turn: wait for it, then read what it wrote.
             with compile_turn(path.with_suffix(".lock")):
                 library = _load_library(codegen, path)
                 if library is None:

@@ -107,9 +107,9 @@ def write_atomically(path: Path, data: bytes) -> None:
 @contextlib.contextmanager
 def compile_turn(path: Path) -> Iterator[None]:
     """Run the block holding the exclusive lock (``flock``) of the lock file ``path``,
-    created if missing: processes that would compile the same cache file at once (two test
-    workers, the worker processes of a local Dask cluster at a run's start) take turns, and
-    the later one finds the file the first wrote instead of compiling it again. Where no
+    created if missing: processes that would compile the same cache file at once (commands
+    started side by side on a cold cache, two test workers) take turns, and the later one
+    finds the file the first wrote instead of compiling it again. Where no
     lock can be taken (no ``fcntl``, a cache folder on NFS without locks, an unwritable
     folder) the block runs without one, as two compiles at once did: the same file twice.
 
