@@ -162,6 +162,7 @@ class _Sample:
         run."""
         from mcchain.kernels import clearance as cl
         from mcchain.kernels import radau as kr
+        from mcchain.kernels.explicit import index1_acceleration
         from mcchain.kernels.forces import mass_diagonal
 
         model = run.model
@@ -193,6 +194,8 @@ class _Sample:
         # the compiled stepper's arrays (mcchain.kernels.radau.radau_kernel)
         n = 2 * ndof
         self.kr = kr
+        # bound here: an import in accelerations() cost 0.8 µs of its ~4 calls a step
+        self.index1_acceleration = index1_acceleration
         self.acc = (self.minv, self.cols, self.first, self.cst, self.row_law, self.B, self.S,
                     self.F, self.g, self.phi, self.qdd, self.lam)  # fmt: skip
         self.stepper = dict(
@@ -230,11 +233,9 @@ class _Sample:
         rank loss, see index1_acceleration). The driver's most frequent call (about 4 times
         a step): index1_acceleration itself, whose 20 arguments numba takes from Python
         1.6 µs faster than the stepping entry's 38."""
-        from mcchain.kernels.explicit import index1_acceleration
-
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
         return float(
-            index1_acceleration(
+            self.index1_acceleration(
                 self.km, self.i, q, v, t, self.alpha2, self.beta2, self.pivot, *self.acc
             )
         )
