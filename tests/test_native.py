@@ -270,6 +270,7 @@ print(json.dumps({{**native.COUNTS, "out": out[:2].tolist()}}))
         [sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, env=env,
     )  # fmt: skip
+    hang_guard = time.monotonic() + 120.0  # only against a hang: no figure depends on it
     try:
         assert child.stdout is not None
         assert child.stdout.readline() == "asking\n"
@@ -281,9 +282,14 @@ print(json.dumps({{**native.COUNTS, "out": out[:2].tolist()}}))
             "->" in line and waiting in line and inode in line
             for line in Path("/proc/locks").read_text().splitlines()
         ):
+            assert time.monotonic() < hang_guard, "the second process never waited its turn"
             time.sleep(0.005)
         shutil.copyfile(compiled, shared / "written.tmp")
         os.replace(shared / "written.tmp", shared / compiled.name)
+    except BaseException:
+        child.kill()  # nothing the test starts outlives it
+        child.communicate()
+        raise
     finally:
         os.unlink(lock)  # as compile_turn ends a turn
         os.close(fd)
