@@ -352,9 +352,9 @@ def _blocks(
 def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     """The fixed-step kernel's blocks of the bodies' sin/cos at a stage, into rows ``scc``
     (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``),
-    ``rotation_check`` (``nbig``: the group's lane-angles whose stage increment
-    δ = ah θ̇ is past :data:`ROTATION_BOUND`), ``sincos_rotated`` (the start's turned by δ)
-    and ``sincos_full`` (in full, as at the start).
+    ``rotation_check`` (counts in ``nbig`` the lanes' bodies whose stage increment δ = ah θ̇
+    is past :data:`ROTATION_BOUND`), ``sincos_rotated`` (the start's turned by δ) and
+    ``sincos_full`` (in full, as at the start).
 
     The stage's angle is θ₀ + ah k, k its previous stage's θ̇; written in full as the stage
     itself writes it (the first stage's bits are the full evaluation's). A NaN δ counts as
