@@ -43,6 +43,9 @@ def scene_text(rtol: float = 1e-7, atol: float = 1e-10, requirement: bool = True
             'select = { joint = "B" }',
             f"max = {LIMIT!r}",
         ]
+    # float64 histories, as test_radau's runs of this mechanism: its rk45 lane module
+    # compiles once for both (the checks read per-sample values)
+    lines += ["[storage]", 'history_dtype = "float64"']
     return "\n".join(lines) + "\n"
 
 

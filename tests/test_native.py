@@ -514,16 +514,19 @@ bearing: like a pendulum on a string with too little speed to loop, the link's f
 @pytest.mark.parametrize(
     ("scene", "settings"),
     [
+        # By default one whole lane module (rk4's) beside the translator's rules one by one
+        # (the random programs and the risks below); numba's compile of each further module
+        # costs 10-45 s of CPU, so the other templates are long references:
         ("double_pendulum", {"t_end": 0.2, "dt": 1e-3, "output_dt": 1e-2, "method": "rk4"}),
-        (
+        pytest.param(
             "double_pendulum",
             {"t_end": 0.2, "dt": 1e-3, "output_dt": 1e-2, "method": "rk4-projection"},
+            marks=pytest.mark.long,
         ),
         # rk45's module with ideal joints, the driver and a contact-law joint that separates
         # and impacts (the double pendulum's rk45 module, ideal joints only, added a compile,
-        # not a path); the four-bar's (3 bodies, 10 s more of numba's compile) makes the
-        # same check, long
-        ("crank-journal", CONTACT_RK45),
+        # not a path); the four-bar's (3 bodies) makes the same check on a larger module
+        pytest.param("crank-journal", CONTACT_RK45, marks=pytest.mark.long),
         pytest.param("fourbar-contact", CONTACT_RK45, marks=pytest.mark.long),
         # last: the Radau stepper itself is compiled by the other tests' worker meanwhile
         ("double_pendulum", {"t_end": 0.05, "dt": 1e-3, "output_dt": 1e-2, "method": "radau"}),

@@ -173,6 +173,10 @@ def _project_start(
     )
 
     km = model.kernel_model()
+    # rows of C-ordered arrays: the kernels below are compiled for those (contact_start may
+    # hand over other strides, which would compile each of them once more)
+    q = np.ascontiguousarray(q)
+    v = np.ascontiguousarray(v)
     ncon, ndof = model.ncon, model.ndof
     phi = np.zeros(ncon)
     B = np.zeros((ncon, ndof))
