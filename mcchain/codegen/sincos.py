@@ -25,20 +25,26 @@ import math
 TWO_PI = 2.0 * math.pi
 _ROUND = "6755399441055744.0"  # 1.5 · 2⁵²: adding and subtracting it rounds to an integer
 
-# fdlibm's __kernel_sin and __kernel_cos (FreeBSD msun k_sin.c, k_cos.c) of {r} as {ps} and
-# {pc}: within about an ulp for |r| ≤ π/4.
+# fdlibm's __kernel_sin and __kernel_cos (FreeBSD msun k_sin.c, k_cos.c) of {r} (z = r²): sin r
+# as {ps}; cos r = 1 − z/2 + z·_COS_TAIL, whose 1 − z/2 the kernel rounds in two parts.
+# Within about an ulp for |r| ≤ π/4.
+_SIN = (
+    "{ps} = {r} + ({z} * {r}) * (-0.16666666666666632 + {z} * (0.008333333333322489"
+    " + {z} * (-0.00019841269829857949 + {z} * (2.755731370707007e-06"
+    " + {z} * (-2.5050760253406863e-08 + {z} * 1.5896909952115501e-10)))))"
+)
+_COS_TAIL = (
+    "{z} * (0.0416666666666666 + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
+    " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
+    " + {z} * -1.1359647557788195e-11)))))"
+)
 _KERNELS = "\n".join(
     [
         "{z} = {r} * {r}",
-        "{ps} = {r} + ({z} * {r}) * (-0.16666666666666632 + {z} * (0.008333333333322489"
-        " + {z} * (-0.00019841269829857949 + {z} * (2.755731370707007e-06"
-        " + {z} * (-2.5050760253406863e-08 + {z} * 1.5896909952115501e-10)))))",
+        _SIN,
         "{hz} = 0.5 * {z}",
         "{w} = 1.0 - {hz}",
-        "{pc} = {w} + (((1.0 - {w}) - {hz}) + {z} * ({z} * (0.0416666666666666"
-        " + {z} * (-0.0013888888888874109 + {z} * (2.480158728947673e-05"
-        " + {z} * (-2.7557314351390663e-07 + {z} * (2.087572321298175e-09"
-        " + {z} * -1.1359647557788195e-11)))))))",
+        "{pc} = {w} + (((1.0 - {w}) - {hz}) + {z} * (" + _COS_TAIL + "))",
     ]
 )
 
@@ -82,13 +88,9 @@ _ROTATED_TEMPLATE = "\n".join(
         # sin δ): s₀ and c₀ plus a correction that is small for small δ, so their own rounding
         # and one more are most of the error (measured within 2.2e-16 of the true value for
         # |δ| ≤ 0.5, 3.3e-16 up to π/4; the full evaluation: 1.1e-16).
-        "{z} = {d} * {d}",
-        "{ps} = {d} + ({z} * {d}) * (-0.16666666666666632 + {z} * (0.008333333333322489"
-        " + {z} * (-0.00019841269829857949 + {z} * (2.755731370707007e-06"
-        " + {z} * (-2.5050760253406863e-08 + {z} * 1.5896909952115501e-10)))))",
-        "{cm} = {z} * (-0.5 + {z} * (0.0416666666666666 + {z} * (-0.0013888888888874109"
-        " + {z} * (2.480158728947673e-05 + {z} * (-2.7557314351390663e-07"
-        " + {z} * (2.087572321298175e-09 + {z} * -1.1359647557788195e-11))))))",
+        "{z} = {r} * {r}",
+        _SIN,
+        "{cm} = {z} * (-0.5 + " + _COS_TAIL + ")",
         "{sin} = {s0} + ({s0} * {cm} + {c0} * {ps})",
         "{cos} = {c0} + ({c0} * {cm} - {s0} * {ps})",
     ]
@@ -100,6 +102,6 @@ def rotated_sincos_code(s0: str, c0: str, delta: str, sin: str, cos: str, tag: s
     expression ``delta`` (δ, rad), temporaries suffixed ``tag``. Only where
     |δ| ≤ :data:`ROTATION_BOUND` (the caller checks it, and takes :func:`sincos_code`
     elsewhere). At δ = 0 the result is s0, c0 (up to the sign of a zero)."""
-    names = {n: f"_{n}{tag}" for n in ("d", "z", "ps", "cm")}
-    lines = _ROTATED_TEMPLATE.format(s0=s0, c0=c0, sin=sin, cos=cos, **names)
+    names = {n: f"_{n}{tag}" for n in ("z", "ps", "cm")}
+    lines = _ROTATED_TEMPLATE.format(s0=s0, c0=c0, r=f"_d{tag}", sin=sin, cos=cos, **names)
     return [f"_d{tag} = {delta}", *lines.splitlines()]
