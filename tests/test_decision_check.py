@@ -124,6 +124,7 @@ def test_check__refusals_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
         (REPO / "configs" / "clearance-sweep.toml").read_text(encoding="utf-8"), encoding="utf-8"
     )
     folder = plan.start_run(static, samples=4, run_dir=tmp_path / "static", progress=False).folder
+    capsys.readouterr()  # the run's own lines (a cold cache's compile notice): not the check's
     for argv, message in [
         (["check", str(folder), "--tighten", "10"], "no [simulate]"),
         (["check", str(folder), "--tighten", "0.5"], "--tighten: must be a number >= 1"),

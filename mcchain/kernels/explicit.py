@@ -364,14 +364,17 @@ def reseat(km, s, q, v, t, minv, cols, first, cst, row_law, tau, work_B, work_S,
 @njit(**JIT)
 def rk4_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, A, bw, cc,
-    balpha2, bbeta2, ctol, tau, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct,
-    sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div, t_sing, t_cl,
+    balpha2, bbeta2, ctol, tau, row0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en,
+    out_ct, sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div, t_sing, t_cl,
 ):  # fmt: skip
     """Fixed-step RK4 (tableau ``A``, ``bw``, ``cc``, strictly sub-diagonal) with Baumgarte
     on the samples ``start:stop``: ``nstep`` steps of ``h``, the last one ``h_last`` long;
     step n starts at :func:`step_time`, and the outputs are written at the times ``t_out``
     (every ``out_every`` steps, and t_end = t_out[-1] after the last step). ``cols``,
-    ``first``: the constraint pattern (:func:`index1_acceleration`).
+    ``first``: the constraint pattern (:func:`index1_acceleration`). The histories
+    ``out_q`` .. ``out_en`` (float64) hold the samples from ``row0`` on: sample s in row
+    s − row0 (the caller may pass a block's rows and store them as float32: the kernel
+    compiles for one type of histories).
 
     Contact-law joints (:mod:`mcchain.kernels.clearance`), as the lanes: after each step's
     first stage, the step-size check (ω_c h > CONTACT_STEP_LIMIT: CONTACT_STEP_TOO_LARGE),
@@ -393,7 +396,7 @@ def rk4_run(
     nout = out_spec.shape[0]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
-            nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            nan_history(s - row0, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             for k in range(npk):
                 peaks_out[s, k] = np.nan
             for k in range(nout):
@@ -510,8 +513,8 @@ def rk4_run(
                 if n == nstep or n % out_every == 0:
                     it = t_out.shape[0] - 1 if n == nstep else n // out_every
                     write_outputs(
-                        km, s, it, q, v, lam0, cst, jf, cf, err0, out_q, out_v, out_jf, out_cf,
-                        out_dtq, out_cerr, out_en, out_ct,
+                        km, s, s - row0, it, q, v, lam0, cst, jf, cf, err0, out_q, out_v,
+                        out_jf, out_cf, out_dtq, out_cerr, out_en, out_ct,
                     )  # fmt: skip
                     written = it + 1
             if st & FAILURE_BITS or n == nstep:
@@ -525,7 +528,7 @@ def rk4_run(
                 reseat(
                     km, s, q, v, tn, minv, cols, first, cst, row_law, tau, B, S, phi, g, nu, dinv,
                 )  # fmt: skip
-        nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+        nan_history(s - row0, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
         outputs_finish(s, (st & FAILURE_BITS) != 0, ot, out_spec, out_data, out_values)
         finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)
@@ -552,9 +555,10 @@ def any_marked(cst):
 
 
 @njit(**JIT)
-def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
-                   out_dtq, out_cerr, out_en, out_ct):  # fmt: skip
-    """The outputs of sample ``s`` at history index ``it``: the state, the reactions from λ
+def write_outputs(km, s, row, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
+                  out_dtq, out_cerr, out_en, out_ct):  # fmt: skip
+    """The outputs of sample ``s`` at history index ``it``, into row ``row`` of ``out_q`` ..
+    ``out_en`` and row ``s`` of the contact history ``out_ct``: the state, the reactions from λ
     (a joint under the law: F_n ≥ 0, clipped at its switch from the link), the driver
     torques, max |Φ|, the energy (with the contacts' elastic energy), δ and each contact-law
     joint's mode. Nothing where the histories hold no time (``[storage] histories =
@@ -573,14 +577,14 @@ def write_outputs(km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, 
         out_ct[s, it, 2 * j] = pen
         out_ct[s, it, 2 * j + 1] = contact_mode(cst[j, FM], pen, cst[j, VI])
     for i in range(ndof):
-        out_q[s, it, i] = q[i]
-        out_v[s, it, i] = v[i]
+        out_q[row, it, i] = q[i]
+        out_v[row, it, i] = v[i]
     for k in range(jf.shape[0]):
-        out_jf[s, it, 2 * k] = jf[k, 0]
-        out_jf[s, it, 2 * k + 1] = jf[k, 1]
-        out_cf[s, it, k] = cf[k]
+        out_jf[row, it, 2 * k] = jf[k, 0]
+        out_jf[row, it, 2 * k + 1] = jf[k, 1]
+        out_cf[row, it, k] = cf[k]
     for d in range(km.driver_row.shape[0]):
-        out_dtq[s, it, d] = -lam[km.driver_row[d]]
-    out_cerr[s, it] = err
+        out_dtq[row, it, d] = -lam[km.driver_row[d]]
+    out_cerr[row, it] = err
     energy = kinetic_energy(km, s, v) + potential_energy(km, s, q)
-    out_en[s, it] = energy + contact_energy(km, s, q, cst)
+    out_en[row, it] = energy + contact_energy(km, s, q, cst)

@@ -75,14 +75,15 @@ from mcchain.status import (
 @njit(**JIT)
 def generalized_alpha_run(
     start, stop, km, Q0, V0, t_out, h, h_last, nstep, out_every, ncon, cols, first, alpha_m,
-    alpha_f, gam, beta, ctol, tau, max_newton, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
-    out_en, out_ct, sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div, t_sing,
-    t_cl, nsteps_out, nevals_out,
+    alpha_f, gam, beta, ctol, tau, max_newton, row0, out_q, out_v, out_jf, out_cf, out_dtq,
+    out_cerr, out_en, out_ct, sum_ct, peaks_out, out_spec, out_data, out_values, status, t_div,
+    t_sing, t_cl, nsteps_out, nevals_out,
 ):  # fmt: skip
     """Generalized-α on M q̈ + Bᵀλ = F, Φ(q, t) = 0 for samples ``start:stop``: ``nstep``
     steps of ``h``, the last one ``h_last`` long, step n starting at
     :func:`mcchain.kernels.explicit.step_time`; outputs at the times ``t_out`` (every
-    ``out_every`` steps, and t_end = t_out[-1] after the last step).
+    ``out_every`` steps, and t_end = t_out[-1] after the last step), sample s in row
+    s − ``row0`` of the float64 histories (see explicit.rk4_run).
 
     Each step: predict q̈_{n+1} = q̈_n, λ_{n+1} = λ_n, then Newton on the residuals
     (M q̈ + Bᵀλ − F, Φ) with the iteration matrix [[β′M + γ′C + K, Bᵀ], [B, 0]] (exact K
@@ -112,7 +113,7 @@ def generalized_alpha_run(
     nout = out_spec.shape[0]
     for s in range(start, stop):
         if status[s] & FAILURE_BITS:
-            nan_history(s, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+            nan_history(s - row0, 0, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
             for k in range(npk):
                 peaks_out[s, k] = np.nan
             for k in range(nout):
@@ -194,8 +195,8 @@ def generalized_alpha_run(
             if n == nstep or n % out_every == 0:
                 it = t_out.shape[0] - 1 if n == nstep else n // out_every
                 write_outputs(
-                    km, s, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf, out_cf,
-                    out_dtq, out_cerr, out_en, out_ct,
+                    km, s, s - row0, it, q, v, lam, cst, jf, cf, err, out_q, out_v, out_jf,
+                    out_cf, out_dtq, out_cerr, out_en, out_ct,
                 )  # fmt: skip
                 written = it + 1
             if n == nstep:
@@ -290,7 +291,7 @@ def generalized_alpha_run(
                     qdd[i] = rhs[i]
                 for r in range(ncon):
                     lam[r] = rhs[ndof + r]
-        nan_history(s, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+        nan_history(s - row0, written, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
         peaks_finish(s, (st & FAILURE_BITS) != 0, pk, npk, peaks_out)
         outputs_finish(s, (st & FAILURE_BITS) != 0, ot, out_spec, out_data, out_values)
         finish_contact(km, s, st, written, cst, out_ct, sum_ct, peaks_out)

@@ -38,6 +38,7 @@ import numpy as np
 
 from mcchain.contact import AUTO, RESEAT_PERIODS, SEATED, SEATED_AT_SWITCH, seat_tolerance
 from mcchain.model import JOINT_CLEARANCE
+from mcchain.solvers.history_rows import float64_rows, store_rows
 from mcchain.status import CONTACT_LOST, DIVERGED, FAILURE_BITS, SINGULAR
 
 if TYPE_CHECKING:
@@ -110,10 +111,12 @@ def run_radau(run: RadauRun, flat: tuple[np.ndarray, ...], singular_pivot: float
     )
     shared = (run.model.kernel_model(), *run.model.constraint_pattern())
     for i in range(n):
+        rows = float64_rows(flat, i, i + 1)  # the sample's histories as the kernels write them
         if run.status[i] & FAILURE_BITS:
-            nan_history(i, 0, *flat)
-            continue
-        _Sample(run, i, singular_pivot, flat, contact, shared).integrate()
+            nan_history(0, 0, *rows)
+        else:
+            _Sample(run, i, singular_pivot, rows, contact, shared).integrate()
+        store_rows(flat, i, rows)
 
 
 class _Dense:
@@ -157,9 +160,10 @@ class _Sample:
         contact: tuple[np.ndarray, np.ndarray],
         shared: tuple[Any, ...],
     ) -> None:
-        """``contact``: the contact history and summary arrays (empty without contact-law
-        joints); ``shared``: the kernel model and the constraint pattern, built once per
-        run."""
+        """``flat``: this sample's histories, one float64 row each
+        (:func:`~mcchain.solvers.history_rows.float64_rows`); ``contact``: the contact
+        history and summary arrays of every sample (empty without contact-law joints);
+        ``shared``: the kernel model and the constraint pattern, built once per run."""
         from mcchain.kernels import clearance as cl
         from mcchain.kernels import radau as kr
         from mcchain.kernels.explicit import index1_acceleration
@@ -516,7 +520,7 @@ class _Sample:
             run.status[i] |= fail_bit
             (run.t_div if fail_bit == DIVERGED else run.t_sing)[i] = fail_time
         if written < self.flat[-1].shape[1]:  # times left unwritten: loaded only then
-            nan_history(i, written, *self.flat)
+            nan_history(0, written, *self.flat)
         assert run.peaks is not None
         run.peaks[i] = np.nan if fail_bit else self.peaks
         if self.spec.shape[0]:
@@ -591,7 +595,7 @@ class _Sample:
         cl.record_stage0(self.km, self.cst, self.row_law)
         q, v = np.ascontiguousarray(y[: self.ndof]), np.ascontiguousarray(y[self.ndof :])
         write_outputs(
-            self.km, self.i, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,
+            self.km, self.i, 0, it, q, v, self.lam, self.cst, self.jf, self.cf, err, *self.flat,
             self.contact[0],
         )  # fmt: skip
         for k in range(model.njoint):

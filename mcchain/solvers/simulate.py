@@ -56,6 +56,7 @@ from mcchain.model import JointKind, Model
 from mcchain.scene.loading import load_section
 from mcchain.scene.models import Simulate
 from mcchain.solvers.grid import output_times
+from mcchain.solvers.history_rows import ROWS_BLOCK, float64_rows, store_rows
 from mcchain.solvers.kernel_choice import choose_kernels
 from mcchain.solvers.start import start_modes, start_state
 from mcchain.solvers.threads import over_samples
@@ -246,15 +247,36 @@ def _run_rk4_loop(run: _Run) -> None:
     integrated = (run.status & FAILURE_BITS) == 0
     run.steps[integrated] = nstep
     run.evaluations[integrated] = RK4.nstage * nstep + 1
-    over_samples(
-        rk4_run, run.model.nsample,
-        run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
-        run.time, run.dt, run.last_step, nstep, run.every, run.model.ncon,
-        *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
-        2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
-        *_flat_outputs(run.out), *_loop_contact_args(run),
-        run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, min_block=1,
+    _over_loop_samples(
+        run, rk4_run,
+        (run.model.kernel_model(), np.ascontiguousarray(run.q), np.ascontiguousarray(run.v),
+         run.time, run.dt, run.last_step, nstep, run.every, run.model.ncon,
+         *run.model.constraint_pattern(), RK4.A, RK4.b, RK4.c,
+         2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT),
+        (*_loop_contact_args(run), run.peaks, *run.output_args(), run.status, run.t_div,
+         run.t_sing, run.t_cl),
     )  # fmt: skip
+
+
+def _over_loop_samples(
+    run: _Run, kernel: Any, before: tuple[Any, ...], after: tuple[Any, ...]
+) -> None:
+    """``kernel(start, stop, *before, row0, *histories, *after)`` over the samples, on
+    threads: the loop kernels take float64 histories only (``row0`` their first sample), so
+    float32 ones are written a block at a time into float64 rows and stored
+    (:mod:`.history_rows`)."""
+    flat = _flat_outputs(run.out)
+    n = run.model.nsample
+    if all(a.dtype == np.float64 for a in flat):
+        over_samples(kernel, n, *before, 0, *flat, *after, min_block=1)
+        return
+
+    def block(start: int, stop: int) -> None:
+        rows = float64_rows(flat, start, stop)
+        kernel(start, stop, *before, start, *rows, *after)
+        store_rows(flat, start, rows)
+
+    over_samples(block, n, min_block=1, max_block=ROWS_BLOCK)
 
 
 def _loop_contact_args(run: _Run) -> tuple[np.ndarray, np.ndarray]:
@@ -313,15 +335,14 @@ def _run_generalized_alpha(run: _Run) -> None:
     s = run.settings
     coef = GeneralizedAlpha.from_rho(s.rho_inf)
     km = run.model.kernel_model()
-    over_samples(
-        generalized_alpha_run, run.model.nsample,
-        km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), run.time, run.dt,
-        run.last_step, run.nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
-        coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
-        SINGULAR_PIVOT, s.max_newton,
-        *_flat_outputs(run.out), *_loop_contact_args(run),
-        run.peaks, *run.output_args(), run.status, run.t_div, run.t_sing, run.t_cl, run.steps,
-        run.evaluations, min_block=1,
+    _over_loop_samples(
+        run, generalized_alpha_run,
+        (km, np.ascontiguousarray(run.q), np.ascontiguousarray(run.v), run.time, run.dt,
+         run.last_step, run.nstep, run.every, run.model.ncon, *run.model.constraint_pattern(),
+         coef.alpha_m, coef.alpha_f, coef.gamma, coef.beta, s.constraint_tolerance,
+         SINGULAR_PIVOT, s.max_newton),
+        (*_loop_contact_args(run), run.peaks, *run.output_args(), run.status, run.t_div,
+         run.t_sing, run.t_cl, run.steps, run.evaluations),
     )  # fmt: skip
 
 

@@ -24,11 +24,18 @@ MIN_BLOCK = 16
 
 
 def item_blocks(
-    count: int, threads: int, min_block: int = 1, per_thread: int = BLOCKS_PER_THREAD
+    count: int,
+    threads: int,
+    min_block: int = 1,
+    per_thread: int = BLOCKS_PER_THREAD,
+    max_block: int | None = None,
 ) -> list[tuple[int, int]]:
     """Contiguous ``(start, stop)`` blocks covering ``0:count`` for ``threads`` threads
-    (``per_thread`` blocks each), each at least ``min_block`` long (but one)."""
+    (``per_thread`` blocks each), each at least ``min_block`` long (but one) and, where
+    ``max_block`` is given, at most that long (more blocks then)."""
     nblock = max(1, min(threads * per_thread, count // min_block))
+    if max_block is not None:
+        nblock = max(nblock, -(-count // max_block))
     edges = [count * k // nblock for k in range(nblock + 1)]
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
@@ -45,14 +52,15 @@ def over_samples(
     *args: Any,
     min_block: int = MIN_BLOCK,
     per_thread: int = BLOCKS_PER_THREAD,
+    max_block: int | None = None,
 ) -> None:
     """Call ``kernel(start, stop, *args)`` on blocks covering ``0:count`` (samples, or lane
     groups with ``min_block=1``), on as many threads as numba may use
     (``numba.get_num_threads()``, which ``--threads`` sets; one where the kernels run
     interpreted, :func:`mcchain.kernels.config.interpret_kernels`); ``per_thread`` blocks
-    per thread."""
+    per thread (more where blocks would be longer than ``max_block``)."""
     threads = 1 if config.INTERPRETED else _numba_threads()
-    blocks = item_blocks(count, threads, min_block, per_thread)
+    blocks = item_blocks(count, threads, min_block, per_thread, max_block)
     if threads == 1 or len(blocks) == 1:
         for start, stop in blocks:
             kernel(start, stop, *args)
