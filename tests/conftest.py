@@ -32,30 +32,39 @@ os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 
 LONGEST_FIRST = (
     "test_contact_start.py",  # first compiles: assembly, radau, the loop kernels, generalized-α
-    "test_native.py",  # numba's compile of lane modules (the reference of the native compiler)
+    # meanwhile, on the other worker: files that compile nothing (the statistics of the
+    # decisions), so that the two workers do not compile the same kernels at once
+    "test_decision_allocation.py",
+    "test_decision_subset.py",
+    "test_decision_whatif.py",
     "test_runs_pipeline.py",  # end to end through the command line, Dask, kills, memory
+    "test_native.py",  # numba's compile of a lane module (the reference of the native compiler)
     "test_outputs_reference.py",  # minimal-coordinate (sympy, scipy) references
     "test_runs_histories.py",
     "test_validate_interpreted.py",
     "test_compile_ahead.py",  # a cold run in a process of its own, on an empty cache
+    "test_outputs_shared_ideal.py",
+    "test_simulate_accuracy.py",
+    "test_slider_drivers.py",
     "test_simulate_methods.py",
+    "test_contact_dynamics.py",
+    "test_radau.py",
+    "test_peaks.py",
+    "test_simulate_stability.py",
+    "test_viz_report_page.py",
     "test_outputs_scene.py",
     "test_scene_configs.py",
-    "test_peaks.py",
-    "test_simulate_accuracy.py",
     "test_simulate_grid.py",
-    "test_slider_drivers.py",
-    "test_contact_dynamics.py",
-    "test_decision_allocation.py",
-    "test_viz_report_page.py",
     "test_decision_requirements.py",
-    "test_decision_subset.py",
 )
 """Test files in the order they start, before all others (in collection order), ranked by
-the CPU time of a cold run (benchmarks/results/ci/ci.md). ``--dist loadfile`` hands each
-worker the next file when it is free: the longest files started last kept one worker busy
-minutes after the other had finished; started first, the short files fill the gap. xdist
-itself would reorder files by their number of tests (its ``--loadscope-reorder``, on by
+the CPU time of a cold run (benchmarks/results/ci/ci.md), but that the second worker starts
+with files that compile nothing while the first compiles the kernels most files share: two
+workers compiling the same kernel at once each pay its whole compile (the Radau kernel, 20 s,
+when test_native's Radau check started beside test_contact_start). ``--dist loadfile`` hands
+each worker the next file when it is free: the longest files started last kept one worker
+busy minutes after the other had finished; started first, the short files fill the gap.
+xdist itself would reorder files by their number of tests (its ``--loadscope-reorder``, on by
 default, which ran the few-test long files last): pyproject's ``--no-loadscope-reorder``
 keeps this order. Order only: each file's tests run as they would alone."""
 
