@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "8209da0139cee160e2eee41b137684225919e68359a71ad5f8141a8c46946592",
-        "rk4-projection": "61bdb7aab91de129f3a4475f12b6901e35e2a9ea1710e9cfa66b72dc9660d9eb",
+        "rk4": "e2b47cf272c0f88c492e8bc7a11daf3f74fcb54c570d4c19b840b2dd7d016d3e",
+        "rk4-projection": "28279c4ee9e492bcc70ad523cc117b5ee5fa9795c89dc9367f2834600fbc9344",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "6ea818882d5bc684c28028a51681f12a6b9d468895ee3ebb7e1cc9bbb6ed4bf9",
-        "rk4-projection": "853bc83b5dd552beaea704e8be2087da8767c9c16a8e8bf6b10e90a6a1e8740d",
+        "rk4": "8d04edb5b122c4faf5fe2b8f07049572976f36d87a7ad5aaf2181b57144b92b2",
+        "rk4-projection": "ec1ad64f4a56e9705ca7aa3ee7a76a6c5dbbd5d9922d134eaba73208d175c9c8",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "b7be2b4edacc60884853374a3712fdced087a6ed2d6b837317bd530392c8478d",
-        "rk4-projection": "fe30bb36a562cde8ea23cd76b9050ec871c836a20bc14cca21bd78fb2ef47855",
+        "rk4": "f4891e32dc1b8d779f2166bc285a1f9eca41a2abfc36464883f0977c74ccecf4",
+        "rk4-projection": "85a733fc7b0b74f6957efbb8937bc3842bb68ef4cca22b6d46c8af5d3436b6a1",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "1aa9b3d662cc8c38b859f035e84796a0bf26aeacdb764f6431c29056e41b8a2b",
-        "rk4-projection": "19533a1487eb68d6d46573415457edfca82c8c7a920a3a9ab6ccbeb8c3e39145",
+        "rk4": "8a0f5c633ccf61e091db99e62fdb5c3edd9f1fe92e4c67d4aad00fa834b0167a",
+        "rk4-projection": "9f83e11697fab4c27b747482d2131eb4ff769f555ff14627e384d90aad09c62c",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

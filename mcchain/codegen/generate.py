@@ -39,6 +39,7 @@ from mcchain.codegen.layout import (
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import INTERLEAVE_CONSTANT, schedule_lane_loops
+from mcchain.codegen.sincos import ROTATION_BOUND, rotated_sincos_code, sincos_code
 from mcchain.codegen.topology import Topology
 from mcchain.codegen.tracking import tracking_blocks, tracking_functions
 from mcchain.compiled.caches import generated_text
@@ -156,8 +157,13 @@ def _blocks(
         vt = " + ".join(f"ah{j} * {at(f'kv{j}', i)}" for j in range(nstage))
         em.emit(f"q{i} = {at('q', i)} + ({qt})", f"v{i} = {at('v', i)} + ({vt})")
     block("load_stage")
+    fixed_step = "sc0" in lay.rows
+    if fixed_step:  # the bodies' sin/cos computed before the stage (_stage_angles)
+        em.angle_rows = lambda body: (at("scc", 2 * body), at("scc", 2 * body + 1))
     em.acceleration(t="ts")
+    em.angle_rows = None
     block("accel_stage")
+    b.update(_stage_angles(topo, lay) if fixed_step else {})
 
     em.emit(
         *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
@@ -341,6 +347,43 @@ def _blocks(
     b.update(tracking_blocks(topo, lay))
     b.update(output_blocks(topo, lay, outputs))
     return b
+
+
+def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
+    """The fixed-step kernel's blocks of the bodies' sin/cos at a stage, into rows ``scc``
+    (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``),
+    ``rotation_check`` (counts in ``nbig`` the lanes' bodies whose stage increment δ = ah θ̇
+    is past :data:`ROTATION_BOUND`), ``sincos_rotated`` (the start's turned by δ) and
+    ``sincos_full`` (in full, as at the start).
+
+    The stage's angle is θ₀ + ah k, k its previous stage's θ̇; written in full as the stage
+    itself writes it (the first stage's bits are the full evaluation's). A NaN δ counts as
+    within the bound: its lane's sin/cos are NaN either way.
+    """
+    at = lay.at
+    full: list[str] = []
+    rotated: list[str] = []
+    check: list[str] = []
+    start: list[str] = []
+    for body in range(topo.nbody):
+        i = 3 * body + 2
+        delta = f"ah * {at('kqc', i)}"
+        sn, cs = f"sn{body}", f"cs{body}"
+        rows = (at("scc", 2 * body), at("scc", 2 * body + 1))
+        first = (at("sc0", 2 * body), at("sc0", 2 * body + 1))
+        full += [f"th{body} = {at('q', i)} + {delta}"]
+        full += sincos_code(f"th{body}", sn, cs, str(body))
+        full += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        start += [f"{first[0]} = {sn}", f"{first[1]} = {cs}"]
+        rotated += rotated_sincos_code(*first, delta, sn, cs, str(body))
+        rotated += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        check.append(f"nbig += 1 if abs({delta}) > {ROTATION_BOUND!r} else 0")
+    return {
+        "sincos_start": "\n".join(full + start or ["pass"]),
+        "sincos_full": "\n".join(full or ["pass"]),
+        "rotation_check": "\n".join(check or ["pass"]),
+        "sincos_rotated": "\n".join(rotated or ["pass"]),
+    }
 
 
 def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:

@@ -8,6 +8,8 @@ folded away), the sparse pattern of B. The arithmetic of each joint and driver i
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from mcchain.codegen.lane_text import JOINT_KERNELS, LaneText, _coef, _tidy
@@ -26,11 +28,20 @@ class ConstraintKinematics(LaneText):
     def __init__(self, topo: Topology):
         super().__init__(topo)
         self._rows_cache: list[dict[int, Coef]] | None = None
+        self.angle_rows: Callable[[int], tuple[str, str]] | None = None
+        """Where :meth:`bodies` reads body b's sin/cos (computed before, in a lane loop of
+        their own), or None: computed in place."""
 
     def bodies(self, q: str = "q", tag: str = "") -> None:
-        """sin/cos of every body angle: ``s{b}``, ``c{b}``."""
+        """sin/cos of every body angle: ``sn{b}``, ``cs{b}`` (read from :attr:`angle_rows`
+        where set)."""
         for b in range(self.topo.nbody):
-            self.emit(*sincos_code(f"{q}{3 * b + 2}", f"sn{b}{tag}", f"cs{b}{tag}", f"{b}{tag}"))
+            sn, cs = f"sn{b}{tag}", f"cs{b}{tag}"
+            if self.angle_rows is not None:
+                rows = self.angle_rows(b)
+                self.emit(f"{sn} = {rows[0]}", f"{cs} = {rows[1]}")
+            else:
+                self.emit(*sincos_code(f"{q}{3 * b + 2}", sn, cs, f"{b}{tag}"))
 
     def _point(
         self, body: int, sx: str, sy: str, name: str, q: str = "q", tag: str = "", world=False

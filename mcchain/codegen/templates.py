@@ -166,6 +166,23 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 ah = A[s, s - 1] * hn if s > 0 else 0.0
                 bh = bw[s] * hn
                 keep = 0.0 if s == 0 else 1.0
+                # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
+                # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
+                # chain), where every lane's |δ| is within the polynomials' interval, else in
+                # full (one branch for the whole group: the lane loops still vectorise).
+                if s == 0:
+                    for l in range(nl):  # lanes: independent
+                        @@sincos_start
+                else:
+                    nbig = 0
+                    for l in range(nl):
+                        @@rotation_check
+                    if nbig == 0:
+                        for l in range(nl):  # lanes: independent
+                            @@sincos_rotated
+                    else:
+                        for l in range(nl):  # lanes: independent
+                            @@sincos_full
                 for l in range(nl):  # lanes: schedule
                     @@load_params
                     @@load_stage_sub

@@ -1,7 +1,7 @@
-"""The branch-free sine/cosine of generated kernels, as a numba function (tests and tools).
+"""The branch-free sine/cosine of generated kernels, as numba functions (tests and tools).
 
-Built from :func:`mcchain.codegen.sincos.sincos_code`, the very lines generated kernels
-inline.
+Built from :func:`mcchain.codegen.sincos.sincos_code` and
+:func:`~mcchain.codegen.sincos.rotated_sincos_code`, the very lines generated kernels inline.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from mcchain.codegen.sincos import sincos_code
-from mcchain.kernels.config import JIT, njit
+from mcchain.codegen.sincos import rotated_sincos_code, sincos_code
+from mcchain.kernels.config import JIT, LANE_JIT, njit
 
 
 def _sincos_function() -> str:
@@ -19,8 +19,21 @@ def _sincos_function() -> str:
     return f"def sincos(x):\n{body}\n    return s, c\n"
 
 
+def _rotated_function() -> str:
+    lines = rotated_sincos_code("s0", "c0", "delta", "s", "c", "")
+    body = "\n".join("    " + line for line in lines)
+    return f"def rotated_sincos(s0, c0, delta):\n{body}\n    return s, c\n"
+
+
 _namespace: dict[str, object] = {"math": math, "np": np}
 exec(_sincos_function(), _namespace)
+exec(_rotated_function(), _namespace)
 # exec'd code has no file for numba's cache: compiled uncached (it serves tests and tools).
 sincos = njit(**dict(JIT, cache=False))(_namespace["sincos"])
 sincos.__doc__ = "(sin x, cos x) by the branch-free polynomial that generated kernels inline."
+# With the lanes' options (fused multiply-adds allowed), as the lanes compile it.
+rotated_sincos = njit(**dict(LANE_JIT, cache=False))(_namespace["rotated_sincos"])
+rotated_sincos.__doc__ = (
+    "(sin(θ₀ + δ), cos(θ₀ + δ)) from (sin θ₀, cos θ₀) and δ, as the rk4 lanes turn a body's "
+    "step-start sine-cosine to a later stage (|δ| ≤ π/4 only)."
+)
