@@ -354,7 +354,10 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``),
     ``rotation_check`` (counts in ``nbig`` the lanes' bodies whose stage increment δ = ah θ̇
     is past :data:`ROTATION_BOUND`), ``sincos_rotated`` (the start's turned by δ) and
-    ``sincos_full`` (in full, as at the start).
+    ``sincos_mixed`` (each lane's and body's own choice: in full, as at the start, where its
+    |δ| is past the bound, else turned). A lane's values so depend on its own δ only, never
+    on the lanes beside it: a sample's bits are the same in any lane group, chunk or thread
+    count; the group's branch between the two blocks only saves the full evaluations.
 
     The stage's angle is θ₀ + ah k, k its previous stage's θ̇; written in full as the stage
     itself writes it (the first stage's bits are the full evaluation's). A NaN δ counts as
@@ -363,6 +366,7 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     at = lay.at
     full: list[str] = []
     rotated: list[str] = []
+    mixed: list[str] = []
     check: list[str] = []
     start: list[str] = []
     for body in range(topo.nbody):
@@ -375,12 +379,18 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
         full += sincos_code(f"th{body}", sn, cs, str(body))
         full += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
         start += [f"{first[0]} = {sn}", f"{first[1]} = {cs}"]
-        rotated += rotated_sincos_code(*first, delta, sn, cs, str(body))
-        rotated += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
-        check.append(f"nbig += 1 if abs({delta}) > {ROTATION_BOUND!r} else 0")
+        turned = rotated_sincos_code(*first, delta, sn, cs, str(body))
+        rotated += [*turned, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        big = f"abs({delta}) > {ROTATION_BOUND!r}"
+        mixed += [f"th{body} = {at('q', i)} + {delta}"]
+        mixed += sincos_code(f"th{body}", f"snf{body}", f"csf{body}", str(body))
+        mixed += turned
+        mixed += [f"{rows[0]} = snf{body} if {big} else {sn}"]
+        mixed += [f"{rows[1]} = csf{body} if {big} else {cs}"]
+        check.append(f"nbig += 1 if {big} else 0")
     return {
         "sincos_start": "\n".join(full + start or ["pass"]),
-        "sincos_full": "\n".join(full or ["pass"]),
+        "sincos_mixed": "\n".join(mixed or ["pass"]),
         "rotation_check": "\n".join(check or ["pass"]),
         "sincos_rotated": "\n".join(rotated or ["pass"]),
     }

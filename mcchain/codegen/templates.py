@@ -168,8 +168,9 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 keep = 0.0 if s == 0 else 1.0
                 # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
-                # chain), where every lane's |δ| is within the polynomials' interval, else in
-                # full (one branch for the whole group: the lane loops still vectorise).
+                # chain) where |δ| is within the polynomials' interval, else in full: each lane
+                # and body by its own δ (its bits do not depend on its group); the full
+                # evaluations are computed only in a group that has such a lane.
                 if s == 0:
                     for l in range(nl):  # lanes: independent
                         @@sincos_start
@@ -182,7 +183,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                             @@sincos_rotated
                     else:
                         for l in range(nl):  # lanes: independent
-                            @@sincos_full
+                            @@sincos_mixed
                 for l in range(nl):  # lanes: schedule
                     @@load_params
                     @@load_stage_sub
