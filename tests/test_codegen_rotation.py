@@ -1,6 +1,7 @@
 """codegen: the rk4 lanes' sine-cosine of a later stage as the step start's turned by the
-stage's increment δ (mcchain.codegen.sincos.rotated_sincos_code), and its fallback: a lane
-group with any |δ| past ROTATION_BOUND takes the full evaluation, bit for bit."""
+stage's increment δ (mcchain.codegen.sincos.rotated_sincos_code), and its fallback: a lane's
+body whose |δ| is past ROTATION_BOUND takes the full evaluation, bit for bit, whatever the
+lanes beside it take."""
 
 from __future__ import annotations
 
@@ -131,6 +132,55 @@ def test_rk4_lanes__a_lane_s_bits_do_not_depend_on_the_lanes_beside_it():
     assert (grouped["status"] == 0).all() and np.isfinite(grouped["q"]).all()
     for name, values in _histories(grouped).items():
         assert np.array_equal(values, _histories(alone)[name], equal_nan=True), name
+
+
+ROTOR = """
+[scene]
+name = "rotor"
+gravity = [0.0, -9.81]
+[[body]]
+name = "crank"
+mass = 0.1
+inertia = 8.333333333333333e-05
+position = [0.05, 0.0]
+[[joint]]
+name = "O"
+bodies = ["ground", "crank"]
+points = [[0.0, 0.0], [-0.05, 0.0]]
+[[driver]]
+body = "crank"
+omega = 20.0
+[sample]
+count = 16
+seed = 7
+design = "random"
+[sample.vary]
+"driver.crank.omega" = { uniform = [0.0, 500.0] }
+"""
+"""A driven crank alone: its one body turns at the drive's ω, so δ = a h ω at every later
+stage (h/2 at the second and third, h at the fourth)."""
+
+
+def test_rk4_lanes__a_fast_lane_is_evaluated_in_full_beside_turned_ones(monkeypatch):
+    """Lane groups that mix rotors fast enough that every later stage's δ is past the bound
+    with slow ones: each fast rotor's values are those of the text that evaluates every
+    sine-cosine in full, bit for bit, whatever the lanes beside it take (that the slow ones
+    are turned: test_rk4_lanes__slow_groups_are_turned_within_rounding)."""
+    model = model_of(ROTOR)
+    column = list(model.param_paths).index("driver.crank.omega")
+    speeds = np.abs(np.asarray(model.parameters)[:, column])
+    fast = speeds * STEP / 2 > ROTATION_BOUND
+    slow = speeds * STEP < ROTATION_BOUND  # turned at every later stage
+    groups = fast.reshape(-1, LANES)
+    assert (groups.any(axis=1) & ~groups.all(axis=1)).any()  # the premise: mixed groups
+    assert slow.any()
+    rotated, reference = _run_both(monkeypatch, model, "rk4-projection", STEP, 20)
+    assert (reference["status"] == 0).all() and np.isfinite(reference["q"]).all()
+    for name, values in _histories(reference).items():
+        mine = _histories(rotated)[name]
+        if values.shape[:1] == (model.nsample,):  # per sample: the fast ones
+            values, mine = values[fast], mine[fast]
+        assert np.array_equal(values, mine, equal_nan=True), name
 
 
 def test_rk4_lanes__slow_groups_are_turned_within_rounding(monkeypatch):
