@@ -16,7 +16,7 @@ from mcchain.codegen.sincos import ROTATION_BOUND
 from mcchain.solvers.simulate import simulate
 from mcchain.solvers.statics import assemble
 from mcchain.testing.minimal import double_pendulum_minimal
-from mcchain.testing.scenes import model_of, scene_model, slider_crank_text
+from mcchain.testing.scenes import model_of, scene_model, slider_crank_text, straight_chain_text
 from mcchain.testing.sincos import rotated_sincos, sincos
 
 ROTATION_TOL = 2 * 2.0**-52  # |error| of sin and cos: 2 ulp of 1 (measured: 3.3e-16 at most)
@@ -134,31 +134,13 @@ def test_rk4_lanes__a_lane_s_bits_do_not_depend_on_the_lanes_beside_it():
         assert np.array_equal(values, _histories(alone)[name], equal_nan=True), name
 
 
-ROTOR = """
-[scene]
-name = "rotor"
-gravity = [0.0, -9.81]
-[[body]]
-name = "crank"
-mass = 0.1
-inertia = 8.333333333333333e-05
-position = [0.05, 0.0]
-[[joint]]
-name = "O"
-bodies = ["ground", "crank"]
-points = [[0.0, 0.0], [-0.05, 0.0]]
-[[driver]]
-body = "crank"
-omega = 20.0
-[sample]
-count = 16
-seed = 7
-design = "random"
-[sample.vary]
-"driver.crank.omega" = { uniform = [0.0, 500.0] }
-"""
-"""A driven crank alone: its one body turns at the drive's ω, so δ = a h ω at every later
-stage (h/2 at the second and third, h at the fourth)."""
+ROTOR = straight_chain_text([0.1], [0.1], angle=0.0) + (
+    '[[driver]]\nbody = "b0"\nomega = 20.0\n'
+    '[sample]\ncount = 16\nseed = 7\ndesign = "random"\n[sample.vary]\n'
+    '"driver.b0.omega" = { uniform = [0.0, 500.0] }\n'
+)
+"""A driven bar alone (0.1 m, pinned at the origin): it turns at the drive's ω, so δ = a h ω
+at every later stage (h/2 at the second and third, h at the fourth)."""
 
 
 def test_rk4_lanes__a_fast_lane_is_evaluated_in_full_beside_turned_ones(monkeypatch):
@@ -167,7 +149,7 @@ def test_rk4_lanes__a_fast_lane_is_evaluated_in_full_beside_turned_ones(monkeypa
     sine-cosine in full, bit for bit, whatever the lanes beside it take (that the slow ones
     are turned: test_rk4_lanes__slow_groups_are_turned_within_rounding)."""
     model = model_of(ROTOR)
-    column = list(model.param_paths).index("driver.crank.omega")
+    column = list(model.param_paths).index("driver.b0.omega")
     speeds = np.abs(np.asarray(model.parameters)[:, column])
     fast = speeds * STEP / 2 > ROTATION_BOUND
     slow = speeds * STEP < ROTATION_BOUND  # turned at every later stage
