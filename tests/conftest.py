@@ -1,7 +1,8 @@
 """Test-wide settings.
 
 Processes the tests start never run their kernels interpreted on a cold cache
-(``MCCHAIN_INTERPRET_COLD=0``), unless a test asks for it.
+(``MCCHAIN_INTERPRET_COLD=0``) nor start the compile-ahead helper
+(``MCCHAIN_COMPILE_AHEAD=0``), unless a test asks for it.
 
 mcchain's cache (``MCCHAIN_CACHE_DIR``: native machine code, generated text, designs) is a
 temporary folder of the session unless the environment names one (``.ci/run`` does, to keep
@@ -28,14 +29,28 @@ settings.load_profile("ci" if os.environ.get("CI") else "dev")
 # A ``mcchain run`` the tests start as a process keeps the compiled kernels, whatever the
 # cache holds: the interpreted first run (mcchain.compiled.first_run) has tests of its own.
 os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
+# Nor does a run on a cold cache start the compile-ahead helper process
+# (mcchain.compiled.ahead): the suite's workers keep both cores busy, so a third process
+# compiling beside them only adds its start (about 2 s of CPU) and, where it meets a kernel
+# another worker is compiling, that compile again (a cold profile: 12.8 s of CPU in the
+# helper of test_decision_whatif's first run). test_compile_ahead turns it on where it
+# checks it.
+os.environ.setdefault("MCCHAIN_COMPILE_AHEAD", "0")
 
 
 LONGEST_FIRST = (
     "test_contact_start.py",  # first compiles: assembly, radau, the loop kernels, generalized-α
-    # meanwhile, on the other worker: files that compile nothing (the statistics of the
-    # decisions), so that the two workers do not compile the same kernels at once
+    # meanwhile, on the other worker: files that load no kernel (the statistics of the
+    # decisions, runs of a fake solver, generated text), about 30 s of CPU, so that the two
+    # workers do not compile the same kernels at once: test_contact_start compiles the
+    # assembly kernel first (12-25 s), which test_decision_whatif's run needs too
     "test_decision_allocation.py",
-    "test_decision_whatif.py",
+    "test_runs_fakes.py",
+    "test_codegen_golden.py",
+    "test_layering.py",
+    "test_decision_sequential.py",
+    "test_decision_stats.py",
+    "test_decision_whatif.py",  # a run of the pinned bar: assembly (loaded), modes
     "test_runs_pipeline.py",  # end to end through the command line, Dask, kills, memory
     "test_native.py",  # numba's compile of a lane module (the reference of the native compiler)
     "test_outputs_reference.py",  # minimal-coordinate (sympy, scipy) references
@@ -149,6 +164,35 @@ def _temporary_mcchain_cache(tmp_path_factory: pytest.TempPathFactory) -> Any:
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("MCCHAIN_CACHE_DIR", str(folder))
         yield
+
+
+@pytest.fixture
+def dask_scheduler(_temporary_mcchain_cache: Any) -> Any:
+    """The address of a Dask cluster for one test's runs on an existing scheduler: two
+    process workers, one compute thread each (the environment ``--dask local`` gives its
+    workers), closed at the end of the test. A cluster costs about 5 s of CPU to start (two
+    interpreters importing distributed, numba and xarray) and its workers and scheduler
+    keep ticking while it idles (about 8 s of CPU a minute here): a test's runs share one,
+    and none outlives its test. The workers inherit this process's environment (the
+    session's ``MCCHAIN_CACHE_DIR``)."""
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    from mcchain.runner.executors import WORKER_ENV
+
+    with LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        # its scheduler's HTTP server on a free port, not the default 8787 that a
+        # cluster started beside it (``--dask local``) would then move with a warning
+        scheduler_kwargs={"dashboard_address": ":0"},
+        env=dict(WORKER_ENV),
+        silence_logs=logging.ERROR,
+    ) as cluster:
+        yield cluster.scheduler_address
 
 
 @pytest.fixture

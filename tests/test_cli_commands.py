@@ -62,10 +62,12 @@ class Ran:
 def in_process(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> Callable[..., Ran]:
-    """``run(*args, cwd=DIR)``: :func:`mcchain.cli.main` in this process, from ``DIR``."""
+    """``run(*args, cwd=DIR)``: :func:`mcchain.cli.main` in this process, from ``DIR``, with
+    ``sys.argv`` as the console script has it (a run's record keeps it)."""
 
     def run(*args: str | Path, cwd: Path) -> Ran:
         monkeypatch.chdir(cwd)
+        monkeypatch.setattr(sys, "argv", ["mcchain", *map(str, args)])
         capsys.readouterr()
         code = cli.main([str(a) for a in args])
         out, err = capsys.readouterr()

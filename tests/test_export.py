@@ -27,6 +27,10 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     text = fourbar_text() + (
         '[sample]\ncount = 6\nseed = 2\n[sample.vary]\n"joint.B.clearance" = '
         "{ uniform = [5e-5, 2e-4] }\n[simulate]\nt_end = 0.01\ndt = 1e-5\noutput_dt = 1e-3\n"
+        # float64 histories, as test_simulate_accuracy's runs of the four-bar: their rk4
+        # lane entry (an entry compiles per type of its arrays: float32 compiled the module
+        # once more, 2.7 s cold); the export reads either type alike
+        '[storage]\nhistory_dtype = "float64"\n'
     )
     scene = write_scene(tmp_path_factory.mktemp("scene"), text)
     history = start_run(scene, out=out, progress=False)

@@ -141,9 +141,10 @@ def test_histories__byte_identical_whatever_the_chunks_and_threads(tmp_path: Pat
 
 
 @pytest.mark.slow
-def test_histories__byte_identical_on_dask(tmp_path: Path, three) -> None:
+def test_histories__byte_identical_on_dask(tmp_path: Path, three, dask_scheduler: str) -> None:
+    """Both on one Dask cluster of two process workers (conftest's ``dask_scheduler``)."""
     for mode in ("none", "failed"):
-        other = run(tmp_path, mode, f"{mode}-dask", chunk_size=5, threads=2, dask="local")
+        other = run(tmp_path, mode, f"{mode}-dask", chunk_size=5, dask=dask_scheduler)
         assert filecmp.cmp(three[mode] / "ensemble.nc", other / "ensemble.nc", shallow=False)
 
 
@@ -219,18 +220,10 @@ def test_histories__show_replays_a_stored_history_and_names_a_missing_one(three,
         show_run(three["none"], worst="contact_force:1", save=tmp_path / "worst.rrd")
 
 
-def test_histories__bad_value_is_one_line_exit_2_nothing_written(tmp_path: Path) -> None:
-    import os
-    import subprocess
-    import sys
-
+def test_histories__bad_value_is_one_line_exit_2_nothing_written(tmp_path: Path, mcchain) -> None:
     path = tmp_path / "bad.toml"
     path.write_text(scene_text("all").replace('histories = "all"', 'histories = "some"'))
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
-    proc = subprocess.run(
-        [sys.executable, "-m", "mcchain.cli", "run", str(path), "--out", str(tmp_path / "runs")],
-        capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path,
-    )  # fmt: skip
+    proc = mcchain("run", path, "--out", tmp_path / "runs", cwd=tmp_path)
     assert proc.returncode == 2 and proc.stdout == ""
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "storage.histories" in lines[0] and "some" in lines[0], lines

@@ -19,14 +19,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from dask.distributed import LocalCluster
+from test_cli_commands import Ran
 from test_runs_support import REPO, start_paused_child
 
 from mcchain import open_run
 from mcchain.ensemble.io import list_parts
 from mcchain.ensemble.registry import validate_dataset
 from mcchain.runner import runs
-from mcchain.runner.executors import WORKER_ENV
 from mcchain.testing.closed_forms import G, clearance_bar_pulsations
 from mcchain.testing.scenes import hanging_clearance_bar_text
 
@@ -43,7 +42,11 @@ def command(*args: str | Path) -> list[str]:
     return [sys.executable, "-m", "mcchain.cli", *map(str, args)]
 
 
-def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+def in_a_process(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``mcchain ARGS`` as a process of its own (``python -m mcchain.cli``): exit code 0.
+    Where a claim needs no process of its own (an exit, a signal, a console), the tests
+    run the command line in this process (conftest's ``mcchain``: :func:`mcchain.cli.main`),
+    which saves the 1.5-2 s of CPU a process takes to import and load its kernels."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.run(
         command(*args), cwd=cwd, env=env, capture_output=True, text=True, timeout=900
@@ -52,7 +55,8 @@ def mcchain(*args: str | Path, cwd: Path) -> subprocess.CompletedProcess[str]:
     return proc
 
 
-def last_line(proc: subprocess.CompletedProcess[str]) -> Path:
+def last_line(proc: subprocess.CompletedProcess[str] | Ran) -> Path:
+    assert proc.returncode == 0, proc.stderr
     return Path(proc.stdout.splitlines()[-1])
 
 
@@ -61,7 +65,7 @@ def quartic_omega(mass: np.ndarray, clearance: np.ndarray) -> np.ndarray:
     return clearance_bar_pulsations(mass, 1.0 / 6.0, 0.5, G, clearance)
 
 
-def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> None:
+def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path, mcchain) -> None:
     proc = mcchain("run", CLEARANCE_BAR, "--samples", "300", "--chunk-size", "64", cwd=tmp_path)
     folder = tmp_path / last_line(proc)
     # No progress bar when stderr is not a terminal: nothing but, on a cold cache, the
@@ -85,15 +89,16 @@ def test_pipeline__run_clearance_bar_from_the_command_line(tmp_path: Path) -> No
         # The journal hangs straight below the pin: d along -y, |d| = c.
         np.testing.assert_allclose(ds.q_eq.sel(dof="theta").values, -np.pi / 2, atol=1e-9)
         assert ds.attrs["scene"] == CLEARANCE_BAR.read_text()
-    listing = mcchain("runs", cwd=tmp_path).stdout
-    assert folder.name in listing and "ok=300" in listing
+    listing = mcchain("runs", cwd=tmp_path)
+    assert listing.returncode == 0
+    assert folder.name in listing.stdout and "ok=300" in listing.stdout
 
 
 def test_pipeline__the_console_exit_loses_nothing(tmp_path: Path) -> None:
     """The command line ends with ``os._exit`` after the exit handlers (the interpreter's
     teardown took 0.3-0.4 s): the log ends with the run's last line, stdout with the run
     folder, and bad input still exits 2 with its message."""
-    proc = mcchain("run", SWEEP, "--samples", "40", "--chunk-size", "16", cwd=tmp_path)
+    proc = in_a_process("run", SWEEP, "--samples", "40", "--chunk-size", "16", cwd=tmp_path)
     folder = tmp_path / last_line(proc)
     assert (folder / "ensemble.nc").is_file()
     assert "run completed" in (folder / "run.log").read_text().splitlines()[-1]
@@ -105,29 +110,26 @@ def test_pipeline__the_console_exit_loses_nothing(tmp_path: Path) -> None:
     assert "missing.toml: no such file" in bad.stderr and bad.stdout == ""
 
 
-def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_path: Path) -> None:
+def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(
+    tmp_path: Path, mcchain, dask_scheduler: str
+) -> None:
+    """``mcchain run`` (the command line, in this process) in one chunk, in small chunks
+    on 2 threads, on a Dask cluster it starts (``--dask local``: two process workers) and
+    on an existing scheduler reached by its tcp:// address (conftest's ``dask_scheduler``):
+    the same file, byte for byte."""
+    assert dask_scheduler.startswith("tcp://")
     variants = {
         "one-chunk": ["--chunk-size", "1000", "--threads", "1"],
         "small-chunks": ["--chunk-size", "96", "--threads", "2"],
         "dask-local": ["--chunk-size", "128", "--dask", "local", "--threads", "2"],
+        "dask-tcp": ["--chunk-size", "200", "--dask", dask_scheduler],
     }
     files = {}
-    with LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        env=dict(WORKER_ENV),
-    ) as cluster:  # an "existing" scheduler, reached by its tcp:// address
-        assert cluster.scheduler_address.startswith("tcp://")
-        variants["dask-tcp"] = ["--chunk-size", "200", "--dask", cluster.scheduler_address]
-        for name, extra in variants.items():
-            folder = tmp_path / name
-            proc = mcchain(
-                "run", SWEEP, "--samples", "1000", "--run-dir", folder, *extra, cwd=tmp_path
-            )
-            assert last_line(proc) == folder
-            files[name] = folder / "ensemble.nc"
+    for name, extra in variants.items():
+        folder = tmp_path / name
+        proc = mcchain("run", SWEEP, "--samples", "1000", "--run-dir", folder, *extra, cwd=tmp_path)
+        assert last_line(proc) == folder
+        files[name] = folder / "ensemble.nc"
     record = runs.read_record(tmp_path / "dask-local")
     assert record["scheduler"] == "dask local" and record["threads"] == 2
     assert len(record["workers"]) == 2
@@ -147,7 +149,10 @@ def test_pipeline__identical_files_in_process_any_chunks_threads_and_dask(tmp_pa
         )
 
 
-def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Path) -> None:
+def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Path, mcchain) -> None:
+    """A run killed (SIGKILL, a process of its own) after 3 parts: the parts it wrote are
+    whole, ``mcchain runs`` calls it interrupted, the resume (the command line, here)
+    completes it to the file of an uninterrupted run."""
     target = tmp_path / "killed"
     args: list[str | Path] = ["run", SWEEP, "--samples", "120", "--chunk-size", "4"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -186,7 +191,7 @@ def test_pipeline__sigkill_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
     assert record["sessions"][1]["argv"][-2:] == ["--resume", str(target)]
 
     reference = tmp_path / "reference"
-    mcchain(*args, "--run-dir", reference, "--chunk-size", "120", cwd=tmp_path)
+    assert last_line(mcchain(*args, "--run-dir", reference, "--chunk-size", "120", cwd=tmp_path))
     assert filecmp.cmp(target / "ensemble.nc", reference / "ensemble.nc", shallow=False)
     with open_run(str(target)) as a, open_run(str(reference)) as b:
         xr.testing.assert_identical(a.load(), b.load())
@@ -299,7 +304,10 @@ def test_memory__real_sample_run_with_histories_is_bounded_by_the_chunk(
     assert m["big"] - m["medium"] < growth
 
 
-def test_pipeline__ctrl_c_keeps_finished_chunks_and_resumes(tmp_path: Path) -> None:
+def test_pipeline__ctrl_c_keeps_finished_chunks_and_resumes(tmp_path: Path, mcchain) -> None:
+    """Ctrl-C (SIGINT to a process of its own) after 2 parts: exit 130, one line naming the
+    folder and the command that completes it, the parts kept; ``mcchain runs`` and the
+    resume (the command line, here) complete it."""
     target = tmp_path / "interrupted"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     samples = 40
@@ -338,6 +346,6 @@ def test_pipeline__ctrl_c_keeps_finished_chunks_and_resumes(tmp_path: Path) -> N
     done = list_parts(target / "parts")
     assert done and not (target / "ensemble.nc").exists()
     assert "FAILED" in mcchain("runs", "--out", tmp_path, cwd=tmp_path).stdout
-    mcchain("run", "--resume", target, cwd=tmp_path)
+    assert last_line(mcchain("run", "--resume", target, cwd=tmp_path)) == target
     record = runs.read_record(target)
     assert record["status"] == "COMPLETED" and record["status_counts"]["samples"] == samples

@@ -346,6 +346,9 @@ def test_slider_driver__report_and_viewer_show_its_force(mcchain, tmp_path: Path
     from mcchain.viz import history, show
 
     scene = INCLINE + "[simulate]\nt_end = 0.2\ndt = 1e-4\noutput_dt = 1e-2\n"
+    # float64 histories, as the incline's other runs: their rk4 lane entry (an entry
+    # compiles per type of its arrays: float32 compiled the module once more, 1.4 s cold)
+    scene += '[storage]\nhistory_dtype = "float64"\n'
     (tmp_path / "incline.toml").write_text(scene)
     ran = mcchain("run", "incline.toml", "--out", "runs", cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr

@@ -4,6 +4,7 @@ kernels where the interpreted check raises."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -27,20 +28,59 @@ def _python(*args: str, env: dict[str, str] | None = None) -> subprocess.Complet
     )
 
 
+VALIDATE_EACH = """
+import contextlib, io, json, sys
+from mcchain import cli
+from mcchain.cli import commands
+commands._may_interpret = True  # as console_main sets it for validate
+printed = {}
+for config in sys.argv[1:]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = cli.main(["validate", config])
+    printed[config] = (code, out.getvalue(), err.getvalue())
+print(json.dumps({"numba": "numba" in sys.modules, "printed": printed}))
+"""
+"""``mcchain validate CONFIG`` for every config in turn, in one fresh process that may
+interpret (as :func:`mcchain.cli.console_main` lets it): each command's exit code and
+output, and whether numba was imported by any of them."""
+
+
+@pytest.fixture(scope="module")
+def validated_interpreted() -> dict[str, tuple[int, str, str]]:
+    """What ``mcchain validate`` prints for each shipped config, interpreted: one process
+    for all (a process costs about 0.6 s of CPU to start; the command line's own choice to
+    interpret is :func:`test_validate__imports_no_numba_from_the_command_line`'s)."""
+    proc = _python("-c", VALIDATE_EACH, *map(str, CONFIGS))
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout.splitlines()[-1])
+    assert result["numba"] is False  # every config ran interpreted
+    return {path: tuple(printed) for path, printed in result["printed"].items()}
+
+
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_validate__interpreted_prints_what_the_compiled_kernels_print(
-    config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+    config: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture,
+    validated_interpreted: dict[str, tuple[int, str, str]],
 ) -> None:
-    interpreted = _python("-m", "mcchain.cli", "validate", str(config))
+    code, stdout, stderr = validated_interpreted[str(config)]
     compiled = in_process(monkeypatch, capsys)("validate", config, cwd=tmp_path)
-    assert (interpreted.returncode, compiled.returncode) == (0, 0), interpreted.stderr
-    assert interpreted.stdout == compiled.stdout
-    assert interpreted.stderr == compiled.stderr == ""
+    assert (code, compiled.returncode) == (0, 0), stderr
+    assert stdout == compiled.stdout
+    assert stderr == compiled.stderr == ""
 
 
-def test_validate__imports_no_numba_from_the_command_line() -> None:
+def test_validate__imports_no_numba_from_the_command_line(
+    validated_interpreted: dict[str, tuple[int, str, str]],
+) -> None:
+    """``mcchain validate`` as a process of its own interprets: no numba imported, and it
+    prints what the check of the same config printed in the shared process above."""
     proc = _python("-X", "importtime", "-m", "mcchain.cli", "validate", str(CONFIGS[0]))
     assert proc.returncode == 0
+    assert proc.stdout == validated_interpreted[str(CONFIGS[0])][1]
     imported = [line.rsplit("|", 1)[-1].strip() for line in proc.stderr.splitlines()]
     assert "numpy" in imported
     assert not [name for name in imported if name.split(".")[0] in ("numba", "llvmlite")]
