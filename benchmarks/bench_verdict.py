@@ -9,7 +9,10 @@ loaded into the cache), then ``--repeats`` times, alternating, timed from the co
 start to its exit with the 1-minute load average beside each run (the machine is shared);
 ratios are of medians and repeat by repeat. The ensembles of the first repeat are compared
 variable by variable: the bitwise equal ones are listed, the others with their largest
-difference. ``--threads`` is passed to ``mcchain run`` (the machine's 2 cores by default).
+difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
+loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
+figure a loaded machine disturbs least. ``--threads`` is passed to ``mcchain run`` (the
+machine's 2 cores by default).
 
     python benchmarks/bench_verdict.py --before main --repeats 3
 
@@ -110,8 +113,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         f"### {args.samples} samples, `mcchain run --threads {args.threads}` end to end, warm "
         "(median of the repeats; the 1-minute load average at each run's start)",
         "",
-        "| variant | wall (s) | " + " | ".join(keys) + " | user CPU (s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|",
+        "| variant | wall (s) | " + " | ".join(keys) + " | wall - compute | user CPU (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -119,6 +122,7 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         lines.append(
             f"| {name} | {statistics.median(r['wall'] for r in mine):.2f} | "
             + " | ".join(f"{m:.2f}" for m in med)
+            + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
             + f" | {statistics.median(r['cpu'] for r in mine):.1f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
