@@ -12,7 +12,9 @@ variable by variable: the bitwise equal ones are listed, the others with their l
 difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
 loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
 figure a loaded machine disturbs least. ``--threads`` is passed to ``mcchain run`` (the
-machine's 2 cores by default).
+machine's 2 cores by default). ``--bytecode``: the runs keep their compiled bytecode (in
+``--work``), as an installed package has it, where the environment sets
+``PYTHONDONTWRITEBYTECODE`` (then each run compiles mcchain's hundred modules from source).
 
     python benchmarks/bench_verdict.py --before main --repeats 3
 
@@ -158,7 +160,16 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--before", default="main", help="commit of the 'before' tree")
     parser.add_argument("--work", default="/tmp/bench-verdict", help="trees and runs")
+    parser.add_argument(
+        "--bytecode",
+        action="store_true",
+        help="let the runs cache their bytecode (under --work) as an installed package does, "
+        "where PYTHONDONTWRITEBYTECODE is set",
+    )
     args = parser.parse_args()
+    if args.bytecode:  # the children inherit it: each tree's modules compiled once, not per run
+        os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+        os.environ["PYTHONPYCACHEPREFIX"] = str(Path(args.work) / "pycache")
     args.before = os.popen(f"git -C {REPO} rev-parse {args.before}").read().strip()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
