@@ -1,14 +1,14 @@
 """A merged ``ensemble.nc`` read with netCDF4 alone, for what a run reads back of it at its
 end: the verdict lines and the retry counts (:mod:`mcchain.runner.observers`).
 
-Opening the file with xarray cost a run about a second: xarray's import (which brings pandas,
-and dask.array through its duck-array checks) and the CF decoding of every variable, for a few
-per-sample arrays. :class:`PerSampleEnsemble` gives the readers of a stored ensemble
-(:mod:`mcchain.decision`) the part of :class:`xarray.Dataset` they use — ``data_vars``,
-``coords``, ``attrs``, ``dims``/``sizes``, ``ds[name]`` with ``values``, ``dims``, ``attrs``,
-``dtype``, ``isel`` and ``transpose`` — with the values xarray would decode: the same dtypes and
-bytes, labels as fixed-width unicode. A variable is read when its values are first asked for
-(a history stays on disk).
+Opening it with xarray for a few per-sample arrays cost a run more than computing its verdict:
+xarray's import (which brings pandas, and dask.array through its duck-array checks) and the CF
+decoding of every variable (benchmarks/results/verdict/verdict.md). :class:`PerSampleEnsemble`
+gives the readers of a stored ensemble (:mod:`mcchain.decision`) the part of
+:class:`xarray.Dataset` they use — ``data_vars``, ``coords``, ``attrs``, ``dims``/``sizes``,
+``ds[name]`` with ``values``, ``dims``, ``attrs``, ``dtype``, ``isel`` and ``transpose`` — with
+the values xarray would decode: the same dtypes and bytes, labels as fixed-width unicode. A
+variable is read when its values are first asked for (a history stays on disk).
 
 That holds for the files mcchain writes: numbers stored as they are, labels as variable-length
 strings, no CF encoding. A file that needs decoding (a ``_FillValue``, ``missing_value``,

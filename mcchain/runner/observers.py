@@ -139,7 +139,7 @@ class VerdictLines(Observer):
 def verdict_lines(run: RunState) -> list[str]:
     """The summary lines of the run's merged ensemble (:class:`VerdictLines`), read with
     netCDF4 alone (:func:`mcchain.ensemble.per_sample.open_stored`: the values xarray would
-    give, without its import and decoding, about a second of a run)."""
+    give, without importing xarray, pandas and dask.array nor decoding every variable)."""
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
     from mcchain.decision.until import sequential_settings
     from mcchain.ensemble.per_sample import open_stored
