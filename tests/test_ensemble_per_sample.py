@@ -19,7 +19,7 @@ import pytest
 import xarray as xr
 from test_decision_verdict import slider_crank_like
 
-from mcchain.decision.allocation_table import allocations
+from mcchain.decision.allocation_table import allocations, box_allocations
 from mcchain.decision.sampled import design_of
 from mcchain.decision.summary import summarize, summary_lines
 from mcchain.decision.until import sequential_settings
@@ -101,6 +101,14 @@ def assert_same_as_xarray(light: PerSampleEnsemble, ds: xr.Dataset) -> None:
         }, name
 
 
+def assert_same_decisions(light: PerSampleEnsemble, ds: xr.Dataset) -> None:
+    """Every table ``mcchain export --requirements`` writes (the requirements, the
+    allocation, the box) is the same from either read (NaN compared as text)."""
+    assert repr(summarize(light)) == repr(summarize(ds))
+    assert repr(allocations(light)) == repr(allocations(ds))
+    assert repr(box_allocations(light)) == repr(box_allocations(ds))
+
+
 CASES = {
     "failed, never and met": {},  # 102 diverged (NaN, -1), 154 never separate
     "no failure bit": {"diverged": 0, "never": 0},
@@ -115,6 +123,7 @@ def test_per_sample__values_and_verdict_lines_equal_xarrays(tmp_path: Path, case
     )
     with open_per_sample(path) as light, open_ensemble(path, dask=False) as ds:
         assert_same_as_xarray(light, ds)
+        assert_same_decisions(light, ds)
         values = light["peak_contact_force"].isel({"joint": 0}).values
         assert values.tobytes() == ds["peak_contact_force"].isel(joint=0).values.tobytes()
         swapped = light["parameters"].transpose("param", "sample")
@@ -188,4 +197,5 @@ def test_run__reads_its_verdict_without_xarray_and_equal_to_it(tmp_path: Path) -
     assert len(record["requirements"]) > 3 and record["requirements"][0].startswith("requirement")
     with open_ensemble(path, dask=False) as ds, open_per_sample(path) as light:
         assert_same_as_xarray(light, ds)
+        assert_same_decisions(light, ds)
         assert record["retries"] == retry_counts(ds[SOLVED_BY].values, SIMULATE)
