@@ -9,7 +9,12 @@ loaded into the cache), then ``--repeats`` times, alternating, timed from the co
 start to its exit with the 1-minute load average beside each run (the machine is shared);
 ratios are of medians and repeat by repeat. The ensembles of the first repeat are compared
 variable by variable: the bitwise equal ones are listed, the others with their largest
-difference. ``--threads`` is passed to ``mcchain run`` (the machine's 2 cores by default).
+difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
+loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
+figure a loaded machine disturbs least. ``--threads`` is passed to ``mcchain run`` (the
+machine's 2 cores by default). ``--bytecode``: the runs keep their compiled bytecode (in
+``--work``), as an installed package has it, where the environment sets
+``PYTHONDONTWRITEBYTECODE`` (then each run compiles mcchain's hundred modules from source).
 
     python benchmarks/bench_verdict.py --before main --repeats 3
 
@@ -110,8 +115,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         f"### {args.samples} samples, `mcchain run --threads {args.threads}` end to end, warm "
         "(median of the repeats; the 1-minute load average at each run's start)",
         "",
-        "| variant | wall (s) | " + " | ".join(keys) + " | user CPU (s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|",
+        "| variant | wall (s) | " + " | ".join(keys) + " | wall - compute | user CPU (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -119,6 +124,7 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         lines.append(
             f"| {name} | {statistics.median(r['wall'] for r in mine):.2f} | "
             + " | ".join(f"{m:.2f}" for m in med)
+            + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
             + f" | {statistics.median(r['cpu'] for r in mine):.1f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
@@ -154,7 +160,16 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--before", default="main", help="commit of the 'before' tree")
     parser.add_argument("--work", default="/tmp/bench-verdict", help="trees and runs")
+    parser.add_argument(
+        "--bytecode",
+        action="store_true",
+        help="let the runs cache their bytecode (under --work) as an installed package does, "
+        "where PYTHONDONTWRITEBYTECODE is set",
+    )
     args = parser.parse_args()
+    if args.bytecode:  # the children inherit it: each tree's modules compiled once, not per run
+        os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+        os.environ["PYTHONPYCACHEPREFIX"] = str(Path(args.work) / "pycache")
     args.before = os.popen(f"git -C {REPO} rev-parse {args.before}").read().strip()
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)

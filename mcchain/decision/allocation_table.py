@@ -14,7 +14,7 @@ from mcchain.decision.requirements import dataset_requirement_met, stored_requir
 from mcchain.decision.sampled import sampled_parameters
 
 if TYPE_CHECKING:
-    import xarray as xr
+    from mcchain.ensemble.per_sample import StoredEnsemble
 
 ALLOCATION_COLUMNS = (
     "requirement",
@@ -101,13 +101,13 @@ class BoxRow:
         return (self.low, self.high) != self.support
 
 
-def failed_samples(ds: xr.Dataset, requirement: Any) -> np.ndarray:
+def failed_samples(ds: StoredEnsemble, requirement: Any) -> np.ndarray:
     """(nsample,) bool: the samples that fail a requirement (``requirement_met`` = 0,
     recomputed from the values and ``status``: a failure bit fails)."""
     return dataset_requirement_met(ds, requirement) == 0
 
 
-def allocations(ds: xr.Dataset) -> list[AllocationRow]:
+def allocations(ds: StoredEnsemble) -> list[AllocationRow]:
     """The allocation of every requirement over every sampled parameter alone."""
     params = sampled_parameters(ds)
     rows = []
@@ -136,7 +136,7 @@ def allocations(ds: xr.Dataset) -> list[AllocationRow]:
     return rows
 
 
-def box_allocations(ds: xr.Dataset) -> list[BoxRow]:
+def box_allocations(ds: StoredEnsemble) -> list[BoxRow]:
     """The box of every requirement over all its sampled parameters (two or more)."""
     params = sampled_parameters(ds)
     if len(params) < 2:

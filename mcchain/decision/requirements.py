@@ -38,8 +38,7 @@ from mcchain.errors import SceneError
 from mcchain.status import FAILURE_BITS
 
 if TYPE_CHECKING:
-    import xarray as xr
-
+    from mcchain.ensemble.per_sample import StoredEnsemble
     from mcchain.model import Model
     from mcchain.scene.models import Scene
     from mcchain.scene.study import Requirement
@@ -213,7 +212,7 @@ def defined_samples(status: np.ndarray) -> np.ndarray:
     return (np.asarray(status).astype(np.int64) & FAILURE_BITS) == 0
 
 
-def defined_mask(ds: xr.Dataset) -> np.ndarray:
+def defined_mask(ds: StoredEnsemble) -> np.ndarray:
     """(nsample,) bool: the samples of a Dataset without a failure bit in ``status`` (all of
     them when it stores no ``status``). The one test of "failed" for every decision."""
     if "status" not in ds.data_vars:
@@ -339,7 +338,7 @@ def variable_attributes(requirements: Sequence[Requirement]) -> dict[str, Any]:
     }
 
 
-def stored_requirements(ds: xr.Dataset) -> list[Requirement]:
+def stored_requirements(ds: StoredEnsemble) -> list[Requirement]:
     """The requirements of a stored ensemble: from ``requirement_met``'s attributes, else
     from the scene in its settings (a run made before the variable existed); [] for none."""
     from mcchain.scene.study import Requirement
@@ -352,7 +351,7 @@ def stored_requirements(ds: xr.Dataset) -> list[Requirement]:
     return [Requirement.model_validate(item) for item in data]
 
 
-def requirement_values(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
+def requirement_values(ds: StoredEnsemble, requirement: Requirement) -> np.ndarray:
     """A requirement's per-sample values (float64, sample order) from a Dataset: its
     ``output`` with ``select`` applied by label or index.
 
@@ -378,7 +377,7 @@ def requirement_values(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
     return np.asarray(da.isel(dict(zip(dims[1:], sel.index, strict=True))).values, dtype=np.float64)
 
 
-def requirement_decision_values(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
+def requirement_decision_values(ds: StoredEnsemble, requirement: Requirement) -> np.ndarray:
     """:func:`requirement_values` as the requirement reads them (:func:`decision_values`):
     NaN on samples with a failure bit, +inf for an event that never happened."""
     return decision_values(
@@ -386,7 +385,7 @@ def requirement_decision_values(ds: xr.Dataset, requirement: Requirement) -> np.
     )
 
 
-def dataset_requirement_met(ds: xr.Dataset, requirement: Requirement) -> np.ndarray:
+def dataset_requirement_met(ds: StoredEnsemble, requirement: Requirement) -> np.ndarray:
     """(nsample,) float64 ``requirement_met`` of one requirement, recomputed from a Dataset's
     values and ``status`` (the rule of :func:`requirement_met`; also right for a run stored
     before failure bits decided)."""

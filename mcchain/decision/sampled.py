@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    import xarray as xr
-
+    from mcchain.ensemble.per_sample import StoredEnsemble
     from mcchain.scene.study import Distribution
 
 
@@ -41,7 +40,7 @@ class SampledParameter:
         return (-math.inf, math.inf) if bounds is None else (float(bounds[0]), float(bounds[1]))
 
 
-def sampled_parameters(ds: xr.Dataset) -> list[SampledParameter]:
+def sampled_parameters(ds: StoredEnsemble) -> list[SampledParameter]:
     """Every sampled parameter of a stored ensemble ([] without ``parameters``)."""
     if "parameters" not in ds.data_vars or "param" not in ds.dims:
         return []
@@ -69,7 +68,7 @@ EXACT_DESIGNS = ("random",)
 """Designs whose samples are independent draws: the binomial interval is exact."""
 
 
-def design_of(ds: xr.Dataset) -> str | None:
+def design_of(ds: StoredEnsemble) -> str | None:
     """The sampling design of a stored ensemble (``[sample] design``), None without
     ``[sample]``."""
     settings = json.loads(str(ds.attrs.get("settings", "{}")))

@@ -66,6 +66,7 @@ from mcchain.ensemble.units import format_quantity, output_units, pretty_units
 if TYPE_CHECKING:
     import xarray as xr
 
+    from mcchain.ensemble.per_sample import StoredEnsemble
     from mcchain.scene.study import Requirement
 
 REQUIREMENT_COLUMNS = (
@@ -300,7 +301,7 @@ def _whole_batches(count: float, batch: int) -> float:
     return count if math.isnan(count) else float(math.ceil(count / batch) * batch)
 
 
-def summarize(ds: xr.Dataset) -> list[RequirementSummary]:
+def summarize(ds: StoredEnsemble) -> list[RequirementSummary]:
     """Every requirement of a stored ensemble, summarized ([] without requirements).
 
     Each requirement reads its output with the failure bits of ``status`` (a failed sample

@@ -110,17 +110,14 @@ class RetryCounts(Observer):
     run`` prints when a sample was retried."""
 
     def on_merged(self, run: RunState) -> None:
-        from mcchain.ensemble.io import open_ensemble
+        from mcchain.ensemble.per_sample import open_stored
         from mcchain.runner.runs import ENSEMBLE
         from mcchain.solvers.retry import SOLVED_BY, retry_counts
 
-        ds = open_ensemble(run.folder / ENSEMBLE, dask=False)  # one small variable
-        try:
+        with open_stored(run.folder / ENSEMBLE) as ds:  # reads one small variable
             if SOLVED_BY in ds.data_vars:
                 solved_by = ds[SOLVED_BY].values
                 run.record["retries"] = retry_counts(solved_by, run.job.scene.simulate)
-        finally:
-            ds.close()
 
 
 class VerdictLines(Observer):
@@ -140,15 +137,14 @@ class VerdictLines(Observer):
 
 
 def verdict_lines(run: RunState) -> list[str]:
-    """The summary lines of the run's merged ensemble (:class:`VerdictLines`)."""
+    """The summary lines of the run's merged ensemble (:class:`VerdictLines`), read with
+    netCDF4 alone (:func:`mcchain.ensemble.per_sample.open_stored`: the values xarray would
+    give, without importing xarray, pandas and dask.array nor decoding every variable)."""
     from mcchain.decision.summary import allocations, design_of, summarize, summary_lines
     from mcchain.decision.until import sequential_settings
-    from mcchain.ensemble.io import open_ensemble
+    from mcchain.ensemble.per_sample import open_stored
     from mcchain.runner.runs import ENSEMBLE
 
-    ds = open_ensemble(run.folder / ENSEMBLE, dask=False)
-    try:
+    with open_stored(run.folder / ENSEMBLE) as ds:
         sequential = sequential_settings(ds.attrs)
         return summary_lines(summarize(ds), allocations(ds), design_of(ds), sequential)
-    finally:
-        ds.close()
