@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -36,6 +37,22 @@ os.environ.setdefault("MCCHAIN_INTERPRET_COLD", "0")
 # helper of test_decision_whatif's first run). test_compile_ahead turns it on where it
 # checks it.
 os.environ.setdefault("MCCHAIN_COMPILE_AHEAD", "0")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """mcchain's bytecode written once, by the run's first process (xdist's controller, or the
+    only one): an installed package has it (pip and uv write it), an editable checkout gets
+    it at its first import, unless ``PYTHONDONTWRITEBYTECODE`` is set (this project's machines
+    set it), when every process the suite starts (its workers, the runs it starts as
+    processes, Dask's workers) would compile mcchain's modules from source again: about
+    0.1-0.3 s of CPU each. Python reads bytecode whatever that variable says."""
+    if hasattr(config, "workerinput"):  # an xdist worker: the controller has written it
+        return
+    import compileall
+
+    import mcchain
+
+    compileall.compile_dir(Path(mcchain.__file__).parent, quiet=1)
 
 
 LONGEST_FIRST = (
