@@ -107,16 +107,10 @@ def _reference():
 
 
 @functools.cache
-def _solved(method: str) -> dict[str, np.ndarray]:
-    scene = load_scene_text(_text(method))
-    return solve_chunk(compile_model(scene), scene)
-
-
-@pytest.mark.parametrize("method", list(METHODS))
-def test_motion_output__against_the_minimal_coordinate_reference(method):
+def _expected() -> tuple[dict[str, float], float]:
+    """The reference's reductions (the outputs' names to their values) and its windowed max
+    pin force: the same for every method, computed once (about 5 s of CPU)."""
     ref = _reference()
-    out = _solved(method)
-    assert out["status"][0] == 0 or method != "rk45"
     expected = {
         "error": reduce_signal(ref.error, 0.0, T_END, "max_abs"),
         "error_window": reduce_signal(ref.error, *WINDOW, "max"),
@@ -124,11 +118,24 @@ def test_motion_output__against_the_minimal_coordinate_reference(method):
         "error_mean": reduce_signal(ref.error, 0.0, T_END, "mean", samples=4001),
         "error_below": reduce_signal(ref.error, 0.0, T_END, "first_time_below", -1e-4),
     }
+    return expected, reduce_signal(ref.pin_force, *WINDOW, "max")
+
+
+@functools.cache
+def _solved(method: str) -> dict[str, np.ndarray]:
+    scene = load_scene_text(_text(method))
+    return solve_chunk(compile_model(scene), scene)
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_motion_output__against_the_minimal_coordinate_reference(method):
+    expected, force = _expected()
+    out = _solved(method)
+    assert out["status"][0] == 0 or method != "rk45"
     assert 1e-4 < expected["error"] < 2 * CLEARANCE  # a motion error the size of c
     for name, value in expected.items():
         tolerance = REFERENCE_TOLERANCE if name != "error_below" else 1e-9  # s
         assert abs(out[name][0] - value) <= tolerance, (name, out[name][0], value)
-    force = reduce_signal(ref.pin_force, *WINDOW, "max")
     assert out["pin_force"][0] == pytest.approx(force, rel=FORCE_TOLERANCE.get(method, 1e-9))
 
 
