@@ -30,6 +30,9 @@ TRACKING_HOOKS = {
     "track_accepted": "adaptive: each lane's accepted state (time in row tl, λ in row lam), "
     "all lanes in one vectorised loop as track_step; a lane's state comes back unchanged "
     "(a rejected step, a lane not running), with the same time",
+    "track_pending": "fixed step: after track_step, in its loop: ``npend += 1`` for a lane "
+    "that has work for track_fixup (whose loop runs only in a group with some); a tracker "
+    "with track_fixup code has this hook",
     "track_fixup": "after track_step or track_accepted, lane by lane (scalar: branches and "
     "calls allowed): the rare work the vectorised feed flagged",
     "track_finish": "the end of lane l's sample sl (``dead``: it failed): its results out",
@@ -91,6 +94,8 @@ def peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
         lines += [f"{at('pkt', m)} = {v} if fresh else {at('pkt', m)}" for m, v in enumerate(times)]
         return "\n".join(lines)
 
+    flagged = " or ".join(f"{at('pkf', i)} > 0.0" for i in range(npk))
+    pending = f"npend += 1 if {flagged} else 0" if npk else ""
     fixup = []
     for i in range(npk):
         points = ", ".join(f"{at('pkt', m)}, {row(i, m)}" for m in range(4))
@@ -114,6 +119,7 @@ def peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
     return {
         "track_step": feed("lamc", "ts"),
         "track_accepted": feed("lam", at("tl")),
+        "track_pending": pending,
         "track_fixup": "\n".join(fixup),
         "track_finish": "\n".join(finish),
     }
@@ -134,6 +140,8 @@ TRACKERS: tuple[Callable[[Topology, Layout], dict[str, str]], ...] = (peak_block
 def tracking_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
     """The code of every tracker at each of :data:`TRACKING_HOOKS`."""
     parts = [tracker(topo, lay) for tracker in TRACKERS]
+    for part in parts:  # the fixed-step kernel runs track_fixup only where a lane is pending
+        assert not part.get("track_fixup") or part.get("track_pending"), "track_pending"
     return {hook: "\n".join(p[hook] for p in parts if p.get(hook)) for hook in TRACKING_HOOKS}
 
 
