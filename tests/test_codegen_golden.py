@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "a98fe26b8f9f26c764ff26fa043482d84c7100e6a8bc59a476b4d804159a759b",
-        "rk4-projection": "3e00028d103f85610102228adf66d4291acaef6317ebd8bedb432113b346f3a1",
+        "rk4": "8cfb442e367ba68d2ee28d6bab5dfdd82de3ad644bede0e587ef393501206ea4",
+        "rk4-projection": "f5b2d52979b1c3521fdf993bf9f08817383f160fa49b114de2cbaf8bb52d924b",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "922db0e5cc4fcbe9ac6be36ecc599ffddb51bfb540eef4b4ee625429b5a93dbc",
-        "rk4-projection": "6ad21ad6eb14e7d8f2b4121f61a3d593c9ec29f5362f2efc8b5520c447ecc7d9",
+        "rk4": "d2dc70503ec67b588c32168d22ec0a9730f131b21d4637f713bedf565ec82cd1",
+        "rk4-projection": "414ee4395e3db806821aa9f456a8eb0fa68c31714fecfe6da470ef434a3aa588",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "2e589f1943b0c8d2b0f07df460854ac1061902a802d4dd9ac1afd4cce8d666d0",
-        "rk4-projection": "509aceb126b4056bc67b9353c0dea4f24b8e412a5145c70b93a037d4022489f1",
+        "rk4": "8f030043c1c63b5ad5b63c9222d19956ca1f4ecdbbcdf55adf00c1eff236f67c",
+        "rk4-projection": "e49510ec5a219cb2930de388a2f7051b15121a74a9ffa389dfcbfa02f7d8e04b",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "ebd5af8c2c15712bee9766dad59e84f1d55b58364fa2e2a97666a45de8c0512b",
-        "rk4-projection": "b4160957b985a4ed86d6e061092f89aa4b75608366226719fe88d8d86b58f600",
+        "rk4": "3fc587dbafa7aa168b4ad31875520458c748e1155f5b35408910184c701728cf",
+        "rk4-projection": "d006c940a1cf4f2cfabdb5554ac82de11ccce108b7d1180a0f70137fa63abce1",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

@@ -26,6 +26,11 @@ class Emitter(ConstraintKinematics, SchurComplement):
     """Generates the straight-line code of one lane for a :class:`Topology` (the names it
     uses: :class:`mcchain.codegen.lane_text.LaneText`)."""
 
+    cancel_gravity = False
+    """Drop from B M⁻¹F the pairs of terms that cancel in exact arithmetic (:func:`_cancelling`):
+    the fixed-step lanes set it; the adaptive lanes and the radau right-hand side keep the
+    terms and their bits (their round-off, a few 1e-16 |g|, is part of their values)."""
+
     def loaded_bodies(self) -> set[int]:
         """Bodies carrying a load or a spring (the others feel gravity only)."""
         topo = self.topo
@@ -107,7 +112,8 @@ class Emitter(ConstraintKinematics, SchurComplement):
             self.contact_law(k)
             self.contact_friction(k, a0)
         for r, row in enumerate(rows):
-            terms = [_mul(val, a0[c]) for c, val in row.items()]
+            gone = _cancelling(row, a0) if self.cancel_gravity else set()
+            terms = [_mul(val, a0[c]) for c, val in row.items() if c not in gone]
             law = self._row_law(r)
             if law is None:
                 self.emit(f"rhs{r} = {_sum(terms)} - gam{r}")
@@ -281,3 +287,28 @@ class Emitter(ConstraintKinematics, SchurComplement):
                 f"eel{k} = {eel}",
                 f"energy = energy if fm{k} == 0.0 else energy + eel{k}",
             )
+
+
+def _negated(x: Coef, y: Coef) -> bool:
+    """Whether coefficient ``y`` is ``-x`` as written: floats, or the texts ``x`` and
+    ``(-x)`` (a coefficient's text is a name or parenthesised: ``lane_text._coef``)."""
+    if isinstance(x, str) and isinstance(y, str):
+        return y == f"(-{x})" or x == f"(-{y})"
+    return not isinstance(x, str) and not isinstance(y, str) and x == -y
+
+
+def _cancelling(row: dict[int, Coef], a0: dict[int, Coef]) -> set[int]:
+    """Columns of a row of B whose terms of B a0 cancel in exact arithmetic: two bodies under
+    gravity alone (a0 the same name, g_x or g_y) with opposite coefficients, as a joint
+    between them has (its Φ depends on their points' difference): uniform gravity does not
+    load it. Written out, the pair's round-off (fused: a few 1e-16 |g|) entered the
+    constraint's right-hand side."""
+    gone: set[int] = set()
+    for c, x in row.items():
+        if c in gone or a0[c] not in ("p_gx", "p_gy"):
+            continue
+        for d, y in row.items():
+            if d != c and d not in gone and a0[d] == a0[c] and _negated(x, y):
+                gone |= {c, d}
+                break
+    return gone

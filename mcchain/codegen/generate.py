@@ -86,10 +86,10 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
 
 
 def _blocks(
-    topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), parallel_pivots: bool = False
+    topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), fixed_step: bool = False
 ) -> dict[str, str]:
     em = Emitter(topo)
-    em.parallel_pivots = parallel_pivots
+    em.parallel_pivots = em.cancel_gravity = fixed_step
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -501,12 +501,13 @@ def generate_source(
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots); the
-    # adaptive lanes and the radau right-hand side keep the sequential ones, and their bits:
-    # the shipped contact-law configs run rk45, whose impacts amplify an ulp of a pivot into
-    # a different sequence of impacts.
-    parallel = variant in ("rk4", "rk4-projection")
-    blocks = _blocks(topo, nstage, lay, outputs, parallel_pivots=parallel)
+    # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots) and
+    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity); the
+    # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
+    # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
+    # of a pivot into a different sequence of impacts.
+    fixed_step = variant in ("rk4", "rk4-projection")
+    blocks = _blocks(topo, nstage, lay, outputs, fixed_step=fixed_step)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
