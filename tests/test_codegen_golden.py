@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "8cfb442e367ba68d2ee28d6bab5dfdd82de3ad644bede0e587ef393501206ea4",
-        "rk4-projection": "f5b2d52979b1c3521fdf993bf9f08817383f160fa49b114de2cbaf8bb52d924b",
+        "rk4": "960c9e969ecc3d6dc2221678d07a837efdb6941528389c951d5a4a7c98a7712b",
+        "rk4-projection": "73db16dddb2e93ed140f059d917300859e595be88ce50c9e9111c7709b9ddb9d",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "d2dc70503ec67b588c32168d22ec0a9730f131b21d4637f713bedf565ec82cd1",
-        "rk4-projection": "414ee4395e3db806821aa9f456a8eb0fa68c31714fecfe6da470ef434a3aa588",
+        "rk4": "a151317260e2b8a790fcf0902eb58b5d6326b2930d86bf3c4f172021f8b0cda1",
+        "rk4-projection": "b4d09c2e47785b94a7187818ec6a36fb3a7441e1c66eb70b87749f4c8a9b0828",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "8f030043c1c63b5ad5b63c9222d19956ca1f4ecdbbcdf55adf00c1eff236f67c",
-        "rk4-projection": "e49510ec5a219cb2930de388a2f7051b15121a74a9ffa389dfcbfa02f7d8e04b",
+        "rk4": "c6082ce23e315b41d3bff7b114aba8961bd34eded2c8912a88a659d35870f776",
+        "rk4-projection": "89e2147f1e62cb7990ef7a2332177ad37093cc9972d28c709e29d4d1c689f0f5",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "3fc587dbafa7aa168b4ad31875520458c748e1155f5b35408910184c701728cf",
-        "rk4-projection": "d006c940a1cf4f2cfabdb5554ac82de11ccce108b7d1180a0f70137fa63abce1",
+        "rk4": "4a78b853768277639eac9c94805dabefdaa47afd9d78a20ef377d7506b9f465c",
+        "rk4-projection": "523a000853b9b24d4eecd67996d6f1045243f76f24d0f4a4f4f7b594c51f689d",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

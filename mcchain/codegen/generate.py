@@ -89,7 +89,7 @@ def _blocks(
     topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), fixed_step: bool = False
 ) -> dict[str, str]:
     em = Emitter(topo)
-    em.parallel_pivots = em.cancel_gravity = fixed_step
+    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_step
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -502,7 +502,8 @@ def generate_source(
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots) and
-    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity); the
+    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity), the
+    # pivots' flags are selects (SchurComplement.select_flags: the same values); the
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.

@@ -111,6 +111,19 @@ class SchurComplement:
     of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
     gives: benchmarks/results/roofline/reading.md)."""
 
+    select_flags = False
+    """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is written as a select rather
+    than as a comparison times 1.0: the same values, one instruction where the conversion of
+    the comparison took three (3 % of the rk4 lanes' step on the clearance double pendulum).
+    The generator sets it for the fixed-step variants (the adaptive ones' text is left as it
+    was: the same form would give them the same values)."""
+
+    def _flag(self, condition: str) -> str:
+        """1.0 where ``condition`` holds, else 0.0 (NaN: 0.0)."""
+        if self.select_flags:
+            return f"1.0 if {condition} else 0.0"
+        return f"({condition}) * 1.0"
+
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"
 
@@ -175,7 +188,7 @@ class SchurComplement:
                 dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
                 self.emit(
                     f"D{j} = {dj}",
-                    f"okp{j} = (D{j} > tau * {S[j, j]}) * 1.0",
+                    f"okp{j} = {self._flag(f'D{j} > tau * {S[j, j]}')}",
                     f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
                 )
             for i in range(j + 1, n):
@@ -201,7 +214,7 @@ class SchurComplement:
             f"Dp{j}_{k} = D{k} if okp{k} > 0.0 else 1.0",
             f"Ep{j}_{k} = E{j}_{k} if okp{k} > 0.0 else 0.0",
             f"N{j} = {sjj} * Dp{j}_{k} - Ep{j}_{k} * Ep{j}_{k}",
-            f"okp{j} = (N{j} > tau * {sjj} * Dp{j}_{k}) * 1.0",
+            f"okp{j} = {self._flag(f'N{j} > tau * {sjj} * Dp{j}_{k}')}",
             f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
             # d_j for a next such column (else dead code): a product, not one more division
             f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
