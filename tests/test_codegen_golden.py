@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "960c9e969ecc3d6dc2221678d07a837efdb6941528389c951d5a4a7c98a7712b",
-        "rk4-projection": "73db16dddb2e93ed140f059d917300859e595be88ce50c9e9111c7709b9ddb9d",
+        "rk4": "52112ca3fd837f7740c0498ff728437802eb5433e5ae041838c91c2e93655a2f",
+        "rk4-projection": "f173f8158fddf642e13be2b90fc9d5cfd1ca6fbc5a12f6cb7dade6bc714419c4",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "a151317260e2b8a790fcf0902eb58b5d6326b2930d86bf3c4f172021f8b0cda1",
-        "rk4-projection": "b4d09c2e47785b94a7187818ec6a36fb3a7441e1c66eb70b87749f4c8a9b0828",
+        "rk4": "bcaae0122da4ab8a458a5c50dcc800e95a0ba090186b92acb78e9d97df161813",
+        "rk4-projection": "8eacd5c710e5391e83d41213eb73ff92cc77c1e09e3f795e7f6a55bea2b20a1b",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "c6082ce23e315b41d3bff7b114aba8961bd34eded2c8912a88a659d35870f776",
-        "rk4-projection": "89e2147f1e62cb7990ef7a2332177ad37093cc9972d28c709e29d4d1c689f0f5",
+        "rk4": "5a70acce86ab85efcb4d24d14fc8227107095d8577eb1352fc7eb497dd6e2b69",
+        "rk4-projection": "7da6ef441d685c17bd76379f4f8c694e99ac3c23ec1e9497f2c1ec47f8090e4d",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "4a78b853768277639eac9c94805dabefdaa47afd9d78a20ef377d7506b9f465c",
-        "rk4-projection": "523a000853b9b24d4eecd67996d6f1045243f76f24d0f4a4f4f7b594c51f689d",
+        "rk4": "8a717010c7ddbd614220f9dd03694f9d1efc527a5fc25d5b74af7b56f4dc74d8",
+        "rk4-projection": "ee49be62eae646acee436a84f4d33f7369cbda90c1e5ccd2256533b3d8fd03c0",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }
