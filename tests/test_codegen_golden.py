@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "52112ca3fd837f7740c0498ff728437802eb5433e5ae041838c91c2e93655a2f",
-        "rk4-projection": "f173f8158fddf642e13be2b90fc9d5cfd1ca6fbc5a12f6cb7dade6bc714419c4",
+        "rk4": "550dba5b0f8e3dac958cd7465d6ba28ddb50b0d0b9aa2153f582e040c57112e6",
+        "rk4-projection": "ecb41fc633bffa812092fa77daff803956047740cb12ae08a3ae546d49736b96",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "bcaae0122da4ab8a458a5c50dcc800e95a0ba090186b92acb78e9d97df161813",
-        "rk4-projection": "8eacd5c710e5391e83d41213eb73ff92cc77c1e09e3f795e7f6a55bea2b20a1b",
+        "rk4": "0b2093918e370b919e8644462548bdb4c05553151cdc1ac29c92042e83c226a6",
+        "rk4-projection": "093c40b0070d58c282facf176f1cc7f494babe5507c045b60df3f11157cc2ce5",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "5a70acce86ab85efcb4d24d14fc8227107095d8577eb1352fc7eb497dd6e2b69",
-        "rk4-projection": "7da6ef441d685c17bd76379f4f8c694e99ac3c23ec1e9497f2c1ec47f8090e4d",
+        "rk4": "52af70eb3ceba8c64c82f2be8e7d20910596f7c3e365015f01610d384165a880",
+        "rk4-projection": "509ec689210a0abe55165d09e0dc9042e5b7978ab8538277b6a629a04f77b017",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "8a717010c7ddbd614220f9dd03694f9d1efc527a5fc25d5b74af7b56f4dc74d8",
-        "rk4-projection": "ee49be62eae646acee436a84f4d33f7369cbda90c1e5ccd2256533b3d8fd03c0",
+        "rk4": "8fe5d50eb462d8aa770f7e8a7e0af097a08c14a55fd6f87821f833743eba8969",
+        "rk4-projection": "cf9676ead484e28d03e0f6761867e7e57ff28c60e40585a25302eeb64bc435ec",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

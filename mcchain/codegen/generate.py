@@ -208,11 +208,14 @@ def _blocks(
     if "att" in lay.rows:
         law_rows = {topo.joint_row[k] for k in topo.contact_joints}
         lost = [f"{at('lamc', r)} <= 0.0" for r in topo.clearance_rows if r not in law_rows]
+        # Bitwise | and & of the comparisons, not `or` and `and`: short-circuits branch, and
+        # the vectorised loop stored through masked scatters (2 % of the rk4 lanes' step).
+        lost = [f"({x})" for x in lost]
         em.emit(
-            f"bad = not ({at('chkc')} <= ctol) or ((not robust) and {at('sga')} > 0.0)",
-            f"lost = {' or '.join(lost) if lost else 'False'}",
-            f"watch = bad or ({at('ncl')} > 0.0 and lost)",
-            f"{at('att')} = 1.0 if {bool(law_rows)} or ({at('alv')} > 0.0 and watch) else 0.0",
+            f"bad = (not ({at('chkc')} <= ctol)) | ((not robust) & ({at('sga')} > 0.0))",
+            f"lost = {' | '.join(lost) if lost else 'False'}",
+            f"watch = bad | (({at('ncl')} > 0.0) & lost)",
+            f"{at('att')} = 1.0 if {bool(law_rows)} | (({at('alv')} > 0.0) & watch) else 0.0",
             f"{at('sga')} = {at('sga')} if {at('att')} > 0.0 else 0.0",
         )
         block("check_flag")
