@@ -116,9 +116,9 @@ class SchurComplement:
     selects: ``1.0 if d > tau S else 0.0`` rather than the comparison times 1.0 (whose
     conversion took three instructions), ``1.0 / d if kept else 0.0`` rather than
     ``okp / (okp d + 1 − okp)`` (two operations fewer). The same values wherever d is finite
-    (a non-finite d dropped: 0 instead of NaN, in a lane whose values are NaN anyway); 3 %
-    and 1.5 % of the rk4 lanes' step on the clearance double pendulum. The generator sets it
-    for the fixed-step variants (the adaptive ones' text is left as it was)."""
+    (a non-finite d dropped: 0 instead of NaN, in a lane whose values are NaN anyway). The
+    generator sets it for the fixed-step variants (the adaptive ones' text is left as it
+    was; what it gives: benchmarks/results/roofline/reading.md)."""
 
     def _flag(self, condition: str) -> str:
         """1.0 where ``condition`` holds, else 0.0 (NaN: 0.0)."""
