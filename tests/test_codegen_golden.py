@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "550dba5b0f8e3dac958cd7465d6ba28ddb50b0d0b9aa2153f582e040c57112e6",
-        "rk4-projection": "ecb41fc633bffa812092fa77daff803956047740cb12ae08a3ae546d49736b96",
+        "rk4": "96693f985ab2aba4649063ed5429313d7e2514ea23d3842df9658f4555c9e7fb",
+        "rk4-projection": "bdb2f2798eddbaac82ebf9df11cd5acb5a92ccb33b7141839f9101f74e802a84",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "0b2093918e370b919e8644462548bdb4c05553151cdc1ac29c92042e83c226a6",
-        "rk4-projection": "093c40b0070d58c282facf176f1cc7f494babe5507c045b60df3f11157cc2ce5",
+        "rk4": "938d59c54a74327eb5bbbd9ba55a9b8e5a298b6b8cdf968c00a5aa2429741233",
+        "rk4-projection": "7fcfea96fbc7d7324482ddb78d645965062b54bbad769f9fc3c2057673f504f2",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "52af70eb3ceba8c64c82f2be8e7d20910596f7c3e365015f01610d384165a880",
-        "rk4-projection": "509ec689210a0abe55165d09e0dc9042e5b7978ab8538277b6a629a04f77b017",
+        "rk4": "32d4b200b1eb80c7f24bce528a4fdd1b43addd500ca0e5c4ebf7bf82000fec50",
+        "rk4-projection": "a56cd8f792070964f7a05ca7fd56c6fa6810a04ca2022e4cc52b154ad2e91fb4",
         "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "8fe5d50eb462d8aa770f7e8a7e0af097a08c14a55fd6f87821f833743eba8969",
-        "rk4-projection": "cf9676ead484e28d03e0f6761867e7e57ff28c60e40585a25302eeb64bc435ec",
+        "rk4": "16a7c78202e6a84c2af7ed8ff1632c6f2a0f3ccf8114692c8f03d1945b36df67",
+        "rk4-projection": "7a604106ea887472ccc372b221303d62798b6a1d3e756a322dfa9635c57ab10f",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

@@ -258,17 +258,13 @@ def _blocks(
         ]
     em.emit(*store)
     block("store_outputs")
-    # The step's increment: restarted at 0 where it is added to the state (the work array
-    # starts at 0), so that each stage adds its b h k in one multiply-add. (A restart inside
-    # the stage, as increment · keep + b h k with keep 0 at the first stage, cost two
-    # operations a row at every stage: 2 % of the step; the increments round once instead of
-    # twice, 1-2 ulp of some outputs on the clearance double pendulum.)
-    acc = [(at(x, i), at("a" + x, i)) for x in ("q", "v") for i in range(ndof)]
-    em.emit(*(f"{y} = {y} + {a}" for y, a in acc), *(f"{a} = 0.0" for _, a in acc))
+    em.emit(
+        *(f"{at(x, i)} = {at(x, i)} + {at('a' + x, i)}" for x in ("q", "v") for i in range(ndof))
+    )
     block("combine")
     em.emit(
-        *(f"{at('aq', i)} = {at('aq', i)} + bh * v{i}" for i in range(ndof)),
-        *(f"{at('av', i)} = {at('av', i)} + bh * qdd{i}" for i in range(ndof)),
+        *(f"{at('aq', i)} = {at('aq', i)} * keep + bh * v{i}" for i in range(ndof)),
+        *(f"{at('av', i)} = {at('av', i)} * keep + bh * qdd{i}" for i in range(ndof)),
     )
     block("accumulate")
     for i in range(ndof):

@@ -165,6 +165,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 # and the step's increment is accumulated as the stages go.
                 ah = A[s, s - 1] * hn if s > 0 else 0.0
                 bh = bw[s] * hn
+                keep = 0.0 if s == 0 else 1.0
                 # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
                 # chain) where |δ| is within the polynomials' interval, else in full: each lane
