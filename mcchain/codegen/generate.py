@@ -163,6 +163,26 @@ def _blocks(
     em.acceleration(t="ts")
     em.angle_rows = None
     block("accel_stage")
+    if topo.contact_joints and not fixed_step:
+        # The adaptive stage again for lane groups whose contact exponents are all 1.5:
+        # contact_power's Hertz branch alone, no libm pow call in the vectorised loop (the
+        # same values: the general stage takes that branch for those lanes).
+        em.hertz_exponent = True
+        em.acceleration(t="ts")
+        em.hertz_exponent = False
+        block("accel_stage_hertz")
+        slots = topo.slots()
+        other = " or ".join(f"{at('P', slots[f'mx{k}'])} != 1.5" for k in topo.contact_joints)
+        b["hertz_dispatch"] = "\n".join(
+            [
+                "nother = 0",
+                "for l in range(nl):",
+                f"    nother += 1 if {other} else 0",
+                "if nother == 0:",
+                "    group_stage_hertz_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau)",
+                "    return",
+            ]
+        )
     b.update(_stage_angles(topo, lay) if fixed_step else {})
 
     em.emit(
@@ -504,6 +524,15 @@ def generate_source(
     parallel = variant in ("rk4", "rk4-projection")
     blocks = _blocks(topo, nstage, lay, outputs, parallel_pivots=parallel)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
+    if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
+        hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
+        hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
+        general = templates.STAGE_HELPER.replace(
+            "    @@stage_coefs_row\n", "    @@hertz_dispatch\n    @@stage_coefs_row\n"
+        )
+        parts_of = tuple(
+            general + hertz if part is templates.STAGE_HELPER else part for part in parts_of
+        )
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
         parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))
