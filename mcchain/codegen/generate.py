@@ -501,6 +501,8 @@ def generate_source(
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
         parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
     if topo.contact_joints:
+        # the contact law's fused multiply-add (contact_power, inlined), for numba's compile
+        parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions(adaptive=variant == "rk45"))

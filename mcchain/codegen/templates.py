@@ -33,8 +33,6 @@ import math
 import numpy as np
 from numba import njit
 
-from mcchain.kernels.config import fma
-
 # error_model="numpy": x / 0 gives inf/nan instead of a raise (which blocks vectorising).
 # fastmath "contract" only: a·b + c may become one fused multiply-add (≈ 1.25× faster lanes,
 # rounding no worse). No reassociation or finite-math assumptions, so NaN still propagates to

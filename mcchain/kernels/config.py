@@ -71,13 +71,16 @@ def register_fma() -> None:
     @intrinsic
     def llvm_fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
         def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-            function = builder.module.declare_intrinsic("llvm.fma", [ir.DoubleType()])
+            double = ir.DoubleType()
+            function = builder.module.declare_intrinsic(
+                "llvm.fma", [double], ir.FunctionType(double, [double] * 3)
+            )
             return builder.call(function, args)
 
         return types.float64(types.float64, types.float64, types.float64), codegen
 
     @overload(fma)
-    def fma_compiled(a: Any, b: Any, c: Any) -> Any:
+    def fma_compiled(a, b, c):  # type: ignore[no-untyped-def]  # numba: as fma's signature
         return lambda a, b, c: llvm_fma(float(a), float(b), float(c))
 
 
