@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from compare_ensembles import run_tree
+
 from mcchain.ensemble.per_sample import open_per_sample
 
 VARIABLES = ("peak_contact_force", "max_penetration", "peak_joint_force", "free_flight_time")
@@ -75,7 +76,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("/tmp/compare-ensembles"))
     args = parser.parse_args()
     print(
-        "| config | tree | " + " | ".join(f"{v} (relative; median / max)" for v in VARIABLES)
+        "| config | tree | "
+        + " | ".join(f"{v} (relative; median / max)" for v in VARIABLES)
         + " | samples whose impact counts differ |"
     )
     print("|---" * (len(VARIABLES) + 3) + "|")

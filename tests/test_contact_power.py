@@ -75,7 +75,7 @@ def test_fma__interpreted_equals_the_compiled_one():
     rng = np.random.default_rng(2)
     for _ in range(2000):
         a, b = (float(v) for v in rng.normal(size=2) * 10.0 ** rng.uniform(-20, 20, 2))
-        for c in (float(rng.normal()), -(a * b), -math.sqrt(abs(a)) ** 2):
+        for c in (float(rng.normal()), -(a * b), -(math.sqrt(abs(a)) ** 2)):
             assert fma(a, b, c) == compiled(a, b, c), (a, b, c)
     assert math.isnan(fma(math.inf, 0.0, 1.0)) and math.isnan(compiled(math.inf, 0.0, 1.0))
     assert fma(1e308, 10.0, -1e308) == compiled(1e308, 10.0, -1e308) == math.inf
