@@ -112,7 +112,7 @@ HERTZ_EXACT_MAX = 1e200
 @njit(**JIT)
 def hertz_power(x):
     """x^1.5 for x ≥ 0 (the Hertz exponent of :func:`contact_power`), correctly rounded for
-    x ≤ 1e200, without libm's ``pow``.
+    1e-200 ≤ x ≤ 1e200, without libm's ``pow``.
 
     √x is rounded once (r); x − r² is exact in one fused multiply-add (e), so
     x^1.5 = x √x = x r + x e / (2 r) + O(e²), and x e / (2 r) = e r / 2 (1 + e / r²): the
