@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 _GENERATE = """
 import pickle, sys
@@ -51,14 +52,11 @@ sys.stdout.buffer.write(pickle.dumps(texts))
 def _texts(tree: str, keys: list[Any], scratch: Path) -> list[str]:
     """The lane texts ``tree`` (a folder or a commit) generates for ``keys``
     (topology, variant, outputs)."""
+    from bench_light import export_tree
+
     folder = Path(tree)
     if not folder.is_dir():
-        folder = scratch / tree.replace("/", "_")
-        folder.mkdir(parents=True, exist_ok=True)
-        archive = subprocess.run(
-            ["git", "archive", tree], cwd=REPO, capture_output=True, check=True
-        ).stdout
-        subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+        folder = export_tree(tree, scratch)
     env = dict(os.environ, PYTHONPATH=str(folder.resolve()))
     env["MCCHAIN_CACHE_DIR"] = str(scratch / "cache")
     out = subprocess.run(
@@ -110,8 +108,6 @@ def main() -> None:
     args = parser.parse_args()
 
     import numba
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from profile_verdict import light_scene
 
     import mcchain.codegen.generate as generate
@@ -160,7 +156,7 @@ def main() -> None:
     for name, values in costs.items():
         steps = int(results[name]["steps_taken"].sum())
         print(
-            f"- {name} ({texts_label(args, name)}): ns an accepted sample-step "
+            f"- {name} ({getattr(args, name)}): ns an accepted sample-step "
             f"{', '.join(f'{c:.0f}' for c in values)}; median {statistics.median(values):.0f}, "
             f"best {min(values):.0f}; accepted steps {steps}"
         )
@@ -172,10 +168,6 @@ def main() -> None:
     print("- bits: every per-sample result identical" if not differ else "- bits:")
     for line in differ:
         print("  " + line)
-
-
-def texts_label(args: argparse.Namespace, name: str) -> str:
-    return str(getattr(args, name))
 
 
 if __name__ == "__main__":
