@@ -206,3 +206,33 @@ def test_margin__two_limits_are_two_failure_modes() -> None:
     np.testing.assert_array_equal(m[:3], [[-2.0, -1.0], [3.0, -6.0], [-7.0, 4.0]])
     assert np.isnan(m[3]).all()
     assert margin(values, None, 2.0).shape == (4,)
+
+
+def _gamma_chain_by_chain(indicator: np.ndarray, p: float, chains: list[np.ndarray]) -> float:
+    """Au & Beck's γ (eq. 29) written out pair by pair: for each lag k, the states with a
+    partner k steps on along their own chain, and how many of those pairs both fail."""
+    n, r0 = indicator.size, p * (1.0 - p)
+    gamma = 0.0
+    for k in range(1, max(len(c) for c in chains)):
+        pairs = [(i, j) for c in chains for i, j in zip(c[:-k], c[k:], strict=True)]
+        joint = sum(1 for i, j in pairs if indicator[i] and indicator[j]) / len(pairs)
+        gamma += 2.0 * (len(pairs) / n) * (joint - p * p) / r0
+    return max(gamma, 0.0)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.1, 0.5, 1.0])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_gamma__the_pairs_along_each_chain_bit_for_bit(share: float, seed: int) -> None:
+    """Chains of unequal lengths (1 to 12 states, shuffled over the level's points): γ is the
+    pair-by-pair definition's to the last bit, at no failure, every failure and between."""
+    from mcchain.decision.subset import _gamma
+
+    rng = np.random.default_rng(seed)
+    lengths = rng.integers(1, 13, size=40)
+    order = rng.permutation(int(lengths.sum()))
+    chains = np.split(order, np.cumsum(lengths)[:-1])
+    indicator = rng.random(order.size) < share
+    p = float(indicator.mean())
+    expected = _gamma_chain_by_chain(indicator, p, chains) if 0.0 < p < 1.0 else 0.0
+    assert _gamma(indicator, p, chains) == expected
+    assert _gamma(indicator, p, None) == 0.0

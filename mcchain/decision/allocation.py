@@ -371,24 +371,26 @@ def peel(params: np.ndarray, failed: np.ndarray, supports: np.ndarray) -> list[n
     failed = np.asarray(failed, dtype=bool)
     box = np.array(supports, dtype=np.float64).copy()
     boxes = [box.copy()]
-    inside = np.ones(len(x), dtype=bool)
-    while inside.sum() >= MIN_BOX_SAMPLES and failed[inside].any():
-        count = int(inside.sum())
+    # the samples inside the current box (each peel keeps a subset of them)
+    x_in, failed_in = x, failed
+    while len(x_in) >= MIN_BOX_SAMPLES and failed_in.any():
+        count = len(x_in)
         remove = max(1, int(PEEL_SHARE * count))
         best: tuple[tuple[float, float, int], int, int, float] | None = None
         for j in range(x.shape[1]):
-            values = np.sort(x[inside, j])
+            column = x_in[:, j]
+            values = np.sort(column)
             for face in (0, 1):
                 if face == 0:  # raise the low face above the `remove` smallest values
                     cut = values[remove - 1]
-                    keep = inside & (x[:, j] > cut)
+                    keep = column > cut
                 else:
                     cut = values[count - remove]
-                    keep = inside & (x[:, j] < cut)
-                kept = int(keep.sum())
+                    keep = column < cut
+                kept = int(np.count_nonzero(keep))
                 if kept == 0 or kept == count:
                     continue
-                share = float(failed[keep].mean())
+                share = int(np.count_nonzero(failed_in & keep)) / kept
                 score = (share, -kept, 2 * j + face)
                 if best is None or score < best[0]:
                     best = (score, j, face, float(cut))
@@ -397,10 +399,11 @@ def peel(params: np.ndarray, failed: np.ndarray, supports: np.ndarray) -> list[n
         _, j, face, cut = best
         if face == 0:
             box[j, 0] = np.nextafter(cut, np.inf)  # the face sits just above the removed value
-            inside &= x[:, j] > cut
+            keep = x_in[:, j] > cut
         else:
             box[j, 1] = np.nextafter(cut, -np.inf)
-            inside &= x[:, j] < cut
+            keep = x_in[:, j] < cut
+        x_in, failed_in = x_in[keep], failed_in[keep]
         boxes.append(box.copy())
     return boxes
 

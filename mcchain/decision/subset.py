@@ -142,12 +142,17 @@ def _gamma(indicator: np.ndarray, p: float, chains: list[np.ndarray] | None) -> 
         return 0.0
     n = indicator.size
     r0 = p * (1.0 - p)
-    longest = max(len(c) for c in chains)
+    lengths = np.array([len(c) for c in chains])
+    longest = int(lengths.max())
+    # The chains' indicators side by side, one row each, False past a chain's end: a pair
+    # (i, i + k) counts only where both are in the chain. Counts are integers: the same
+    # sums, hence the same γ, as chain by chain.
+    along = np.zeros((lengths.size, longest), dtype=bool)
+    along[np.arange(longest) < lengths[:, None]] = indicator[np.concatenate(chains)]
     gamma = 0.0
     for k in range(1, longest):
-        pairs = [(indicator[c[:-k]], indicator[c[k:]]) for c in chains if len(c) > k]
-        count = sum(a.size for a, _ in pairs)
-        joint = sum(float(np.sum(a & b)) for a, b in pairs) / count
+        count = int(np.maximum(lengths - k, 0).sum())
+        joint = int(np.count_nonzero(along[:, :-k] & along[:, k:])) / count
         gamma += 2.0 * (count / n) * (joint - p * p) / r0
     return max(gamma, 0.0)
 
