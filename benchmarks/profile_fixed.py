@@ -1,6 +1,6 @@
 """What a warm verdict run spends outside its chunk loop (issue 37, item 6), in CPU seconds.
 
-    python benchmarks/profile_fixed.py [--samples 64] [--rounds 5]
+    python benchmarks/profile_fixed.py [--before REF] [--samples 64] [--rounds 5]
 
 Two tables, each figure the median over ``--rounds`` fresh processes (CPU seconds of the
 process, which a loaded machine disturbs far less than wall seconds; the 1-minute load
@@ -19,13 +19,16 @@ average is printed beside them):
    verdict lines; CPU and wall seconds of each, and what the process spent before and after
    the CLI's ``main``.
 
-Appends a dated section to ``benchmarks/results/verdict/fixed.md``. Run it on a warm cache
-(one ``mcchain run`` of the scene first); ``--bytecode`` as in ``bench_verdict.py``.
+``--before``: a commit (exported into ``--work`` with ``git archive``) measured beside this
+tree, the two alternating round by round. Each tree runs once unmeasured first (its kernels
+loaded or compiled into the cache). Appends a dated section to
+``benchmarks/results/verdict/fixed.md``; ``--bytecode`` as in ``bench_verdict.py``.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import statistics
@@ -36,7 +39,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_light import REPO, scene_with
+from bench_light import REPO, export_tree, scene_with
 from bench_speed import append_results
 
 RESULTS = REPO / "benchmarks" / "results" / "verdict"
@@ -175,53 +178,31 @@ def cpu_of_child(command: list[str], env: dict[str, str]) -> tuple[str, float, f
     return done.stdout, wall, cpu
 
 
-def import_floor(rounds: int, env: dict[str, str]) -> list[tuple[str, float]]:
-    """Median CPU seconds of each import step, and of the interpreter before them."""
+def floor_round(env: dict[str, str]) -> list[float]:
+    """CPU seconds of the interpreter (before the first step, and its exit) and of each
+    import step, in one fresh process."""
     codes = json.dumps([code for _, code in IMPORT_STEPS])
-    steps: list[list[float]] = [[] for _ in range(len(IMPORT_STEPS) + 1)]
-    for _ in range(rounds):
-        out, _, cpu = cpu_of_child([sys.executable, "-c", FLOOR, codes], env)
-        marks = json.loads(out)
-        steps[0].append(cpu - (marks[-1] - marks[0]))  # the interpreter, before the first
-        for i in range(len(IMPORT_STEPS)):
-            steps[i + 1].append(marks[i + 1] - marks[i])
-    names = ["the interpreter (`python -c`, site) and its exit", *[n for n, _ in IMPORT_STEPS]]
-    return [(name, statistics.median(values)) for name, values in zip(names, steps, strict=True)]
+    out, _, cpu = cpu_of_child([sys.executable, "-c", FLOOR, codes], env)
+    marks = json.loads(out)
+    return [cpu - (marks[-1] - marks[0]), *(b - a for a, b in itertools.pairwise(marks))]
 
 
-def run_phases(
-    rounds: int, samples: int, scene: Path, work: Path, env: dict[str, str]
-) -> list[tuple[str, float, float, int]]:
-    """Median (label, CPU, wall, calls) of each timed step of ``mcchain run``."""
+def phases_round(env: dict[str, str], scene: Path, samples: int, folder: Path) -> dict:
+    """{step: [CPU, wall, calls]} of one ``mcchain run`` in a fresh process."""
     env = {**env, "PROFILE_FIXED_PHASES": json.dumps(PHASES)}
-    cpu: dict[str, list[float]] = {}
-    wall: dict[str, list[float]] = {}
-    calls: dict[str, int] = {}
-    for r in range(rounds):
-        folder = work / f"run-{r}-{time.time_ns()}"
-        command = [sys.executable, "-c", RUN, "run", str(scene), "--samples", str(samples)]
-        command += ["--run-dir", str(folder), "--threads", "2", "--no-background-compile"]
-        out, process_wall, process_cpu = cpu_of_child(command, env)
-        record = json.loads(out.splitlines()[-1])
-        events = record["events"]
-        summed: dict[str, list[float]] = {}
-        for label, w, c in events:
-            summed.setdefault(label, [0.0, 0.0, 0])
-            summed[label][0] += c
-            summed[label][1] += w
-            summed[label][2] += 1
-        main = summed.pop("main")
-        summed["outside"] = [process_cpu - main[0], process_wall - main[1], 1]
-        summed["process"] = [process_cpu, process_wall, 1]
-        for label, (c, w, n) in summed.items():
-            cpu.setdefault(label, []).append(c)
-            wall.setdefault(label, []).append(w)
-            calls[label] = int(n)
-    return [
-        (text, statistics.median(cpu[key]), statistics.median(wall[key]), calls[key])
-        for key, text in ORDER
-        if key in cpu
-    ]
+    command = [sys.executable, "-c", RUN, "run", str(scene), "--samples", str(samples)]
+    command += ["--run-dir", str(folder), "--threads", "2", "--no-background-compile"]
+    out, process_wall, process_cpu = cpu_of_child(command, env)
+    summed: dict[str, list[float]] = {}
+    for label, w, c in json.loads(out.splitlines()[-1])["events"]:
+        total = summed.setdefault(label, [0.0, 0.0, 0])
+        total[0] += c
+        total[1] += w
+        total[2] += 1
+    main = summed.pop("main")
+    summed["outside"] = [process_cpu - main[0], process_wall - main[1], 1]
+    summed["process"] = [process_cpu, process_wall, 1]
+    return summed
 
 
 def nested(text: str) -> str:
@@ -230,25 +211,83 @@ def nested(text: str) -> str:
     return "· " * depth + text.lstrip(" ")
 
 
+def median_of(rounds: list[dict], key: str, index: int) -> float:
+    return statistics.median(r[key][index] for r in rounds if key in r)
+
+
+def tables(trees: list[str], floors: dict, phases: dict, samples: int) -> list[str]:
+    """The two tables' lines, a CPU column per tree (and the wall seconds of the last)."""
+    floor_names = ["the interpreter (`python -c`, site) and its exit"]
+    floor_names += [name for name, _ in IMPORT_STEPS]
+    heads = " | ".join(f"CPU (s), {t}" for t in trees)
+    lines = [
+        "### the import floor: CPU seconds of each step, in this order, in one process",
+        "",
+        f"| step | {heads} |",
+        "|---|" + "---|" * len(trees),
+    ]
+    medians = {t: [statistics.median(col) for col in zip(*floors[t], strict=True)] for t in trees}
+    for i, name in enumerate(floor_names):
+        lines.append(f"| {name} | " + " | ".join(f"{medians[t][i]:.3f}" for t in trees) + " |")
+    lines.append("| **sum** | " + " | ".join(f"**{sum(medians[t]):.3f}**" for t in trees) + " |")
+    last = trees[-1]
+    lines += [
+        "",
+        f"### `mcchain run` at {samples} samples: the timed steps (nested steps are part of "
+        "the one above them)",
+        "",
+        f"| step | calls | {heads} | wall (s), {last} |",
+        "|---|---|" + "---|" * (len(trees) + 1),
+    ]
+    for key, text in ORDER:
+        if not all(any(key in r for r in phases[t]) for t in trees):
+            continue
+        calls = int(median_of(phases[last], key, 2))
+        cpus = " | ".join(f"{median_of(phases[t], key, 0):.3f}" for t in trees)
+        wall = median_of(phases[last], key, 1)
+        lines.append(f"| {nested(text)} | {calls} | {cpus} | {wall:.3f} |")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=64)
     parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--before", default=None, help="a commit measured beside this tree")
     parser.add_argument("--bytecode", action="store_true", help="as in bench_verdict.py")
-    parser.add_argument("--work", default=None, help="run folders (default: a temporary one)")
+    parser.add_argument("--work", default=None, help="trees and run folders (default: temporary)")
     args = parser.parse_args()
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
     work = Path(args.work or tempfile.mkdtemp(prefix="profile-fixed-"))
     work.mkdir(parents=True, exist_ok=True)
-    if args.bytecode:
-        env.pop("PYTHONDONTWRITEBYTECODE", None)
-        env["PYTHONPYCACHEPREFIX"] = str(work / "pycache")
+    roots = {"this tree": REPO}
+    if args.before is not None:
+        commit = subprocess.run(
+            ["git", "-C", str(REPO), "rev-parse", args.before],
+            capture_output=True, text=True, check=True,
+        ).stdout.strip()  # fmt: skip
+        tree = work / f"tree-{commit[:10]}"
+        roots = {f"before ({commit[:10]})": tree if tree.exists() else export_tree(commit, work)}
+        roots["after"] = REPO
+    envs = {}
+    for name, root in roots.items():
+        env = {**os.environ, "PYTHONPATH": str(root)}
+        if args.bytecode:
+            env.pop("PYTHONDONTWRITEBYTECODE", None)
+            env["PYTHONPYCACHEPREFIX"] = str(work / "pycache")
+        envs[name] = env
     scene = scene_with("none", work)
-    import_floor(1, env)  # unmeasured: with --bytecode, every module's bytecode written
+    trees = list(roots)
+    for name in trees:  # unmeasured: kernels loaded once, with --bytecode the bytecode written
+        floor_round(envs[name])
+        phases_round(envs[name], scene, args.samples, work / f"warm-{time.time_ns()}")
     load0 = os.getloadavg()[0]
-    floor = import_floor(args.rounds, env)
-    run_phases(1, args.samples, scene, work, env)  # unmeasured, as the first round above
-    phases = run_phases(args.rounds, args.samples, scene, work, env)
+    floors: dict[str, list[list[float]]] = {t: [] for t in trees}
+    phases: dict[str, list[dict]] = {t: [] for t in trees}
+    for r in range(args.rounds):  # the trees alternate, round by round
+        for name in trees if r % 2 == 0 else trees[::-1]:
+            floors[name].append(floor_round(envs[name]))
+            folder = work / f"run-{r}-{time.time_ns()}"
+            phases[name].append(phases_round(envs[name], scene, args.samples, folder))
     load1 = os.getloadavg()[0]
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     command = "python benchmarks/profile_fixed.py " + " ".join(sys.argv[1:])
@@ -256,21 +295,9 @@ def main() -> None:
         f"## profile_fixed, {when}",
         "",
         f"`{command}` ({os.cpu_count()} cores, {when}, load {load0:.1f} -> {load1:.1f}; "
-        f"medians of {args.rounds} fresh processes)",
+        f"medians of {args.rounds} fresh processes a tree)",
         "",
-        "### the import floor: CPU seconds of each step, in this order, in one process",
-        "",
-        "| step | CPU (s) |",
-        "|---|---|",
-        *(f"| {name} | {cpu:.3f} |" for name, cpu in floor),
-        f"| **sum** | **{sum(cpu for _, cpu in floor):.3f}** |",
-        "",
-        f"### `mcchain run` at {args.samples} samples: the timed steps (nested steps are "
-        "part of the one above them)",
-        "",
-        "| step | calls | CPU (s) | wall (s) |",
-        "|---|---|---|---|",
-        *(f"| {nested(text)} | {n} | {c:.3f} | {w:.3f} |" for text, c, w, n in phases),
+        *tables(trees, floors, phases, args.samples),
     ]
     text = "\n".join(lines)
     print(text)
