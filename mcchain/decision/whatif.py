@@ -149,15 +149,26 @@ def chernoff_bounds(mean: float, n: int, confidence: float) -> tuple[float, floa
         return 0.0, 1.0
     level = -math.log1p(-confidence)
     y = min(max(float(mean), 0.0), 1.0)
-    lo, hi = y, 1.0  # upper bound: KL rises from 0 at y to +inf at 1
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if n * kl_bernoulli(y, mid) <= level else (lo, mid)
-    upper = hi if y < 1.0 else 1.0
-    lo2, hi2 = 0.0, y  # lower bound
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo2 + hi2)
-        lo2, hi2 = (lo2, mid) if n * kl_bernoulli(y, mid) <= level else (mid, hi2)
+    p = np.float64(y)
+
+    def below_level(m: float) -> bool:
+        """n KL(y ‖ m) <= level: :func:`kl_bernoulli`'s operations on float64 scalars (the
+        same values, without its arrays: 120 evaluations a bound pair)."""
+        q = np.float64(m)
+        a = p * np.log(p / q) if p > 0 else 0.0
+        b = (1 - p) * np.log((1 - p) / (1 - q)) if p < 1 else 0.0
+        return bool(n * (a + b) <= level)
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo, hi = y, 1.0  # upper bound: KL rises from 0 at y to +inf at 1
+        for _ in range(BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if below_level(mid) else (lo, mid)
+        upper = hi if y < 1.0 else 1.0
+        lo2, hi2 = 0.0, y  # lower bound
+        for _ in range(BISECTIONS):
+            mid = 0.5 * (lo2 + hi2)
+            lo2, hi2 = (lo2, mid) if below_level(mid) else (mid, hi2)
     lower = lo2 if y > 0.0 else 0.0
     return lower, upper
 
