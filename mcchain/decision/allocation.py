@@ -129,10 +129,10 @@ def reaches(failures: np.ndarray, kept: np.ndarray, p: float, level: float) -> n
     for q < p <= S/k each likelihood ratio (q/p)^S ((1 − q)/(1 − p))^(k − S) of the mixture
     is below 1 (it rises with q up to S/k, and it is 1 at q = p). So log W_k(p) < 0 <
     level there, and the computed value, wrong by some 1e-12 (sums of terms of a few
-    thousand), is below the level too. Skipping those prefixes, most of them where a
-    requirement fails often, gives the same answers from a third of the evaluations of the
-    incomplete beta functions (the verdict's largest cost: 0.13 s of it at 4,096 samples).
-    A level within :data:`SKIP_MARGIN` of 0 evaluates every prefix."""
+    thousand), is below the level too. Skipping those prefixes (most of them, where a
+    requirement fails often) gives the same answers for fewer evaluations of the incomplete
+    beta functions, the verdict's largest cost (benchmarks/results/verdict/verdict.md,
+    "h-fixed"). A level within :data:`SKIP_MARGIN` of 0 evaluates every prefix."""
     s = np.asarray(failures, dtype=np.float64)
     k = np.asarray(kept, dtype=np.float64)
     if level <= SKIP_MARGIN:
