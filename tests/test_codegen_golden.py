@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
-        "accel": "367d77f036121918d788466d8220aa0b47c25b3422f9da0bd0431b2a95d94b5d",
-        "rk4": "32d4b200b1eb80c7f24bce528a4fdd1b43addd500ca0e5c4ebf7bf82000fec50",
-        "rk4-projection": "a56cd8f792070964f7a05ca7fd56c6fa6810a04ca2022e4cc52b154ad2e91fb4",
-        "rk45": "4e3de9e51b9e55fb3e7efc9495b1a194fdc4b8947a41aabd37a67967fef7f377",
+        "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
+        "rk4": "188484d4a012e0fc5c3493467340dc4a9537ff1f266b2a026a62bbe1715b61f2",
+        "rk4-projection": "30f93cb12af645de316fdb056bab0b3ddad5c7b7b88a077d4e7345c5a0901cca",
+        "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
@@ -106,7 +106,7 @@ def test_generate_source__a_variant_holds_only_the_functions_it_calls(variant):
     assert set(re.findall(r"^def (\w+)\(", source, re.MULTILINE)) == FUNCTIONS[variant]
 
 
-PURE_CALLS = {"abs", "max", "min", "math.sqrt", "float", "int"}
+PURE_CALLS = {"abs", "max", "min", "math.sqrt", "fma", "float", "int"}
 
 
 def _lane_index_ok(array: str, index: ast.expr) -> bool:

@@ -15,6 +15,7 @@ from mcchain.contact import LAW_CODES
 from mcchain.kernels import contact as kc
 from mcchain.kernels import forces as kf
 from mcchain.kernels import joints as kj
+from mcchain.kernels.config import fma
 
 
 def _run(function, arguments: dict[str, float], suffix: str = "7") -> list[float]:
@@ -23,8 +24,8 @@ def _run(function, arguments: dict[str, float], suffix: str = "7") -> list[float
     statements, results = inline(function.__module__, function.__name__, names, suffix)
     scope: dict[str, float] = dict(arguments)
     for line in statements:
-        exec(line, {"math": math}, scope)
-    return [eval(r, {"math": math}, scope) for r in results]
+        exec(line, {"math": math, "fma": fma}, scope)
+    return [eval(r, {"math": math, "fma": fma}, scope) for r in results]
 
 
 def _same(a: float, b: float) -> bool:

@@ -18,6 +18,7 @@ from mcchain.decision.allocation import (
     log_evidence,
     pass_level,
     prior,
+    reaches,
     upper_bound,
 )
 
@@ -61,6 +62,62 @@ def test_upper_bound__the_evidence_reaches_the_level_there_and_beyond() -> None:
         assert np.all(log_evidence(s, k, above) >= level)
         # above S/k and above the one-sided bound of one fixed test (the price of every cut)
         assert max(s / k, stats.beta.ppf(CONFIDENCE, s + 1, k - s)) < bound
+
+
+@pytest.mark.parametrize("k", [1, 2, 10, 257, 4096])
+@pytest.mark.parametrize("p", [1e-4, 0.01, 0.3, 0.5, 0.97])
+@pytest.mark.parametrize("level", [pass_level(0.95, 3), pass_level(0.05, 1), 2e-6])
+def test_reaches__the_full_evaluation_s_answer_where_the_share_failed_is_at_least_p(
+    k: int, p: float, level: float
+) -> None:
+    """Every failure count 0..k: the same answers as evaluating the evidence everywhere; the
+    prefixes it skips (S >= p k) have an evidence below 1 as computed, too."""
+    s = np.arange(k + 1, dtype=np.float64)
+    kept = np.full_like(s, k)
+    evidence = log_evidence(s, kept, p)
+    assert np.array_equal(reaches(s, kept, p, level), evidence >= level)
+    skipped = s >= p * kept
+    assert np.all(evidence[skipped] < 1e-9)
+
+
+def test_reaches__a_level_near_zero_evaluates_every_prefix() -> None:
+    s, k = np.array([0.0, 5.0, 50.0, 100.0]), np.array([100.0, 100.0, 100.0, 100.0])
+    for level in (1e-7, 0.0, -4.0, -5.0):
+        assert np.array_equal(reaches(s, k, 0.2, level), log_evidence(s, k, 0.2) >= level)
+    # S >= p k: log W is -3.57 and -4.54 there (below 0, above -5)
+    assert reaches(s, k, 0.2, -5.0).tolist() == [True, True, True, True]
+
+
+@pytest.mark.parametrize(
+    ("share", "ties"), [(0.0, False), (1.0, False), (0.9, True), (0.3, False), (0.012, True)]
+)
+def test_allocate__the_same_ranges_and_bounds_as_evaluating_every_prefix(
+    share: float, ties: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The allocation with :func:`reaches` against the one that evaluates the evidence of
+    every prefix at every bisection step: the same range and the same p_upper to the bit,
+    on ensembles with no failure, all failures, ties, and shares far above and near the
+    target, where the failures depend on the parameter."""
+    import mcchain.decision.allocation as allocation
+
+    def everywhere(s: np.ndarray, k: np.ndarray, p: float, level: float) -> np.ndarray:
+        return np.asarray(log_evidence(s, k, p) >= level)
+
+    for seed in range(4):
+        rng = np.random.default_rng([37, seed])
+        x = rng.random(2000)
+        if ties:
+            x = np.round(x, 2)
+        failed = (
+            rng.random(2000) < np.clip(share * 2 * x, 0.0, 1.0)
+            if 0 < share < 1
+            else (np.full(2000, share == 1.0))
+        )
+        fast = allocate(x, failed, 0.01, CONFIDENCE, (0.0, 1.0))
+        with monkeypatch.context() as patch:
+            patch.setattr(allocation, "reaches", everywhere)
+            full = allocate(x, failed, 0.01, CONFIDENCE, (0.0, 1.0))
+        assert fast == full
 
 
 def test_upper_bound__zero_failures_need_more_than_the_success_run_figure() -> None:

@@ -74,11 +74,18 @@ def _residual(km, q, ncon, t=0.0):
 
 
 def _central(fun, x, h=FD_STEP):
-    cols = []
-    for k in range(x.size):
-        step = np.zeros_like(x)
-        step[k] = h
-        cols.append((fun(x + step) - fun(x - step)) / (2 * h))
+    """Central differences of ``fun`` at ``x``, column by column, Richardson-extrapolated
+    from steps h and h/2: (4 D(h/2) − D(h))/3 cancels the h² term, so a clearance joint
+    whose |d| is small (derivatives growing like 1/|d|ⁿ) does not put the difference's
+    truncation error above FD_RTOL (a random chain measured 6e-6 at h = 1e-6 against the
+    complex step, where the kernel agreed with it to 4e-17)."""
+
+    def difference(k, step):
+        e = np.zeros_like(x)
+        e[k] = step
+        return (fun(x + e) - fun(x - e)) / (2 * step)
+
+    cols = [(4 * difference(k, h / 2) - difference(k, h)) / 3 for k in range(x.size)]
     return np.stack(cols, axis=-1)
 
 

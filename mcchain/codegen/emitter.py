@@ -142,11 +142,10 @@ class Emitter(ConstraintKinematics, SchurComplement):
         """
         r = self.contact_row[k]
         self.emit(f"pen{k} = rho{k} - p_cl{k}", f"pdot{k} = phid{r}")
-        fn, delta_slope, _rate_slope = self.inline(
-            "contact_law",
-            [f"{x}{k}" for x in ("pen", "pdot", "ins", "vi", "p_K", "p_mx", "p_lw", "p_er")],
-            k,
-        )
+        arguments = [f"{x}{k}" for x in ("pen", "pdot", "ins", "vi", "p_K", "p_mx", "p_lw", "p_er")]
+        if self.hertz_exponent:  # lanes whose exponents are all 1.5: contact_power's branch
+            arguments[5] = "1.5"
+        fn, delta_slope, _rate_slope = self.inline("contact_law", arguments, k)
         if fn != f"fn{k}":
             self.emit(f"fn{k} = {fn}")
         self.emit(f"kc{k} = fm{k} * {delta_slope}")

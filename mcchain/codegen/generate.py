@@ -86,10 +86,10 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
 
 
 def _blocks(
-    topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), fixed_step: bool = False
+    topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), fixed_variant: bool = False
 ) -> dict[str, str]:
     em = Emitter(topo)
-    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_step
+    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_variant
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -163,6 +163,26 @@ def _blocks(
     em.acceleration(t="ts")
     em.angle_rows = None
     block("accel_stage")
+    if topo.contact_joints and not fixed_step:
+        # The adaptive stage again for lane groups whose contact exponents are all 1.5:
+        # contact_power's Hertz branch alone, no libm pow call in the vectorised loop (the
+        # same values: the general stage takes that branch for those lanes).
+        em.hertz_exponent = True
+        em.acceleration(t="ts")
+        em.hertz_exponent = False
+        block("accel_stage_hertz")
+        slots = topo.slots()
+        other = " or ".join(f"{at('P', slots[f'mx{k}'])} != 1.5" for k in topo.contact_joints)
+        b["hertz_dispatch"] = "\n".join(
+            [
+                "nother = 0",
+                "for l in range(nl):",
+                f"    nother += 1 if {other} else 0",
+                "if nother == 0:",
+                "    group_stage_hertz_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau)",
+                "    return",
+            ]
+        )
     b.update(_stage_angles(topo, lay) if fixed_step else {})
 
     em.emit(
@@ -484,6 +504,8 @@ def generate_source(
         parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
         parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
     if topo.contact_joints:
+        # the contact law's fused multiply-add (contact_power, inlined), for numba's compile
+        parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions(adaptive=variant == "rk45"))
@@ -506,9 +528,18 @@ def generate_source(
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.
-    fixed_step = variant in ("rk4", "rk4-projection")
-    blocks = _blocks(topo, nstage, lay, outputs, fixed_step=fixed_step)
+    fixed_variant = variant in ("rk4", "rk4-projection")
+    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed_variant)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
+    if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
+        hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
+        hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
+        general = templates.STAGE_HELPER.replace(
+            "    @@stage_coefs_row\n", "    @@hertz_dispatch\n    @@stage_coefs_row\n"
+        )
+        parts_of = tuple(
+            general + hertz if part is templates.STAGE_HELPER else part for part in parts_of
+        )
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
         parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))

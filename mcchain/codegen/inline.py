@@ -38,8 +38,9 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-_BUILTINS = frozenset({"abs", "max", "min"})
-"""Calls kept as written: the lane text's own functions (mcchain.codegen.native)."""
+_BUILTINS = frozenset({"abs", "max", "min", "fma"})
+"""Calls kept as written: the lane text's own functions (mcchain.codegen.native; ``fma`` is
+:func:`mcchain.kernels.config.fma`, imported by the generated module's header)."""
 
 
 @functools.cache

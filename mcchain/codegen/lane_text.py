@@ -56,6 +56,9 @@ class LaneText:
         # (fm: law active, ins: in contact at the step's start, vi: approach speed δ̇⁻).
         self.contact_row = {k: topo.joint_row[k] for k in topo.contact_joints}
         self._contact_state: Callable[[str, int], str] = lambda name, k: "0.0"
+        self.hertz_exponent = False
+        """Write every contact joint's exponent as the literal 1.5 (a copy of the stage for
+        lane groups whose exponents all are: ``contact_power`` without ``pow``)."""
 
     def contact_source(self, where: Callable[[str, int], str]) -> None:
         """Where the contact state ``fm``/``ins``/``vi`` of joint k is read (default 0: the

@@ -453,6 +453,9 @@ class FunctionLowering:
             return b.select(
                 b.icmp_signed("<", value, ir.Constant(_I64, 0)), b.neg(value), value
             ), I64
+        if name == "fma":  # mcchain.kernels.config.fma: rounded once
+            operands = [self._cast(*self._scalar(arg), F64) for arg in node.args]
+            return b.call(self.module.intrinsic("llvm.fma", _DOUBLE, 3), operands), F64
         if name == "math.sqrt":
             value = self._cast(*self._scalar(node.args[0]), F64)
             return b.call(self.module.intrinsic("llvm.sqrt", _DOUBLE, 1), [value]), F64

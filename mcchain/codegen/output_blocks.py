@@ -103,7 +103,8 @@ def _feed(
         *(f"lam{r} = {at(lam, r)}" for r in range(topo.ncon)),
     )
     kinds = {kind for kind, *_ in outputs}
-    if kinds & {OUTPUT_JOINT_FORCE, OUTPUT_CONTACT_FORCE, OUTPUT_PENETRATION}:
+    forces = bool(kinds & {OUTPUT_JOINT_FORCE, OUTPUT_CONTACT_FORCE, OUTPUT_PENETRATION})
+    if forces:
         em.outputs(t="tf")  # joint forces jfx, jfy, normal forces cf (and their geometry)
         if OUTPUT_PENETRATION in kinds:
             em.constraint_values(t="tf", v="v")  # Φ̇ of a clearance row: δ̇
@@ -115,8 +116,11 @@ def _feed(
                 continue
             if kind <= OUTPUT_ANGULAR_VELOCITY and index not in angles:
                 angles.add(index)
-                em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
-                                     f"o{index}"))  # fmt: skip
+                if forces:  # the forces' geometry computed this body's sin/cos (sn, cs)
+                    em.emit(f"osn{index} = sn{index}", f"ocs{index} = cs{index}")
+                else:
+                    em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
+                                         f"o{index}"))  # fmt: skip
             values.append(_signal(em, topo, kind, component if ref == -1 or component < 2 else -2,
                                   index, k, f"{tag}{k}"))  # fmt: skip
         if ref == OUTPUT_TABULATED_REFERENCE:  # the ideal mechanism's, the same for all

@@ -22,6 +22,7 @@ import functools
 import math
 import sys
 from collections.abc import Callable
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,45 @@ hypot: Callable[[float, float], float] = math.hypot
 ``math.hypot`` can differ from libm's in the last place, and a position 1 ulp off moved an
 eigenpulsation by 2e-13: with libm's in both, interpreted and compiled kernels give the same
 bits on every shipped scene."""
+
+
+def fma(a: float, b: float, c: float) -> float:
+    """a·b + c rounded once (IEEE 754 fused multiply-add), as the kernels call it.
+
+    Compiled (numba, and the lane text through :mod:`mcchain.codegen.native`) it is LLVM's
+    ``llvm.fma`` (:func:`register_fma`), one instruction on a CPU with FMA; here, where the
+    kernels run interpreted, the exact product and sum in rationals rounded once (the same
+    value for finite operands and result, but the sign of a zero result: +0.0); with an inf
+    or NaN operand or an overflowing result, a·b + c as Python rounds it (the same inf or
+    NaN)."""
+    try:
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
+    except (ValueError, OverflowError):
+        return a * b + c
+
+
+@functools.cache
+def register_fma() -> None:
+    """:func:`fma` compiled by numba as ``llvm.fma`` (once per process; before a kernel that
+    calls it is compiled: :func:`njit` and the numba-compiled lane modules call this)."""
+    from llvmlite import ir
+    from numba.core import types
+    from numba.extending import intrinsic, overload
+
+    @intrinsic
+    def llvm_fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            double = ir.DoubleType()
+            function = builder.module.declare_intrinsic(
+                "llvm.fma", [double], ir.FunctionType(double, [double] * 3)
+            )
+            return builder.call(function, args)
+
+        return types.float64(types.float64, types.float64, types.float64), codegen
+
+    @overload(fma)
+    def fma_compiled(a, b, c):  # type: ignore[no-untyped-def]  # numba: as fma's signature
+        return lambda a, b, c: llvm_fma(float(a), float(b), float(c))
 
 
 def interpret_kernels() -> bool:
@@ -76,6 +116,7 @@ def njit(*args: Any, **options: Any) -> Any:
             return args[0]
         return lambda function: function
     numba_cache()  # a writable cache, before any kernel is decorated with cache=True
+    register_fma()
     from numba import njit as numba_njit
 
     if args and callable(args[0]):
