@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "96693f985ab2aba4649063ed5429313d7e2514ea23d3842df9658f4555c9e7fb",
-        "rk4-projection": "bdb2f2798eddbaac82ebf9df11cd5acb5a92ccb33b7141839f9101f74e802a84",
+        "rk4": "ee90b42766218ddc7e08f4d65a2d5cd3db869a9e6da53cf5235c25c652ee00a1",
+        "rk4-projection": "45bd7cb81bf016e094aee3fdef3c8f18d2875d574512e9f4fd8a4a389d686152",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "938d59c54a74327eb5bbbd9ba55a9b8e5a298b6b8cdf968c00a5aa2429741233",
-        "rk4-projection": "7fcfea96fbc7d7324482ddb78d645965062b54bbad769f9fc3c2057673f504f2",
+        "rk4": "8c2e7ce606522f929dedaf076f19ebb6630443167bf3a947c427e5aa6e5e5574",
+        "rk4-projection": "bc50718d5e85abc09b2cf35bd31a147653caca1b09d55dd6c690239a1fec108b",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "188484d4a012e0fc5c3493467340dc4a9537ff1f266b2a026a62bbe1715b61f2",
-        "rk4-projection": "30f93cb12af645de316fdb056bab0b3ddad5c7b7b88a077d4e7345c5a0901cca",
+        "rk4": "cff9c7bc713207df3f599931420a05c7b9110c8b35e2fda5e6dfffc3c4d66b1b",
+        "rk4-projection": "7bdc754a09f79069dfcdebcfa163338d8877ece1a4710839b14f8ac2935202b8",
         "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "16a7c78202e6a84c2af7ed8ff1632c6f2a0f3ccf8114692c8f03d1945b36df67",
-        "rk4-projection": "7a604106ea887472ccc372b221303d62798b6a1d3e756a322dfa9635c57ab10f",
+        "rk4": "f540bc0dd4dbdf3150878d762c0d40b1b44f0f0879749ada4df9410f5b9b9183",
+        "rk4-projection": "705892764007b6927448a34393353af068fb6a9f4a3f8993de8e539ab95e18a6",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

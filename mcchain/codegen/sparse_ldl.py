@@ -112,25 +112,17 @@ class SchurComplement:
     gives: benchmarks/results/roofline/reading.md)."""
 
     select_flags = False
-    """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) and the inverse of a pivot are
-    selects: ``1.0 if d > tau S else 0.0`` rather than the comparison times 1.0 (whose
-    conversion took three instructions), ``1.0 / d if kept else 0.0`` rather than
-    ``okp / (okp d + 1 − okp)`` (two operations fewer). The same values wherever d is finite
-    (a non-finite d dropped: 0 instead of NaN, in a lane whose values are NaN anyway). The
-    generator sets it for the fixed-step variants (the adaptive ones' text is left as it
-    was; what it gives: benchmarks/results/roofline/reading.md)."""
+    """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
+    else 0.0``, rather than the comparison times 1.0 (whose conversion took three
+    instructions): the same values. The generator sets it for the fixed-step variants (the
+    adaptive ones' text is left as it was; what it gives, and why the pivots' inverses are
+    not selects too: benchmarks/results/roofline/reading.md)."""
 
     def _flag(self, condition: str) -> str:
         """1.0 where ``condition`` holds, else 0.0 (NaN: 0.0)."""
         if self.select_flags:
             return f"1.0 if {condition} else 0.0"
         return f"({condition}) * 1.0"
-
-    def _inverse(self, j: int) -> str:
-        """1/d_j of a kept pivot j, 0 for a dropped one."""
-        if self.select_flags:
-            return f"1.0 / D{j} if okp{j} > 0.0 else 0.0"
-        return f"okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))"
 
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"
@@ -197,7 +189,7 @@ class SchurComplement:
                 self.emit(
                     f"D{j} = {dj}",
                     f"okp{j} = {self._flag(f'D{j} > tau * {S[j, j]}')}",
-                    f"Di{j} = {self._inverse(j)}",
+                    f"Di{j} = okp{j} / (okp{j} * D{j} + (1.0 - okp{j}))",
                 )
             for i in range(j + 1, n):
                 if (i, j) not in L:
