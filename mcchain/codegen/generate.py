@@ -532,6 +532,10 @@ def generate_source(
     blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed_variant)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
+        # the markers the copy and the dispatch replace (else the copy would silently be the
+        # general stage, or never be called)
+        for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", "    @@stage_coefs_row\n"):
+            assert marker in templates.STAGE_HELPER, marker
         hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
         hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
         general = templates.STAGE_HELPER.replace(
