@@ -14,6 +14,7 @@ moves rk45 at 1e-15 by 5e-12 m before the impact, 1.1e-8 m at 30 ms).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -34,7 +35,12 @@ PENETRATION_TOL = 1e-12  # m, max_penetration: continuous peaks (measured 3.6e-1
 REFERENCE_RTOL = 1e-14  # rk45, converged (0.3 s)
 
 
-def run(method: str, rtol: float, output_dt: float = 1e-5) -> dict[str, np.ndarray]:
+@functools.cache
+def run(method: str, rtol: float, output_dt: float = 1e-6) -> dict[str, np.ndarray]:
+    """The 30 ms of the Flores slider-crank under ``method``, every µs stored (the free-flight
+    reference's spacing: the impact test's history errors are then held at every µs too).
+    Computed once per method for the tests of this file (one worker runs them: ``--dist
+    loadfile``): each 30 ms run costs 3-6 s of CPU; the tests read, never write, them."""
     text = flores_pin_text(method=method, rtol=rtol, atol=1e-13, output_dt=output_dt)
     scene = load_scene_text(text)
     model = compile_model(scene)
@@ -118,8 +124,8 @@ def test_radau__slider_crank_free_flight_time_agrees_with_rk45_and_the_history()
     −3.5e-14 m, rk45 +8e-15 m: 3.4e-8 s apart). Were: radau 7.1770e-4 s, rk45 7.1798e-4 s
     (from the start of its step that crossed the tolerance); now both 7.18132e-4 s."""
     pin = 2
-    radau = run("radau", 1e-11, output_dt=1e-6)
-    rk45 = run("rk45", REFERENCE_RTOL, output_dt=1e-6)
+    radau = run("radau", 1e-11)
+    rk45 = run("rk45", REFERENCE_RTOL)
     for out in (radau, rk45):
         assert out["status"][0] == 0 and out["impact_count"][0, pin] == 6
         reference = free_flight_reference(out, pin)
