@@ -89,6 +89,18 @@ class ClearanceMotion:
         """The slider's x minus the ideal slider's (closed form), m."""
         return self.x(t) - self.mechanism.ideal_x(t)
 
+    def errors(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`error` at every time of ``t`` (s) at once, m: the same formulas on arrays
+        (numpy's sin, cos and sqrt: equal to ``math``'s within an ulp or two), the dense
+        output evaluated once for all of them."""
+        alpha = self.dense(t)[0]
+        mech = self.mechanism
+        th = mech.angle0 + mech.omega * t
+        r, L, c = mech.crank, mech.rod, mech.clearance
+        sin2 = -(r * np.sin(th) + c * np.sin(alpha)) / L
+        x = r * np.cos(th) + L * np.sqrt(1.0 - sin2 * sin2) + c * np.cos(alpha)
+        return x - (r * np.cos(th) + np.sqrt(L * L - (r * np.sin(th)) ** 2))
+
     def pin_force(self, t: float) -> float:
         """|force on the slider by the rod| at the pin, N: the link's force lies along d, and
         the guide takes none along x, so m ẍ = F cos α."""
@@ -159,13 +171,17 @@ def reduce_signal(
     reduce: str,
     threshold: float = 0.0,
     samples: int = 20001,
+    on_arrays: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> float:
     """A ``[[output]]`` reduction of f over [t0, t1], by dense sampling refined with scipy:
     extrema by bounded minimisation around each sampled extremum (to 1e-14 of the
     spacing), rms and mean by 8-point Gauss–Legendre between the samples, a crossing by
-    ``brentq``."""
+    ``brentq``. ``on_arrays``: f on an array of times at once (e.g.
+    :meth:`ClearanceMotion.errors`), for the dense sampling and the quadrature nodes (the
+    reference's 10⁵ evaluations one by one cost seconds); the refinements call f."""
+    many = on_arrays or (lambda times: np.array([f(t) for t in times.ravel()]))
     ts = np.linspace(t0, t1, samples)
-    fs = np.array([f(t) for t in ts])
+    fs = many(ts)
     if reduce in ("max", "min", "max_abs", "range"):
 
         def extreme(sign: float) -> float:
@@ -187,7 +203,7 @@ def reduce_signal(
         half = 0.5 * (ts[1:] - ts[:-1])
         middle = 0.5 * (ts[1:] + ts[:-1])
         points = middle[:, None] + half[:, None] * nodes[None, :]
-        values = np.array([f(t) for t in points.ravel()]).reshape(points.shape) ** power
+        values = many(points.ravel()).reshape(points.shape) ** power
         mean = float(np.sum(half * (values @ weights))) / (t1 - t0)
         return math.sqrt(mean) if reduce == "rms" else mean
     sense = 1.0 if reduce == "first_time_above" else -1.0
