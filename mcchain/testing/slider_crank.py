@@ -73,7 +73,7 @@ class ClearanceMotion:
     """A reference run: α(t) and α̇(t) by DOP853's dense output, and the slider's x."""
 
     mechanism: SliderCrank
-    dense: Callable[[float], np.ndarray]
+    dense: Callable[[float | np.ndarray], np.ndarray]  # OdeSolution: one time or many
     t_end: float
     rhs: Callable[[float, np.ndarray], np.ndarray]  # (t, [α, α̇]) -> [α̇, α̈]
     slider_acceleration: Callable[[float, float, float, float], float]
