@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "ee90b42766218ddc7e08f4d65a2d5cd3db869a9e6da53cf5235c25c652ee00a1",
-        "rk4-projection": "45bd7cb81bf016e094aee3fdef3c8f18d2875d574512e9f4fd8a4a389d686152",
+        "rk4": "f59faf100334e38aeec5e704e017ba751284e0562cc12c779d100c779c7af5cf",
+        "rk4-projection": "57d5c091312c108707deb210e4fd1f02bdbcf87661f2b0c5c26a858c695f79cc",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "8c2e7ce606522f929dedaf076f19ebb6630443167bf3a947c427e5aa6e5e5574",
-        "rk4-projection": "bc50718d5e85abc09b2cf35bd31a147653caca1b09d55dd6c690239a1fec108b",
+        "rk4": "0d83e2f2d6026362e9fc2751a294a7b862a3d6cbb0fdaaa5384546f1090164b8",
+        "rk4-projection": "bee9a6695ec453b72c6e8ec12385d3c120dc10950e030750a4a6b2470076003f",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "cff9c7bc713207df3f599931420a05c7b9110c8b35e2fda5e6dfffc3c4d66b1b",
-        "rk4-projection": "7bdc754a09f79069dfcdebcfa163338d8877ece1a4710839b14f8ac2935202b8",
+        "rk4": "0ab77bbe06072024ddd0081eedef258793bd352c390a7fb30a541008e595f58d",
+        "rk4-projection": "257a1494e2fa6ab5f7b6728fea6857162601f628d81ec887f4b06d8cd622a674",
         "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "f540bc0dd4dbdf3150878d762c0d40b1b44f0f0879749ada4df9410f5b9b9183",
-        "rk4-projection": "705892764007b6927448a34393353af068fb6a9f4a3f8993de8e539ab95e18a6",
+        "rk4": "5ca75cd6b31ef3c2335a00726587666ffa805ee9e650fbba2a9f106c2e857d3f",
+        "rk4-projection": "9e9934f3a8df5c21863e4dead69e449e1f532c4bda1033c29d2b9858c9d16325",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

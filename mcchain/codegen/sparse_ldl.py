@@ -111,6 +111,14 @@ class SchurComplement:
     of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
     gives: benchmarks/results/roofline/reading.md)."""
 
+    invariant_pivots: dict[frozenset[int], tuple[str, str]] = {}
+    """Pairs of rows of B (by their index) whose 2×2 block of S has a determinant that does
+    not change with the state (an ideal revolute joint to the ground:
+    :meth:`mcchain.codegen.kinematics.ConstraintKinematics.ground_revolutes`), each with the
+    texts of that determinant and of its inverse, computed once per sample. With
+    :attr:`parallel_pivots`, the second pivot of such a pair is :meth:`_ground_pivot`'s: no
+    division in the stage. The generator fills it for the fixed-step variants."""
+
     select_flags = False
     """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
     else 0.0``, rather than the comparison times 1.0 (whose conversion took three
@@ -181,8 +189,16 @@ class SchurComplement:
                     lower[i].add(j)
 
         for j in range(n):
-            if self.parallel_pivots and len(lower[j]) == 1:
-                self._single_pivot(j, min(lower[j]), S[j, j])
+            k = min(lower[j], default=-1)
+            pair = frozenset((order[k], order[j]))
+            if self.parallel_pivots and len(lower[j]) == 1 and not lower[k]:
+                invariant = self.invariant_pivots.get(pair)
+            else:
+                invariant = None
+            if invariant is not None:
+                self._ground_pivot(j, k, S[j, j], *invariant)
+            elif self.parallel_pivots and len(lower[j]) == 1:
+                self._single_pivot(j, k, S[j, j])
             else:
                 prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
                 dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
@@ -217,6 +233,22 @@ class SchurComplement:
             f"okp{j} = {self._flag(f'N{j} > tau * {sjj} * Dp{j}_{k}')}",
             f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
             # d_j for a next such column (else dead code): a product, not one more division
+            f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
+        )
+
+    def _ground_pivot(self, j: int, k: int, sjj: str, det: str, inverse: str) -> None:
+        """:meth:`_single_pivot` where pivot k is the first of its column (d_k = S_kk, E_jk =
+        S_jk) and rows k, j are a pair of :attr:`invariant_pivots`: N_j = S_jj S_kk − S_jk²
+        is the block's determinant ``det``, the same at every state (a few ulp from the
+        product written out, which it replaces), so 1/d_j = d_k · ``inverse``: no division.
+        The drop test is N_j ≤ tau S_jj d_k as there. Pivot k is dropped only in a NaN lane
+        (S_kk ≥ 1/m > 0 with m > 0: the scene's rule), whose S_jj is NaN too: pivot j is then
+        dropped as well, as there (1/d_j = 0)."""
+        self.emit(
+            f"Dp{j}_{k} = D{k} if okp{k} > 0.0 else 1.0",
+            f"N{j} = {det}",
+            f"okp{j} = {self._flag(f'N{j} > tau * {sjj} * Dp{j}_{k}')}",
+            f"Di{j} = Dp{j}_{k} * {inverse} if okp{j} > 0.0 else 0.0",
             f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
         )
 
