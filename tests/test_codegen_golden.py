@@ -29,27 +29,27 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "f59faf100334e38aeec5e704e017ba751284e0562cc12c779d100c779c7af5cf",
-        "rk4-projection": "57d5c091312c108707deb210e4fd1f02bdbcf87661f2b0c5c26a858c695f79cc",
+        "rk4": "ffdd58b088bedc9327c006be5494fd5769c85fa0828276167c120bfc557d643f",
+        "rk4-projection": "577b438e59efb76f37ed1ffb5e5aaeadeebe2db67932a0f1e75683e76034f2f8",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
-        "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "0d83e2f2d6026362e9fc2751a294a7b862a3d6cbb0fdaaa5384546f1090164b8",
-        "rk4-projection": "bee9a6695ec453b72c6e8ec12385d3c120dc10950e030750a4a6b2470076003f",
-        "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
+        "accel": "6f3551001b12cb65710a2e0332530bbc91ebbcfd151bdecd33ed16dbd2576d0a",
+        "rk4": "977c6159e9fd5e46864177a6e7211189a795f5941055397cfbaa2a058cc468e9",
+        "rk4-projection": "459d3422a6c19b36e7d3b5a8e39c08f12d7002a2e8591abc9a1c924bcb485a01",
+        "rk45": "3f4267b18afbcfe4be8a61e02c1aa208ff810ab26301e64978390a7d2d85efb0",
     },
     "fourbar-clearance-auto": {
-        "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "0ab77bbe06072024ddd0081eedef258793bd352c390a7fb30a541008e595f58d",
-        "rk4-projection": "257a1494e2fa6ab5f7b6728fea6857162601f628d81ec887f4b06d8cd622a674",
-        "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
+        "accel": "632537b19cc322c7b3299b8436ee4b44b8672bb01381690cd0ee8d841f292982",
+        "rk4": "676f130f99345a38dcbc6b26235b6e525e404b715af35177b76ac318b969577e",
+        "rk4-projection": "55fef7b3f158d799a9281ecd764331fb2a29a83342ce1e3800868ac0b5760595",
+        "rk45": "437dd25c9d2ddab424c4767f2b5a0f1a06a7fa9dae71ec0cf8a95e29bacbe826",
     },
     "chain4-mixed-spring": {
-        "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "5ca75cd6b31ef3c2335a00726587666ffa805ee9e650fbba2a9f106c2e857d3f",
-        "rk4-projection": "9e9934f3a8df5c21863e4dead69e449e1f532c4bda1033c29d2b9858c9d16325",
-        "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
+        "accel": "ab81033088607ce431c4becde7eb25e39a776f907ec19967086763efc83cf224",
+        "rk4": "0c7d2a7b27710fb9f741a64d04f1313d0dd637c300b601aadafaa319881237f5",
+        "rk4-projection": "3f37b6b1c125bdfafa5b62f8a62c9d1a3f5ec21b2403e5369e9f9d0ab3349781",
+        "rk45": "fdf0dc3651983942f1624061fb13da3c2f23c682d95497b9dd8ee0fa21df6e9d",
     },
 }
 

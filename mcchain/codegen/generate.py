@@ -140,6 +140,8 @@ def _blocks(
     b["invariant_rows"] = ""
     if fixed_variant and "gdet" in lay.rows:
         b["invariant_rows"] = _ground_determinants(em, lay)
+    if fixed_variant:
+        em.unit_rows = em.unit_normal_rows()
     cj = {k: j for j, k in enumerate(topo.contact_joints)}
     em.contact_source(lambda name, k: at(name, cj[k]))
     em.emit(

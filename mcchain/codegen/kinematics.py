@@ -164,6 +164,17 @@ class ConstraintKinematics(LaneText):
         self._rows_cache = rows
         return rows
 
+    def unit_normal_rows(self) -> dict[int, tuple[str, str]]:
+        """The row of each clearance joint not under a contact law: its entries at a body's
+        x and y are ± its unit normal (ex, ey) (under a law, n = 0 at the bearing's
+        centre). {row: (ex, ey)}."""
+        topo = self.topo
+        return {
+            topo.joint_row[k]: (f"ex{k}", f"ey{k}")
+            for k in range(topo.njoint)
+            if topo.joint_kind[k] == JOINT_CLEARANCE and k not in self.contact_row
+        }
+
     def ground_revolutes(self) -> dict[frozenset[int], tuple[int, int, str, str]]:
         """The two rows of B of each ideal revolute joint k between the ground and one body b:
         {{row x, row y}: (k, b, slot of the joint's point on b in b's frame: x, y)}.

@@ -119,6 +119,13 @@ class SchurComplement:
     :attr:`parallel_pivots`, the second pivot of such a pair is :meth:`_ground_pivot`'s: no
     division in the stage. The generator fills it for the fixed-step variants."""
 
+    unit_rows: dict[int, tuple[str, str]] = {}
+    """Rows of B whose entries at each body's x and y are ± a unit vector (ex, ey), by row:
+    the names (a clearance joint's normal, not under a contact law, where it is 0 at the
+    bearing's centre). In S_rr such a body's two terms e_x² /m + e_y² /m are its 1/m (equal
+    in exact arithmetic, within an ulp or two of 1/m as written out); the generator fills it
+    for the fixed-step variants."""
+
     select_flags = False
     """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
     else 0.0``, rather than the comparison times 1.0 (whose conversion took three
@@ -168,7 +175,10 @@ class SchurComplement:
                 i, j = pos[ri], pos[rj]
                 if j > i:
                     continue
-                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
+                cols = sorted(set(rows[ri]) & set(rows[rj]))
+                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in cols]
+                if ri == rj and ri in self.unit_rows:
+                    terms = self._unit_terms(ri, rows[ri], cols, self.unit_rows[ri])
                 laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
                 if not laws:
                     self.emit(f"S{i}_{j} = {_sum(terms)}")
@@ -235,6 +245,23 @@ class SchurComplement:
             # d_j for a next such column (else dead code): a product, not one more division
             f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
         )
+
+    def _unit_terms(
+        self, r: int, row: dict[int, Coef], cols: list[int], unit: tuple[str, str]
+    ) -> list[Coef]:
+        """The terms of S_rr for a row of :attr:`unit_rows`: 1/m of each body whose x and y
+        entries are ±(ex, ey) (e_x² + e_y² = 1), the products for the other entries."""
+        terms: list[Coef] = []
+        for c in cols:
+            b, k = divmod(c, 3)
+            pair = (row.get(3 * b), row.get(3 * b + 1))
+            signed = [tuple(_mul(sign, e) for e in unit) for sign in (1.0, -1.0)]
+            if k < 2 and pair in signed:
+                if k == 0:
+                    terms.append(self._minv(c))
+                continue
+            terms.append(_mul(row[c], f"Wt{r}_{c}"))
+        return terms
 
     def _ground_pivot(self, j: int, k: int, sjj: str, det: str, inverse: str) -> None:
         """:meth:`_single_pivot` where pivot k is the first of its column (d_k = S_kk, E_jk =
