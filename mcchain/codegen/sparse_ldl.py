@@ -175,7 +175,7 @@ class SchurComplement:
                 i, j = pos[ri], pos[rj]
                 if j > i:
                     continue
-                cols = sorted(set(rows[ri]) & set(rows[rj]))
+                cols = list(set(rows[ri]) & set(rows[rj]))
                 terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in cols]
                 if ri == rj and ri in self.unit_rows:
                     terms = self._unit_terms(ri, rows[ri], cols, self.unit_rows[ri])
