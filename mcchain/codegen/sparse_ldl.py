@@ -10,7 +10,8 @@ kernels.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 
 import numpy as np
 
@@ -111,7 +112,7 @@ class SchurComplement:
     of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
     gives: benchmarks/results/roofline/reading.md)."""
 
-    invariant_pivots: dict[frozenset[int], tuple[str, str]] = {}
+    invariant_pivots: Mapping[frozenset[int], tuple[str, str]] = MappingProxyType({})
     """Pairs of rows of B (by their index) whose 2×2 block of S has a determinant that does
     not change with the state (an ideal revolute joint to the ground:
     :meth:`mcchain.codegen.kinematics.ConstraintKinematics.ground_revolutes`), each with the
@@ -119,7 +120,7 @@ class SchurComplement:
     :attr:`parallel_pivots`, the second pivot of such a pair is :meth:`_ground_pivot`'s: no
     division in the stage. The generator fills it for the fixed-step variants."""
 
-    unit_rows: dict[int, tuple[str, str]] = {}
+    unit_rows: Mapping[int, tuple[str, str]] = MappingProxyType({})
     """Rows of B whose entries at each body's x and y are ± a unit vector (ex, ey), by row:
     the names (a clearance joint's normal, not under a contact law, where it is 0 at the
     bearing's centre). In S_rr such a body's two terms e_x² /m + e_y² /m are its 1/m (equal
