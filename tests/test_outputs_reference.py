@@ -109,7 +109,7 @@ def _reference():
 @functools.cache
 def _expected() -> tuple[dict[str, float], float]:
     """The reference's reductions (the outputs' names to their values) and its windowed max
-    pin force: the same for every method, computed once (about 5 s of CPU)."""
+    pin force: the same for every method, computed once."""
     ref = _reference()
     error = functools.partial(reduce_signal, ref.error, on_arrays=ref.errors)
     expected = {
