@@ -160,8 +160,8 @@ def _lanes_feed(topo: Topology, lay: Layout, outputs: Signature, base: list[str]
         return f"rfx{k}, rfy{k}, rrx{k}, rry{k} = {values}"
 
     em = Emitter(topo)
-    em.emit(f"fresh = {at('ofs')} > 0.0", f"cnt = {at('otk', 4)}", f"tc = {at('otk', 2)}",
-            f"td = {at('otk', 3)}")  # fmt: skip
+    em.emit(f"fresh = {at('ofs')} > 0.0", f"cnt = {at('otk', 4)}",
+            *(f"t{x} = {at('otk', i + 1)}" for i, x in enumerate("bcd")))  # fmt: skip
     em.emit(*_signals(topo, lay, outputs, at("tl"), "kv0", "lam", "", data, reference))
     steps = "mcchain.kernels.output_steps"
     for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
@@ -178,7 +178,8 @@ def _lanes_feed(topo: Topology, lay: Layout, outputs: Signature, base: list[str]
             span = "(tf - td)"
         else:
             em.emit(f"fb{k} = {w(FB)}", f"fc{k} = {w(FC)}", f"fd{k} = {w(FD)}")
-            arguments = ["cnt", "tc", "td", f"fb{k}", f"fc{k}", f"fd{k}", f"of{k}", *window]
+            arguments = ["cnt", "tb", "tc", "td", "tf", f"fb{k}", f"fc{k}", f"fd{k}", f"of{k}",
+                         *window]  # fmt: skip
             settled, reduced, hi, lo = em.kernel(steps, "cubic_settles", arguments, f"_s{k}")
             span = "(td - tc)"
         em.emit(
@@ -363,6 +364,8 @@ def output_functions(with_hermite: bool) -> str:
         output_steps.hull_clear,
         output_steps.cubic_gates,
         output_steps.extremes_only,
+        output_steps.step_inside,
+        output_steps.cubic_slope,
         output_steps.hermite_settles,
         output_steps.middle_step_plain,
         output_steps.cubic_settles,
@@ -370,7 +373,6 @@ def output_functions(with_hermite: bool) -> str:
         outputs._crossing,
         outputs.hermite_window,
         outputs.hermite_feed,
-        outputs._newton_slopes,
         outputs.cubic_window,
         outputs.cubic_feed,
         outputs.output_last,

@@ -56,6 +56,31 @@ def extremes_only(reduce):
 
 
 @njit(**JIT)
+def step_inside(t0, t1, w0, w1, reduce):
+    """True where the step [t0, t1] (t1 > t0) lies whole inside the window [w0, w1] and the
+    reduction keeps only the extremes: the step's extremes are its ends' unless the
+    interpolant passes them."""
+    return extremes_only(reduce) and t1 > t0 and t0 >= w0 and t1 <= w1
+
+
+@njit(**JIT)
+def cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, at):
+    """The slope at ``at`` of the cubic through the four points (ascending times), from its
+    Newton form."""
+    d1 = (fb - fa) / (tb - ta)
+    d2 = (fc - fb) / (tc - tb)
+    d3 = (fd - fc) / (td - tc)
+    e1 = (d2 - d1) / (tc - ta)
+    e2 = (d3 - d2) / (td - tb)
+    g = (e2 - e1) / (td - ta)
+    u = at - ta
+    xb = tb - ta
+    xc = tc - ta
+    return d1 + e1 * (2.0 * u - xb) + g * (3.0 * u * u - 2.0 * u * (xb + xc) + xb * xc)
+
+
+
+@njit(**JIT)
 def hermite_settles(count, t0, f0, r0, t1, f1, r1, w0, w1, reduce, hi, lo):
     """Whether feeding (f1, ḟ1) at ``t1`` after (f0, ḟ0) at ``t0`` (``count`` values fed
     so far) to an output whose rate the state gives, in the window [w0, w1] with running
@@ -69,7 +94,7 @@ def hermite_settles(count, t0, f0, r0, t1, f1, r1, w0, w1, reduce, hi, lo):
     high = max(hi, max(f0, f1))
     low = min(lo, min(f0, f1))
     outside = not (step > 0.0 and min(t1, w1) > max(t0, w0))
-    inside = count >= 1.0 and step > 0.0 and t0 >= w0 and t1 <= w1 and extremes_only(reduce)
+    inside = count >= 1.0 and step_inside(t0, t1, w0, w1, reduce)
     reduced = inside and hull_clear(f0, r0, f1, r1, step, high, low)
     return count < 1.0 or outside or reduced, reduced, high, low
 
@@ -80,21 +105,28 @@ def middle_step_plain(fa, fb, fc, fd, t0, t1, w0, w1, reduce):
     its ends alone: neither gate open (:func:`cubic_gates`), an extremes reduction, the step
     whole inside the window [w0, w1]."""
     rise, fall = cubic_gates(fa, fb, fc, fd)
-    closed = rise == 0.0 and fall == 0.0
-    return closed and extremes_only(reduce) and t1 > t0 and t0 >= w0 and t1 <= w1
+    return rise == 0.0 and fall == 0.0 and step_inside(t0, t1, w0, w1, reduce)
 
 
 @njit(**JIT)
-def cubic_settles(count, tc, td, fb, fc, fd, f, w0, w1, reduce, hi, lo):
-    """Whether feeding ``f`` (after the values fb, fc, fd, the last two at ``tc``, ``td``;
-    ``count`` values fed so far) to an output known by its values only changes its
-    reduction in the plain way: (settled, reduced, hi, lo). Settled: fewer than three values
-    fed before (nothing reduced), or ``reduced``: four or more, and the step [tc, td] on the
-    cubic through the four is reduced from its ends (:func:`middle_step_plain`); then the
-    span grows by td − tc and the extremes are the returned ``hi``, ``lo``."""
+def cubic_settles(count, tb, tc, td, t, fb, fc, fd, f, w0, w1, reduce, hi, lo):
+    """Whether feeding ``f`` at ``t`` (after the values fb, fc, fd at tb, tc, td; ``count``
+    values fed so far) to an output known by its values only changes its reduction in the
+    plain way: (settled, reduced, hi, lo). Settled: fewer than three values fed before
+    (nothing reduced), or ``reduced``: four or more, the step [tc, td] whole inside the
+    window, an extremes reduction, and the step's interpolant (the Hermite form of the cubic
+    through the four) unable to pass the extremes with its ends: neither gate open
+    (:func:`middle_step_plain`), or its hull clear of them (:func:`hull_clear`, with the
+    cubic's slopes); then the span grows by td − tc and the extremes are the returned
+    ``hi``, ``lo``."""
     high = max(hi, max(fc, fd))
     low = min(lo, min(fc, fd))
-    reduced = count > 3.0 and middle_step_plain(fb, fc, fd, f, tc, td, w0, w1, reduce)
+    plain = middle_step_plain(fb, fc, fd, f, tc, td, w0, w1, reduce)
+    slope0 = cubic_slope(tb, fb, tc, fc, td, fd, t, f, tc)
+    slope1 = cubic_slope(tb, fb, tc, fc, td, fd, t, f, td)
+    inside = step_inside(tc, td, w0, w1, reduce)
+    clear = inside and hull_clear(fc, slope0, fd, slope1, td - tc, high, low)
+    reduced = count > 3.0 and (plain or clear)
     return count < 3.0 or reduced, reduced, high, low
 
 
@@ -103,8 +135,10 @@ __all__ = [
     "THIRD",
     "cubic_gates",
     "cubic_settles",
+    "cubic_slope",
     "extremes_only",
     "hermite_settles",
     "hull_clear",
     "middle_step_plain",
+    "step_inside",
 ]

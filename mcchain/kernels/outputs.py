@@ -53,6 +53,7 @@ from mcchain.kernels.config import JIT, hypot, njit
 from mcchain.kernels.contact import _hermite
 from mcchain.kernels.output_steps import (
     cubic_gates,
+    cubic_slope,
     cubic_settles,
     hermite_settles,
     hull_clear,
@@ -350,21 +351,6 @@ def hermite_feed(W, base, stride, count, td, t, f, r, w0, w1, threshold, reduce)
 
 
 @njit(**JIT)
-def _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, at):
-    """The slope at ``at`` of the cubic through the four points (ascending times)."""
-    d1 = (fb - fa) / (tb - ta)
-    d2 = (fc - fb) / (tc - tb)
-    d3 = (fd - fc) / (td - tc)
-    e1 = (d2 - d1) / (tc - ta)
-    e2 = (d3 - d2) / (td - tb)
-    g = (e2 - e1) / (td - ta)
-    u = at - ta
-    xb = tb - ta
-    xc = tc - ta
-    return d1 + e1 * (2.0 * u - xb) + g * (3.0 * u * u - 2.0 * u * (xb + xc) + xb * xc)
-
-
-@njit(**JIT)
 def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, w1,
                  threshold, reduce):  # fmt: skip
     """Reduce step ``interval`` (0 [ta, tb], 1 [tb, tc], 2 [tc, td]) of the cubic through
@@ -389,8 +375,8 @@ def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, 
             W[base + HI * stride] = max(W[base + HI * stride], max(f0, f1))
             W[base + LO * stride] = min(W[base + LO * stride], min(f0, f1))
             return
-    r0 = _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t0)
-    r1 = _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t1)
+    r0 = cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t0)
+    r1 = cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t1)
     top = max(max(fa, fb), max(fc, fd))
     low = min(min(fa, fb), min(fc, fd))
     spread = top - low
@@ -409,8 +395,9 @@ def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, redu
     fb = W[base + FB * stride]
     fc = W[base + FC * stride]
     fd = W[base + FD * stride]
-    settled, reduced, hi, lo = cubic_settles(count, tc, td, fb, fc, fd, f, w0, w1, reduce,
-                                             W[base + HI * stride], W[base + LO * stride])  # fmt: skip
+    settled, reduced, hi, lo = cubic_settles(count, tb, tc, td, t, fb, fc, fd, f, w0, w1,
+                                             reduce, W[base + HI * stride],
+                                             W[base + LO * stride])  # fmt: skip
     if reduced:
         W[base + SPAN * stride] += td - tc
         W[base + HI * stride] = hi
