@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "ee90b42766218ddc7e08f4d65a2d5cd3db869a9e6da53cf5235c25c652ee00a1",
         "rk4-projection": "45bd7cb81bf016e094aee3fdef3c8f18d2875d574512e9f4fd8a4a389d686152",
-        "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
+        "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "8c2e7ce606522f929dedaf076f19ebb6630443167bf3a947c427e5aa6e5e5574",
         "rk4-projection": "bc50718d5e85abc09b2cf35bd31a147653caca1b09d55dd6c690239a1fec108b",
-        "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
+        "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
         "rk4": "cff9c7bc713207df3f599931420a05c7b9110c8b35e2fda5e6dfffc3c4d66b1b",
         "rk4-projection": "7bdc754a09f79069dfcdebcfa163338d8877ece1a4710839b14f8ac2935202b8",
-        "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
+        "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "f540bc0dd4dbdf3150878d762c0d40b1b44f0f0879749ada4df9410f5b9b9183",
         "rk4-projection": "705892764007b6927448a34393353af068fb6a9f4a3f8993de8e539ab95e18a6",
-        "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
+        "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }
 
