@@ -142,22 +142,23 @@ def _lanes_feed(topo: Topology, lay: Layout, outputs: Signature, base: list[str]
     first = [
         "for l in range(nl):",
         f"    cnt = {at('otk', 4)}",
-        f"    {at('ofs')} = 1.0 if run[l] and (cnt == 0.0 or {at('tl')} > {at('otk', 3)}) "
-        "else 0.0",
+        f"    {at('ofs')} = 1.0 if run[l] and (cnt == 0.0 or {at('tl')} > {at('otk', 3)}) else 0.0",
     ]
+    # the reference's values the signal reads (a component: its x or y and rate), by row
+    names = ("rfx", "rfy", "rrx", "rry")
+    components = [component for _kind, component, *_rest in outputs]
+    read = [[0, 1, 2, 3] if c == 2 else ([1, 3] if c == 1 else [0, 2]) for c in components]
     for k, (_kind, _component, _item, ref, _reduce, _rate) in enumerate(outputs):
         if ref == OUTPUT_TABULATED_REFERENCE:
             first.append(f"    rfx{k}, rfy{k}, rrx{k}, rry{k} = reference_signal(ot_in, {k}, "
                          f"{at('tl')})")  # fmt: skip
-            first += [f"    {at('ofr', 4 * k + i)} = r{x}{k}"
-                      for i, x in enumerate(("fx", "fy", "rx", "ry"))]  # fmt: skip
+            first += [f"    {at('ofr', 4 * k + i)} = {names[i]}{k}" for i in read[k]]
 
     def data(k: int, c: int) -> str:
         return at("otd", OUTPUT_SAMPLE_COLUMNS * k + c)
 
     def reference(k: int) -> str:
-        values = ", ".join(at("ofr", 4 * k + i) for i in range(4))
-        return f"rfx{k}, rfy{k}, rrx{k}, rry{k} = {values}"
+        return "\n".join(f"{names[i]}{k} = {at('ofr', 4 * k + i)}" for i in read[k])
 
     em = Emitter(topo)
     em.emit(f"fresh = {at('ofs')} > 0.0", f"cnt = {at('otk', 4)}",
@@ -212,13 +213,13 @@ def _lanes_feed(topo: Topology, lay: Layout, outputs: Signature, base: list[str]
         f"        tf = {at('tl')}",
     ]
     for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
-        window = f"{data(k, 2)}, {data(k, 3)}, {data(k, 4)}, {reduce}"
+        bounds = f"{data(k, 2)}, {data(k, 3)}, {data(k, 4)}, {reduce}"
         value = at("ofv", 2 * k)
         call = (
             f"hermite_feed(W, {base[k]}, {lmax}, cnt, td, tf, {value}, {at('ofv', 2 * k + 1)}, "
-            f"{window})"
+            f"{bounds})"
             if rate
-            else f"cubic_feed(W, {base[k]}, {lmax}, cnt, tb, tc, td, tf, {value}, {window})"
+            else f"cubic_feed(W, {base[k]}, {lmax}, cnt, tb, tc, td, tf, {value}, {bounds})"
         )
         left += [f"        if {at('ofl', k)} > 0.0:", f"            {call}"]
     fed = at("ofs") + " > 0.0"
@@ -288,7 +289,7 @@ def _signals(
             values.append(_signal(em, topo, kind, component if ref == -1 or component < 2 else -2,
                                   index, k, f"{tag}{k}", point))  # fmt: skip
         if ref == OUTPUT_TABULATED_REFERENCE:  # the ideal mechanism's, the same for all
-            em.emit(reference(k))
+            em.emit(*reference(k).splitlines())
             pick = "y" if component == 1 else "x"
             tabulated = (f"rfx{k}", f"rfy{k}", f"rrx{k}", f"rry{k}")
             values.append(tabulated if component == 2 else (f"rf{pick}{k}", f"rr{pick}{k}"))

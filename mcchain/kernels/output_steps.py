@@ -79,7 +79,6 @@ def cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, at):
     return d1 + e1 * (2.0 * u - xb) + g * (3.0 * u * u - 2.0 * u * (xb + xc) + xb * xc)
 
 
-
 @njit(**JIT)
 def hermite_settles(count, t0, f0, r0, t1, f1, r1, w0, w1, reduce, hi, lo):
     """Whether feeding (f1, ḟ1) at ``t1`` after (f0, ḟ0) at ``t0`` (``count`` values fed

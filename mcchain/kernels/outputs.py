@@ -51,14 +51,6 @@ from mcchain.codes import (
 )
 from mcchain.kernels.config import JIT, hypot, njit
 from mcchain.kernels.contact import _hermite
-from mcchain.kernels.output_steps import (
-    cubic_gates,
-    cubic_slope,
-    cubic_settles,
-    hermite_settles,
-    hull_clear,
-    middle_step_plain,
-)
 from mcchain.kernels.joints import (
     clearance_rate,
     distance,
@@ -68,6 +60,14 @@ from mcchain.kernels.joints import (
     point_acceleration,
     point_velocity,
     rotate,
+)
+from mcchain.kernels.output_steps import (
+    cubic_gates,
+    cubic_settles,
+    cubic_slope,
+    hermite_settles,
+    hull_clear,
+    middle_step_plain,
 )
 
 # Offsets of an output's state (times ``stride``).
@@ -83,7 +83,6 @@ GL_X0 = 0.3399810435848563
 GL_X1 = 0.8611363115940526
 GL_W0 = 0.6521451548625461
 GL_W1 = 0.3478548451374538
-
 
 
 # -- the signal ------------------------------------------------------------------------------
@@ -337,8 +336,9 @@ def hermite_feed(W, base, stride, count, td, t, f, r, w0, w1, threshold, reduce)
     :func:`mcchain.kernels.output_steps.hermite_settles`, without it)."""
     f0 = W[base + FD * stride]
     r0 = W[base + RD * stride]
-    settled, reduced, hi, lo = hermite_settles(count, td, f0, r0, t, f, r, w0, w1, reduce,
-                                               W[base + HI * stride], W[base + LO * stride])  # fmt: skip
+    hi = W[base + HI * stride]
+    lo = W[base + LO * stride]
+    settled, reduced, hi, lo = hermite_settles(count, td, f0, r0, t, f, r, w0, w1, reduce, hi, lo)
     if reduced:
         W[base + SPAN * stride] += t - td
         W[base + HI * stride] = hi
@@ -395,9 +395,10 @@ def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, redu
     fb = W[base + FB * stride]
     fc = W[base + FC * stride]
     fd = W[base + FD * stride]
-    settled, reduced, hi, lo = cubic_settles(count, tb, tc, td, t, fb, fc, fd, f, w0, w1,
-                                             reduce, W[base + HI * stride],
-                                             W[base + LO * stride])  # fmt: skip
+    hi = W[base + HI * stride]
+    lo = W[base + LO * stride]
+    settled, reduced, hi, lo = cubic_settles(count, tb, tc, td, t, fb, fc, fd, f, w0, w1, reduce,
+                                             hi, lo)  # fmt: skip
     if reduced:
         W[base + SPAN * stride] += td - tc
         W[base + HI * stride] = hi
