@@ -7,6 +7,7 @@ windows that cut the step, hold it exactly or miss it, every reduction, the firs
 
 from __future__ import annotations
 
+import ast
 import math
 
 import numpy as np
@@ -163,3 +164,40 @@ def test_cap_margin__below_the_capped_error_the_ratio_is_the_largest():
         # ... and not far above it: the cap gives up little
         above = cap * (1.0 + 1e-5)
         assert SAFETY * above**expo < MAX_FACTOR
+
+
+def test_lanes_feed__its_vector_loop_touches_only_its_lane():
+    """The adaptive lanes' feed of the slider-crank verdict (a tabulated reference and a
+    values-only output): its loops marked independent (LLVM vectorises them) read and write
+    only lane ``l``'s elements and call no function of the module (the plain steps are
+    inlined), and the full feeds stay for the lanes flagged (the golden topologies have no
+    outputs: the same checks as tests/test_codegen_golden.py, on a text with them)."""
+    from test_codegen_golden import CONFIGS, LMAX_PINNED, PURE_CALLS, _lane_index_ok
+
+    from mcchain.codegen.generate import generate_source
+    from mcchain.codegen.schedule import INDEPENDENT_MARK
+    from mcchain.codegen.topology import Topology
+    from mcchain.scene import compile_model, load_scene
+    from mcchain.solvers.output_plan import output_plan
+
+    scene = load_scene(CONFIGS / "slider-crank-requirement.toml")
+    model = compile_model(scene, nsample=2)
+    timed = [o for o in scene.output if o.at is None]
+    plan = output_plan(timed, model, float(scene.simulate.t_end))
+    assert {rate for *_rest, rate in plan.signature} == {0, 1}  # both kinds of feed
+    source = generate_source(Topology.from_model(model), "rk45", outputs=plan.signature,
+                             lmax=LMAX_PINNED)  # fmt: skip
+    lines = source.splitlines()
+    marked = [node for node in ast.walk(ast.parse(source)) if isinstance(node, ast.For)
+              and lines[node.lineno - 1].endswith(INDEPENDENT_MARK)]  # fmt: skip
+    shifts = [{n.id for n in ast.walk(loop) if isinstance(n, ast.Name)} & {"shift0", "shift1"}
+              for loop in marked]  # fmt: skip
+    feed = [loop for loop, names in zip(marked, shifts, strict=True) if names]
+    assert len(feed) == 1
+    for node in ast.walk(feed[0]):
+        if isinstance(node, ast.Subscript):
+            assert _lane_index_ok(ast.unparse(node.value), node.slice), ast.unparse(node)
+        if isinstance(node, ast.Call):
+            assert ast.unparse(node.func) in PURE_CALLS | {"range"}, ast.unparse(node)
+    calls = [line.strip().split("(")[0] for line in lines if line.strip().endswith(")")]
+    assert calls.count("hermite_feed") == 1 and calls.count("cubic_feed") == 1
