@@ -19,9 +19,9 @@ from mcchain.kernels.config import JIT, njit
 
 THIRD = 1.0 / 3.0
 HULL_ROUNDING = 128.0 * 2.0**-52
-"""A bound of the rounding of a cubic Hermite interpolant's value (:func:`_hermite`, about
-25 ulp at most) or of a Bézier point, relative to |f0| + |f1| + |h ḟ0| + |h ḟ1|, with room
-to spare (128 machine epsilons; :func:`hull_clear`)."""
+"""A bound of the rounding of a cubic Hermite interpolant's value (about 25 ulp at most:
+mcchain.kernels.contact._hermite) or of a Bézier point, relative to |f0| + |f1| + |h ḟ0| +
+|h ḟ1|, with room to spare (128 machine epsilons; :func:`hull_clear`)."""
 
 
 @njit(**JIT)
