@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "ffdd58b088bedc9327c006be5494fd5769c85fa0828276167c120bfc557d643f",
         "rk4-projection": "577b438e59efb76f37ed1ffb5e5aaeadeebe2db67932a0f1e75683e76034f2f8",
-        "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
+        "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "c4cdc3ee87cf1feca7cb1cd5aa2cc94c85708791dfd9a4ecd25ab77a038adce5",
         "rk4-projection": "10ab0faafe345a4d6c5c09a835bf6fe5e60e021a1eb9b946d3aa40a290dce9f8",
-        "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
+        "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
         "rk4": "0ab77bbe06072024ddd0081eedef258793bd352c390a7fb30a541008e595f58d",
         "rk4-projection": "257a1494e2fa6ab5f7b6728fea6857162601f628d81ec887f4b06d8cd622a674",
-        "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
+        "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "5cd88b3d63dd33b722b96cefde1b9e08ed87bddb47989b533f64547cf6d3a7f9",
         "rk4-projection": "cd7ac63a38ed55ab0284584709841b83d9e0ff38c7dac730f7ae5f7b30a0f979",
-        "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
+        "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from mcchain.codes import OUTPUT_REDUCTIONS, OUTPUT_WIDTH
+from mcchain.kernels import output_steps as kos
 from mcchain.kernels import outputs as ko
 from mcchain.kernels.config import JIT, njit
 
@@ -214,8 +215,8 @@ def _cubic_window_in_full(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, inter
     t1 = tb if interval == 0 else (tc if interval == 1 else td)
     f0 = fa if interval == 0 else (fb if interval == 1 else fc)
     f1 = fb if interval == 0 else (fc if interval == 1 else fd)
-    r0 = ko._newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t0)
-    r1 = ko._newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t1)
+    r0 = kos.cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t0)
+    r1 = kos.cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t1)
     gate_hi = 1.0
     gate_lo = 1.0
     if interval == 1:

@@ -49,6 +49,7 @@ from mcchain.contact import (
     RESEAT_TOLERANCE,
 )
 from mcchain.kernels.tableaux import (
+    CAP_MARGIN,
     DOPRI5,
     MAX_FACTOR,
     MIN_FACTOR,
@@ -473,6 +474,7 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "SAFETY": repr(SAFETY),
         "MIN_FACTOR": repr(MIN_FACTOR),
         "MAX_FACTOR": repr(MAX_FACTOR),
+        "CAP_MARGIN": repr(CAP_MARGIN),
     }
 
 

@@ -14,6 +14,11 @@ from mcchain.codegen.topology import Topology
 from mcchain.codes import OUTPUT_WIDTH
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
 
+OUTPUT_SAMPLE_COLUMNS = 5
+"""The per-sample columns of an output's data (``ot_in[row, k, :5]``: the point sx, sy, the
+window w0, w1, the threshold: mcchain.solvers.output_plan.DATA_COLUMNS), which the adaptive
+kernel copies into rows ``otd`` when a lane takes a sample."""
+
 
 def target_cpu() -> tuple[str, str]:
     """The CPU name and features numba compiles for, as its codegen chooses them:
@@ -86,7 +91,10 @@ ROW_MEANINGS = """\
 
 OUTPUT_ROW_MEANINGS = """\
 # [[output]]s: ot OUTPUT_WIDTH rows each, their running reductions; otk their four times and
-# the count fed (mcchain.kernels.outputs).
+# the count fed (mcchain.kernels.outputs). Adaptive kernel only: otd each output's data for
+# the lane's sample (point, window, threshold); ofr its tabulated reference's x, y and rates
+# at the lane's state; ofv its signal and rate there; ofl 1 where its step is left to the
+# full feed; ofs 1 where the lane's state is new (fed).
 """
 """Legend of the output rows, written only into modules that have them."""
 
@@ -187,6 +195,12 @@ class Layout:
         if outputs:
             self.add("ot", OUTPUT_WIDTH * outputs)
             self.add("otk", PEAK_CLOCK)
+            if adaptive:  # the feed of all lanes at once (mcchain.codegen.output_blocks)
+                self.add("otd", OUTPUT_SAMPLE_COLUMNS * outputs)
+                self.add("ofr", 4 * outputs)
+                self.add("ofv", 2 * outputs)
+                self.add("ofl", outputs)
+                self.add("ofs", 1)
 
     def row_map(self, title: str) -> str:
         """A comment block naming the rows of W (first-last) under ``title``."""

@@ -15,9 +15,11 @@ text, and so its kernels, are those of a build without this module.
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 
 from mcchain.codegen.emitter import Emitter
-from mcchain.codegen.layout import Layout
+from mcchain.codegen.layout import OUTPUT_SAMPLE_COLUMNS, Layout
+from mcchain.codegen.schedule import INDEPENDENT_MARK
 from mcchain.codegen.sincos import sincos_code
 from mcchain.codegen.topology import Topology
 from mcchain.codes import (
@@ -62,8 +64,13 @@ def output_blocks(topo: Topology, lay: Layout, outputs: Signature) -> dict[str, 
     # each running lane at its accepted state (its sample in row smp).
     blocks = {"outputs_setup": "\n".join(setup), "outputs_finish": "\n".join(finish)}
     if "smp" in lay.rows:  # the adaptive kernel's layout
-        adaptive = _feed(topo, lay, outputs, base, at("tl"), "kv0", "lam", f"int({at('smp')})")
-        blocks["outputs_feed"] = "for l in range(nl):\n    if run[l]:\n" + _indented(adaptive, 8)
+        columns = range(OUTPUT_SAMPLE_COLUMNS)
+        blocks["outputs_setup"] += "\n" + "\n".join([
+            "row = sl % ot_in.shape[0]",
+            *(f"{at('otd', OUTPUT_SAMPLE_COLUMNS * k + c)} = ot_in[row, {k}, {c}]"
+              for k in range(len(outputs)) for c in columns),
+        ])  # fmt: skip
+        blocks["outputs_feed"] = _lanes_feed(topo, lay, outputs, base)
         blocks["outputs_c"] = ""
     else:
         fixed = _feed(topo, lay, outputs, base, "ts", "kvc", "lamc", "s0 + l")
@@ -90,55 +97,8 @@ def _feed(
     multipliers in rows ``lam``) at time ``t``, unless ``t`` is not after the last fed;
     ``sample``: the lane's sample (its row of ``ot_in``)."""
     at = lay.at
-    em = Emitter(topo)
-    cj = {k: j for j, k in enumerate(topo.contact_joints)}
-    em.contact_source(lambda name, k: at(name, cj[k]))
-    em.load_params(lambda k: at("P", k))
-    em.emit(
-        f"tf = {t}",
-        f"row = ({sample}) % ot_in.shape[0]",
-        *(f"q{i} = {at('q', i)}" for i in range(topo.ndof)),
-        *(f"v{i} = {at('v', i)}" for i in range(topo.ndof)),
-        *(f"oa{i} = {at(acc, i)}" for i in range(topo.ndof)),
-        *(f"lam{r} = {at(lam, r)}" for r in range(topo.ncon)),
-    )
-    kinds = {kind for kind, *_ in outputs}
-    forces = bool(kinds & {OUTPUT_JOINT_FORCE, OUTPUT_CONTACT_FORCE, OUTPUT_PENETRATION})
-    if forces:
-        em.outputs(t="tf")  # joint forces jfx, jfy, normal forces cf (and their geometry)
-        if OUTPUT_PENETRATION in kinds:
-            em.constraint_values(t="tf", v="v")  # Φ̇ of a clearance row: δ̇
-    angles: set[int] = set()
-    for k, (kind, component, item, ref, _reduce, _rate) in enumerate(outputs):
-        values: list[tuple[str, ...]] = []
-        for tag, index in (("m", item), ("r", ref)):
-            if index < 0:
-                continue
-            if kind <= OUTPUT_ANGULAR_VELOCITY and index not in angles:
-                angles.add(index)
-                if forces:  # the forces' geometry computed this body's sin/cos (sn, cs)
-                    em.emit(f"osn{index} = sn{index}", f"ocs{index} = cs{index}")
-                else:
-                    em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
-                                         f"o{index}"))  # fmt: skip
-            values.append(_signal(em, topo, kind, component if ref == -1 or component < 2 else -2,
-                                  index, k, f"{tag}{k}"))  # fmt: skip
-        if ref == OUTPUT_TABULATED_REFERENCE:  # the ideal mechanism's, the same for all
-            em.emit(f"rfx{k}, rfy{k}, rrx{k}, rry{k} = reference_signal(ot_in, {k}, tf)")
-            pick = "y" if component == 1 else "x"
-            tabulated = (f"rfx{k}", f"rfy{k}", f"rrx{k}", f"rry{k}")
-            values.append(tabulated if component == 2 else (f"rf{pick}{k}", f"rr{pick}{k}"))
-        if ref == -1:
-            (f, r) = values[0]
-        elif component < 2:
-            f, r = f"({values[0][0]}) - ({values[1][0]})", f"({values[0][1]}) - ({values[1][1]})"
-        else:  # the magnitude of the difference of the two vectors
-            (fx1, fy1, rx1, ry1), (fx2, fy2, rx2, ry2) = values
-            arguments = [f"({fx1}) - ({fx2})", f"({fy1}) - ({fy2})", f"({rx1}) - ({rx2})",
-                         f"({ry1}) - ({ry2})", "2.0"]  # fmt: skip
-            f, r = em.kernel(OUTPUT_KERNELS, "vector_component", arguments, f"_d{k}")
-        em.emit(f"of{k} = {f}", f"or{k} = {r}")
-    lines = em.take(0).splitlines()
+    lines = _signals(topo, lay, outputs, t, acc, lam, f"row = ({sample}) % ot_in.shape[0]",
+                     lambda k, c: f"ot_in[row, {k}, {c}]", _reference_call)  # fmt: skip
     feeds = []
     for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
         window = f"ot_in[row, {k}, 2], ot_in[row, {k}, 3], ot_in[row, {k}, 4], {reduce}"
@@ -165,8 +125,196 @@ def _feed(
     return "\n".join(body)
 
 
+def _lanes_feed(topo: Topology, lay: Layout, outputs: Signature, base: list[str]) -> str:
+    """The adaptive kernel's feed of every running lane at its accepted state (rows q, v,
+    kv0, lam; its time tl), where it is after the last state fed (a rejected step's is met
+    again). Four loops over the lanes: the new-state flag (``run`` is an array of its own)
+    and the tabulated references (a table lookup that branches); every lane's signals and
+    its plain steps (:mod:`mcchain.kernels.output_steps`, inlined) at once, branch-free,
+    its state written through the flag; the full feed (:func:`mcchain.kernels.outputs.
+    hermite_feed`, ``cubic_feed``) lane by lane for the steps left (a new extreme, a window
+    edge, the first steps of a cubic); the clocks. The same numbers as one feed a lane."""
+    from mcchain.kernels.outputs import FA, FB, FC, FD, HI, LO, RD, SPAN
+
+    at = lay.at
+    lmax = lay.lmax
+    n = len(outputs)
+    first = [
+        "for l in range(nl):",
+        f"    cnt = {at('otk', 4)}",
+        f"    {at('ofs')} = 1.0 if run[l] and (cnt == 0.0 or {at('tl')} > {at('otk', 3)}) else 0.0",
+    ]
+    # the reference's values the signal reads (a component: its x or y and rate), by row
+    names = ("rfx", "rfy", "rrx", "rry")
+    components = [component for _kind, component, *_rest in outputs]
+    read = [[0, 1, 2, 3] if c == 2 else ([1, 3] if c == 1 else [0, 2]) for c in components]
+    for k, (_kind, _component, _item, ref, _reduce, _rate) in enumerate(outputs):
+        if ref == OUTPUT_TABULATED_REFERENCE:
+            first.append(f"    rfx{k}, rfy{k}, rrx{k}, rry{k} = reference_signal(ot_in, {k}, "
+                         f"{at('tl')})")  # fmt: skip
+            first += [f"    {at('ofr', 4 * k + i)} = {names[i]}{k}" for i in read[k]]
+
+    def data(k: int, c: int) -> str:
+        return at("otd", OUTPUT_SAMPLE_COLUMNS * k + c)
+
+    def reference(k: int) -> str:
+        return "\n".join(f"{names[i]}{k} = {at('ofr', 4 * k + i)}" for i in read[k])
+
+    em = Emitter(topo)
+    em.emit(f"fresh = {at('ofs')} > 0.0", f"cnt = {at('otk', 4)}",
+            *(f"t{x} = {at('otk', i + 1)}" for i, x in enumerate("bcd")))  # fmt: skip
+    em.emit(*_signals(topo, lay, outputs, at("tl"), "kv0", "lam", "", data, reference))
+    steps = "mcchain.kernels.output_steps"
+    for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
+        ot = lay.rows["ot"] + OUTPUT_WIDTH * k
+
+        def w(offset: int, ot: int = ot) -> str:
+            return f"W[{(ot + offset) * lmax} + l]"
+
+        window = [data(k, 2), data(k, 3), str(reduce), w(HI), w(LO)]
+        if rate:
+            em.emit(f"f0_{k} = {w(FD)}", f"r0_{k} = {w(RD)}")
+            arguments = ["cnt", "td", f"f0_{k}", f"r0_{k}", "tf", f"of{k}", f"or{k}", *window]
+            settled, reduced, hi, lo = em.kernel(steps, "hermite_settles", arguments, f"_s{k}")
+            span = "(tf - td)"
+        else:
+            em.emit(f"fb{k} = {w(FB)}", f"fc{k} = {w(FC)}", f"fd{k} = {w(FD)}")
+            arguments = ["cnt", "tb", "tc", "td", "tf", f"fb{k}", f"fc{k}", f"fd{k}", f"of{k}",
+                         *window]  # fmt: skip
+            settled, reduced, hi, lo = em.kernel(steps, "cubic_settles", arguments, f"_s{k}")
+            span = "(td - tc)"
+        em.emit(
+            f"ok{k} = {settled}",
+            f"red{k} = fresh and ({reduced})",
+            f"{w(SPAN)} = {w(SPAN)} + {span} if red{k} else {w(SPAN)}",
+            f"{w(HI)} = {hi} if red{k} else {w(HI)}",
+            f"{w(LO)} = {lo} if red{k} else {w(LO)}",
+            f"shift{k} = fresh and ok{k}",
+        )
+        if rate:
+            em.emit(f"{w(FD)} = of{k} if shift{k} else f0_{k}",
+                    f"{w(RD)} = or{k} if shift{k} else r0_{k}")  # fmt: skip
+        else:
+            em.emit(f"{w(FA)} = fb{k} if shift{k} else {w(FA)}",
+                    f"{w(FB)} = fc{k} if shift{k} else fb{k}",
+                    f"{w(FC)} = fd{k} if shift{k} else fc{k}",
+                    f"{w(FD)} = of{k} if shift{k} else fd{k}")  # fmt: skip
+        em.emit(
+            f"{at('ofl', k)} = 1.0 if fresh and not ok{k} else 0.0",
+            f"{at('ofv', 2 * k)} = of{k}",
+            f"{at('ofv', 2 * k + 1)} = or{k}",
+        )
+    plain = [f"for l in range(nl):  {INDEPENDENT_MARK}", em.take(4)]
+    left = [
+        "for l in range(nl):",
+        f"    if {' + '.join(at('ofl', k) for k in range(n))} > 0.0:",
+        f"        cnt = {at('otk', 4)}",
+        *(f"        t{x} = {at('otk', i + 1)}" for i, x in enumerate("bcd")),
+        f"        tf = {at('tl')}",
+    ]
+    for k, (_kind, _component, _item, _ref, reduce, rate) in enumerate(outputs):
+        bounds = f"{data(k, 2)}, {data(k, 3)}, {data(k, 4)}, {reduce}"
+        value = at("ofv", 2 * k)
+        call = (
+            f"hermite_feed(W, {base[k]}, {lmax}, cnt, td, tf, {value}, {at('ofv', 2 * k + 1)}, "
+            f"{bounds})"
+            if rate
+            else f"cubic_feed(W, {base[k]}, {lmax}, cnt, tb, tc, td, tf, {value}, {bounds})"
+        )
+        left += [f"        if {at('ofl', k)} > 0.0:", f"            {call}"]
+    fed = at("ofs") + " > 0.0"
+    clock = [
+        f"for l in range(nl):  {INDEPENDENT_MARK}",
+        *(f"    {at('otk', i)} = {at('otk', i + 1)} if {fed} else {at('otk', i)}"
+          for i in range(3)),
+        f"    {at('otk', 3)} = {at('tl')} if {fed} else {at('otk', 3)}",
+        f"    {at('otk', 4)} = min({at('otk', 4)} + 1.0, 4.0) if {fed} else {at('otk', 4)}",
+    ]  # fmt: skip
+    return "\n".join([*first, *plain, *left, *clock])
+
+
+def _reference_call(k: int) -> str:
+    """The tabulated reference of output ``k`` at the feed's time ``tf``, from the table."""
+    return f"rfx{k}, rfy{k}, rrx{k}, rry{k} = reference_signal(ot_in, {k}, tf)"
+
+
+def _signals(
+    topo: Topology,
+    lay: Layout,
+    outputs: Signature,
+    t: str,
+    acc: str,
+    lam: str,
+    row: str,
+    data: Callable[[int, int], str],
+    reference: Callable[[int], str],
+) -> list[str]:
+    """The lines that set ``of<k>``, ``or<k>``: each output's signal and rate at the lane's
+    state at time ``t`` (``tf``); ``row``: a line before the state's (or empty), ``data(k,
+    c)``: column c of output k's data, ``reference(k)``: the line that sets its tabulated
+    reference ``rfx<k>, rfy<k>, rrx<k>, rry<k>``."""
+    at = lay.at
+    em = Emitter(topo)
+    cj = {k: j for j, k in enumerate(topo.contact_joints)}
+    em.contact_source(lambda name, k: at(name, cj[k]))
+    em.load_params(lambda k: at("P", k))
+    em.emit(
+        f"tf = {t}",
+        *([row] if row else []),
+        *(f"q{i} = {at('q', i)}" for i in range(topo.ndof)),
+        *(f"v{i} = {at('v', i)}" for i in range(topo.ndof)),
+        *(f"oa{i} = {at(acc, i)}" for i in range(topo.ndof)),
+        *(f"lam{r} = {at(lam, r)}" for r in range(topo.ncon)),
+    )
+    kinds = {kind for kind, *_ in outputs}
+    forces = bool(kinds & {OUTPUT_JOINT_FORCE, OUTPUT_CONTACT_FORCE, OUTPUT_PENETRATION})
+    if forces:
+        em.outputs(t="tf")  # joint forces jfx, jfy, normal forces cf (and their geometry)
+        if OUTPUT_PENETRATION in kinds:
+            em.constraint_values(t="tf", v="v")  # Φ̇ of a clearance row: δ̇
+    angles: set[int] = set()
+    for k, (kind, component, item, ref, _reduce, _rate) in enumerate(outputs):
+        values: list[tuple[str, ...]] = []
+        for tag, index in (("m", item), ("r", ref)):
+            if index < 0:
+                continue
+            if kind <= OUTPUT_ANGULAR_VELOCITY and index not in angles:
+                angles.add(index)
+                if forces:  # the forces' geometry computed this body's sin/cos (sn, cs)
+                    em.emit(f"osn{index} = sn{index}", f"ocs{index} = cs{index}")
+                else:
+                    em.emit(*sincos_code(f"q{3 * index + 2}", f"osn{index}", f"ocs{index}",
+                                         f"o{index}"))  # fmt: skip
+            point = [data(k, 0), data(k, 1)]
+            values.append(_signal(em, topo, kind, component if ref == -1 or component < 2 else -2,
+                                  index, k, f"{tag}{k}", point))  # fmt: skip
+        if ref == OUTPUT_TABULATED_REFERENCE:  # the ideal mechanism's, the same for all
+            em.emit(*reference(k).splitlines())
+            pick = "y" if component == 1 else "x"
+            tabulated = (f"rfx{k}", f"rfy{k}", f"rrx{k}", f"rry{k}")
+            values.append(tabulated if component == 2 else (f"rf{pick}{k}", f"rr{pick}{k}"))
+        if ref == -1:
+            (f, r) = values[0]
+        elif component < 2:
+            f, r = f"({values[0][0]}) - ({values[1][0]})", f"({values[0][1]}) - ({values[1][1]})"
+        else:  # the magnitude of the difference of the two vectors
+            (fx1, fy1, rx1, ry1), (fx2, fy2, rx2, ry2) = values
+            arguments = [f"({fx1}) - ({fx2})", f"({fy1}) - ({fy2})", f"({rx1}) - ({rx2})",
+                         f"({ry1}) - ({ry2})", "2.0"]  # fmt: skip
+            f, r = em.kernel(OUTPUT_KERNELS, "vector_component", arguments, f"_d{k}")
+        em.emit(f"of{k} = {f}", f"or{k} = {r}")
+    return em.take(0).splitlines()
+
+
 def _signal(
-    em: Emitter, topo: Topology, kind: int, component: int, index: int, k: int, tag: str
+    em: Emitter,
+    topo: Topology,
+    kind: int,
+    component: int,
+    index: int,
+    k: int,
+    tag: str,
+    point: list[str],
 ) -> tuple[str, ...]:
     """The expressions of one item's quantity (and its rate): (f, r), or with ``component``
     −2 the vector's (fx, fy, rx, ry) (a difference's magnitude is taken after)."""
@@ -174,7 +322,6 @@ def _signal(
         i = 3 * index
         state = [f"q{i}", f"q{i + 1}", f"q{i + 2}", f"v{i}", f"v{i + 1}", f"v{i + 2}",
                  f"oa{i}", f"oa{i + 1}", f"oa{i + 2}"]  # fmt: skip
-        point = [f"ot_in[row, {k}, 0]", f"ot_in[row, {k}, 1]"]
         trig = [f"ocs{index}", f"osn{index}"]
         if component == -2:
             x = em.kernel(OUTPUT_KERNELS, "body_signal", [str(kind), "0", *trig, *state, *point],
@@ -202,22 +349,31 @@ def output_functions(with_hermite: bool) -> str:
     constants) copied into the generated module (for the reason of
     :func:`mcchain.codegen.generate._contact_functions`); ``with_hermite``: also the
     Hermite interpolant, which the contact functions do not bring."""
-    from mcchain.kernels import contact, outputs
+    from mcchain.kernels import contact, output_steps, outputs
 
     names = ("FA", "FB", "FC", "FD", "RD", "HI", "LO", "S1", "S2", "CROSS", "SPAN",
              "REFERENCE_HEAD", "REFERENCE_WIDTH")  # fmt: skip
     constants = [f"{name} = {getattr(outputs, name)!r}" for name in names]
     constants += [f"{name} = {getattr(outputs, name)!r}" for name in
-                  ("GL_X0", "GL_X1", "GL_W0", "GL_W1", "THIRD", "HULL_ROUNDING")]  # fmt: skip
+                  ("GL_X0", "GL_X1", "GL_W0", "GL_W1")]  # fmt: skip
+    constants += [f"{name} = {getattr(output_steps, name)!r}" for name in
+                  ("THIRD", "HULL_ROUNDING")]  # fmt: skip
     constants.append(f"OUTPUT_WIDTH = {OUTPUT_WIDTH!r}")
     parts = ["\n".join(constants)]
     kernels = [contact._hermite] if with_hermite else []
     kernels += [
+        output_steps.hull_clear,
+        output_steps.cubic_gates,
+        output_steps.extremes_only,
+        output_steps.step_inside,
+        output_steps.cubic_slope,
+        output_steps.hermite_settles,
+        output_steps.middle_step_plain,
+        output_steps.cubic_settles,
         outputs.outputs_start,
         outputs._crossing,
         outputs.hermite_window,
         outputs.hermite_feed,
-        outputs._newton_slopes,
         outputs.cubic_window,
         outputs.cubic_feed,
         outputs.output_last,

@@ -299,6 +299,8 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
     expo = -1.0 / (order_err + 1.0)
+    # below this error norm the ratio is MAX_FACTOR without the power (tableaux.CAP_MARGIN)
+    en_cap = (MAX_FACTOR / SAFETY * CAP_MARGIN) ** -(order_err + 1.0)
     lanes = max(1, min(lanes, LMAXV))
     nxt = g_start * lanes  # the next sample to take
     stop = min(g_stop * lanes, nsample)
@@ -438,7 +440,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
             en = @[en]
             nstp[l] += 1
             ok = en <= 1.0
-            fac = SAFETY * en**expo if en > 0.0 else MAX_FACTOR
+            fac = SAFETY * en**expo if en > en_cap else MAX_FACTOR
             fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
             if not ok:
                 fac = min(fac, 1.0)

@@ -61,6 +61,14 @@ from mcchain.kernels.joints import (
     point_velocity,
     rotate,
 )
+from mcchain.kernels.output_steps import (
+    cubic_gates,
+    cubic_settles,
+    cubic_slope,
+    hermite_settles,
+    hull_clear,
+    middle_step_plain,
+)
 
 # Offsets of an output's state (times ``stride``).
 FA, FB, FC, FD = 0, 1, 2, 3  # the last four values fed, oldest first
@@ -75,12 +83,6 @@ GL_X0 = 0.3399810435848563
 GL_X1 = 0.8611363115940526
 GL_W0 = 0.6521451548625461
 GL_W1 = 0.3478548451374538
-
-THIRD = 1.0 / 3.0
-HULL_ROUNDING = 128.0 * float(np.finfo(np.float64).eps)
-"""A bound of the rounding of a cubic Hermite interpolant's value (:func:`_hermite`, about
-25 ulp at most) or of a Bézier point, relative to |f0| + |f1| + |h ḟ0| + |h ḟ1|, with room
-to spare (:func:`hermite_window`'s shortcut)."""
 
 
 # -- the signal ------------------------------------------------------------------------------
@@ -261,21 +263,12 @@ def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, r
         return
     hi = max(W[base + HI * stride], max(fa, fb))  # the extremes with the clipped ends
     lo = min(W[base + LO * stride], min(fa, fb))
-    if reduce < 6:
-        # The interpolant lies between the extremes of its Bézier points f0, f0 + h ḟ0 / 3,
-        # f1 − h ḟ1 / 3, f1: strictly inside [lo, hi] by more than any rounding of the
-        # points or of an interpolated value (HULL_ROUNDING of the terms' size), no
-        # critical point can move an extreme, and the roots below are not needed: the
-        # same numbers (most steps of a feed are away from its running extremes).
-        c1 = f0 + h * r0 * THIRD
-        c2 = f1 - h * r1 * THIRD
-        slack = HULL_ROUNDING * (abs(f0) + abs(f1) + abs(h * r0) + abs(h * r1))
-        top = max(max(f0, f1), max(c1, c2))
-        bottom = min(min(f0, f1), min(c1, c2))
-        if top + slack < hi and bottom - slack > lo:
-            W[base + HI * stride] = hi
-            W[base + LO * stride] = lo
-            return
+    if reduce < 6 and hull_clear(f0, r0, f1, r1, h, hi, lo):
+        # no critical point can move an extreme: the roots below are not needed (the same
+        # numbers; most steps of a feed are away from its running extremes)
+        W[base + HI * stride] = hi
+        W[base + LO * stride] = lo
+        return
     sense = 1.0 if reduce == 6 else -1.0
     if reduce >= 6 and not W[base + CROSS * stride] == np.inf:
         return  # the crossing is found
@@ -339,29 +332,22 @@ def hermite_window(W, base, stride, t0, f0, r0, t1, f1, r1, w0, w1, threshold, r
 def hermite_feed(W, base, stride, count, td, t, f, r, w0, w1, threshold, reduce):
     """Feed an output whose rate the state gives: the value ``f`` and rate ``r`` at time
     ``t`` (after ``td``, the last time fed; ``count`` values fed so far) close the step
-    [td, t], reduced on its cubic Hermite interpolant (:func:`hermite_window`)."""
-    if count >= 1.0:
-        hermite_window(
-            W, base, stride, td, W[base + FD * stride], W[base + RD * stride], t, f, r, w0, w1,
-            threshold, reduce, 1.0, 1.0, -np.inf, np.inf,
-        )  # fmt: skip
+    [td, t], reduced on its cubic Hermite interpolant (:func:`hermite_window`; a plain step,
+    :func:`mcchain.kernels.output_steps.hermite_settles`, without it)."""
+    f0 = W[base + FD * stride]
+    r0 = W[base + RD * stride]
+    hi = W[base + HI * stride]
+    lo = W[base + LO * stride]
+    settled, reduced, hi, lo = hermite_settles(count, td, f0, r0, t, f, r, w0, w1, reduce, hi, lo)
+    if reduced:
+        W[base + SPAN * stride] += t - td
+        W[base + HI * stride] = hi
+        W[base + LO * stride] = lo
+    elif not settled:
+        hermite_window(W, base, stride, td, f0, r0, t, f, r, w0, w1, threshold, reduce, 1.0,
+                       1.0, -np.inf, np.inf)  # fmt: skip
     W[base + FD * stride] = f
     W[base + RD * stride] = r
-
-
-@njit(**JIT)
-def _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, at):
-    """The slope at ``at`` of the cubic through the four points (ascending times)."""
-    d1 = (fb - fa) / (tb - ta)
-    d2 = (fc - fb) / (tc - tb)
-    d3 = (fd - fc) / (td - tc)
-    e1 = (d2 - d1) / (tc - ta)
-    e2 = (d3 - d2) / (td - tb)
-    g = (e2 - e1) / (td - ta)
-    u = at - ta
-    xb = tb - ta
-    xc = tc - ta
-    return d1 + e1 * (2.0 * u - xb) + g * (3.0 * u * u - 2.0 * u * (xb + xc) + xb * xc)
 
 
 @njit(**JIT)
@@ -379,20 +365,18 @@ def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, 
     gate_hi = 1.0
     gate_lo = 1.0
     if interval == 1:
-        gate_hi = 1.0 if fb >= fa and fc >= fd and (fb > fa or fc > fd) else 0.0
-        gate_lo = 1.0 if fb <= fa and fc <= fd and (fb < fa or fc < fd) else 0.0
-        if gate_hi == 0.0 and gate_lo == 0.0 and reduce != 3 and reduce != 4 and reduce < 6:
-            if t1 > t0 and t0 >= w0 and t1 <= w1:
-                # Neither gate open, the step whole in the window: hermite_window would
-                # take the extremes from the ends alone (fa = f0, fb = f1 exactly: ta 0,
-                # tb (t1 - t0) / h = 1), so the slopes are not needed. The same numbers,
-                # without the two slopes and the quadratic: most steps of a feed end here.
-                W[base + SPAN * stride] += t1 - t0
-                W[base + HI * stride] = max(W[base + HI * stride], max(f0, f1))
-                W[base + LO * stride] = min(W[base + LO * stride], min(f0, f1))
-                return
-    r0 = _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t0)
-    r1 = _newton_slopes(ta, fa, tb, fb, tc, fc, td, fd, t1)
+        gate_hi, gate_lo = cubic_gates(fa, fb, fc, fd)
+        if middle_step_plain(fa, fb, fc, fd, t0, t1, w0, w1, reduce):
+            # Neither gate open, the step whole in the window: hermite_window would take
+            # the extremes from the ends alone (fa = f0, fb = f1 exactly: ta 0, tb
+            # (t1 - t0) / h = 1), so the slopes are not needed. The same numbers, without
+            # the two slopes and the quadratic.
+            W[base + SPAN * stride] += t1 - t0
+            W[base + HI * stride] = max(W[base + HI * stride], max(f0, f1))
+            W[base + LO * stride] = min(W[base + LO * stride], min(f0, f1))
+            return
+    r0 = cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t0)
+    r1 = cubic_slope(ta, fa, tb, fb, tc, fc, td, fd, t1)
     top = max(max(fa, fb), max(fc, fd))
     low = min(min(fa, fb), min(fc, fd))
     spread = top - low
@@ -406,11 +390,20 @@ def cubic_window(W, base, stride, ta, fa, tb, fb, tc, fc, td, fd, interval, w0, 
 def cubic_feed(W, base, stride, count, tb, tc, td, t, f, w0, w1, threshold, reduce):
     """Feed an output known by its values only: with three earlier values, the step [tc, td]
     is reduced on the cubic through (tb, tc, td, t) (and the first step [tb, tc] once, when
-    exactly three came before); the last step waits for :func:`output_last`."""
+    exactly three came before); the last step waits for :func:`output_last`. A plain step
+    (:func:`mcchain.kernels.output_steps.cubic_settles`) without the cubic."""
     fb = W[base + FB * stride]
     fc = W[base + FC * stride]
     fd = W[base + FD * stride]
-    if count >= 3.0:
+    hi = W[base + HI * stride]
+    lo = W[base + LO * stride]
+    settled, reduced, hi, lo = cubic_settles(count, tb, tc, td, t, fb, fc, fd, f, w0, w1, reduce,
+                                             hi, lo)  # fmt: skip
+    if reduced:
+        W[base + SPAN * stride] += td - tc
+        W[base + HI * stride] = hi
+        W[base + LO * stride] = lo
+    elif not settled:
         if count == 3.0:
             cubic_window(W, base, stride, tb, fb, tc, fc, td, fd, t, f, 0, w0, w1, threshold,
                          reduce)  # fmt: skip

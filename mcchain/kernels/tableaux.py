@@ -21,6 +21,12 @@ MAX_FACTOR = 5.0
 """Adaptive step control: largest ratio of a new step to the one before (also the ratio when
 the error estimate is exactly zero)."""
 
+CAP_MARGIN = 1.0 + 1e-6
+"""Adaptive step control: an error norm at most (MAX_FACTOR / SAFETY · CAP_MARGIN)^-(q+1)
+takes the ratio MAX_FACTOR without the power err^(-1/(q+1)), which there is above MAX_FACTOR
+/ SAFETY by the margin, a million times its rounding: the same ratio, one ``pow`` fewer a
+step on the steps with a small error (the steps cut short to land on an output time)."""
+
 
 @dataclass(frozen=True)
 class Tableau:
