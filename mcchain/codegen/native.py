@@ -47,7 +47,6 @@ from mcchain.codegen.native_expressions import (
     Type,
     type_of_value,
 )
-from mcchain.codegen.native_translate import ModuleTranslator
 from mcchain.compiled.caches import compile_turn, evict_oldest, mcchain_cache, write_atomically
 
 
@@ -247,6 +246,8 @@ class NativeModule:
 
     def _compile(self, codegen: Any, name: str, argtypes: tuple[Type, ...], symbol: str) -> Any:
         """Entry point ``name`` for ``argtypes`` compiled now, as the library ``symbol``."""
+        from mcchain.codegen.native_translate import ModuleTranslator  # only to compile
+
         COUNTS["compiled"] += 1
         # Symbols unique in the process's JIT engine, which holds every library.
         translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
