@@ -169,7 +169,7 @@ def cpu_of_child(command: list[str], env: dict[str, str]) -> tuple[str, float, f
     """stdout, wall and CPU (user + system) seconds of a child process, started in its tree
     (``env["PYTHONPATH"]``): ``python -c`` puts its working folder first on ``sys.path``,
     and started in this repository, a child would import this tree's mcchain whatever
-    ``PYTHONPATH`` says (until 2026-11-29 14:20 UTC, the "before" columns measured this
+    ``PYTHONPATH`` says (until 2026-11-29 14:13 UTC, the "before" columns measured this
     tree)."""
     before = os.times()
     t0 = time.perf_counter()
