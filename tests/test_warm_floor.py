@@ -112,3 +112,24 @@ def test_njit__cached_kernels_load_lightly_others_as_numba_does() -> None:
     plain = njit(**{**JIT, "cache": False})(lambda x: x + 1.0)
     assert not hasattr(plain._cache.load_overload, "func")
     assert plain(np.float64(1.0)) == 2.0
+
+
+def test_verdict_lines__the_summarys_modules_imported_beside_the_compute() -> None:
+    """In a fresh interpreter: the first chunk done starts their import on a thread of its
+    own, which has ended, the modules imported, once the computing is over."""
+    code = """
+import sys
+from mcchain.runner.observers import VerdictLines
+verdict = VerdictLines()
+print(["mcchain.decision.summary" in sys.modules, "scipy.special" in sys.modules])
+verdict.on_chunk_done(None, None)
+started = verdict._imports
+verdict.on_chunk_done(None, None)
+verdict.on_chunks_done(None)
+print(["mcchain.decision.summary" in sys.modules, "scipy.special" in sys.modules])
+print([verdict._imports is started, started.is_alive()])
+"""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["[False, False]", "[True, True]", "[True, False]"]
