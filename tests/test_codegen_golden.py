@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "ee90b42766218ddc7e08f4d65a2d5cd3db869a9e6da53cf5235c25c652ee00a1",
-        "rk4-projection": "45bd7cb81bf016e094aee3fdef3c8f18d2875d574512e9f4fd8a4a389d686152",
+        "rk4": "ffdd58b088bedc9327c006be5494fd5769c85fa0828276167c120bfc557d643f",
+        "rk4-projection": "577b438e59efb76f37ed1ffb5e5aaeadeebe2db67932a0f1e75683e76034f2f8",
         "rk45": "ae1a9c85deb7fa0a0d1924d437acfe1d019c74a4e5ee6bfb2be7044ae40f4edf",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "8c2e7ce606522f929dedaf076f19ebb6630443167bf3a947c427e5aa6e5e5574",
-        "rk4-projection": "bc50718d5e85abc09b2cf35bd31a147653caca1b09d55dd6c690239a1fec108b",
+        "rk4": "c4cdc3ee87cf1feca7cb1cd5aa2cc94c85708791dfd9a4ecd25ab77a038adce5",
+        "rk4-projection": "10ab0faafe345a4d6c5c09a835bf6fe5e60e021a1eb9b946d3aa40a290dce9f8",
         "rk45": "af0cd0bdf92d80b79d4af919a1263fb4149eb178fd0314e2d316e2357e27dd9b",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "cff9c7bc713207df3f599931420a05c7b9110c8b35e2fda5e6dfffc3c4d66b1b",
-        "rk4-projection": "7bdc754a09f79069dfcdebcfa163338d8877ece1a4710839b14f8ac2935202b8",
+        "rk4": "0ab77bbe06072024ddd0081eedef258793bd352c390a7fb30a541008e595f58d",
+        "rk4-projection": "257a1494e2fa6ab5f7b6728fea6857162601f628d81ec887f4b06d8cd622a674",
         "rk45": "7f956795d9da87d37ef9a1b92119d0fb9ca13142f237823d7054c06b17f5fa10",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "f540bc0dd4dbdf3150878d762c0d40b1b44f0f0879749ada4df9410f5b9b9183",
-        "rk4-projection": "705892764007b6927448a34393353af068fb6a9f4a3f8993de8e539ab95e18a6",
+        "rk4": "5cd88b3d63dd33b722b96cefde1b9e08ed87bddb47989b533f64547cf6d3a7f9",
+        "rk4-projection": "cd7ac63a38ed55ab0284584709841b83d9e0ff38c7dac730f7ae5f7b30a0f979",
         "rk45": "27b68d00aa0f93d7749a8227c90f5fc70c04132902531bacb6f707aa1933e78a",
     },
 }

@@ -137,6 +137,11 @@ def _blocks(
     # Lane kernels: everything in W.
     em.load_params(lambda k: at("P", k))
     block("load_params")
+    b["invariant_rows"] = ""
+    if fixed_variant and "gdet" in lay.rows:
+        b["invariant_rows"] = _ground_determinants(em, lay)
+    if fixed_variant:
+        em.unit_rows = em.unit_normal_rows()
     cj = {k: j for j, k in enumerate(topo.contact_joints)}
     em.contact_source(lambda name, k: at(name, cj[k]))
     em.emit(
@@ -370,6 +375,29 @@ def _blocks(
     b.update(tracking_blocks(topo, lay))
     b.update(output_blocks(topo, lay, outputs))
     return b
+
+
+def _ground_determinants(em: Emitter, lay: Layout) -> str:
+    """Rows ``gdet`` of each ideal revolute joint to the ground (its index in
+    ``topo.ground_revolutes``: i): the determinant of its block of S, 1/m (1/m + |s|²/J),
+    and its inverse, per sample (the group's setup, templates.ERK_KERNEL); and the emitter's
+    :attr:`~mcchain.codegen.sparse_ldl.SchurComplement.invariant_pivots` reading them, so
+    that a stage divides for neither (what it gives: benchmarks/results/roofline/
+    reading.md, sixth stop)."""
+    topo, at = em.topo, lay.at
+    slots = topo.slots()
+    lines: list[str] = []
+    pivots: dict[frozenset[int], tuple[str, str]] = {}
+    for pair, (k, body, sx, sy) in em.ground_revolutes().items():
+        i = topo.ground_revolutes.index(k)
+        det, inverse = at("gdet", 2 * i), at("gdet", 2 * i + 1)
+        im, ij = at("P", slots[f"im{body}"]), at("P", slots[f"iJ{body}"])
+        x, y = at("P", slots[sx]), at("P", slots[sy])
+        lines += [f"{det} = {im} * ({im} + {ij} * ({x} * {x} + {y} * {y}))"]
+        lines += [f"{inverse} = 1.0 / {det}"]
+        pivots[pair] = (det, inverse)
+    em.invariant_pivots = pivots
+    return "\n".join(lines)
 
 
 def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:

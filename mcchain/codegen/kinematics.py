@@ -164,6 +164,38 @@ class ConstraintKinematics(LaneText):
         self._rows_cache = rows
         return rows
 
+    def unit_normal_rows(self) -> dict[int, tuple[str, str]]:
+        """The row of each clearance joint not under a contact law: its entries at a body's
+        x and y are ± its unit normal (ex, ey) (under a law, n = 0 at the bearing's
+        centre). {row: (ex, ey)}."""
+        topo = self.topo
+        return {
+            topo.joint_row[k]: (f"ex{k}", f"ey{k}")
+            for k in range(topo.njoint)
+            if topo.joint_kind[k] == JOINT_CLEARANCE and k not in self.contact_row
+        }
+
+    def ground_revolutes(self) -> dict[frozenset[int], tuple[int, int, str, str]]:
+        """The two rows of B of each ideal revolute joint k between the ground and one body b:
+        {{row x, row y}: (k, b, slot of the joint's point on b in b's frame: x, y)}.
+
+        Those rows' block of S = B M⁻¹ Bᵀ is 1/m_b I + 1/J_b w wᵀ with w the point turned a
+        right angle (|w| = |s|, s the point in b's frame), whose determinant
+        1/m_b (1/m_b + |s|²/J_b) does not change with the state (used by
+        :meth:`mcchain.codegen.sparse_ldl.SchurComplement.schur_factor`). Only rows of
+        exactly that pattern (x row: b's x and θ; y row: b's y and θ) are listed."""
+        topo = self.topo
+        rows = self.rows()
+        pairs: dict[frozenset[int], tuple[int, int, str, str]] = {}
+        for k in topo.ground_revolutes:
+            a, b = topo.joint_a[k], topo.joint_b[k]
+            body, side = (b, "sb") if a == GROUND else (a, "sa")
+            r = topo.joint_row[k]
+            cols = {3 * body, 3 * body + 2}, {3 * body + 1, 3 * body + 2}
+            if set(rows[r]) == cols[0] and set(rows[r + 1]) == cols[1]:
+                pairs[frozenset((r, r + 1))] = (k, body, f"{side}x{k}", f"{side}y{k}")
+        return pairs
+
     def constraint_values(self, t: str = "t", q: str = "q", v: str | None = "v") -> None:
         """``phi{r}`` (and ``phid{r}`` = Φ̇ if ``v``) and ``phimax`` = max |Φ|."""
         topo = self.topo

@@ -111,7 +111,8 @@ CONTACT_ROW_MEANINGS = """\
 FIXED_STEP_ROW_MEANINGS = """\
 # Fixed-step kernels only: alv 1 while the lane's sample has no failure bit, ncl 1 while it
 # has no contact_lost bit; att 1 where the step's checks may change its status; sc0 sin and
-# cos of each body's angle at the step's start, scc at the current stage.
+# cos of each body's angle at the step's start, scc at the current stage; gdet per ideal
+# revolute joint to the ground the determinant of its block of S and its inverse.
 """
 """Legend of the rows only the fixed-step kernels have."""
 
@@ -182,6 +183,7 @@ class Layout:
                 self.add(name, 1)
             self.add("sc0", 2 * topo.nbody)  # sin θ, cos θ of each body at the step's start
             self.add("scc", 2 * topo.nbody)  # ... at the current stage
+            self.add("gdet", 2 * len(topo.ground_revolutes))  # per such joint: det, 1/det
         if outputs:
             self.add("ot", OUTPUT_WIDTH * outputs)
             self.add("otk", PEAK_CLOCK)

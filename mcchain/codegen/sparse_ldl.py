@@ -10,7 +10,8 @@ kernels.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 
 import numpy as np
 
@@ -111,6 +112,21 @@ class SchurComplement:
     of 1/d_j. The generator sets it for the fixed-step variants only (why, and what it
     gives: benchmarks/results/roofline/reading.md)."""
 
+    invariant_pivots: Mapping[frozenset[int], tuple[str, str]] = MappingProxyType({})
+    """Pairs of rows of B (by their index) whose 2×2 block of S has a determinant that does
+    not change with the state (an ideal revolute joint to the ground:
+    :meth:`mcchain.codegen.kinematics.ConstraintKinematics.ground_revolutes`), each with the
+    texts of that determinant and of its inverse, computed once per sample. With
+    :attr:`parallel_pivots`, the second pivot of such a pair is :meth:`_ground_pivot`'s: no
+    division in the stage. The generator fills it for the fixed-step variants."""
+
+    unit_rows: Mapping[int, tuple[str, str]] = MappingProxyType({})
+    """Rows of B whose entries at each body's x and y are ± a unit vector (ex, ey), by row:
+    the names (a clearance joint's normal, not under a contact law, where it is 0 at the
+    bearing's centre). In S_rr such a body's two terms e_x² /m + e_y² /m are its 1/m (equal
+    in exact arithmetic, within an ulp or two of 1/m as written out); the generator fills it
+    for the fixed-step variants."""
+
     select_flags = False
     """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
     else 0.0``, rather than the comparison times 1.0 (whose conversion took three
@@ -160,7 +176,10 @@ class SchurComplement:
                 i, j = pos[ri], pos[rj]
                 if j > i:
                     continue
-                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in set(rows[ri]) & set(rows[rj])]
+                cols = list(set(rows[ri]) & set(rows[rj]))
+                terms = [_mul(rows[ri][c], f"Wt{rj}_{c}") for c in cols]
+                if ri == rj and ri in self.unit_rows:
+                    terms = self._unit_terms(ri, rows[ri], cols, self.unit_rows[ri])
                 laws = sorted({x for x in (self._row_law(ri), self._row_law(rj)) if x})
                 if not laws:
                     self.emit(f"S{i}_{j} = {_sum(terms)}")
@@ -181,8 +200,16 @@ class SchurComplement:
                     lower[i].add(j)
 
         for j in range(n):
-            if self.parallel_pivots and len(lower[j]) == 1:
-                self._single_pivot(j, min(lower[j]), S[j, j])
+            k = min(lower[j], default=-1)
+            pair = frozenset((order[k], order[j]))
+            if self.parallel_pivots and len(lower[j]) == 1 and not lower[k]:
+                invariant = self.invariant_pivots.get(pair)
+            else:
+                invariant = None
+            if invariant is not None:
+                self._ground_pivot(j, k, S[j, j], *invariant)
+            elif self.parallel_pivots and len(lower[j]) == 1:
+                self._single_pivot(j, k, S[j, j])
             else:
                 prods = [f"L{j}_{k} * E{j}_{k}" for k in sorted(lower[j])]
                 dj = S[j, j] + ("" if not prods else " - (" + " + ".join(prods) + ")")
@@ -217,6 +244,39 @@ class SchurComplement:
             f"okp{j} = {self._flag(f'N{j} > tau * {sjj} * Dp{j}_{k}')}",
             f"Di{j} = Dp{j}_{k} / N{j} if okp{j} > 0.0 else 0.0",
             # d_j for a next such column (else dead code): a product, not one more division
+            f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
+        )
+
+    def _unit_terms(
+        self, r: int, row: dict[int, Coef], cols: list[int], unit: tuple[str, str]
+    ) -> list[Coef]:
+        """The terms of S_rr for a row of :attr:`unit_rows`: 1/m of each body whose x and y
+        entries are ±(ex, ey) (e_x² + e_y² = 1), the products for the other entries."""
+        terms: list[Coef] = []
+        for c in cols:
+            b, k = divmod(c, 3)
+            pair = (row.get(3 * b), row.get(3 * b + 1))
+            signed = [tuple(_mul(sign, e) for e in unit) for sign in (1.0, -1.0)]
+            if k < 2 and pair in signed:
+                if k == 0:
+                    terms.append(self._minv(c))
+                continue
+            terms.append(_mul(row[c], f"Wt{r}_{c}"))
+        return terms
+
+    def _ground_pivot(self, j: int, k: int, sjj: str, det: str, inverse: str) -> None:
+        """:meth:`_single_pivot` where pivot k is the first of its column (d_k = S_kk, E_jk =
+        S_jk) and rows k, j are a pair of :attr:`invariant_pivots`: N_j = S_jj S_kk − S_jk²
+        is the block's determinant ``det``, the same at every state (a few ulp from the
+        product written out, which it replaces), so 1/d_j = d_k · ``inverse``: no division.
+        The drop test is N_j ≤ tau S_jj d_k as there. Pivot k is dropped only in a NaN lane
+        (S_kk ≥ 1/m > 0 with m > 0: the scene's rule), whose S_jj is NaN too: pivot j is then
+        dropped as well, as there (1/d_j = 0)."""
+        self.emit(
+            f"Dp{j}_{k} = D{k} if okp{k} > 0.0 else 1.0",
+            f"N{j} = {det}",
+            f"okp{j} = {self._flag(f'N{j} > tau * {sjj} * Dp{j}_{k}')}",
+            f"Di{j} = Dp{j}_{k} * {inverse} if okp{j} > 0.0 else 0.0",
             f"D{j} = N{j} * (Di{k} if okp{k} > 0.0 else 1.0)",
         )
 

@@ -154,6 +154,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
     + """
         for l in range(nl):
             @@status_rows
+            @@invariant_rows
         t = t_out[0]
         hb = h  # the step that ended at t (at the start: none, h)
         for n in range(nstep + 1):

@@ -14,6 +14,7 @@ import numpy as np
 
 from mcchain.model import (
     DRIVER_HARMONIC,
+    GROUND,
     LOAD_CONSTANT,
     LOAD_HARMONIC,
     JointKind,
@@ -123,6 +124,18 @@ class Topology:
     @property
     def ncon(self) -> int:
         return sum(JointKind(k).rows for k in self.joint_kind) + self.ndriver
+
+    @property
+    def ground_revolutes(self) -> tuple[int, ...]:
+        """Ideal revolute joints between the ground and one body: the determinant of their
+        2×2 block of B M⁻¹ Bᵀ is a per-sample constant (the fixed-step lanes compute it once:
+        mcchain.codegen.kinematics.ConstraintKinematics.ground_revolutes)."""
+        return tuple(
+            k
+            for k, kind in enumerate(self.joint_kind)
+            if kind == JointKind.IDEAL
+            and (self.joint_a[k] == GROUND) != (self.joint_b[k] == GROUND)
+        )
 
     @property
     def clearance_rows(self) -> tuple[int, ...]:

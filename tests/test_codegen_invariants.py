@@ -1,0 +1,90 @@
+"""codegen: the fixed-step lanes' per-sample invariants of S = B M⁻¹ Bᵀ. An ideal revolute
+joint to the ground has a 2×2 block of S whose determinant does not change with the state
+(rows ``gdet``, computed once per sample: its second pivot divides for nothing); a clearance
+row's S_rr takes e_x² + e_y² = 1 (``SchurComplement.unit_rows``). The adaptive lanes keep
+the products written out."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.generate import generate_source
+from mcchain.codegen.topology import Topology
+from mcchain.scene import compile_model, load_scene
+from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+
+def _pendulum() -> Topology:
+    model = model_of(straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4}), nsample=2)
+    return Topology.from_model(model)
+
+
+def _fourbar() -> Topology:
+    return Topology.from_model(compile_model(load_scene(CONFIGS / "fourbar-clearance.toml")))
+
+
+def test_ground_revolutes__each_ideal_joint_to_the_ground_with_its_body_and_point():
+    topo = _pendulum()  # joint 0: ground to body 0 (ideal); joint 1: body 0 to 1 (clearance)
+    assert topo.ground_revolutes == (0,)
+    assert Emitter(topo).ground_revolutes() == {frozenset((0, 1)): (0, 0, "sbx0", "sby0")}
+    four = _fourbar()
+    pairs = Emitter(four).ground_revolutes()
+    assert len(pairs) == 2  # the crank and the rocker on the ground
+    assert sorted(k for k, *_ in pairs.values()) == list(four.ground_revolutes)
+    for rows, (k, body, sx, sy) in pairs.items():
+        a, b = four.joint_a[k], four.joint_b[k]
+        assert -1 in (a, b) and body == (b if a == -1 else a)
+        assert rows == frozenset((four.joint_row[k], four.joint_row[k] + 1))
+        assert sx[:3] in ("sax", "sbx") and sy == sx[:2] + "y" + sx[3:]
+
+
+def test_ground_determinant__is_the_blocks_determinant_at_every_angle():
+    """The generated setup lines of rows gdet, evaluated on random parameters, against
+    det(1/m I + 1/J w wᵀ) (w the joint's point turned by θ and a right angle) at random θ,
+    and 1/det."""
+    topo = _pendulum()
+    text = generate_source(topo, "rk4", lmax=4)
+    lines = re.findall(r"^\s*(W\[\d+ \+ l\] = .*(?:\* \(W|1\.0 / W).*)$", text, flags=re.M)
+    det_line, inverse_line = lines[:2]
+    slots = topo.slots()
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        W = np.zeros(4 * 400)
+        im, ij = 1.0 / rng.uniform(0.1, 5.0), 1.0 / rng.uniform(1e-3, 1.0)
+        s = rng.uniform(-0.5, 0.5, 2)
+        for name, value in (("im0", im), ("iJ0", ij), ("sbx0", s[0]), ("sby0", s[1])):
+            W[slots[name] * 4] = value
+        exec(det_line + "\n" + inverse_line, {"W": W, "l": 0})
+        det_row = int(re.match(r"\s*W\[(\d+)", det_line).group(1))
+        inv_row = int(re.match(r"\s*W\[(\d+)", inverse_line).group(1))
+        for theta in rng.uniform(-20.0, 20.0, 5):
+            c, sn = np.cos(theta), np.sin(theta)
+            p = np.array([c * s[0] - sn * s[1], sn * s[0] + c * s[1]])
+            w = np.array([-p[1], p[0]])
+            block = im * np.eye(2) + ij * np.outer(w, w)
+            assert np.isclose(W[det_row], np.linalg.det(block), rtol=1e-13, atol=0.0)
+        assert W[inv_row] == 1.0 / W[det_row]
+
+
+def _stage(text: str) -> str:
+    """The stage's line of S_rr of the clearance row (the pendulum's row 2)."""
+    return next(line for line in text.splitlines() if re.match(r"\s*S2_2\w* = ", line))
+
+
+def test_fixed_step_lanes__use_the_invariants_the_adaptive_ones_do_not():
+    topo = _pendulum()
+    rk4, rk45 = generate_source(topo, "rk4", lmax=4), generate_source(topo, "rk45", lmax=4)
+    assert "gdet" in rk4 and "gdet" not in rk45
+    # pivot 1 (the ground joint's y row): N1 read from gdet, 1/d1 a product, no division
+    assert re.search(r"N1\w* = W\[\d+ \+ l\]\n", rk4)
+    assert re.search(r"Di1\w* = Dp1_0\w* \* W\[\d+ \+ l\] if", rk4)
+    assert re.search(r"Di1\w* = okp1\w* / \(okp1\w* \* D1", rk45)  # sequential, as before
+    # S_rr of the clearance row: each body's 1/m, not e_x² /m + e_y² /m
+    assert "p_im0" in _stage(rk4) and "Wt2_0" not in _stage(rk4)
+    assert "Wt2_0" in _stage(rk45) and "Wt2_3" in _stage(rk45)
