@@ -55,7 +55,7 @@ def timed(owner, name, label):
     setattr(owner, name, g)
 
 timed(dispatcher.Dispatcher, "_compile_for_args", "dispatcher")
-timed(caching.Cache, "load_overload", "load")
+timed(caching.Cache, "_load_overload", "load")  # numba's own load and mcchain's light one
 timed(caching.IndexDataCacheFile, "_load_index", "index")
 timed(caching.IndexDataCacheFile, "_load_data", "unpickle")
 timed(codegen.CPUCodegen, "unserialize_library", "llvm")
@@ -221,7 +221,10 @@ FIGURES: list[tuple[str, Any]] = [
     ("… numba cache loads, CPU s", lambda r: _part(r, "dispatcher")),
     ("… … numba cache files loaded, MB", lambda r: r.get("loaded_mb", 0.0)),
     ("… … index check and unpickle, CPU s", lambda r: _part(r, "index") + _part(r, "unpickle")),
-    ("… … dispatcher around the load, CPU s", lambda r: _part(r, "dispatcher") - _part(r, "load")),
+    (
+        "… … dispatcher around the load (numba's target context refresh, where done), CPU s",
+        lambda r: _part(r, "dispatcher") - _part(r, "load"),
+    ),
     ("… LLVM library loads, numba's and the lane kernels' (count)", lambda r: _count(r, "llvm")),
     ("… LLVM library loads, CPU s", lambda r: _part(r, "llvm")),
     ("… … parse of the bitcode kept for linking, CPU s", lambda r: _part(r, "bitcode")),

@@ -166,10 +166,16 @@ os._exit(0)
 
 
 def cpu_of_child(command: list[str], env: dict[str, str]) -> tuple[str, float, float]:
-    """stdout, wall and CPU (user + system) seconds of a child process."""
+    """stdout, wall and CPU (user + system) seconds of a child process, started in its tree
+    (``env["PYTHONPATH"]``): ``python -c`` puts its working folder first on ``sys.path``,
+    and started in this repository, a child would import this tree's mcchain whatever
+    ``PYTHONPATH`` says (until 2026-11-29 14:13 UTC, the "before" columns measured this
+    tree)."""
     before = os.times()
     t0 = time.perf_counter()
-    done = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
+    done = subprocess.run(
+        command, env=env, capture_output=True, text=True, check=True, cwd=env["PYTHONPATH"]
+    )
     wall = time.perf_counter() - t0
     after = os.times()
     cpu = (after.children_user - before.children_user) + (

@@ -14,10 +14,10 @@ set by numba and clear here.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
-import pickle
 import sys
 from typing import Any
 
@@ -204,7 +204,10 @@ def test_arrays__strided_views_locals_tuples_tables_float32(native):
 
 
 def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, monkeypatch):
-    """Counted: the second module loads the file (no compile), the third compiles again."""
+    """Counted: the second module loads the file (no compile), the third compiles again.
+    The file is the entry's object code alone after its header and SHA-256 (no bitcode to
+    parse on load); a damaged one (not a cache file, cut short, one byte changed: LLVM's
+    loader would crash on it) is compiled again, with the same values."""
     from mcchain.codegen import native as native_module
 
     monkeypatch.setenv("MCCHAIN_CACHE_DIR", str(tmp_path))
@@ -215,18 +218,26 @@ def test_machine_code__cached_on_disk_and_a_bad_file_compiles_again(tmp_path, mo
     assert counts == {"compiled": 1, "loaded": 0}
     files = list((tmp_path / "native").iterdir())
     assert len(files) == 1
-    state = pickle.loads(files[0].read_bytes())
-    assert state[1] == "object"  # machine code, not IR: nothing to optimise on load
+    written = files[0].read_bytes()
+    header = native_module.OBJECT_HEADER
+    object_code = written[len(header) + 32 :]
+    assert written.startswith(header) and object_code.startswith(b"\x7fELF")  # machine code
+    assert written[len(header) : len(header) + 32] == hashlib.sha256(object_code).digest()
     again = np.zeros(10, np.int64)
     NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, again)  # loaded
     assert counts == {"compiled": 1, "loaded": 1}
-    files[0].write_bytes(b"not a library")
-    third = np.zeros(10, np.int64)
-    NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, third)  # compiled again
-    assert counts == {"compiled": 2, "loaded": 1}
-    assert out.tolist() == again.tolist() == third.tolist()
+    changed = bytearray(written)
+    changed[len(written) // 2] ^= 0xFF
+    for compiles, damaged in enumerate(
+        [b"not a library", written[: len(written) // 2], bytes(changed)], start=2
+    ):
+        files[0].write_bytes(damaged)
+        monkeypatch.setattr(native_module, "_LOADED", {})  # as in a new process
+        third = np.zeros(10, np.int64)
+        NativeModule(SOURCE, "mcchain_test_cache").integers(7, 3, third)
+        assert counts == {"compiled": compiles, "loaded": 1}
+        assert out.tolist() == again.tolist() == third.tolist()
     assert out[:2].tolist() == [2, 1]
-    assert pickle.loads(files[0].read_bytes())[1] == "object"
 
 
 def test_machine_code__a_process_finding_the_entry_s_turn_taken_loads_what_it_wrote(

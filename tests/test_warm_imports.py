@@ -141,7 +141,7 @@ from mcchain.scene import compile_model, load_scene
 from mcchain.solvers import radau, solve_chunk
 
 loads, inside = [], [False]
-load = caching.Cache.load_overload
+load = caching.Cache._load_overload  # numba's load and mcchain's light one
 
 
 def recorded(self, sig, target_context):
@@ -162,7 +162,7 @@ def traced(*args):
         inside[0] = False
 
 
-caching.Cache.load_overload = recorded
+caching.Cache._load_overload = recorded
 radau.run_radau = traced
 scene = load_scene({str(scene_path)!r})
 out = solve_chunk(compile_model(scene), scene, with_modes=False)

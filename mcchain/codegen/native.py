@@ -30,7 +30,6 @@ import ctypes
 import functools
 import hashlib
 import os
-import pickle
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -48,7 +47,6 @@ from mcchain.codegen.native_expressions import (
     Type,
     type_of_value,
 )
-from mcchain.codegen.native_translate import ModuleTranslator
 from mcchain.compiled.caches import compile_turn, evict_oldest, mcchain_cache, write_atomically
 
 
@@ -210,39 +208,46 @@ class NativeModule:
             if entry is None:
                 if not array_layout_ok():
                     raise RuntimeError("this NumPy's array layout is not the one entries read")
-                library, address = self._load_or_compile(name, argtypes)
+                holder, address = self._load_or_compile(name, argtypes)
                 proto = ctypes.CFUNCTYPE(ctypes.c_int32, *map(ctypes_argument, argtypes))
-                entry = (proto(address), library)  # the library keeps the code alive
+                entry = (proto(address), holder)  # the engine or library holds the code
                 self._entries[name][key] = entry
         return entry
 
     def _load_or_compile(self, name: str, argtypes: tuple[Type, ...]) -> tuple[Any, int]:
-        """The compiled library of entry point ``name`` for ``argtypes``, from the disk
-        cache or compiled now, and the address of its entry function."""
+        """Entry point ``name`` for ``argtypes``, loaded from the disk cache
+        (:data:`CACHE_FORMAT`) or compiled now: what holds its machine code (the engine
+        or the compiled library) and the address of its entry function."""
         codegen = _codegen()
         key = repr(
-            (self._digest, name, argtypes, self.contract, codegen.magic_tuple(), *key_versions())
-        )
+            (self._digest, name, argtypes, self.contract, codegen.magic_tuple(), *key_versions(),
+             CACHE_FORMAT)
+        )  # fmt: skip
         digest = hashlib.sha256(key.encode()).hexdigest()[:24]
         path = mcchain_cache("native") / f"{self.name}-{name}-{digest}.bin"
-        symbol = f"{self.name}.{name}.{digest}"  # unique in the process's JIT engine
-        library = _load_library(codegen, path)
-        if library is None:
-            # Another process compiling the same entry (a command started beside this one, a
-            # test worker) holds this turn: wait for it, then read what it wrote.
-            with compile_turn(path.with_suffix(".lock")):
-                library = _load_library(codegen, path)
-                if library is None:
-                    library = self._compile(codegen, name, argtypes, symbol)
-                    write_atomically(path, pickle.dumps(library.serialize_using_object_code()))
-            evict_oldest(path.parent, CACHE_MAX_BYTES, keep=path)
-        address = library.get_pointer_to_function(symbol)
-        if not address:
-            raise RuntimeError(f"{symbol} missing from its compiled library")
-        return library, address
+        symbol = f"{self.name}.{name}.{digest}"  # unique in the process's JIT engines
+        loaded = _load_object(path, symbol)
+        if loaded is not None:
+            return loaded
+        # Another process compiling the same entry (a command started beside this one, a
+        # test worker) holds this turn: wait for it, then read what it wrote.
+        with compile_turn(path.with_suffix(".lock")):
+            loaded = _load_object(path, symbol)
+            if loaded is None:
+                library = self._compile(codegen, name, argtypes, symbol)
+                _name, _kind, (object_code, _bitcode) = library.serialize_using_object_code()
+                write_atomically(path, _object_file(object_code))
+                address = library.get_pointer_to_function(symbol)
+                if not address:
+                    raise RuntimeError(f"{symbol} missing from its compiled library")
+                loaded = library, address
+        evict_oldest(path.parent, CACHE_MAX_BYTES, keep=path)
+        return loaded
 
     def _compile(self, codegen: Any, name: str, argtypes: tuple[Type, ...], symbol: str) -> Any:
         """Entry point ``name`` for ``argtypes`` compiled now, as the library ``symbol``."""
+        from mcchain.codegen.native_translate import ModuleTranslator  # only to compile
+
         COUNTS["compiled"] += 1
         # Symbols unique in the process's JIT engine, which holds every library.
         translator = ModuleTranslator(self.source, symbol, _target_data(codegen))
@@ -258,19 +263,86 @@ class NativeModule:
         return library
 
 
-def _load_library(codegen: Any, path: Path) -> Any:
-    """The library cached at ``path``, or None where there is none or it cannot be read (a
-    stale or partial file: compiled again)."""
-    if not path.exists():
+CACHE_FORMAT = "object code alone, with its digest"
+"""What a cache file holds: the entry's object code (ELF on Linux), loaded as it is, after
+:data:`OBJECT_HEADER` and the object code's SHA-256. numba's own format
+(:meth:`CodeLibrary.serialize_using_object_code`) adds the module's bitcode, for other
+libraries to inline from, and parsing it back cost 80-90 ms an entry on every warm run;
+nothing inlines from an entry. Part of the key, so a file of the other format is never read
+as this one; the digest is checked before LLVM reads the code (a damaged object file
+crashes LLVM's loader, where a damaged pickle raised)."""
+
+OBJECT_HEADER = b"mcchain native object 1\n"
+"""The first bytes of a cache file (:data:`CACHE_FORMAT`)."""
+
+
+def _object_file(object_code: bytes) -> bytes:
+    """The bytes of a cache file holding ``object_code`` (:data:`CACHE_FORMAT`)."""
+    return OBJECT_HEADER + hashlib.sha256(object_code).digest() + object_code
+
+
+def _object_code(data: bytes) -> bytes | None:
+    """The object code of a cache file's bytes, or None where they are not a whole file of
+    :data:`CACHE_FORMAT` (its digest differs: a damaged or partial file)."""
+    if not data.startswith(OBJECT_HEADER):
+        return None
+    start = len(OBJECT_HEADER) + hashlib.sha256().digest_size
+    digest, object_code = data[len(OBJECT_HEADER) : start], data[start:]
+    return object_code if hashlib.sha256(object_code).digest() == digest else None
+
+
+@functools.cache
+def _object_engine() -> Any:
+    """The process's execution engine (MCJIT) of the entries loaded from the cache: their
+    object code is linked in as it is (its relocations resolved, its calls of libm's
+    functions bound in this process, as numba's own engine binds them), without the
+    bitcode numba's libraries parse. Created once; entries stay in it for the process's
+    life, as those of numba's engine do."""
+    from llvmlite import binding
+
+    _codegen()  # numba's symbols (its C helpers) registered in the process, as for a compile
+    target = binding.Target.from_triple(binding.get_process_triple())
+    machine = target.create_target_machine(
+        cpu=binding.get_host_cpu_name(),
+        features=binding.get_host_cpu_features().flatten(),
+        codemodel="jitdefault",
+        jit=True,
+    )
+    return binding.create_mcjit_compiler(binding.parse_assembly(""), machine)
+
+
+def _load_object(path: Path, symbol: str) -> tuple[Any, int] | None:
+    """The engine holding entry ``symbol``, cached at ``path``, and its address; None where
+    there is no such file, or it cannot be read or does not define ``symbol`` (a stale or
+    partial file: compiled again)."""
+    from llvmlite import binding
+
+    engine = _object_engine()
+    if symbol in _LOADED:  # an engine cannot hold a symbol twice
+        return engine, _LOADED[symbol]
+    try:
+        object_code = _object_code(path.read_bytes())
+    except OSError:
+        return None
+    if object_code is None:
         return None
     try:
-        library = codegen.unserialize_library(pickle.loads(path.read_bytes()))
+        engine.add_object_file(binding.ObjectFileRef.from_data(object_code))
+        engine.finalize_object()
+        address = engine.get_function_address(symbol)
     except Exception:
+        return None
+    if not address:
         return None
     with contextlib.suppress(OSError):
         os.utime(path)  # recently used: the last to be evicted
     COUNTS["loaded"] += 1
-    return library
+    _LOADED[symbol] = address
+    return engine, address
+
+
+_LOADED: dict[str, int] = {}
+"""The entries :func:`_object_engine` holds: symbol -> address."""
 
 
 def _target_data(codegen: Any) -> Any:

@@ -120,9 +120,9 @@ def njit(*args: Any, **options: Any) -> Any:
     from numba import njit as numba_njit
 
     if args and callable(args[0]):
-        return _one_compile_per_type(numba_njit(*args, **options))
+        return _loaded_lightly(_one_compile_per_type(numba_njit(*args, **options)))
     decorate = numba_njit(*args, **options)
-    return lambda function: _one_compile_per_type(decorate(function))
+    return lambda function: _loaded_lightly(_one_compile_per_type(decorate(function)))
 
 
 def _one_compile_per_type(dispatcher: Any) -> Any:
@@ -150,6 +150,38 @@ def _one_compile_per_type(dispatcher: Any) -> Any:
 
     dispatcher.get_call_template = by_type
     return dispatcher
+
+
+def _loaded_lightly(dispatcher: Any) -> Any:
+    """``dispatcher`` whose machine code, where numba's cache holds it, is loaded by
+    :func:`load_cached` (a dispatcher without ``cache=True`` is returned unchanged)."""
+    cache = getattr(dispatcher, "_cache", None)
+    if cache is not None and hasattr(cache, "_load_overload"):
+        cache.load_overload = functools.partial(load_cached, cache)
+    return dispatcher
+
+
+def load_cached(cache: Any, signature: Any, target_context: Any) -> Any:
+    """A kernel's machine code from numba's cache (``cache``: a dispatcher's), as numba's
+    ``Cache.load_overload`` loads it, but without refreshing ``target_context`` first.
+
+    That refresh installs the implementations of every function numba can compile (its
+    registries: 0.3 s of CPU, and ``scipy.linalg``, which ``numba.np.arraymath`` imports to
+    check for BLAS: 0.2 s more), on each process's first cached load; a warm run compiles
+    nothing, and loading machine code needs only numba's runtime (NRT, initialised here).
+    A compile refreshes the contexts itself (``numba.core.compiler``), and compiled code
+    that calls LAPACK imports SciPy's when it first does. Where loading raises, numba's own
+    load (with the refresh) is tried.
+    """
+    from numba.core.runtime import rtsys
+
+    try:
+        rtsys.initialize(target_context)
+        with cache._guard_against_spurious_io_errors():
+            return cache._load_overload(signature, target_context)
+        return None  # the guard swallowed an I/O error: compiled, as numba does
+    except Exception:
+        return type(cache).load_overload(cache, signature, target_context)
 
 
 @functools.cache

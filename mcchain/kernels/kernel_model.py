@@ -12,11 +12,11 @@ builds: the kernels import nothing of the Model, only its codes, from :mod:`mcch
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.core.extending import overload
 from numba.experimental import structref
 
-from mcchain.kernels.config import JIT
+from mcchain.kernels.config import JIT, njit
 
 
 @structref.register

@@ -10,8 +10,10 @@ This module imports only the standard library at import time.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+import threading
 import time
 import traceback
 from typing import TYPE_CHECKING, Any
@@ -126,6 +128,23 @@ class VerdictLines(Observer):
     ``mcchain export --requirements`` writes it with the CSVs). The ensemble is complete
     then, so a failure here never fails the run: it becomes the summary's one line."""
 
+    _imports: threading.Thread | None = None
+
+    def on_chunk_done(self, run: RunState, chunk: SolvedChunk) -> None:
+        """After the first chunk: the summary's modules (``scipy.special``: 0.2-0.3 s of CPU,
+        its array-API layer importing ``numpy.f2py``) imported on a thread of their own while
+        the next chunks compute (the lane kernels release the GIL), not after the merge,
+        when nothing else runs. Only when they are imported; their values are the same."""
+        if self._imports is None:
+            self._imports = threading.Thread(
+                target=_import_summary, name="mcchain-verdict-imports", daemon=True
+            )
+            self._imports.start()
+
+    def on_chunks_done(self, run: RunState) -> None:
+        if self._imports is not None:  # nothing this run started goes on after its compute
+            self._imports.join()
+
     def on_merged(self, run: RunState) -> None:
         try:
             run.record["requirements"] = verdict_lines(run)
@@ -134,6 +153,13 @@ class VerdictLines(Observer):
             run.record["requirements"] = [
                 f"requirements: the summary failed ({error}); see run.log"
             ]
+
+
+def _import_summary() -> None:
+    """Import the modules :func:`verdict_lines` uses (:meth:`VerdictLines.on_chunk_done`);
+    an error is left to that import, where the summary reports it."""
+    with contextlib.suppress(Exception):
+        import mcchain.decision.summary  # noqa: F401
 
 
 def verdict_lines(run: RunState) -> list[str]:
