@@ -104,6 +104,34 @@ def test_compile_notice__announced_prints_only_the_time_since_the_announcement()
     assert line.startswith("kernels ready in ")
 
 
+def test_cold_run__a_scene_its_keys_refuse_gets_its_one_line_alone(monkeypatch, tmp_path, capsys):
+    """On a cold cache the compile notice comes at the start of a run, but a scene refused
+    by its keys (no compiled kernel needed to tell) is refused before it: the one line
+    alone on stderr, no helper process started, nothing written."""
+    from mcchain.compiled.ready import Kernels
+    from mcchain.errors import SceneError
+
+    started: list[Path] = []
+    monkeypatch.setattr(ahead, "assembly_is_cached", lambda: False)
+
+    def start(cls: type[CompileAhead], scene_path: Path, *args: object) -> CompileAhead:
+        started.append(scene_path)
+        return cls(None)  # cold, no helper process: the notice still comes
+
+    monkeypatch.setattr(CompileAhead, "start", classmethod(start))
+    bad = tmp_path / "bad.toml"
+    bad.write_text(BAR.replace("t_end = 0.1", "t_end = 0.1\ndtt = 1e-4"), encoding="utf-8")
+    with pytest.raises(SceneError, match=r"^simulate\.dtt: "):
+        Kernels.for_run(bad, None, None, compiled=True)
+    assert started == [] and capsys.readouterr().err == ""
+    good = tmp_path / "good.toml"
+    good.write_text(BAR, encoding="utf-8")
+    Kernels.for_run(good, None, None, compiled=True)
+    assert started == [good]
+    assert capsys.readouterr().err.startswith("compiling the kernels of this scene's analyses")
+    assert sorted(tmp_path.iterdir()) == [bad, good]
+
+
 BAR = (
     swinging_bar_text(count=8)
     + """[sample.vary]

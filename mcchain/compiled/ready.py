@@ -64,14 +64,21 @@ class Kernels:
         first_run: FirstRun | None = None,
     ) -> Kernels:
         """The kernels of a new run of the scene at ``scene_path`` (with the run's ``--seed``
-        and ``--samples``): on a cold cache, a compiled run starts its helper process and
-        prints the compile notice now, before the scene check compiles assembly."""
+        and ``--samples``): on a cold cache, a compiled run reads the scene's keys (a bad
+        one is refused here, in its one line), then starts its helper process and prints
+        the compile notice, before the scene check compiles assembly."""
         if not compiled or first_run is not None:
             return cls(compiled, first_run=first_run if compiled else None)
         kernels = cls(compiled)
         if Path(scene_path).is_file():
-            from mcchain.compiled.ahead import CompileAhead
+            from mcchain.compiled.ahead import CompileAhead, assembly_is_cached
 
+            if not assembly_is_cached():
+                # A scene its keys refuse gets its one line alone, without the notice and
+                # before a helper process starts on it (the keys need no compiled kernel).
+                from mcchain.scene import load_scene
+
+                load_scene(scene_path)
             kernels.ahead = CompileAhead.start(Path(scene_path), seed, samples)
             if kernels.ahead is not None:
                 announce_compile(ahead=kernels.ahead.process is not None)
