@@ -73,6 +73,42 @@ def test_inline__renames_locals_with_the_suffix_and_writes_constants_as_floats()
     assert results == ["fn_3", "delta_slope_3", "rate_slope_3"]
 
 
+NESTED = """
+def outer(a, b):
+    top = a + b
+    low = inner(a, b)
+    mid = top * 2.0
+    return top - low + mid
+
+
+def inner(a, b):
+    top = a * b
+    top = top + 1.0
+    return top - a
+"""
+
+
+def test_inline__a_callees_local_named_like_its_callers_gets_its_own_name(tmp_path, monkeypatch):
+    """Caller and callee share the suffix: the callee's ``top`` (reassigned in its own
+    body, which keeps its name) is written as ``top_0_2``, and the caller's ``top`` keeps
+    its value (the callee overwrote it: the text gave 35 where the function gives 11)."""
+    (tmp_path / "nested_kernel.py").write_text(NESTED, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    statements, (result,) = inline("nested_kernel", "outer", ["x", "y"], "_0")
+    assert statements == [
+        "top_0 = x + y",
+        "top_0_2 = x * y",
+        "top_0_2 = top_0_2 + 1.0",
+        "low_0 = top_0_2 - x",
+        "mid_0 = top_0 * 2.0",
+    ]
+    namespace: dict[str, float] = {"x": 3.0, "y": 5.0}
+    exec("\n".join(statements), namespace)
+    namespace_outer: dict[str, object] = {}
+    exec(NESTED, namespace_outer)
+    assert eval(result, namespace) == namespace_outer["outer"](3.0, 5.0) == 11.0
+
+
 def test_inline__refuses_code_outside_the_straight_line_subset():
     with pytest.raises(TypeError, match=r"unpack only|not straight-line"):
         inline(kc.__name__, "contact_crossing", ["a", "b", "c", "d", "h"], "0")

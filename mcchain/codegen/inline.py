@@ -88,7 +88,14 @@ def _constant(module: str, name: str, where: str) -> float:
 class _Inliner:
     """Inlines one call: ``names`` maps each parameter and renamed local to its expression."""
 
-    def __init__(self, module: str, function: str, suffix: str, out: list[str]) -> None:
+    def __init__(
+        self,
+        module: str,
+        function: str,
+        suffix: str,
+        out: list[str],
+        owners: dict[str, _Inliner] | None = None,
+    ) -> None:
         self.module = module
         functions, _constants, _imported = _module(module)
         if function not in functions:
@@ -97,6 +104,10 @@ class _Inliner:
         self.suffix = suffix
         self.out = out
         self.names: dict[str, ast.expr] = {}
+        # Which call wrote each local of the text: a callee's local named like one of its
+        # caller's (both take the call's suffix) gets a name of its own instead of
+        # overwriting the caller's value.
+        self.owners: dict[str, _Inliner] = {} if owners is None else owners
 
     def where(self, node: ast.AST) -> str:
         return f"{self.module}.{self.tree.name} line {getattr(node, 'lineno', '?')}"
@@ -168,9 +179,18 @@ class _Inliner:
             if isinstance(result, (ast.Name, ast.Constant)):
                 self.names[name] = result  # no new line for a plain name or literal
                 continue
-            local = f"{name}{self.suffix}"
+            local = self._local(f"{name}{self.suffix}")
             self.out.append(f"{local} = {ast.unparse(result)}")
             self.names[name] = ast.Name(local, ast.Load())
+
+    def _local(self, wanted: str) -> str:
+        """``wanted``, or ``wanted_2``, ``wanted_3``, … where another call of the text
+        already wrote ``wanted`` (this call reassigning its own local keeps the name)."""
+        local, k = wanted, 1
+        while self.owners.setdefault(local, self) is not self:
+            k += 1
+            local = f"{wanted}_{k}"
+        return local
 
     def call(self, node: ast.Call) -> list[ast.expr]:
         if node.keywords:
@@ -192,7 +212,7 @@ class _Inliner:
         if not isinstance(func, ast.Name) or func.id not in _module(module)[0]:
             raise TypeError(f"{self.where(node)}: cannot inline {ast.unparse(func)}")
         arguments = [ast.unparse(self.expr(a)) for a in node.args]
-        return _Inliner(module, func.id, self.suffix, self.out).run(arguments)
+        return _Inliner(module, func.id, self.suffix, self.out, self.owners).run(arguments)
 
     def expr(self, node: ast.expr) -> ast.expr:
         if isinstance(node, ast.Name):
