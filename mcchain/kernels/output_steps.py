@@ -88,7 +88,6 @@ def hermite_settles(count, t0, f0, r0, t1, f1, r1, w0, w1, reduce, hi, lo):
     whole inside the window, an extremes reduction, and the interpolant unable to pass the
     extremes with the step's ends (:func:`hull_clear`); then the span grows by t1 − t0 and
     the extremes are the returned ``hi``, ``lo``."""
-    # (names apart from hull_clear's: the lanes inline both with one suffix)
     step = t1 - t0
     high = max(hi, max(f0, f1))
     low = min(lo, min(f0, f1))
