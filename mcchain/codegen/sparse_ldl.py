@@ -201,11 +201,9 @@ class SchurComplement:
 
         for j in range(n):
             k = min(lower[j], default=-1)
-            pair = frozenset((order[k], order[j]))
+            invariant = None
             if self.parallel_pivots and len(lower[j]) == 1 and not lower[k]:
-                invariant = self.invariant_pivots.get(pair)
-            else:
-                invariant = None
+                invariant = self.invariant_pivots.get(frozenset((order[k], order[j])))
             if invariant is not None:
                 self._ground_pivot(j, k, S[j, j], *invariant)
             elif self.parallel_pivots and len(lower[j]) == 1:
