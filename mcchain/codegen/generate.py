@@ -24,6 +24,7 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.fixed_step import fixed_step_blocks
 from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
@@ -31,9 +32,9 @@ from mcchain.codegen.layout import (
     FIXED_STEP_ROW_MEANINGS,
     LMAX,
     OUTPUT_ROW_MEANINGS,
-    ROW_MEANINGS,
     Layout,
     row_length,
+    row_meanings,
     target_cpu,
 )
 from mcchain.codegen.native import NativeModule, array_layout_ok
@@ -190,10 +191,13 @@ def _blocks(
             ]
         )
     b.update(_stage_angles(topo, lay) if fixed_step else {})
+    b.update(fixed_step_blocks(topo, nstage, lay) if fixed_step else {})
 
+    # the stage's k: the fixed step's into this stage's rows (fixed_step_blocks), else kqc
+    k_row = (lambda i: lay.stage_at(i, "kw")) if fixed_step else (lambda i: at("kqc", i))
     em.emit(
-        *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
-        *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
+        *(f"{k_row(i)} = v{i}" for i in range(ndof)),
+        *(f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)),
         *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
         *probe,
         f"{at('chkc')} = phimax + prb * 0.0",
@@ -207,13 +211,13 @@ def _blocks(
     if cj:
         em.emit(f"{at('wca')} = max({at('wca')}, {at('wcc')})")
     block("contact_stage_max")
-    em.emit(
-        *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(ndof)),
-        *(f"{at('kv0', i)} = {at('kvc', i)}" for i in range(ndof)),
-        *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
-        f"{at('chk')} = {at('chkc')}",
-        f"{at('sg')} = {at('sgc')}",
-    )
+    if not fixed_step:  # the adaptive first stage's (FSAL) rows
+        em.emit(
+            *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(2 * ndof)),
+            *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
+            f"{at('chk')} = {at('chkc')}",
+            f"{at('sg')} = {at('sgc')}",
+        )
     block("accept_zero")
     elem = lay.at_index
     b["kill_lane"] = "\n".join(
@@ -284,21 +288,6 @@ def _blocks(
         ]
     em.emit(*store)
     block("store_outputs")
-    em.emit(
-        *(f"{at(x, i)} = {at(x, i)} + {at('a' + x, i)}" for x in ("q", "v") for i in range(ndof))
-    )
-    block("combine")
-    em.emit(
-        *(f"{at('aq', i)} = {at('aq', i)} * keep + bh * v{i}" for i in range(ndof)),
-        *(f"{at('av', i)} = {at('av', i)} * keep + bh * qdd{i}" for i in range(ndof)),
-    )
-    block("accumulate")
-    for i in range(ndof):
-        em.emit(
-            f"q{i} = {at('q', i)} + ah * {at('kqc', i)}",
-            f"v{i} = {at('v', i)} + ah * {at('kvc', i)}",
-        )
-    block("load_stage_sub")
     em.projection_terms(t="tp")
     block("projection")
     # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).
@@ -423,7 +412,7 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     start: list[str] = []
     for body in range(topo.nbody):
         i = 3 * body + 2
-        delta = f"ah * {at('kqc', i)}"
+        delta = f"ah * {lay.stage_at(i, 'kr')}"  # the previous stage's θ̇
         sn, cs = f"sn{body}", f"cs{body}"
         rows = (at("scc", 2 * body), at("scc", 2 * body + 1))
         first = (at("sc0", 2 * body), at("sc0", 2 * body + 1))
@@ -461,7 +450,6 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "LAMROW": str(lay.rows["lam"]),
         "LAMCROW": str(lay.rows["lamc"]),
         "K0ROW": str(lay.rows["kq0"]),
-        "KCROW": str(lay.rows["kqc"]),
         "FAILBITS": str(FAILURE_BITS),
         "DIVERGED_BIT": str(DIVERGED),
         "SINGULAR_BIT": str(SINGULAR),
@@ -531,11 +519,13 @@ def generate_source(
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
-        parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
+        parts += [row_meanings(variant == "rk45"), lay.row_map(f"{users} ({nstage} stages)")]
         parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
-    if topo.contact_joints:
-        # the contact law's fused multiply-add (contact_power, inlined), for numba's compile
+    if topo.contact_joints or variant in ("rk4", "rk4-projection"):
+        # the contact law's fused multiply-add (contact_power, inlined), the fixed step's
+        # combine's rounded products (fixed_step.py): for numba's compile
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
+    if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions(adaptive=variant == "rk45"))

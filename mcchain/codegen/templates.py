@@ -162,11 +162,12 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
             nst = NSTAGE if n < nstep else 1
             for s in range(nst):
                 ts = t + cc[s] * hn
-                # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one,
-                # and the step's increment is accumulated as the stages go.
+                # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one's
+                # k (rows at kr; the first stage, with ah = 0, the last stage's), and writes
+                # its own once (at kw); the step's combine reads them all (fixed_step.py).
                 ah = A[s, s - 1] * hn if s > 0 else 0.0
-                bh = bw[s] * hn
-                keep = 0.0 if s == 0 else 1.0
+                kw = (K0ROW + 2 * NDOF * s) * LMAXV
+                kr = (K0ROW + 2 * NDOF * ((s + NSTAGE - 1) % NSTAGE)) * LMAXV
                 # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
                 # chain) where |δ| is within the polynomials' interval, else in full: each lane
@@ -191,7 +192,6 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     @@accel_stage
                     @@store_stage
                     @@contact_stage_max
-                    @@accumulate
                     @[sga] = @[sga] + sing
                 if s > 0:
                     continue
@@ -243,7 +243,8 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     )
             if n == nstep:
                 break
-            for l in range(nl):
+            @@combine_coefs
+            for l in range(nl):  # lanes: independent
                 @@combine
             # The next step's time from its index, not accumulated: t_end at the end.
             nx = n + 1
