@@ -106,7 +106,10 @@ def row_meanings(adaptive: bool) -> str:
     """The legend of a generated module's row map: :data:`ROW_MEANINGS`, whose rows kqc, kvc,
     aq, av only the adaptive kernel's layout has (it uses kqc, kvc; the fixed-step kernel's
     stages write their rows kq{j}, kv{j} themselves: :class:`Layout`)."""
-    return ROW_MEANINGS if adaptive else ROW_MEANINGS.replace(_STAGE_ROWS_ADAPTIVE, _STAGE_ROWS_FIXED)
+    if adaptive:
+        return ROW_MEANINGS
+    return ROW_MEANINGS.replace(_STAGE_ROWS_ADAPTIVE, _STAGE_ROWS_FIXED)
+
 
 OUTPUT_ROW_MEANINGS = """\
 # [[output]]s: ot OUTPUT_WIDTH rows each, their running reductions; otk their four times and
