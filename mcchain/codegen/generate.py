@@ -515,13 +515,14 @@ def generate_source(
         parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
     lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
-    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45", outputs=len(outputs))
+    fixed = variant in ("rk4", "rk4-projection")
+    lay = Layout(topo, nstage, lmax, variant == "rk45", len(outputs), fixed_step=fixed)
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
-        parts += [row_meanings(variant == "rk45"), lay.row_map(f"{users} ({nstage} stages)")]
+        parts += [row_meanings(fixed), lay.row_map(f"{users} ({nstage} stages)")]
         parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
-    if topo.contact_joints or variant in ("rk4", "rk4-projection"):
+    if topo.contact_joints or fixed:
         # the contact law's fused multiply-add (contact_power, inlined), the fixed step's
         # combine's rounded products (fixed_step.py): for numba's compile
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
@@ -548,8 +549,7 @@ def generate_source(
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.
-    fixed_variant = variant in ("rk4", "rk4-projection")
-    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed_variant)
+    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
         # the markers the copy and the dispatch replace (else the copy would silently be the
@@ -580,7 +580,8 @@ def lane_rows(topo: Topology, variant: str, outputs: Signature = ()) -> int:
     nstage = RK4.nstage if tableau is None else tableau.nstage
     if tableau is None:
         outputs = ()
-    layout = Layout(topo, nstage, LMAX, adaptive=variant == "rk45", outputs=len(outputs))
+    fixed = variant in ("rk4", "rk4-projection")
+    layout = Layout(topo, nstage, LMAX, variant == "rk45", len(outputs), fixed_step=fixed)
     return row_length(layout.size)
 
 

@@ -102,11 +102,11 @@ ROW_MEANINGS = (
 :func:`row_meanings`)."""
 
 
-def row_meanings(adaptive: bool) -> str:
-    """The legend of a generated module's row map: :data:`ROW_MEANINGS`, whose rows kqc, kvc,
-    aq, av only the adaptive kernel's layout has (it uses kqc, kvc; the fixed-step kernel's
-    stages write their rows kq{j}, kv{j} themselves: :class:`Layout`)."""
-    if adaptive:
+def row_meanings(fixed_step: bool) -> str:
+    """The legend of a generated module's row map: :data:`ROW_MEANINGS`, but for the
+    fixed-step kernel's, which has no rows kqc, kvc, aq, av (its stages write their rows
+    kq{j}, kv{j} themselves: :class:`Layout`)."""
+    if not fixed_step:
         return ROW_MEANINGS
     return ROW_MEANINGS.replace(_STAGE_ROWS_ADAPTIVE, _STAGE_ROWS_FIXED)
 
@@ -167,11 +167,13 @@ class Layout:
         lmax: int | None = None,
         adaptive: bool = False,
         outputs: int = 0,
+        fixed_step: bool = False,
     ):
         """``adaptive``: with the rows only the adaptive kernel uses (``pw``: ω_c² at the
         accepted state, per contact-law joint, for the located re-seat dwell); ``outputs``:
         the number of ``[[output]]``s (rows ``ot``, OUTPUT_WIDTH each, and their clock
-        ``otk``: mcchain.kernels.outputs), last."""
+        ``otk``: mcchain.kernels.outputs), last; ``fixed_step``: the fixed-step kernel's,
+        without rows kqc, kvc, aq, av (its stages write their own rows: :meth:`stage_at`)."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -182,10 +184,10 @@ class Layout:
         for j in range(nstage):  # stage j: kq_j then kv_j, 2 ndof consecutive rows
             self.add(f"kq{j}", topo.ndof)
             self.add(f"kv{j}", topo.ndof)
-        if adaptive:  # (the fixed step's stages write their own rows: stage_at)
+        if not fixed_step:
             self.add("kqc", topo.ndof)  # current stage, then copied to its rows
             self.add("kvc", topo.ndof)
-            self.add("aq", topo.ndof)  # unused (the fixed step's increment, once)
+            self.add("aq", topo.ndof)  # unused (once the fixed step's increment)
             self.add("av", topo.ndof)
         self.add("qn", topo.ndof)
         self.add("vn", topo.ndof)
