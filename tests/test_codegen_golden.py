@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "67cfc0f2fcd4cdb1d50a9b1eaa1cc7587347a43e13c29d8178d77af41e6b4004",
-        "rk4-projection": "0225d028c3110bf0096d8320353e92414ef266607271e9e7f445ef93ce2ecf68",
+        "rk4": "44064032872844f8ae907a35aece624958079d386c9170201083f3ee0b5df806",
+        "rk4-projection": "0aa46bf688f7b3a2ebd318def8be6e8cfe8143307bb674e84f81877e8b1b0225",
         "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "33465317606a39523c78aa708b5b0362309bb35006bd0d402f5d7e7f6caaa459",
-        "rk4-projection": "79f0f0f5d08707952b06aee48783e4b8e33f540d6386b48c6315de7eece74169",
+        "rk4": "f2849ce6ac5c30d972bd0cc36f05d0ce4e96f0f2ced4ac8eb1e93f1916977aa0",
+        "rk4-projection": "cb600bb42c8e147209a1de0ab9b6bbb766e183d3d04ec48ddad7ffff3e3a5d4a",
         "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "40d27dc8139be99ceef6d05fe408a11a62d2bfea3f7e5ef41d10373a11df97d5",
-        "rk4-projection": "f9ec65bd420746d1d2f1699278c69b8d5a27eca4535a3e20056803376b862144",
+        "rk4": "3e5efe9050207f50f2cc6a7f138f3ce876fc44bb65764a45b47c2ce8572fd860",
+        "rk4-projection": "55bc1f89a97b261c82e95f1c279a99547c455a16ddeb69023674436cc20ecbda",
         "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "833ff0560ff8f49b704e77419e5355c8332d5f90d0704d8aab23e050e208bb53",
-        "rk4-projection": "1ca5b4a5975269d3a912cb31cc275dfd7b2007f0159c3f8a8d60a98fa61920c3",
+        "rk4": "48ff82726fd7ad1bc5d1a76dc46cd02ec147fc97e49f61b20e8867208ecab212",
+        "rk4-projection": "006808b7082dc7c6c5381b9352ea364863ae93453c8ded1998740f12c5618d7f",
         "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }

@@ -195,19 +195,27 @@ def _blocks(
 
     # the stage's k: the fixed step's into this stage's rows (fixed_step_blocks), else kqc
     k_row = (lambda i: lay.stage_at(i, "kw")) if fixed_step else (lambda i: at("kqc", i))
+    stage_k = [f"{k_row(i)} = v{i}" for i in range(ndof)]
+    stage_k += [f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)]
+    stage_contact = []
+    for k, j in cj.items():
+        stage_contact += [
+            f"{at(x, j)} = {y}{k}" for x, y in (("pdc", "pen"), ("prc", "pdot"), ("wjc", "wj"))
+        ]
+    stage_contact += [f"{at('wcc')} = wc2"] if cj else []
+    # λ and max |Φ| of the stage (the fixed step's checks read them after its first stage
+    # only: store_stage_later, templates.ERK_KERNEL), its rank loss (the adaptive step's)
     em.emit(
-        *(f"{k_row(i)} = v{i}" for i in range(ndof)),
-        *(f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)),
+        *stage_k,
         *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
         *probe,
         f"{at('chkc')} = phimax + prb * 0.0",
-        f"{at('sgc')} = sing",
+        *([] if fixed_step else [f"{at('sgc')} = sing"]),
+        *stage_contact,
     )
-    for k, j in cj.items():
-        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}")
-    if cj:
-        em.emit(f"{at('wcc')} = wc2")
     block("store_stage")
+    em.emit(*stage_k, *stage_contact)
+    block("store_stage_later")
     if cj:
         em.emit(f"{at('wca')} = max({at('wca')}, {at('wcc')})")
     block("contact_stage_max")
