@@ -19,12 +19,13 @@ def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str
     """Blocks ``load_stage_sub`` (the stage's state, from the previous stage's k),
     ``combine_coefs`` and ``combine`` (the step's new state) of the fixed-step kernel.
 
-    The combine rounds as the accumulation it replaces did, term by term: each b_j h k_j
-    rounded on its own, the sum from the first stage on, then the state plus the sum:
-    q + (((p0 + p1) + p2) + p3). ``fma(b, k, 0.0)`` is that rounded product in a form LLVM
-    cannot fuse into the sum (a product ``b * k`` would be: ``fastmath={"contract"}``); it
-    is b·k exactly rounded, but for the sign of an exact zero (+0.0 where b·k is −0.0),
-    which reaches the state only where it is itself a zero (tests/test_fixed_step_rows.py).
+    The combine rounds as the loop kernel does (mcchain.kernels.explicit, uncontracted):
+    each p_j = b_j h k_j rounded on its own, the sum from the first stage on, then the
+    state plus the sum, q + (((p0 + p1) + p2) + p3); the accumulation it replaces was
+    contracted by LLVM row by row, some rows rounded once, others twice. ``fma(b, k, 0.0)``
+    is that rounded product in a form LLVM cannot fuse into the sum (a product ``b * k``
+    would be: ``fastmath={"contract"}``): b·k rounded, +0.0 where it is −0.0, as the loop
+    kernel's 0.0 + b h k (tests/test_codegen_stage_rows.py).
     """
     ndof = topo.ndof
     load = []
