@@ -446,12 +446,18 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
         check.append(f"nlong += 1 if abs({delta}) > {SHORT_ROTATION_BOUND!r} else 0")
         past = f"abs({delta}) > {SHORT_ROTATION_BOUND!r}"
         long += rotated_sincos_code(*first, delta, sn, cs, str(body))
-        long += [f"{row} = {value} if {past} else {row}" for row, value in zip(rows, (sn, cs))]
+        long += [
+            f"{row} = {value} if {past} else {row}"
+            for row, value in zip(rows, (sn, cs), strict=True)
+        ]
         big = f"abs({delta}) > {ROTATION_BOUND!r}"
         long.append(f"nbig += 1 if {big} else 0")
         mixed += [f"th{body} = {at('q', i)} + {delta}"]
         mixed += sincos_code(f"th{body}", sn, cs, str(body))
-        mixed += [f"{row} = {value} if {big} else {row}" for row, value in zip(rows, (sn, cs))]
+        mixed += [
+            f"{row} = {value} if {big} else {row}"
+            for row, value in zip(rows, (sn, cs), strict=True)
+        ]
     return {
         "sincos_start": "\n".join(full + start or ["pass"]),
         "rotation_check": "\n".join(check or ["pass"]),
