@@ -409,16 +409,13 @@ def _ground_determinants(em: Emitter, lay: Layout) -> str:
 def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     """The fixed-step kernel's blocks of the bodies' sin/cos at a stage, into rows ``scc``
     (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``); at
-    a later stage, the start's turned by the stage's increment δ = ah θ̇ in three tiers, each
-    lane and body by its own |δ|: ``sincos_rotated`` (short polynomials, every lane; within
-    :data:`SHORT_ROTATION_BOUND`) with ``rotation_check`` (counts in ``nlong`` the lanes'
-    bodies past it), ``sincos_rotated_long`` (fdlibm's polynomials, replacing the short
-    pair where |δ| is past SHORT_ROTATION_BOUND; counts in ``nbig`` those past
-    :data:`ROTATION_BOUND`) and ``sincos_mixed`` (in full, as at the start, replacing the
-    turned pair where |δ| is past ROTATION_BOUND). A lane's values so depend on its own δ
-    only, never on the lanes beside it: a sample's bits are the same in any lane group, chunk
-    or thread count; the group's branches only save the longer tiers' work where no lane
-    needs it.
+    a later stage the start's turned by the stage's increment δ = ah θ̇, each lane and body
+    by its own |δ|: ``sincos_rotated`` by the short polynomials (every lane) with
+    ``rotation_check`` (counts in ``nlong`` the lanes' bodies past
+    :data:`SHORT_ROTATION_BOUND`), ``sincos_rotated_long`` by fdlibm's where |δ| is past it
+    (counts in ``nbig`` those past :data:`ROTATION_BOUND`), ``sincos_mixed`` in full where
+    |δ| is past that. A sample's bits so never depend on the lanes beside it (nor on the
+    chunk or thread count); the group's branches only skip a longer tier no lane needs.
 
     The stage's angle is θ₀ + ah k, k its previous stage's θ̇; written in full as the stage
     itself writes it (the first stage's bits are the full evaluation's). A NaN δ counts as
@@ -437,27 +434,21 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
         sn, cs = f"sn{body}", f"cs{body}"
         rows = (at("scc", 2 * body), at("scc", 2 * body + 1))
         first = (at("sc0", 2 * body), at("sc0", 2 * body + 1))
-        full += [f"th{body} = {at('q', i)} + {delta}"]
-        full += sincos_code(f"th{body}", sn, cs, str(body))
-        full += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        past, big = (f"abs({delta}) > {b!r}" for b in (SHORT_ROTATION_BOUND, ROTATION_BOUND))
+        evaluated = [
+            f"th{body} = {at('q', i)} + {delta}",
+            *sincos_code(f"th{body}", sn, cs, str(body)),
+        ]
+        full += [*evaluated, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
         start += [f"{first[0]} = {sn}", f"{first[1]} = {cs}"]
         short = rotated_sincos_code(*first, delta, sn, cs, str(body), short=True)
         rotated += [*short, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
-        check.append(f"nlong += 1 if abs({delta}) > {SHORT_ROTATION_BOUND!r} else 0")
-        past = f"abs({delta}) > {SHORT_ROTATION_BOUND!r}"
+        check.append(f"nlong += 1 if {past} else 0")
         long += rotated_sincos_code(*first, delta, sn, cs, str(body))
-        long += [
-            f"{row} = {value} if {past} else {row}"
-            for row, value in zip(rows, (sn, cs), strict=True)
-        ]
-        big = f"abs({delta}) > {ROTATION_BOUND!r}"
-        long.append(f"nbig += 1 if {big} else 0")
-        mixed += [f"th{body} = {at('q', i)} + {delta}"]
-        mixed += sincos_code(f"th{body}", sn, cs, str(body))
-        mixed += [
-            f"{row} = {value} if {big} else {row}"
-            for row, value in zip(rows, (sn, cs), strict=True)
-        ]
+        long += [f"{rows[0]} = {sn} if {past} else {rows[0]}"]
+        long += [f"{rows[1]} = {cs} if {past} else {rows[1]}", f"nbig += 1 if {big} else 0"]
+        mixed += [*evaluated, f"{rows[0]} = {sn} if {big} else {rows[0]}"]
+        mixed += [f"{rows[1]} = {cs} if {big} else {rows[1]}"]
     return {
         "sincos_start": "\n".join(full + start or ["pass"]),
         "rotation_check": "\n".join(check or ["pass"]),
