@@ -11,7 +11,11 @@ fresh process; the two trees alternate round by round so that both see the same 
 * ``mujoco``: rk4 lanes on the clearance double pendulum (10⁴ samples, 2,000 steps of
   1e-4 s) against ``mujoco.rollout`` (RK4, the ideal-joint double pendulum in minimal
   coordinates; ``pip install mujoco``), ns per instance-step, 2 threads (wall) and 1 thread
-  (CPU);
+  (CPU); each round also measures the machine's peak beside them (``benchmarks/peak.py``'s
+  NumPy dgemm, 2 and 1 BLAS threads), and with ``--flops BEFORE,AFTER`` (flops per
+  instance-step of each tree's text: ``bench_roofline.py --count``) the lanes' GFLOP/s as
+  a fraction of the peak measured in the same run (the best of each, and the median of
+  the rounds' own fractions);
 * ``adaptive``: the Flores slider-crank (``configs/slider-crank-flores.toml``, 512 samples,
   4 ms): rk45 as configured against rk4 at dt = 1e-6 s, ns per instance-step (accepted
   steps), 1 thread (CPU) and 2 threads (wall), and their ratio;
@@ -30,12 +34,16 @@ import datetime
 import json
 import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from peak import dgemm  # the ceilings' own dgemm, in a fresh process
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "results" / "speed"
@@ -170,6 +178,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--only", default="mujoco,adaptive,warm,verdict")
     parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument(
+        "--flops", default=None, help="flops per instance-step of the before and after texts: B,A"
+    )
     args = parser.parse_args(argv)
     sections = args.only.split(",")
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-speed-"))
@@ -203,6 +214,11 @@ def main(argv: list[str] | None = None) -> int:
                                  env={**os.environ, "PYTHONPATH": str(REPO)},
                                  capture_output=True, text=True, check=True)  # fmt: skip
             add("mujoco:reference", json.loads(out.stdout.splitlines()[-1]))
+            add(
+                "peak",
+                {f"dgemm_{th}": dgemm(th, None)["gflops"] for th in (2, 1)}
+                | {"load": os.getloadavg()[0]},
+            )
     text = report(results, args, trees)
     print(text)
     append_results(OUT / "speed.md", text)
@@ -211,6 +227,30 @@ def main(argv: list[str] | None = None) -> int:
 
 def _best(rows: list[dict[str, Any]], key: str) -> float:
     return min(float(r[key]) for r in rows)
+
+
+def _peak_rows(results: dict[str, list[dict[str, Any]]], flops: str) -> list[str]:
+    """Rows of the lanes' GFLOP/s against the dgemm peak measured in the same rounds:
+    the best kernel time over the best dgemm, and the median of each round's own ratio
+    (kernel rows of round r beside peak row r)."""
+    counts = dict(zip(("before", "after"), map(float, flops.split(",")), strict=True))
+    peaks = results["peak"]
+    lines = []
+    for th in (2, 1):
+        best_peak = max(float(r[f"dgemm_{th}"]) for r in peaks)
+        cells = []
+        for k in ("before", "after"):
+            rows = results[f"mujoco:{k}"]
+            best = counts[k] / _best(rows, f"rk4_{th}")  # flops per ns = GFLOP/s
+            per_round = [counts[k] / float(r[f"rk4_{th}"]) / float(p[f"dgemm_{th}"])
+                         for r, p in zip(rows, peaks, strict=True)]  # fmt: skip
+            cells.append(
+                f"{best:.1f} GFLOP/s = {100 * best / best_peak:.0f} % "
+                f"(rounds' median {100 * statistics.median(per_round):.0f} %)"
+            )
+        lines.append(f"| rk4 lanes / dgemm peak ({best_peak:.1f} GFLOP/s), {th} thread(s) | "
+                     f"{cells[0]} | {cells[1]} | ≥ 50 % |")  # fmt: skip
+    return lines
 
 
 def report(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace,
@@ -236,6 +276,8 @@ def report(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace,
                          f"instance-step | {b:.1f} | {a:.1f} | |")  # fmt: skip
             lines.append(f"| MuJoCo rollout ({mj:,.0f} ns) / rk4 lanes, {th} thread(s) | "
                          f"{mj / b:.0f}× | {mj / a:.0f}× | ≥ 150× |")  # fmt: skip
+        if args.flops:
+            lines += _peak_rows(results, args.flops)
     if "adaptive:before" in results:
         for th in (1, 2):
             cells = []

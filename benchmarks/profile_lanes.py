@@ -1,0 +1,167 @@
+"""Where the rk4 lanes' step goes, measured: cpu-clock samples on the machine code.
+
+    python benchmarks/profile_lanes.py [--text FILE.py] [--seconds 15] [--top 12]
+
+The text (default: this tree's generated rk4 lane text of bench_paired's scene, the
+clearance double pendulum) is compiled (:class:`mcchain.codegen.native.NativeModule`, its
+object code cached in a scratch folder) and its ``erk_run`` called on bench_paired's
+captured arguments (256 samples, 2,000 steps, 1 thread) for ``--seconds`` under
+``perf record -e cpu-clock`` (a software clock: this VM has no hardware counters). Each
+sample's instruction address is placed in the entry's object code (read back from the
+cache file and disassembled with ``objdump``), and the samples are summed per basic block:
+the table gives each hot block's share of the kernel's samples, its size in instructions
+and bytes, and its mix (vector fused multiply-adds, other vector FP operations, divisions and square
+roots, and the explicit vector loads, stores and register moves: a load folded into an
+operation counts with its operation).
+llvm-mca (reading.md, sixth stop) models a block's throughput; this measures where the
+time is actually spent. A sample lands on the instruction after the one that held the
+retirement (skid): within a block that is noise, across blocks it is not.
+
+Needs ``perf`` and ``objdump`` on the PATH. Prints its table (readings:
+benchmarks/results/roofline/reading.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+_RUN = """
+import json, sys, time
+sys.path.insert(0, {bench!r})
+import numba
+import bench_paired as bp
+from mcchain.codegen import native
+from mcchain.codegen.native import NativeModule
+numba.set_num_threads(1)
+module = NativeModule(open({text!r}).read(), "profiled")
+groups, args = bp._captured_call(256, 2000)
+bp._call(module, groups, args)  # compiled (or loaded) before the clock
+print(json.dumps(native._LOADED), flush=True)
+t0 = time.time()
+while time.time() - t0 < {seconds}:
+    bp._call(module, groups, args)
+"""
+
+_INSTRUCTION = re.compile(r"\s+([0-9a-f]+):\t((?:[0-9a-f]{2} )+)\s*\t(\S+)\s*(.*)")
+
+
+def _instructions(objfile: Path) -> list[tuple[int, int, str, str]]:
+    """(offset, length in bytes, mnemonic, operands) of every instruction of the entry's
+    code section."""
+    command = ["objdump", "-d", "--insn-width=15", "-j", ".ltext", str(objfile)]
+    text = subprocess.run(command, check=True, capture_output=True, text=True).stdout
+    out = []
+    for line in text.splitlines():
+        m = _INSTRUCTION.match(line)
+        if m:
+            out.append((int(m.group(1), 16), len(m.group(2).split()), m.group(3), m.group(4)))
+    return out
+
+
+def _blocks(instructions: list[tuple[int, int, str, str]]) -> list[list[tuple[int, int, str, str]]]:
+    """The basic blocks: a new one at every jump target and after every jump."""
+    leaders = {instructions[0][0]}
+    for k, (_, _, op, arg) in enumerate(instructions):
+        if op.startswith("j"):
+            target = re.match(r"([0-9a-f]+)", arg)
+            if target:
+                leaders.add(int(target.group(1), 16))
+            if k + 1 < len(instructions):
+                leaders.add(instructions[k + 1][0])
+    blocks: list[list[tuple[int, int, str, str]]] = []
+    for ins in instructions:
+        if ins[0] in leaders or not blocks:
+            blocks.append([])
+        blocks[-1].append(ins)
+    return blocks
+
+
+def _kind(op: str, arg: str) -> str:
+    """The class of one instruction for the table's mix."""
+    if re.match(r"vf(n?)m(add|sub)", op):
+        return "fma"
+    if op in ("vmulpd", "vaddpd", "vsubpd", "vmaxpd", "vminpd"):
+        return "fp"
+    if op in ("vdivpd", "vsqrtpd"):
+        return "div"
+    if op in ("vmovapd", "vmovupd"):
+        if arg.count("%zmm") == 2 or arg.count("%ymm") == 2:
+            return "move"
+        return "load" if arg.split(",")[-1].strip().startswith("%") else "store"
+    return "other"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--text", default=None, help="a generated text (.py); default: this tree's")
+    parser.add_argument("--seconds", type=float, default=15.0)
+    parser.add_argument("--top", type=int, default=12)
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="mcchain-profile-") as scratch:
+        work = Path(scratch)
+        text = work / "text.py"
+        if args.text:
+            text.write_text(Path(args.text).read_text())
+        else:
+            import bench_paired
+
+            text.write_text(bench_paired._text(str(REPO), work))
+        env = dict(os.environ, MCCHAIN_CACHE_DIR=str(work / "cache"))
+        run = _RUN.format(bench=str(Path(__file__).parent), text=str(text), seconds=0)
+        subprocess.run([sys.executable, "-c", run], env=env, check=True, capture_output=True)
+        run = _RUN.format(bench=str(Path(__file__).parent), text=str(text), seconds=args.seconds)
+        data = work / "perf.data"
+        out = subprocess.run(
+            ["perf", "record", "-q", "-e", "cpu-clock", "-F", "10000", "-o", str(data),
+             sys.executable, "-c", run],
+            env=env, check=True, capture_output=True, text=True,
+        )  # fmt: skip
+        loaded = json.loads(out.stdout.splitlines()[0])
+        ((symbol, address),) = ((k, v) for k, v in loaded.items() if k.startswith("profiled."))
+        (cached,) = (work / "cache" / "native").glob("profiled-erk_run-*.bin")
+        from mcchain.codegen.native import _object_code
+
+        objfile = work / "entry.o"
+        objfile.write_bytes(_object_code(cached.read_bytes()) or b"")
+        ips = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip"], check=True,
+                             capture_output=True, text=True).stdout.split()  # fmt: skip
+        instructions = _instructions(objfile)
+    # the entry's symbol is at offset 0 of its section: an address minus the entry's is
+    # the offset objdump prints
+    samples = collections.Counter(int(ip, 16) - address for ip in ips)
+    end = instructions[-1][0] + instructions[-1][1]
+    inside = sum(n for off, n in samples.items() if 0 <= off < end)
+    print(f"`python benchmarks/profile_lanes.py --seconds {args.seconds:g}`"
+          f"{' --text ' + args.text if args.text else ''}: {len(ips):,} samples, "
+          f"{inside:,} in {symbol} ({100 * inside / max(len(ips), 1):.0f} %); load average "
+          f"{os.getloadavg()[0]:.1f}\n")  # fmt: skip
+    rows = []
+    for block in _blocks(instructions):
+        share = sum(samples.get(off, 0) for off, _, _, _ in block)
+        mix = collections.Counter(_kind(op, arg) for _, _, op, arg in block)
+        rows.append((share, block[0][0], len(block), sum(n for _, n, _, _ in block), mix))
+    print(
+        "| share of the kernel's samples | block at | instructions | bytes | fma | other FP "
+        "| div/sqrt | loads | stores | moves |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for share, start, count, nbytes, mix in sorted(rows, reverse=True)[: args.top]:
+        print(f"| {100 * share / max(inside, 1):.1f} % | {start:#x} | {count} | {nbytes:,} | "
+              f"{mix['fma']} | {mix['fp']} | {mix['div']} | {mix['load']} | {mix['store']} | "
+              f"{mix['move']} |")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
