@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "ffdd58b088bedc9327c006be5494fd5769c85fa0828276167c120bfc557d643f",
-        "rk4-projection": "577b438e59efb76f37ed1ffb5e5aaeadeebe2db67932a0f1e75683e76034f2f8",
+        "rk4": "ae115fc1f17f8298f58ad900ffd8c7e07be075fa0271496e76c0c720ce2e6d96",
+        "rk4-projection": "a4fb7d52fb264e1ebbf5bb591a87d260b3d298f5e4a1f9294005405e575bcdf3",
         "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "c4cdc3ee87cf1feca7cb1cd5aa2cc94c85708791dfd9a4ecd25ab77a038adce5",
-        "rk4-projection": "10ab0faafe345a4d6c5c09a835bf6fe5e60e021a1eb9b946d3aa40a290dce9f8",
+        "rk4": "27d67a16fddb97f1181254214fe94c15e6dd1cc44858037186fb19191111b2b2",
+        "rk4-projection": "11974f08ecd88f43bd5b752ddda4313a7f12197931c8e5dd51d233fbd1f57457",
         "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "0ab77bbe06072024ddd0081eedef258793bd352c390a7fb30a541008e595f58d",
-        "rk4-projection": "257a1494e2fa6ab5f7b6728fea6857162601f628d81ec887f4b06d8cd622a674",
+        "rk4": "f510c093ab43fbf094ea95d88ccf97179377e8a48e317e61d70c6f109b18e7b5",
+        "rk4-projection": "36823f9b3d5ef3f11a8acace3382f28044a61d1958e7979b8e799496b26066f7",
         "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "5cd88b3d63dd33b722b96cefde1b9e08ed87bddb47989b533f64547cf6d3a7f9",
-        "rk4-projection": "cd7ac63a38ed55ab0284584709841b83d9e0ff38c7dac730f7ae5f7b30a0f979",
+        "rk4": "12314e89e60143bf8f14298ac8d8ef0c7b833367a3eeb4b2b45fa9f1e077bbd1",
+        "rk4-projection": "f8839041958d9fca6e80d7641ebff81ec76042a56e0a33404ca98adb642bb2cf",
         "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }
