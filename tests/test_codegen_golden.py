@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "44064032872844f8ae907a35aece624958079d386c9170201083f3ee0b5df806",
-        "rk4-projection": "0aa46bf688f7b3a2ebd318def8be6e8cfe8143307bb674e84f81877e8b1b0225",
+        "rk4": "f4afab9a7dfbe039b051e059c84a1dedd4e31ffe452d8720c73fe30cc4378163",
+        "rk4-projection": "9c065f50ccb0e69f8047e1c77ce18964d64077357126662458555384c09c4c75",
         "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "f2849ce6ac5c30d972bd0cc36f05d0ce4e96f0f2ced4ac8eb1e93f1916977aa0",
-        "rk4-projection": "cb600bb42c8e147209a1de0ab9b6bbb766e183d3d04ec48ddad7ffff3e3a5d4a",
+        "rk4": "b9d30ea9ae8ac96da3cbc8e3ae2f66dea7ec0c4eb4ba43e8ea582618c067987c",
+        "rk4-projection": "59811f3f806534f3099a91fcd70833d04fbf356ac592069a96c76d82d841ed5f",
         "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "3e5efe9050207f50f2cc6a7f138f3ce876fc44bb65764a45b47c2ce8572fd860",
-        "rk4-projection": "55bc1f89a97b261c82e95f1c279a99547c455a16ddeb69023674436cc20ecbda",
+        "rk4": "bd3712648b4c8510e6b734128b3e1dad5b4bab3b23b07a66a469c4eca485bf3a",
+        "rk4-projection": "053fe37146c4793c9c112422d51d2de84c1d7658c834e531e78302ee610727f3",
         "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "48ff82726fd7ad1bc5d1a76dc46cd02ec147fc97e49f61b20e8867208ecab212",
-        "rk4-projection": "006808b7082dc7c6c5381b9352ea364863ae93453c8ded1998740f12c5618d7f",
+        "rk4": "65469f2c7cda9db9b52a64187153a6a1c7be2151bbfa5a510e555e3c0a20987f",
+        "rk4-projection": "8d009e00441a44c63b018bb3da268d4304e1614639c0aa4e68476339fd86ef33",
         "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }

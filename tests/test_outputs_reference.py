@@ -272,4 +272,7 @@ def test_force_outputs__the_peaks_over_the_whole_run_and_a_window(method):
     t = out["time"]
     inside = (t >= 0.008) & (t <= 0.012)
     stored = np.max(np.abs(out["driver_torque"][0, inside, 0]))
-    assert stored <= out["torque_late"][0] <= out["peak_driver_torque"][0, 0]
+    assert stored <= out["torque_late"][0]
+    # The run's peak lies in the window: the two maxima are one, reduced by two feeds that
+    # can round an ulp apart either way (as pin_peak and peak_joint_force above).
+    assert out["torque_late"][0] <= out["peak_driver_torque"][0, 0] * (1.0 + 1e-12)

@@ -40,7 +40,12 @@ from mcchain.codegen.layout import (
 from mcchain.codegen.native import NativeModule, array_layout_ok
 from mcchain.codegen.output_blocks import Signature, output_blocks, output_functions
 from mcchain.codegen.schedule import INTERLEAVE_CONSTANT, schedule_lane_loops
-from mcchain.codegen.sincos import ROTATION_BOUND, rotated_sincos_code, sincos_code
+from mcchain.codegen.sincos import (
+    ROTATION_BOUND,
+    SHORT_ROTATION_BOUND,
+    rotated_sincos_code,
+    sincos_code,
+)
 from mcchain.codegen.topology import Topology
 from mcchain.codegen.tracking import tracking_blocks, tracking_functions
 from mcchain.compiled.caches import generated_text
@@ -400,21 +405,23 @@ def _ground_determinants(em: Emitter, lay: Layout) -> str:
 
 def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     """The fixed-step kernel's blocks of the bodies' sin/cos at a stage, into rows ``scc``
-    (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``),
-    ``rotation_check`` (counts in ``nbig`` the lanes' bodies whose stage increment δ = ah θ̇
-    is past :data:`ROTATION_BOUND`), ``sincos_rotated`` (the start's turned by δ) and
-    ``sincos_mixed`` (each lane's and body's own choice: in full, as at the start, where its
-    |δ| is past the bound, else turned). A lane's values so depend on its own δ only, never
-    on the lanes beside it: a sample's bits are the same in any lane group, chunk or thread
-    count; the group's branch between the two blocks only saves the full evaluations.
+    (templates.ERK_KERNEL): ``sincos_start`` at the step's start (also into rows ``sc0``); at
+    a later stage the start's turned by the stage's increment δ = ah θ̇, each lane and body
+    by its own |δ|: ``sincos_rotated`` by the short polynomials (every lane) with
+    ``rotation_check`` (counts in ``nlong`` the lanes' bodies past
+    :data:`SHORT_ROTATION_BOUND`), ``sincos_rotated_long`` by fdlibm's where |δ| is past it
+    (counts in ``nbig`` those past :data:`ROTATION_BOUND`), ``sincos_mixed`` in full where
+    |δ| is past that. A sample's bits so never depend on the lanes beside it (nor on the
+    chunk or thread count); the group's branches only skip a longer tier no lane needs.
 
     The stage's angle is θ₀ + ah k, k its previous stage's θ̇; written in full as the stage
     itself writes it (the first stage's bits are the full evaluation's). A NaN δ counts as
-    within the bound: its lane's sin/cos are NaN either way.
+    within the bounds: its lane's sin/cos are NaN either way.
     """
     at = lay.at
     full: list[str] = []
     rotated: list[str] = []
+    long: list[str] = []
     mixed: list[str] = []
     check: list[str] = []
     start: list[str] = []
@@ -424,24 +431,27 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
         sn, cs = f"sn{body}", f"cs{body}"
         rows = (at("scc", 2 * body), at("scc", 2 * body + 1))
         first = (at("sc0", 2 * body), at("sc0", 2 * body + 1))
-        full += [f"th{body} = {at('q', i)} + {delta}"]
-        full += sincos_code(f"th{body}", sn, cs, str(body))
-        full += [f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        past, big = (f"abs({delta}) > {b!r}" for b in (SHORT_ROTATION_BOUND, ROTATION_BOUND))
+        evaluated = [
+            f"th{body} = {at('q', i)} + {delta}",
+            *sincos_code(f"th{body}", sn, cs, str(body)),
+        ]
+        full += [*evaluated, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
         start += [f"{first[0]} = {sn}", f"{first[1]} = {cs}"]
-        turned = rotated_sincos_code(*first, delta, sn, cs, str(body))
-        rotated += [*turned, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
-        big = f"abs({delta}) > {ROTATION_BOUND!r}"
-        mixed += [f"th{body} = {at('q', i)} + {delta}"]
-        mixed += sincos_code(f"th{body}", f"snf{body}", f"csf{body}", str(body))
-        mixed += turned
-        mixed += [f"{rows[0]} = snf{body} if {big} else {sn}"]
-        mixed += [f"{rows[1]} = csf{body} if {big} else {cs}"]
-        check.append(f"nbig += 1 if {big} else 0")
+        short = rotated_sincos_code(*first, delta, sn, cs, str(body), short=True)
+        rotated += [*short, f"{rows[0]} = {sn}", f"{rows[1]} = {cs}"]
+        check.append(f"nlong += 1 if {past} else 0")
+        long += rotated_sincos_code(*first, delta, sn, cs, str(body))
+        long += [f"{rows[0]} = {sn} if {past} else {rows[0]}"]
+        long += [f"{rows[1]} = {cs} if {past} else {rows[1]}", f"nbig += 1 if {big} else 0"]
+        mixed += [*evaluated, f"{rows[0]} = {sn} if {big} else {rows[0]}"]
+        mixed += [f"{rows[1]} = {cs} if {big} else {rows[1]}"]
     return {
         "sincos_start": "\n".join(full + start or ["pass"]),
-        "sincos_mixed": "\n".join(mixed or ["pass"]),
         "rotation_check": "\n".join(check or ["pass"]),
         "sincos_rotated": "\n".join(rotated or ["pass"]),
+        "sincos_rotated_long": "\n".join(long or ["pass"]),
+        "sincos_mixed": "\n".join(mixed or ["pass"]),
     }
 
 

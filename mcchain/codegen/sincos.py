@@ -15,7 +15,10 @@ and cosine, but LLVM then fused the other product of a·sin θ + b·cos θ into 
 
 :func:`rotated_sincos_code` is the sine-cosine of θ₀ + δ from that of θ₀ and the same two
 polynomials at δ itself (no reduction, no quadrant: a shorter chain), valid only where
-|δ| ≤ :data:`ROTATION_BOUND`, the polynomials' own interval.
+|δ| ≤ :data:`ROTATION_BOUND`, the polynomials' own interval; with ``short=True`` by Taylor
+polynomials of degree 7 (sine) and 6 (cos δ − 1), valid only where |δ| ≤
+:data:`SHORT_ROTATION_BOUND`, on which interval their error is no larger than fdlibm's on
+theirs.
 """
 
 from __future__ import annotations
@@ -80,28 +83,45 @@ ROTATION_BOUND = math.pi / 4
 """Largest |δ| for :func:`rotated_sincos_code`: the interval of fdlibm's polynomials (measured:
 1.1e-16 on it, 4e-14 at 1 rad, 2.5e-10 at π/2)."""
 
+SHORT_ROTATION_BOUND = 0.02
+"""Largest |δ| for :func:`rotated_sincos_code` with ``short=True``. Its Taylor polynomials'
+error on [−0.02, 0.02] is at most 1.4e-21 (sine) and 6.4e-19 (cos δ − 1), fdlibm's on [−π/4,
+π/4] reaches 2.7e-18 and 9.8e-19 (tests/test_codegen_rotation.py proves it). A stage's
+increment δ = a h θ̇ is within it up to θ̇ = 0.02 / h (200 rad/s at h = 0.1 ms)."""
+
+# Taylor to δ⁷ and to δ⁶ (the coefficients 1/3!, 1/5!, 1/7! and 1/4!, 1/6! rounded to doubles).
+_SHORT_SIN = (
+    "{ps} = {r} + ({z} * {r}) * (-0.16666666666666666 + {z} * (0.008333333333333333"
+    " + {z} * -0.0001984126984126984))"
+)
+_SHORT_COS_TAIL = "{z} * (0.041666666666666664 + {z} * -0.001388888888888889)"
+
+# sin δ and cos δ − 1 (cos δ − 1 without the 1, so that its small value keeps its own relative
+# precision); then sin(θ₀ + δ) = s₀ + (s₀ (cos δ − 1) + c₀ sin δ), cos(θ₀ + δ) = c₀ + (c₀
+# (cos δ − 1) − s₀ sin δ): s₀ and c₀ plus a correction that is small for small δ, so their own
+# rounding and one more are most of the error (measured within 2.2e-16 of the true value for
+# |δ| ≤ 0.5, 3.3e-16 up to π/4; the full evaluation: 1.1e-16).
+_TURN = (
+    "{sin} = {s0} + ({s0} * {cm} + {c0} * {ps})",
+    "{cos} = {c0} + ({c0} * {cm} - {s0} * {ps})",
+)
 _ROTATED_TEMPLATE = "\n".join(
-    [
-        # sin δ and cos δ − 1 by fdlibm's polynomials (cos δ − 1 without the 1, so that its
-        # small value keeps its own relative precision); then
-        # sin(θ₀ + δ) = s₀ + (s₀ (cos δ − 1) + c₀ sin δ), cos(θ₀ + δ) = c₀ + (c₀ (cos δ − 1) − s₀
-        # sin δ): s₀ and c₀ plus a correction that is small for small δ, so their own rounding
-        # and one more are most of the error (measured within 2.2e-16 of the true value for
-        # |δ| ≤ 0.5, 3.3e-16 up to π/4; the full evaluation: 1.1e-16).
-        "{z} = {r} * {r}",
-        _SIN,
-        "{cm} = {z} * (-0.5 + " + _COS_TAIL + ")",
-        "{sin} = {s0} + ({s0} * {cm} + {c0} * {ps})",
-        "{cos} = {c0} + ({c0} * {cm} - {s0} * {ps})",
-    ]
+    ["{z} = {r} * {r}", _SIN, "{cm} = {z} * (-0.5 + " + _COS_TAIL + ")", *_TURN]
+)
+_SHORT_ROTATED_TEMPLATE = "\n".join(
+    ["{z} = {r} * {r}", _SHORT_SIN, "{cm} = {z} * (-0.5 + " + _SHORT_COS_TAIL + ")", *_TURN]
 )
 
 
-def rotated_sincos_code(s0: str, c0: str, delta: str, sin: str, cos: str, tag: str) -> list[str]:
+def rotated_sincos_code(
+    s0: str, c0: str, delta: str, sin: str, cos: str, tag: str, short: bool = False
+) -> list[str]:
     """Lines computing ``sin``/``cos`` of θ₀ + δ from ``s0``/``c0`` (those of θ₀) and the
     expression ``delta`` (δ, rad), temporaries suffixed ``tag``. Only where
-    |δ| ≤ :data:`ROTATION_BOUND` (the caller checks it, and takes :func:`sincos_code`
-    elsewhere). At δ = 0 the result is s0, c0 (up to the sign of a zero)."""
+    |δ| ≤ :data:`ROTATION_BOUND`, or |δ| ≤ :data:`SHORT_ROTATION_BOUND` if ``short`` (the
+    caller checks it, and takes the longer form or :func:`sincos_code` elsewhere). At δ = 0
+    the result is s0, c0 (up to the sign of a zero)."""
     names = {n: f"_{n}{tag}" for n in ("z", "ps", "cm")}
-    lines = _ROTATED_TEMPLATE.format(s0=s0, c0=c0, r=f"_d{tag}", sin=sin, cos=cos, **names)
+    template = _SHORT_ROTATED_TEMPLATE if short else _ROTATED_TEMPLATE
+    lines = template.format(s0=s0, c0=c0, r=f"_d{tag}", sin=sin, cos=cos, **names)
     return [f"_d{tag} = {delta}", *lines.splitlines()]

@@ -181,22 +181,26 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 kr = (K0ROW + 2 * NDOF * ((s + NSTAGE - 1) % NSTAGE)) * LMAXV
                 # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
-                # chain) where |δ| is within the polynomials' interval, else in full: each lane
-                # and body by its own δ (its bits do not depend on its group); the full
-                # evaluations are computed (and overwrite the turned pairs) only in a group
-                # that has such a lane, counted in the turning loop itself (a loop of its own
-                # for the count cost 5 % of the step).
+                # chain): by short polynomials where |δ| is within their interval, by fdlibm's
+                # where it is within theirs, else in full: each lane and body by its own δ (its
+                # bits do not depend on its group); a longer tier is computed (and overwrites
+                # the pairs) only in a group that has a lane needing it, counted in the loop
+                # before (a loop of its own for the count cost 5 % of the step).
                 if s == 0:
                     for l in range(nl):  # lanes: independent
                         @@sincos_start
                 else:
-                    nbig = 0
+                    nlong = 0
                     for l in range(nl):  # lanes: independent
                         @@rotation_check
                         @@sincos_rotated
-                    if nbig > 0:
+                    if nlong > 0:
+                        nbig = 0
                         for l in range(nl):  # lanes: independent
-                            @@sincos_mixed
+                            @@sincos_rotated_long
+                        if nbig > 0:
+                            for l in range(nl):  # lanes: independent
+                                @@sincos_mixed
                 # The stage's lanes: the first stage's store its λ and max |Φ| as well, which
                 # the step's checks read after it; a later stage's are never read (a copy of
                 # the loop without them: 2 % of the step).
