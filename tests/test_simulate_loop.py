@@ -79,6 +79,11 @@ CONTACT_AGREEMENT = 1e-11
 """Largest difference between the paths under the contact law, relative to each output's
 largest value: the impact forces (1e2–1e3 × the link's) carry the rounding of the
 penetration (K δ^1.5 with δ ~ 1e-6 m)."""
+RESEAT_AGREEMENT = 1e-10
+"""The same under model auto over 0.3 s (150,000 steps, the switches and re-seats): there the
+loop kernel against itself, the start's sideways speed 1 ulp apart, moves v by 1.2e-11 of its
+largest value, the joint and contact forces by 1.9e-11 and 2.0e-11 (measured; 3 ulp: 1.0e-11,
+1.3e-11, 1.4e-11), so two roundings of the step are this far apart by chance; 5× that."""
 CONTACT_OUTPUTS = (
     "penetration", "peak_contact_force", "max_penetration", "free_flight_time",
     "first_separation_time", "peak_joint_force",
@@ -112,11 +117,12 @@ def test_loop__contact_law_agrees_with_the_lanes(scene):
     if scene["model"] == "auto":
         mode = loop["contact_mode"][0, :, 0]
         assert np.any((mode[:-1] >= 1) & (mode[1:] == 0)), "no re-seat to compare"
+    agreement = RESEAT_AGREEMENT if scene["model"] == "auto" else CONTACT_AGREEMENT
     for var in (*HISTORIES[:4], "energy", *CONTACT_OUTPUTS):
         a, b = lanes[var], loop[var]
         np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=var)
         scale = np.nanmax(np.abs(a)) if np.isfinite(a).any() else 0.0
-        assert np.nanmax(np.abs(a - b), initial=0.0) <= CONTACT_AGREEMENT * scale, var
+        assert np.nanmax(np.abs(a - b), initial=0.0) <= agreement * scale, var
 
 
 def test_two_coupled_contact_joints__both_paths_agree_and_conserve_energy():

@@ -161,11 +161,12 @@ def test_simulate__perturbed_start_is_projected_onto_the_constraints():
     assert out["status"][0] == 0
 
 
-def _run_lane_body(lines: list[str], W: np.ndarray) -> np.ndarray:
-    """Execute straight-line lane code in Python for lane 0 (the loop body as generated)."""
+def _run_lane_body(lines: list[str], W: np.ndarray, kw: int = 0, kr: int = 0) -> np.ndarray:
+    """Execute straight-line lane code in Python for lane 0 (the loop body as generated;
+    ``kw``, ``kr``: the fixed step's stage rows, this stage's and the previous one's)."""
     import math
 
-    scope = dict(np=np, math=math, W=W, l=0, ah=0.3, bh=0.2, keep=1.0, ts=0.1, tau=1e-12,
+    scope = dict(np=np, math=math, W=W, l=0, ah=0.3, ts=0.1, tau=1e-12, kw=kw, kr=kr,
                  balpha2=20.0, bbeta2=100.0)  # fmt: skip
     exec("\n".join(lines), scope)
     return W
@@ -199,18 +200,20 @@ def test_demand_order__same_stores_as_written():
 
     model = compile_model(load_scene_text(chain_scene_text(3, {1}, 5, springs=1, forces=1)))
     topo = Topology.from_model(model)
-    lay = Layout(topo, RK4.nstage)
+    lay = Layout(topo, RK4.nstage, fixed_step=True)
     template = "for l in range(nl):\n    @@load_params\n    @@load_stage_sub\n    @@accel_stage\n"
-    template += "    @@store_stage\n    @@accumulate\n"
-    text = _fill(template, _blocks(topo, RK4.nstage, lay), _tokens(topo, RK4.nstage, lay), lay)
+    template += "    @@store_stage\n"
+    blocks = _blocks(topo, RK4.nstage, lay)
+    text = _fill(template, blocks, _tokens(topo, RK4.nstage, lay), lay)
+    stage = {"kr": lay.rows["kq0"] * LMAX, "kw": lay.rows["kq1"] * LMAX}  # stage 1's rows
     body = [line.strip() for line in text.splitlines()[1:] if line.strip()]
     rng = np.random.default_rng(3)
     W = rng.uniform(0.5, 1.5, lay.size * LMAX)
     q = slice(lay.rows["q"] * LMAX, (lay.rows["q"] + topo.ndof) * LMAX)
     W[q] = np.repeat(model.q0[0], LMAX)
-    expected = _run_lane_body(body, W.copy())
+    expected = _run_lane_body(body, W.copy(), **stage)
     assert np.isfinite(expected).all()
-    assert np.array_equal(_run_lane_body(demand_order(body), W.copy()), expected)
+    assert np.array_equal(_run_lane_body(demand_order(body), W.copy(), **stage), expected)
 
 
 def _index1_functions(model, sim):

@@ -24,6 +24,7 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
+from mcchain.codegen.fixed_step import fixed_step_blocks
 from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
@@ -31,9 +32,9 @@ from mcchain.codegen.layout import (
     FIXED_STEP_ROW_MEANINGS,
     LMAX,
     OUTPUT_ROW_MEANINGS,
-    ROW_MEANINGS,
     Layout,
     row_length,
+    row_meanings,
     target_cpu,
 )
 from mcchain.codegen.native import NativeModule, array_layout_ok
@@ -195,30 +196,41 @@ def _blocks(
             ]
         )
     b.update(_stage_angles(topo, lay) if fixed_step else {})
+    b.update(fixed_step_blocks(topo, nstage, lay) if fixed_step else {})
 
+    # the stage's k: the fixed step's into this stage's rows (fixed_step_blocks), else kqc
+    k_row = (lambda i: lay.stage_at(i, "kw")) if fixed_step else (lambda i: at("kqc", i))
+    stage_k = [f"{k_row(i)} = v{i}" for i in range(ndof)]
+    stage_k += [f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)]
+    stage_contact = []
+    for k, j in cj.items():
+        stage_contact += [
+            f"{at(x, j)} = {y}{k}" for x, y in (("pdc", "pen"), ("prc", "pdot"), ("wjc", "wj"))
+        ]
+    stage_contact += [f"{at('wcc')} = wc2"] if cj else []
+    # λ and max |Φ| of the stage (the fixed step's checks read them after its first stage
+    # only: store_stage_later, templates.ERK_KERNEL), its rank loss (the adaptive step's)
     em.emit(
-        *(f"{at('kqc', i)} = v{i}" for i in range(ndof)),
-        *(f"{at('kvc', i)} = qdd{i}" for i in range(ndof)),
+        *stage_k,
         *(f"{at('lamc', r)} = lam{r}" for r in range(ncon)),
         *probe,
         f"{at('chkc')} = phimax + prb * 0.0",
-        f"{at('sgc')} = sing",
+        *([] if fixed_step else [f"{at('sgc')} = sing"]),
+        *stage_contact,
     )
-    for k, j in cj.items():
-        em.emit(f"{at('pdc', j)} = pen{k}", f"{at('prc', j)} = pdot{k}", f"{at('wjc', j)} = wj{k}")
-    if cj:
-        em.emit(f"{at('wcc')} = wc2")
     block("store_stage")
+    em.emit(*stage_k, *stage_contact)
+    block("store_stage_later")
     if cj:
         em.emit(f"{at('wca')} = max({at('wca')}, {at('wcc')})")
     block("contact_stage_max")
-    em.emit(
-        *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(ndof)),
-        *(f"{at('kv0', i)} = {at('kvc', i)}" for i in range(ndof)),
-        *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
-        f"{at('chk')} = {at('chkc')}",
-        f"{at('sg')} = {at('sgc')}",
-    )
+    if not fixed_step:  # the adaptive first stage's (FSAL) rows
+        em.emit(
+            *(f"{at('kq0', i)} = {at('kqc', i)}" for i in range(2 * ndof)),
+            *(f"{at('lam', r)} = {at('lamc', r)}" for r in range(ncon)),
+            f"{at('chk')} = {at('chkc')}",
+            f"{at('sg')} = {at('sgc')}",
+        )
     block("accept_zero")
     elem = lay.at_index
     b["kill_lane"] = "\n".join(
@@ -289,21 +301,6 @@ def _blocks(
         ]
     em.emit(*store)
     block("store_outputs")
-    em.emit(
-        *(f"{at(x, i)} = {at(x, i)} + {at('a' + x, i)}" for x in ("q", "v") for i in range(ndof))
-    )
-    block("combine")
-    em.emit(
-        *(f"{at('aq', i)} = {at('aq', i)} * keep + bh * v{i}" for i in range(ndof)),
-        *(f"{at('av', i)} = {at('av', i)} * keep + bh * qdd{i}" for i in range(ndof)),
-    )
-    block("accumulate")
-    for i in range(ndof):
-        em.emit(
-            f"q{i} = {at('q', i)} + ah * {at('kqc', i)}",
-            f"v{i} = {at('v', i)} + ah * {at('kvc', i)}",
-        )
-    block("load_stage_sub")
     em.projection_terms(t="tp")
     block("projection")
     # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).
@@ -430,7 +427,7 @@ def _stage_angles(topo: Topology, lay: Layout) -> dict[str, str]:
     start: list[str] = []
     for body in range(topo.nbody):
         i = 3 * body + 2
-        delta = f"ah * {at('kqc', i)}"
+        delta = f"ah * {lay.stage_at(i, 'kr')}"  # the previous stage's θ̇
         sn, cs = f"sn{body}", f"cs{body}"
         rows = (at("scc", 2 * body), at("scc", 2 * body + 1))
         first = (at("sc0", 2 * body), at("sc0", 2 * body + 1))
@@ -471,7 +468,6 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "LAMROW": str(lay.rows["lam"]),
         "LAMCROW": str(lay.rows["lamc"]),
         "K0ROW": str(lay.rows["kq0"]),
-        "KCROW": str(lay.rows["kqc"]),
         "FAILBITS": str(FAILURE_BITS),
         "DIVERGED_BIT": str(DIVERGED),
         "SINGULAR_BIT": str(SINGULAR),
@@ -537,15 +533,18 @@ def generate_source(
         parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
     lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
-    lay = Layout(topo, nstage, lmax, adaptive=variant == "rk45", outputs=len(outputs))
+    fixed = variant in ("rk4", "rk4-projection")
+    lay = Layout(topo, nstage, lmax, variant == "rk45", len(outputs), fixed_step=fixed)
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
-        parts += [ROW_MEANINGS, lay.row_map(f"{users} ({nstage} stages)")]
+        parts += [row_meanings(fixed), lay.row_map(f"{users} ({nstage} stages)")]
         parts.append(ADAPTIVE_ROW_MEANINGS if variant == "rk45" else FIXED_STEP_ROW_MEANINGS)
-    if topo.contact_joints:
-        # the contact law's fused multiply-add (contact_power, inlined), for numba's compile
+    if topo.contact_joints or fixed:
+        # the contact law's fused multiply-add (contact_power, inlined), the fixed step's
+        # combine's rounded products (fixed_step.py): for numba's compile
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
+    if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)
         parts.append(_contact_functions(adaptive=variant == "rk45"))
@@ -568,8 +567,7 @@ def generate_source(
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.
-    fixed_variant = variant in ("rk4", "rk4-projection")
-    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed_variant)
+    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
         # the markers the copy and the dispatch replace (else the copy would silently be the
@@ -600,7 +598,8 @@ def lane_rows(topo: Topology, variant: str, outputs: Signature = ()) -> int:
     nstage = RK4.nstage if tableau is None else tableau.nstage
     if tableau is None:
         outputs = ()
-    layout = Layout(topo, nstage, LMAX, adaptive=variant == "rk45", outputs=len(outputs))
+    fixed = variant in ("rk4", "rk4-projection")
+    layout = Layout(topo, nstage, LMAX, variant == "rk45", len(outputs), fixed_step=fixed)
     return row_length(layout.size)
 
 

@@ -77,9 +77,19 @@ def row_length(nrow: int) -> int:
     return LMAX * k
 
 
-ROW_MEANINGS = """\
+_STAGE_ROWS_ADAPTIVE = (
+    "# kqc, kvc the current stage; aq, av the accumulated increment of a fixed step; qn, vn the\n"
+)
+_STAGE_ROWS_FIXED = (
+    "# (each written by its stage, read by the next stage and by the step's combine); qn, vn the\n"
+)
+
+ROW_MEANINGS = (
+    """\
 # W rows: P parameters (slots of Topology.slots); q, v state; kq{j}, kv{j} stage j (q', v');
-# kqc, kvc the current stage; aq, av the accumulated increment of a fixed step; qn, vn the
+"""
+    + _STAGE_ROWS_ADAPTIVE
+    + """\
 # proposed state of an adaptive step; lam, lamc multipliers (accepted, current stage); chk,
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
@@ -87,7 +97,19 @@ ROW_MEANINGS = """\
 # values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count;
 # pkf the cubic checks the last point fed asks for (1 interior, 2 first step, 3 both).
 """
-"""Legend of the row map written into the header of a generated module."""
+)
+"""Legend of the row map written into the header of a generated module (the adaptive one's:
+:func:`row_meanings`)."""
+
+
+def row_meanings(fixed_step: bool) -> str:
+    """The legend of a generated module's row map: :data:`ROW_MEANINGS`, but for the
+    fixed-step kernel's, which has no rows kqc, kvc, aq, av (its stages write their rows
+    kq{j}, kv{j} themselves: :class:`Layout`)."""
+    if not fixed_step:
+        return ROW_MEANINGS
+    return ROW_MEANINGS.replace(_STAGE_ROWS_ADAPTIVE, _STAGE_ROWS_FIXED)
+
 
 OUTPUT_ROW_MEANINGS = """\
 # [[output]]s: ot OUTPUT_WIDTH rows each, their running reductions; otk their four times and
@@ -145,11 +167,13 @@ class Layout:
         lmax: int | None = None,
         adaptive: bool = False,
         outputs: int = 0,
+        fixed_step: bool = False,
     ):
         """``adaptive``: with the rows only the adaptive kernel uses (``pw``: ω_c² at the
         accepted state, per contact-law joint, for the located re-seat dwell); ``outputs``:
         the number of ``[[output]]``s (rows ``ot``, OUTPUT_WIDTH each, and their clock
-        ``otk``: mcchain.kernels.outputs), last."""
+        ``otk``: mcchain.kernels.outputs), last; ``fixed_step``: the fixed-step kernel's,
+        without rows kqc, kvc, aq, av (its stages write their own rows: :meth:`stage_at`)."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -160,10 +184,11 @@ class Layout:
         for j in range(nstage):  # stage j: kq_j then kv_j, 2 ndof consecutive rows
             self.add(f"kq{j}", topo.ndof)
             self.add(f"kv{j}", topo.ndof)
-        self.add("kqc", topo.ndof)  # current stage, then copied to its rows
-        self.add("kvc", topo.ndof)
-        self.add("aq", topo.ndof)  # accumulated increment of a fixed step
-        self.add("av", topo.ndof)
+        if not fixed_step:
+            self.add("kqc", topo.ndof)  # current stage, then copied to its rows
+            self.add("kvc", topo.ndof)
+            self.add("aq", topo.ndof)  # unused (once the fixed step's increment)
+            self.add("av", topo.ndof)
         self.add("qn", topo.ndof)
         self.add("vn", topo.ndof)
         self.add("lam", ncon1)
@@ -227,6 +252,13 @@ class Layout:
 
     def at(self, name: str, i: int = 0) -> str:
         return f"W[{(self.rows[name] + i) * self.lmax} + l]"
+
+    def stage_at(self, i: int, base: str) -> str:
+        """Element ``i`` of a stage's rows kq{j}, kv{j} (q' rows 0..ndof-1, then v') of lane
+        ``l``, the stage's first element at the run-time offset ``base`` (the fixed-step
+        kernel's ``kw``: this stage's rows, ``kr``: the previous stage's; templates.ERK_KERNEL).
+        The offset is the same for every lane, so the lane loops stay vectorised."""
+        return f"W[{base} + {i * self.lmax} + l]"
 
     def at_index(self, name: str, index: str, shift: int = 0) -> str:
         """Element of row ``name`` + ``shift`` + the loop variable ``index`` (generated loops

@@ -73,7 +73,8 @@ def output_blocks(topo: Topology, lay: Layout, outputs: Signature) -> dict[str, 
         blocks["outputs_feed"] = _lanes_feed(topo, lay, outputs, base)
         blocks["outputs_c"] = ""
     else:
-        fixed = _feed(topo, lay, outputs, base, "ts", "kvc", "lamc", "s0 + l")
+        # (the step's start: its first stage's accelerations in rows kv0)
+        fixed = _feed(topo, lay, outputs, base, "ts", "kv0", "lamc", "s0 + l")
         blocks["outputs_c"] = "for l in range(nl):\n" + _indented(fixed, 4)
         blocks["outputs_feed"] = ""
     return blocks

@@ -131,6 +131,17 @@ _GROUP_FINISH = (
     + "\n"
 )
 
+_STAGE_LANES = """
+for l in range(nl):  # lanes: schedule
+    @@load_params
+    @@load_stage_sub
+    @@accel_stage
+    @@STORE
+    @@contact_stage_max
+    @[sga] = @[sga] + sing
+"""
+"""The fixed-step kernel's stage, every lane at once (``STORE``: its stores' block)."""
+
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
             out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
@@ -162,11 +173,12 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
             nst = NSTAGE if n < nstep else 1
             for s in range(nst):
                 ts = t + cc[s] * hn
-                # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one,
-                # and the step's increment is accumulated as the stages go.
+                # A strictly sub-diagonal tableau (RK4): a stage needs only the previous one's
+                # k (rows at kr; the first stage, with ah = 0, the last stage's), and writes
+                # its own once (at kw); the step's combine reads them all (fixed_step.py).
                 ah = A[s, s - 1] * hn if s > 0 else 0.0
-                bh = bw[s] * hn
-                keep = 0.0 if s == 0 else 1.0
+                kw = (K0ROW + 2 * NDOF * s) * LMAXV
+                kr = (K0ROW + 2 * NDOF * ((s + NSTAGE - 1) % NSTAGE)) * LMAXV
                 # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
                 # chain): by short polynomials where |δ| is within their interval, by fdlibm's
@@ -189,14 +201,17 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                         if nbig > 0:
                             for l in range(nl):  # lanes: independent
                                 @@sincos_mixed
-                for l in range(nl):  # lanes: schedule
-                    @@load_params
-                    @@load_stage_sub
-                    @@accel_stage
-                    @@store_stage
-                    @@contact_stage_max
-                    @@accumulate
-                    @[sga] = @[sga] + sing
+                # The stage's lanes: the first stage's store its λ and max |Φ| as well, which
+                # the step's checks read after it; a later stage's are never read (a copy of
+                # the loop without them: 2 % of the step).
+                if s == 0:
+"""
+    + _lanes(_STAGE_LANES.replace("STORE", "store_stage"), 20)
+    + """
+                else:
+"""
+    + _lanes(_STAGE_LANES.replace("STORE", "store_stage_later"), 20)
+    + """
                 if s > 0:
                     continue
                 # Failures, once per step at its start: max |Φ| of the state, and rank loss in
@@ -247,7 +262,8 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                     )
             if n == nstep:
                 break
-            for l in range(nl):
+            @@combine_coefs
+            for l in range(nl):  # lanes: independent
                 @@combine
             # The next step's time from its index, not accumulated: t_end at the end.
             nx = n + 1
