@@ -259,8 +259,10 @@ def report(results: dict[str, list[dict[str, Any]]], args: argparse.Namespace,
         f"## Issue 37: before and after, side by side ({datetime.date.today()})",
         "",
         f"`python benchmarks/bench_speed.py --before {args.before} --after {args.after} "
-        f"--rounds {args.rounds} --repeats {args.repeats} --only {args.only}`; best of each "
-        f"figure's repeats and rounds; load averages "
+        f"--rounds {args.rounds} --repeats {args.repeats} --only {args.only}"
+        + (f" --flops {args.flops}" if args.flops else "")
+        + "`; best of each "
+        "figure's repeats and rounds; load averages "
         + ", ".join(f"{r['load']:.1f}" for rows in results.values() for r in rows)
         + ".",
         "",

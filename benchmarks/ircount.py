@@ -8,7 +8,9 @@ emitted: each basic block increments a counter of its own. Each block's content 
 from the IR text, so a run gives, exactly, the operations the optimised IR executed:
 
 * flops: ``fadd``, ``fsub``, ``fmul``, ``fdiv``, ``frem`` and ``llvm.sqrt`` count 1 per
-  element (a ``<8 x double>`` operation is 8), ``llvm.fma``/``llvm.fmuladd`` 2. The fused
+  element (a ``<8 x double>`` operation is 8), ``llvm.fma``/``llvm.fmuladd`` 2 (1 where the
+  addend is a zero constant: ``fma(b, k, 0.0)`` is a product rounded on its own, written so
+  that LLVM cannot fuse it into a sum, e.g. the fixed-step lanes' combine). The fused
   multiply-adds the "contract" flag allows are formed later, when instructions are selected:
   an fmul and an fadd are 2 flops either way. ``fneg``, ``fabs``, compares, selects,
   min/max and conversions are not flops (counted apart as ``fp_other``);
@@ -41,6 +43,7 @@ _INTRINSIC = re.compile(
     r"round|rint|trunc|masked\.gather|masked\.scatter|masked\.load|"
     r"masked\.store)\.(v(\d+))?(f64|f32)"
 )
+_ZERO_ADDEND = re.compile(r"(?:zeroinitializer|double -?0\.000000e\+00)\)")
 _LIBM = re.compile(
     r"call [^@]*@(sin|cos|tan|hypot|atan2|atan|asin|acos|exp|log|pow|sinh|cosh|"
     r"tanh|expm1|log1p|cbrt|fmod)\b"
@@ -73,7 +76,7 @@ class Block:
     label: str = ""
     instructions: int = 0  # IR instructions (a proxy for the machine code's)
     flops: int = 0
-    fma: int = 0  # elements of llvm.fma / fmuladd (2 flops each, included in flops)
+    fma: int = 0  # elements of llvm.fma / fmuladd with an addend (2 flops each, in flops)
     vector_flops: int = 0  # of the flops, those in vector operations
     fp_other: int = 0
     libm: int = 0
@@ -108,9 +111,10 @@ def _analyse(line: str, block: Block) -> None:
             block.flops += n
             block.vector_flops += n if m.group(3) else 0
         elif kind in ("fma", "fmuladd"):
-            block.flops += 2 * n
-            block.fma += n
-            block.vector_flops += 2 * n if m.group(3) else 0
+            per = 1 if _ZERO_ADDEND.search(line) else 2  # a product alone: one flop
+            block.flops += per * n
+            block.fma += n if per == 2 else 0
+            block.vector_flops += per * n if m.group(3) else 0
         elif kind in ("masked.gather", "masked.load"):
             block.load_bytes += n * elem
         elif kind in ("masked.scatter", "masked.store"):
