@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "f4afab9a7dfbe039b051e059c84a1dedd4e31ffe452d8720c73fe30cc4378163",
-        "rk4-projection": "9c065f50ccb0e69f8047e1c77ce18964d64077357126662458555384c09c4c75",
+        "rk4": "1c8911ca1e00dc5141a4b172135fb0d4a19cc682eae095220b27269b04d19ff5",
+        "rk4-projection": "fadd9e8b1c621f4cec469926e8b607e57e90e3f7872143018a7660e0afa1092e",
         "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "b9d30ea9ae8ac96da3cbc8e3ae2f66dea7ec0c4eb4ba43e8ea582618c067987c",
-        "rk4-projection": "59811f3f806534f3099a91fcd70833d04fbf356ac592069a96c76d82d841ed5f",
+        "rk4": "25ed5f9527d004c000758a90732ae6736d3f7bf4eb2f9c528b64d2b17d87b8db",
+        "rk4-projection": "a6cfff082ef6b2e2ca7ed65b5f1503589550b0930fc53a2102c438a5f72b3ffa",
         "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
     },
     "fourbar-clearance-auto": {
         "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
-        "rk4": "bd3712648b4c8510e6b734128b3e1dad5b4bab3b23b07a66a469c4eca485bf3a",
-        "rk4-projection": "053fe37146c4793c9c112422d51d2de84c1d7658c834e531e78302ee610727f3",
+        "rk4": "8d0603fc49733f6fc9a520f0df4f5b311dbb6a88847230e5557d687de2a53623",
+        "rk4-projection": "f3cc1f8ca1ec4179f1551e90057d6ada4ff0d19b517654e4ac03db0abd4dfb95",
         "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "65469f2c7cda9db9b52a64187153a6a1c7be2151bbfa5a510e555e3c0a20987f",
-        "rk4-projection": "8d009e00441a44c63b018bb3da268d4304e1614639c0aa4e68476339fd86ef33",
+        "rk4": "5e688b51ce22c936d0c3411b79f087bc331e2b87ba64826784294435a2aadb85",
+        "rk4-projection": "79662b602e4fac1ccfdf6743e6c7f2d9dbf0579b7b0e816251c1594879fdb5a6",
         "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
     },
 }

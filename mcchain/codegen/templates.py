@@ -142,6 +142,12 @@ for l in range(nl):  # lanes: schedule
 """
 """The fixed-step kernel's stage, every lane at once (``STORE``: its stores' block)."""
 
+_FIRST_STAGE_LANES = _STAGE_LANES.replace("STORE", "store_stage").replace(
+    "    @@load_params", "    @@sincos_start\n    @@load_params"
+)
+"""The first stage's: with the bodies' sine-cosine in full (rows sc0 and scc), the stores
+the step's checks read (λ, max |Φ|)."""
+
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
             out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
@@ -179,17 +185,15 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 ah = A[s, s - 1] * hn if s > 0 else 0.0
                 kw = (K0ROW + 2 * NDOF * s) * LMAXV
                 kr = (K0ROW + 2 * NDOF * ((s + NSTAGE - 1) % NSTAGE)) * LMAXV
-                # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc); at a
+                # The bodies' sine-cosine: at the step's start in full (rows sc0 and scc), in
+                # the first stage's own loop (a loop of its own cost 1.5 % of the step); at a
                 # later stage the start's turned by the stage's increment δ = ah θ̇ (a shorter
                 # chain): by short polynomials where |δ| is within their interval, by fdlibm's
                 # where it is within theirs, else in full: each lane and body by its own δ (its
                 # bits do not depend on its group); a longer tier is computed (and overwrites
                 # the pairs) only in a group that has a lane needing it, counted in the loop
                 # before (a loop of its own for the count cost 5 % of the step).
-                if s == 0:
-                    for l in range(nl):  # lanes: independent
-                        @@sincos_start
-                else:
+                if s > 0:
                     nlong = 0
                     for l in range(nl):  # lanes: independent
                         @@rotation_check
@@ -206,7 +210,7 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 # the loop without them: 2 % of the step).
                 if s == 0:
 """
-    + _lanes(_STAGE_LANES.replace("STORE", "store_stage"), 20)
+    + _lanes(_FIRST_STAGE_LANES, 20)
     + """
                 else:
 """
