@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "1c8911ca1e00dc5141a4b172135fb0d4a19cc682eae095220b27269b04d19ff5",
         "rk4-projection": "fadd9e8b1c621f4cec469926e8b607e57e90e3f7872143018a7660e0afa1092e",
-        "rk45": "da5cbcbc4353930a48a7d84ca6096243e8bf1cd784745597f171b5ef27a5d32c",
+        "rk45": "36a402ea75b404f58d675d86ce8ea8f3e4a87fea0c2d7f2c4978e974b8ba4f66",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "25ed5f9527d004c000758a90732ae6736d3f7bf4eb2f9c528b64d2b17d87b8db",
         "rk4-projection": "a6cfff082ef6b2e2ca7ed65b5f1503589550b0930fc53a2102c438a5f72b3ffa",
-        "rk45": "bebac82d2d62f41a3f30bed78719d67b4a15f4c28cf9a17302d21427b257fbdf",
+        "rk45": "671fcd454ce6003b7090bd11d78d4f75466bae4ecade540c88f742f583f82dfb",
     },
     "fourbar-clearance-auto": {
-        "accel": "a93148bb958b8dbd4e955c741f934262b9aa23b3ffae1187e56f9a9b1d67a13c",
+        "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
         "rk4": "8d0603fc49733f6fc9a520f0df4f5b311dbb6a88847230e5557d687de2a53623",
         "rk4-projection": "f3cc1f8ca1ec4179f1551e90057d6ada4ff0d19b517654e4ac03db0abd4dfb95",
-        "rk45": "e6550d459c2bb89a6f76f1bdb83beb35b3c19fdfa3e3c99971744872d165f657",
+        "rk45": "bfbfde9efb85c3977d90dc9c659db8efafddd79cfca3777ce4d202b74a99075f",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "5e688b51ce22c936d0c3411b79f087bc331e2b87ba64826784294435a2aadb85",
         "rk4-projection": "79662b602e4fac1ccfdf6743e6c7f2d9dbf0579b7b0e816251c1594879fdb5a6",
-        "rk45": "1ca1cdcfef81d484bf7b1f9bf9806e416cfe8e66280b99b1cb29b1abcc3ddf82",
+        "rk45": "018514d4779ff3f7e7a5b9faf8653af0bd78621d05803bb7a0bad1ac065198cb",
     },
 }
 

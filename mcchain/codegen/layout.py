@@ -77,19 +77,18 @@ def row_length(nrow: int) -> int:
     return LMAX * k
 
 
-_STAGE_ROWS_ADAPTIVE = (
-    "# kqc, kvc the current stage; aq, av the accumulated increment of a fixed step; qn, vn the\n"
-)
-_STAGE_ROWS_FIXED = (
-    "# (each written by its stage, read by the next stage and by the step's combine); qn, vn the\n"
-)
-
-ROW_MEANINGS = (
-    """\
-# W rows: P parameters (slots of Topology.slots); q, v state; kq{j}, kv{j} stage j (q', v');
-"""
-    + _STAGE_ROWS_ADAPTIVE
-    + """\
+def row_meanings(fixed_step: bool) -> str:
+    """Legend of the row map written into the header of a generated module; the fixed-step
+    kernel's has no rows kqc, kvc (its stages write their rows kq{j}, kv{j} themselves:
+    :class:`Layout`)."""
+    stage = (
+        "(each written by its stage, read by the next stage and by the step's combine);"
+        if fixed_step
+        else "kqc, kvc the current stage;"
+    )
+    return f"""\
+# W rows: P parameters (slots of Topology.slots); q, v state; kq{{j}}, kv{{j}} stage j (q', v');
+# {stage} qn, vn the
 # proposed state of an adaptive step; lam, lamc multipliers (accepted, current stage); chk,
 # chkc max |Phi| (accepted, current); sg, sgc, sga rank-loss counts (accepted, current, since
 # the last check); act, pmax projection (still iterating, last max |Phi|); hs the lane's step;
@@ -97,18 +96,6 @@ ROW_MEANINGS = (
 # values and its continuous peak (mcchain.kernels.peaks); pkt their four times and the count;
 # pkf the cubic checks the last point fed asks for (1 interior, 2 first step, 3 both).
 """
-)
-"""Legend of the row map written into the header of a generated module (the adaptive one's:
-:func:`row_meanings`)."""
-
-
-def row_meanings(fixed_step: bool) -> str:
-    """The legend of a generated module's row map: :data:`ROW_MEANINGS`, but for the
-    fixed-step kernel's, which has no rows kqc, kvc, aq, av (its stages write their rows
-    kq{j}, kv{j} themselves: :class:`Layout`)."""
-    if not fixed_step:
-        return ROW_MEANINGS
-    return ROW_MEANINGS.replace(_STAGE_ROWS_ADAPTIVE, _STAGE_ROWS_FIXED)
 
 
 OUTPUT_ROW_MEANINGS = """\
@@ -173,7 +160,7 @@ class Layout:
         accepted state, per contact-law joint, for the located re-seat dwell); ``outputs``:
         the number of ``[[output]]``s (rows ``ot``, OUTPUT_WIDTH each, and their clock
         ``otk``: mcchain.kernels.outputs), last; ``fixed_step``: the fixed-step kernel's,
-        without rows kqc, kvc, aq, av (its stages write their own rows: :meth:`stage_at`)."""
+        without rows kqc, kvc (its stages write their own rows: :meth:`stage_at`)."""
         self.lmax = LMAX if lmax is None else lmax
         self.rows: dict[str, int] = {}
         self.size = 0
@@ -187,8 +174,6 @@ class Layout:
         if not fixed_step:
             self.add("kqc", topo.ndof)  # current stage, then copied to its rows
             self.add("kvc", topo.ndof)
-            self.add("aq", topo.ndof)  # unused (once the fixed step's increment)
-            self.add("av", topo.ndof)
         self.add("qn", topo.ndof)
         self.add("vn", topo.ndof)
         self.add("lam", ncon1)
