@@ -14,6 +14,9 @@ from __future__ import annotations
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.topology import Topology
 
+FIXED_STEP_VARIANTS = ("rk4", "rk4-projection")
+"""The variants whose module is the fixed-step kernel (templates.ERK_KERNEL)."""
+
 
 def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
     """Blocks ``load_stage_sub`` (the stage's state, from the previous stage's k),

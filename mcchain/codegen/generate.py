@@ -24,7 +24,7 @@ from mcchain.codegen import templates
 from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
-from mcchain.codegen.fixed_step import fixed_step_blocks
+from mcchain.codegen.fixed_step import FIXED_STEP_VARIANTS, fixed_step_blocks
 from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
@@ -533,8 +533,8 @@ def generate_source(
         parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
     lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
-    fixed = variant in ("rk4", "rk4-projection")
-    lay = Layout(topo, nstage, lmax, variant == "rk45", len(outputs), fixed_step=fixed)
+    fixed = variant in FIXED_STEP_VARIANTS
+    lay = _layout(topo, variant, nstage, lmax, outputs)
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
@@ -598,9 +598,13 @@ def lane_rows(topo: Topology, variant: str, outputs: Signature = ()) -> int:
     nstage = RK4.nstage if tableau is None else tableau.nstage
     if tableau is None:
         outputs = ()
-    fixed = variant in ("rk4", "rk4-projection")
-    layout = Layout(topo, nstage, LMAX, variant == "rk45", len(outputs), fixed_step=fixed)
-    return row_length(layout.size)
+    return row_length(_layout(topo, variant, nstage, LMAX, outputs).size)
+
+
+def _layout(topo: Topology, variant: str, nstage: int, lmax: int, outputs: Signature) -> Layout:
+    """The work array of ``variant``'s module (rows ``lmax`` long, ``outputs`` tracked)."""
+    fixed = variant in FIXED_STEP_VARIANTS
+    return Layout(topo, nstage, lmax, variant == "rk45", len(outputs), fixed_step=fixed)
 
 
 def _contact_functions(adaptive: bool) -> str:
