@@ -93,6 +93,17 @@ def _captured_call(samples: int, steps: int) -> tuple[int, tuple[Any, ...]]:
     return captured[0]
 
 
+def _own_lanes(text: str, args: tuple[Any, ...]) -> tuple[int, tuple[Any, ...]]:
+    """The lane groups and ``args`` with the lane count of ``text`` (its ``lmax``, read from
+    its clamp ``lanes = max(1, min(lanes, N))``): a what-if with other rows than this tree's
+    runs every sample in groups of its own width."""
+    width = int(re.search(r"lanes = max\(1, min\(lanes, (\d+)\)\)", text).group(1))
+    names = _parameter_names(text)
+    nsample = next(a for n, a in zip(names, args, strict=True) if n == "P").shape[1]
+    own = tuple(width if n == "lanes" else a for n, a in zip(names, args, strict=True))
+    return -(-nsample // width), own
+
+
 def _call(module: Any, groups: int, args: tuple[Any, ...]) -> tuple[float, list[np.ndarray]]:
     """CPU seconds of one ``erk_run`` over every group on fresh copies of ``args``, and the
     arrays after the call."""
@@ -131,11 +142,16 @@ def _bits(
     return notes, same_nan
 
 
-def _array_names(text: str, args: tuple[Any, ...]) -> list[str]:
-    """The names ``erk_run`` gives its array arguments (from its ``def`` in ``text``)."""
+def _parameter_names(text: str) -> list[str]:
+    """The names of ``erk_run``'s parameters after g_start, g_stop (from its ``def``)."""
     params = re.search(r"def erk_run\(([^)]*)\)", text, flags=re.S)
     assert params is not None
-    names = [p.strip() for p in params.group(1).split(",")][2:]  # after g_start, g_stop
+    return [p.strip() for p in params.group(1).split(",")][2:]
+
+
+def _array_names(text: str, args: tuple[Any, ...]) -> list[str]:
+    """The names ``erk_run`` gives its array arguments."""
+    names = _parameter_names(text)
     return [n for n, a in zip(names, args, strict=True) if isinstance(a, np.ndarray)]
 
 
@@ -155,14 +171,15 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="mcchain-paired-") as scratch:
         texts = [_text(tree, Path(scratch)) for tree in (args.before, args.after)]
     modules = [NativeModule(text, f"paired_{i}") for i, text in enumerate(texts)]
-    groups, call_args = _captured_call(args.samples, args.steps)
-    outputs = [_call(m, groups, call_args)[1] for m in modules]  # compiles, then the bits
-    notes, same_nan = _bits(*outputs, _array_names(texts[1], call_args))
+    _, captured = _captured_call(args.samples, args.steps)
+    calls = [_own_lanes(text, captured) for text in texts]
+    outputs = [_call(m, *call)[1] for m, call in zip(modules, calls)]  # compiles; the bits
+    notes, same_nan = _bits(*outputs, _array_names(texts[1], captured))
     units = args.samples * (args.steps + 1)
     ratios, times = [], [[], []]
     for r in range(args.rounds):
         order = (0, 1) if r % 2 == 0 else (1, 0)
-        spent = {i: _call(modules[i], groups, call_args)[0] for i in order}
+        spent = {i: _call(modules[i], *calls[i])[0] for i in order}
         for i in (0, 1):
             times[i].append(spent[i] / units * 1e9)
         ratios.append(spent[1] / spent[0])

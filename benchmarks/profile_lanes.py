@@ -1,6 +1,7 @@
 """Where the rk4 lanes' step goes, measured: cpu-clock samples on the machine code.
 
     python benchmarks/profile_lanes.py [--text FILE.py] [--seconds 15] [--top 12]
+        [--disassembly FILE]
 
 The text (default: this tree's generated rk4 lane text of bench_paired's scene, the
 clearance double pendulum) is compiled (:class:`mcchain.codegen.native.NativeModule`, its
@@ -107,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--text", default=None, help="a generated text (.py); default: this tree's")
     parser.add_argument("--seconds", type=float, default=15.0)
     parser.add_argument("--top", type=int, default=12)
+    parser.add_argument("--disassembly", default=None, help="write the entry's objdump here")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="mcchain-profile-") as scratch:
         work = Path(scratch)
@@ -137,6 +139,10 @@ def main(argv: list[str] | None = None) -> int:
         ips = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip"], check=True,
                              capture_output=True, text=True).stdout.split()  # fmt: skip
         instructions = _instructions(objfile)
+        if args.disassembly:
+            command = ["objdump", "-d", "--no-show-raw-insn", "-j", ".ltext", str(objfile)]
+            listing = subprocess.run(command, check=True, capture_output=True, text=True)
+            Path(args.disassembly).write_text(listing.stdout)
     # the entry's symbol is at offset 0 of its section: an address minus the entry's is
     # the offset objdump prints
     samples = collections.Counter(int(ip, 16) - address for ip in ips)
