@@ -115,6 +115,10 @@ class _Loop:
     exit: ir.Block  # break
 
 
+_SPECULATABLE_CALLS = frozenset({"max", "min", "abs", "float", "math.sqrt", "math.copysign"})
+"""Calls without side effects or undefined values, which :meth:`FunctionLowering._speculatable`
+admits in an operand evaluated where Python would skip it."""
+
 STACK_ARRAY_MAX_BYTES = 64 << 10
 """Largest local array (``np.zeros``/``np.full`` in the text) kept on the stack; larger ones
 (the work array ``W`` of a long chain: 625 KiB for a 128-bar rk45 lane group) are allocated
@@ -202,6 +206,11 @@ class FunctionLowering:
         self.arrays: dict[str, _ArrayValue] = {}
         self.tuples: dict[str, tuple[ir.Value, Tuple]] = {}
         self.loops: list[_Loop] = []
+        # a[i] = x if c else a[i]: the element's text and value, while its arms are read
+        self.kept: tuple[str, ir.Value, Type] | None = None
+        self.opaque_zero: ir.Value | None = None  # an i64 zero LLVM cannot see through
+        self.local_arrays: set[str] = set()  # np.zeros / np.full of the function
+        self.lane_depth = 0  # lane loops (INDEPENDENT_MARK) around the statement
         args = iter(self.function.args)
         for arg, ty in zip(fn.args.args, argtypes, strict=True):
             if isinstance(ty, Array):
@@ -310,24 +319,51 @@ class FunctionLowering:
             return self._short_circuit(node, truth_only=True)
         return self._truth(*self._scalar(node))
 
+    def _speculatable(self, nodes: list[ast.expr]) -> bool:
+        """Whether ``nodes`` may be evaluated where Python would skip them, giving the same
+        values: inside a lane loop (whose reads of the function's own arrays are in bounds
+        whatever the branch: :data:`mcchain.codegen.schedule.INDEPENDENT_MARK`), reading
+        only those arrays, calling only functions without side effects and dividing
+        integers by nonzero constants only. Evaluated so, a branch is a select: a lane loop
+        with branches vectorises into masked loads and stores, microcoded on AMD Zen 1-3."""
+        if not self.lane_depth:
+            return False
+        for node in (n for root in nodes for n in ast.walk(root)):
+            if isinstance(node, ast.Subscript):
+                if not (isinstance(node.value, ast.Name) and node.value.id in self.local_arrays):
+                    return False
+            elif isinstance(node, ast.Call):
+                if _name(node.func) not in _SPECULATABLE_CALLS:
+                    return False
+            elif isinstance(node, ast.BinOp) and isinstance(
+                node.op, (ast.FloorDiv, ast.Mod, ast.LShift, ast.RShift)
+            ):
+                if not (isinstance(node.right, ast.Constant) and node.right.value):
+                    return False
+            elif isinstance(node, (ast.NamedExpr, ast.Lambda, ast.Await, ast.Yield)):
+                return False
+        return True
+
     def _short_circuit(self, node: ast.BoolOp, truth_only: bool) -> ir.Value:
         """``a and b`` / ``a or b`` as Python and numba evaluate them: an operand only where
         the ones before do not decide (``i < n and t[i] > 0`` reads ``t[i]`` only if
-        ``i < n``), with branches and a phi. As a value (``truth_only`` False) the operands
-        must be bools: Python's ``x and y`` is then ``x`` or ``y``, any other type would be
-        one of theirs (refused, never met in the generated text)."""
+        ``i < n``), with branches and a phi; where the operands allow
+        (:meth:`_speculatable`), all of them and no branch. As a value (``truth_only``
+        False) the operands must be bools: Python's ``x and y`` is then ``x`` or ``y``, any
+        other type would be one of theirs (refused, never met in the generated text)."""
         b = self.builder
+        if self._speculatable(node.values[1:]):
+            truths = [self._operand_truth(node, operand, truth_only) for operand in node.values]
+            combine = b.and_ if isinstance(node.op, ast.And) else b.or_
+            result = truths[0]
+            for truth in truths[1:]:
+                result = combine(result, truth)
+            return result
         decides = 0 if isinstance(node.op, ast.And) else 1  # the operand truth that ends it
         after = self.function.append_basic_block()
         incoming: list[tuple[ir.Value, ir.Block]] = []
         for k, operand in enumerate(node.values):
-            if isinstance(operand, ast.BoolOp):
-                truth = self._short_circuit(operand, truth_only)
-            else:
-                value, ty = self._scalar(operand)
-                if not truth_only and ty != BOOL:
-                    raise TranslationError(f"{ast.unparse(node)}: a value of non-bool operands")
-                truth = self._truth(value, ty)
+            truth = self._operand_truth(node, operand, truth_only)
             if k == len(node.values) - 1:
                 incoming.append((truth, b.block))
                 b.branch(after)
@@ -342,6 +378,15 @@ class FunctionLowering:
             phi.add_incoming(value, block)
         return phi
 
+    def _operand_truth(self, node: ast.BoolOp, operand: ast.expr, truth_only: bool) -> ir.Value:
+        """The truth (i1) of one operand of ``node``."""
+        if isinstance(operand, ast.BoolOp):
+            return self._short_circuit(operand, truth_only)
+        value, ty = self._scalar(operand)
+        if not truth_only and ty != BOOL:
+            raise TranslationError(f"{ast.unparse(node)}: a value of non-bool operands")
+        return self._truth(value, ty)
+
     def _scalar(self, node: ast.expr) -> tuple[ir.Value, str]:
         value, ty = self._expr(node)
         if not isinstance(ty, str):
@@ -350,8 +395,15 @@ class FunctionLowering:
 
     def _ifexp(self, node: ast.IfExp) -> tuple[ir.Value, str]:
         """``a if c else b`` with branches (an array read in the branch not taken may be
-        out of bounds); LLVM makes it a select where it can."""
+        out of bounds); LLVM makes it a select where it can. Where the arms allow
+        (:meth:`_speculatable`), both evaluated and a select."""
         b = self.builder
+        if self._speculatable([node.body, node.orelse]):
+            cond = self._condition(node.test)
+            v1, t1 = self._scalar(node.body)
+            v2, t2 = self._scalar(node.orelse)
+            ty = t1 if t1 == t2 else _unify(t1, t2)
+            return b.select(cond, self._cast(v1, t1, ty), self._cast(v2, t2, ty)), ty
         cond = self._condition(node.test)
         then = self.function.append_basic_block()
         orelse = self.function.append_basic_block()
@@ -495,8 +547,14 @@ class FunctionLowering:
             value, ty = self.tuples[base.id]
             k = self.module.constant_int(node.slice)
             return self.builder.extract_value(value, k), ty.items[k]
+        if self.kept is not None and ast.unparse(node) == self.kept[0]:
+            return self.kept[1], self.kept[2]
         arr = self._array(base)
         ptr = self._element_ptr(arr, [self._index(i) for i in _index_nodes(node.slice)])
+        return self._load_element(ptr, arr)
+
+    def _load_element(self, ptr: ir.Value, arr: _ArrayValue) -> tuple[ir.Value, Type]:
+        """The element at ``ptr`` of ``arr`` as a value of its scalar type."""
         value = self.builder.load(ptr)
         if arr.ty.dtype == BOOL:
             value = self.builder.icmp_unsigned("!=", value, ir.Constant(_I8, 0))
