@@ -12,7 +12,10 @@ _ROW = re.compile(r"W\[[^\]]+\]")
 INDEPENDENT_MARK = "# lanes: independent"
 """The comment ending the line of a ``for`` loop whose iterations read and write disjoint
 memory: a lane loop whose lane ``l`` touches only ``W[row * LMAX + l]`` and its own
-sample's elements. :mod:`mcchain.codegen.native` tells LLVM so."""
+sample's elements. :mod:`mcchain.codegen.native` tells LLVM so. Its reads of the
+function's own arrays (``W``) are in bounds whatever a branch decides, so the translator
+evaluates the arms of its conditional expressions eagerly and selects (a branch there
+vectorises into masked stores, slow on AMD Zen 1-3)."""
 
 INTERLEAVE_CONSTANT = "INTERLEAVE"
 """The generated module's constant naming how many SIMD registers of lanes a lane loop's
