@@ -115,7 +115,9 @@ class _Loop:
     exit: ir.Block  # break
 
 
-_SPECULATABLE_CALLS = frozenset({"max", "min", "abs", "float", "math.sqrt", "math.copysign"})
+_SPECULATABLE_CALLS = frozenset(
+    {"max", "min", "abs", "float", "fma", "math.sqrt", "math.copysign"}
+)
 """Calls without side effects or undefined values, which :meth:`FunctionLowering._speculatable`
 admits in an operand evaluated where Python would skip it."""
 
