@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     modules = [NativeModule(text, f"paired_{i}") for i, text in enumerate(texts)]
     _, captured = _captured_call(args.samples, args.steps)
     calls = [_own_lanes(text, captured) for text in texts]
-    outputs = [_call(m, *call)[1] for m, call in zip(modules, calls)]  # compiles; the bits
+    outputs = [_call(m, *call)[1] for m, call in zip(modules, calls, strict=True)]  # compiled; bits
     notes, same_nan = _bits(*outputs, _array_names(texts[1], captured))
     units = args.samples * (args.steps + 1)
     ratios, times = [], [[], []]

@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import platform
 import sys
 from typing import Any
 
@@ -976,16 +977,20 @@ def _keeps_machine_code() -> str:
 values = st.one_of(st.floats(-2.0, 2.0), st.just(0.0), st.just(math.nan))
 
 
+@pytest.fixture(scope="module")
+def keeps() -> NativeModule:
+    return NativeModule(KEEPS, "mcchain_test_keeps")
+
+
 @settings(max_examples=60, deadline=None)
 @given(data=st.lists(values, min_size=64, max_size=64), nl=st.integers(0, 8), t=values)
-def test_lane_branches__selects_give_python_s_values(data, nl, t):
+def test_lane_branches__selects_give_python_s_values(keeps, data, nl, t):
     """The conditional expressions and ``or``/``and`` of a lane loop, evaluated eagerly and
     selected (its reads are in bounds whatever the branch), and ``a[i] = x if c else a[i]``
     anywhere: the values are Python's, NaN comparisons included."""
-    module = _keeps_module()
     X, out = np.array(data), np.arange(8.0)
     ref_X, ref_out = X.copy(), out.copy()
-    module.keeps(X, nl, t, out)
+    keeps.keeps(X, nl, t, out)
     namespace: dict[str, Any] = {}
     exec(KEEPS, namespace)
     namespace["keeps"](ref_X, nl, t, ref_out)
@@ -993,18 +998,7 @@ def test_lane_branches__selects_give_python_s_values(data, nl, t):
     _assert_same_bits(out, ref_out)
 
 
-_KEEPS_MODULE: list[NativeModule] = []
-
-
-def _keeps_module() -> NativeModule:
-    if not _KEEPS_MODULE:
-        _KEEPS_MODULE.append(NativeModule(KEEPS, "mcchain_test_keeps"))
-    return _KEEPS_MODULE[0]
-
-
-@pytest.mark.skipif(
-    not __import__("platform").machine().lower() in ("x86_64", "amd64"), reason="x86 code"
-)
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="x86 code")
 def test_lane_branches__no_masked_store_in_the_machine_code():
     """Neither the lane loop's branches nor ``a[i] = x if c else a[i]`` become masked
     stores: ``vmaskmovpd`` (AVX2) is microcoded on AMD Zen 1-3, where the rk4 step's
@@ -1014,7 +1008,7 @@ def test_lane_branches__no_masked_store_in_the_machine_code():
     code = _keeps_machine_code()
     stores = [
         line for line in code.splitlines()
-        if "maskmov" in line and line.rstrip().endswith(")")  # a masked store's target
-        or "{%k" in line and "mov" in line and line.rstrip().endswith("}")
+        if ("maskmov" in line and line.rstrip().endswith(")"))  # a masked store's target
+        or ("{%k" in line and "mov" in line and line.rstrip().endswith("}"))
     ]  # fmt: skip
     assert stores == [], stores

@@ -115,9 +115,7 @@ class _Loop:
     exit: ir.Block  # break
 
 
-_SPECULATABLE_CALLS = frozenset(
-    {"max", "min", "abs", "float", "fma", "math.sqrt", "math.copysign"}
-)
+_SPECULATABLE_CALLS = frozenset({"max", "min", "abs", "float", "fma", "math.sqrt", "math.copysign"})
 """Calls without side effects or undefined values, which :meth:`FunctionLowering._speculatable`
 admits in an operand evaluated where Python would skip it."""
 
@@ -332,6 +330,8 @@ class FunctionLowering:
             return False
         for node in (n for root in nodes for n in ast.walk(root)):
             if isinstance(node, ast.Subscript):
+                if self.kept is not None and ast.unparse(node) == self.kept[0]:
+                    continue  # read already (FunctionTranslator._kept_select)
                 if not (isinstance(node.value, ast.Name) and node.value.id in self.local_arrays):
                     return False
             elif isinstance(node, ast.Call):

@@ -48,32 +48,11 @@ from mcchain.codegen.native_expressions import (
 from mcchain.codegen.schedule import INDEPENDENT_MARK, INTERLEAVE_CONSTANT
 
 
-_PURE_CALLS = frozenset({"max", "min", "abs"})
-"""Calls an arm of a kept element's select may hold (:func:`_keeps_element`)."""
-
-
-def _keeps_element(target: ast.Subscript, value: ast.expr) -> bool:
-    """Whether ``target = value`` is ``a[i] = x if c else y`` with ``a[i]`` itself one of
+def _keeps_element(target: ast.Subscript, value: ast.IfExp) -> bool:
+    """Whether ``target = value`` (``a[i] = x if c else y``) has ``a[i]`` itself as one of
     the arms (:meth:`FunctionTranslator._kept_select`)."""
-    if not isinstance(value, ast.IfExp):
-        return False
     key = ast.unparse(target)
     return any(ast.unparse(arm) == key for arm in (value.body, value.orelse))
-
-
-def _pure_arms(target: ast.Subscript, value: ast.IfExp) -> bool:
-    """Whether the arms of ``value`` read no other element than ``target``, call only
-    :data:`_PURE_CALLS` and branch nowhere: both may be evaluated, and the branch made a
-    select."""
-    key = ast.unparse(target)
-    for node in (n for arm in (value.body, value.orelse) for n in ast.walk(arm)):
-        if isinstance(node, ast.Subscript) and ast.unparse(node) != key:
-            return False
-        if isinstance(node, ast.Call) and _name(node.func) not in _PURE_CALLS:
-            return False
-        if isinstance(node, (ast.IfExp, ast.BoolOp, ast.NamedExpr)):
-            return False
-    return True
 
 
 class FunctionTranslator(FunctionLowering):
@@ -184,8 +163,10 @@ class FunctionTranslator(FunctionLowering):
             if isinstance(target.value, ast.Name):
                 self.written.add(target.value.id)
             indices = _index_nodes(target.slice)
-            if _keeps_element(target, value_node) and not any(
-                isinstance(i, ast.Slice) for i in indices
+            if (
+                isinstance(value_node, ast.IfExp)
+                and _keeps_element(target, value_node)
+                and not any(isinstance(i, ast.Slice) for i in indices)
             ):
                 ptr = self._element_ptr(arr, [self._index(i) for i in indices])
                 value, ty = self._kept_select(target, value_node, ptr, arr)
@@ -204,15 +185,15 @@ class FunctionTranslator(FunctionLowering):
         self, target: ast.Subscript, node: ast.IfExp, ptr: ir.Value, arr: _ArrayValue
     ) -> tuple[ir.Value, Type]:
         """``a[i] = x if c else a[i]`` (:func:`_keeps_element`): the element read once,
-        without a branch (it is stored just after, so reading it is safe); where the arms
-        allow (:func:`_pure_arms`) both evaluated and the branch made a select.
+        without a branch (it is stored just after, so reading it is safe), then the
+        conditional expression with that value for the element (a select where its arms
+        allow: :meth:`_speculatable`).
 
         The read goes through the address plus an offset LLVM cannot see to be zero: the
         same address would let LLVM 22's instruction selection fold the vector select and
         store into a masked store (``vmaskmovpd``), microcoded on AMD Zen 1-3: the lanes'
         per-step tracking, all such stores, took 16 % of the rk4 step there (an LLVM
         fault, llvm/llvm-project#213195, fixed after LLVM 22)."""
-        b = self.builder
         zero = self.opaque_zero
         if zero is None:
             zero = self.alloca_builder.asm(
@@ -220,18 +201,12 @@ class FunctionTranslator(FunctionLowering):
                 side_effect=False,
             )  # fmt: skip
             self.opaque_zero = zero
-        old = self._load_element(b.gep(ptr, [zero], inbounds=True), arr)
+        old = self._load_element(self.builder.gep(ptr, [zero], inbounds=True), arr)
         self.kept = (ast.unparse(target), *old)
         try:
-            if not _pure_arms(target, node):
-                return self._ifexp(node)
-            cond = self._condition(node.test)
-            v1, t1 = self._scalar(node.body)
-            v2, t2 = self._scalar(node.orelse)
+            return self._ifexp(node)
         finally:
             self.kept = None
-        ty = t1 if t1 == t2 else _unify(t1, t2)
-        return b.select(cond, self._cast(v1, t1, ty), self._cast(v2, t2, ty)), ty
 
     def _store_element(self, ptr: ir.Value, value: ir.Value, ty: Type, dtype: str) -> None:
         if isinstance(ty, (Array, Tuple)):
