@@ -92,11 +92,10 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
     return text
 
 
-def _blocks(
-    topo: Topology, nstage: int, lay: Layout, outputs: Signature = (), fixed_variant: bool = False
-) -> dict[str, str]:
+def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -> dict[str, str]:
+    fixed_step = lay.fixed_step  # the fixed-step kernel's blocks (templates.ERK_KERNEL)
     em = Emitter(topo)
-    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_variant
+    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_step
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -145,9 +144,9 @@ def _blocks(
     em.load_params(lambda k: at("P", k))
     block("load_params")
     b["invariant_rows"] = ""
-    if fixed_variant and "gdet" in lay.rows:
+    if fixed_step and "gdet" in lay.rows:
         b["invariant_rows"] = _ground_determinants(em, lay)
-    if fixed_variant:
+    if fixed_step:
         em.unit_rows = em.unit_normal_rows()
     cj = {k: j for j, k in enumerate(topo.contact_joints)}
     em.contact_source(lambda name, k: at(name, cj[k]))
@@ -169,7 +168,6 @@ def _blocks(
         vt = " + ".join(f"ah{j} * {at(f'kv{j}', i)}" for j in range(nstage))
         em.emit(f"q{i} = {at('q', i)} + ({qt})", f"v{i} = {at('v', i)} + ({vt})")
     block("load_stage")
-    fixed_step = "sc0" in lay.rows
     if fixed_step:  # the bodies' sin/cos computed before the stage (_stage_angles)
         em.angle_rows = lambda body: (at("scc", 2 * body), at("scc", 2 * body + 1))
     em.acceleration(t="ts")
@@ -533,8 +531,8 @@ def generate_source(
         parts.append(f"# outputs: {outputs!r}\n")
     nstage = RK4.nstage if tableau is None else tableau.nstage
     lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
-    fixed = variant in FIXED_STEP_VARIANTS
     lay = _layout(topo, variant, nstage, lmax, outputs)
+    fixed = lay.fixed_step
     if lmax > LMAX:
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
@@ -567,7 +565,7 @@ def generate_source(
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.
-    blocks = _blocks(topo, nstage, lay, outputs, fixed_variant=fixed)
+    blocks = _blocks(topo, nstage, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
         # the markers the copy and the dispatch replace (else the copy would silently be the

@@ -162,6 +162,7 @@ class Layout:
         ``otk``: mcchain.kernels.outputs), last; ``fixed_step``: the fixed-step kernel's,
         without rows kqc, kvc (its stages write their own rows: :meth:`stage_at`)."""
         self.lmax = LMAX if lmax is None else lmax
+        self.fixed_step = fixed_step
         self.rows: dict[str, int] = {}
         self.size = 0
         ncon1 = max(topo.ncon, 1)
