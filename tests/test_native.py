@@ -954,23 +954,19 @@ def keeps(X, nl, t, out):
 
 
 def _keeps_machine_code() -> str:
-    """The assembly of ``KEEPS``'s entry as the lane kernels are compiled."""
-    from mcchain.codegen.native import _codegen, _contract, _prefer_register_width, _target_data
-    from mcchain.codegen.native_expressions import Array
-    from mcchain.codegen.native_translate import ModuleTranslator
-
-    vector = Array("f64", 1, True)
-    codegen = _codegen()
-    translator = ModuleTranslator(KEEPS, "mcchain_test_keeps", _target_data(codegen))
-    translator.entry("keeps", (vector, "i64", "f64", vector), "mcchain_test_keeps_entry")
-    _prefer_register_width(translator.ir_module)
-    _contract(translator.ir_module)
+    """The assembly of ``KEEPS``'s entry as the lane kernels are compiled
+    (:meth:`NativeModule._compile`)."""
     from numba.core.compiler_lock import global_compiler_lock
 
+    from mcchain.codegen.native import _codegen
+    from mcchain.codegen.native_expressions import Array
+
+    vector = Array("f64", 1, True)
+    module = NativeModule(KEEPS, "mcchain_test_keeps_code")
     with global_compiler_lock:  # numba's codegen asserts it
-        library = codegen.create_library("mcchain_test_keeps")
-        library.add_ir_module(translator.ir_module)
-        library.finalize()
+        library = module._compile(
+            _codegen(), "keeps", (vector, "i64", "f64", vector), "mcchain_test_keeps_entry"
+        )
         return library.get_asm_str()
 
 

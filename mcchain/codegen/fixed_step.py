@@ -2,11 +2,9 @@
 
 Stage s writes its k = (q', v') = (v, q̈) once, into rows of its own (kq{s}, kv{s}; the stage
 loop's ``kw``); the next stage, and the turning loop before it, read the previous stage's
-rows (``kr``); the step's combine forms the increment from the rows of all the stages. The
-stage body stored each k twice before (into the current stage's rows and into an
-accumulated increment, ``aq·keep + b h k``): 2 ndof stores and 2 ndof multiply-adds a stage
-fewer now, the body being bound by its stores (benchmarks/results/roofline/reading.md,
-eighth stop).
+rows (``kr``); the step's combine forms the increment from the rows of all the stages, so
+the stage stores each k once (its body is bound by its stores:
+benchmarks/results/roofline/reading.md).
 """
 
 from __future__ import annotations
@@ -24,8 +22,7 @@ def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str
 
     The combine rounds as the loop kernel does (mcchain.kernels.explicit, uncontracted):
     each p_j = b_j h k_j rounded on its own, the sum from the first stage on, then the
-    state plus the sum, q + (((p0 + p1) + p2) + p3); the accumulation it replaces was
-    contracted by LLVM row by row, some rows rounded once, others twice. ``fma(b, k, 0.0)``
+    state plus the sum, q + (((p0 + p1) + p2) + p3), every row alike. ``fma(b, k, 0.0)``
     is that rounded product in a form LLVM cannot fuse into the sum (a product ``b * k``
     would be: ``fastmath={"contract"}``): b·k rounded, +0.0 where it is −0.0, as the loop
     kernel's 0.0 + b h k (tests/test_codegen_stage_rows.py).

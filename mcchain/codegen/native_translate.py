@@ -191,9 +191,9 @@ class FunctionTranslator(FunctionLowering):
 
         The read goes through the address plus an offset LLVM cannot see to be zero: the
         same address would let LLVM 22's instruction selection fold the vector select and
-        store into a masked store (``vmaskmovpd``), microcoded on AMD Zen 1-3: the lanes'
-        per-step tracking, all such stores, took 16 % of the rk4 step there (an LLVM
-        fault, llvm/llvm-project#213195, fixed after LLVM 22)."""
+        store into a masked store (``vmaskmovpd``), microcoded on AMD Zen 1-3 (an LLVM
+        fault, llvm/llvm-project#213195, fixed after LLVM 22; what it cost the lanes'
+        per-step tracking: benchmarks/results/roofline/reading.md, ninth stop)."""
         zero = self.opaque_zero
         if zero is None:
             zero = self.alloca_builder.asm(
