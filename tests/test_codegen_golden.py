@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "1c8911ca1e00dc5141a4b172135fb0d4a19cc682eae095220b27269b04d19ff5",
-        "rk4-projection": "fadd9e8b1c621f4cec469926e8b607e57e90e3f7872143018a7660e0afa1092e",
+        "rk4": "e202714bdd29a12b763153b07f581988a4881f0d174dfe8ae003745558159dd7",
+        "rk4-projection": "68ab320c40e9300f43ba9d26c5d98505555abbf8ecad9837472ff4feaa312433",
         "rk45": "36a402ea75b404f58d675d86ce8ea8f3e4a87fea0c2d7f2c4978e974b8ba4f66",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "25ed5f9527d004c000758a90732ae6736d3f7bf4eb2f9c528b64d2b17d87b8db",
-        "rk4-projection": "a6cfff082ef6b2e2ca7ed65b5f1503589550b0930fc53a2102c438a5f72b3ffa",
+        "rk4": "6839d3afe61c25150deb34ff4969e90c5c840537812aba6aef2b0f9c9096815c",
+        "rk4-projection": "de2151125b0019f71c6dedf0cd706845582ebf9df0735f8b788b0d9d8c6c217b",
         "rk45": "671fcd454ce6003b7090bd11d78d4f75466bae4ecade540c88f742f583f82dfb",
     },
     "fourbar-clearance-auto": {
         "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
-        "rk4": "8d0603fc49733f6fc9a520f0df4f5b311dbb6a88847230e5557d687de2a53623",
-        "rk4-projection": "f3cc1f8ca1ec4179f1551e90057d6ada4ff0d19b517654e4ac03db0abd4dfb95",
+        "rk4": "4d91dc13954b7a3b9665cd134ca5bfb2004ffd7b4abd0c048bbdc60e2f7c054d",
+        "rk4-projection": "cd0a45de4f30eacace8646b616cdd83b268b042b7dfc4c4e26a7f589cb32584d",
         "rk45": "bfbfde9efb85c3977d90dc9c659db8efafddd79cfca3777ce4d202b74a99075f",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "5e688b51ce22c936d0c3411b79f087bc331e2b87ba64826784294435a2aadb85",
-        "rk4-projection": "79662b602e4fac1ccfdf6743e6c7f2d9dbf0579b7b0e816251c1594879fdb5a6",
+        "rk4": "ab4abfdde8bca1671e9fee4aa1e309aca8ed26881057c0577449cf6e7f71f96e",
+        "rk4-projection": "1ddd4d7353ba1d2a2f2b0d29fa13aa06133f3c7bd1ef559fc66c333dba2a2a5f",
         "rk45": "018514d4779ff3f7e7a5b9faf8653af0bd78621d05803bb7a0bad1ac065198cb",
     },
 }

@@ -9,6 +9,7 @@ dt = 1e-4.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
@@ -117,6 +118,22 @@ def test_output_times__output_dt_no_multiple_of_dt_is_refused_in_one_line():
     with pytest.raises(SceneError, match=r"^simulate\.output_dt: must be a whole multiple"):
         grid(T_TURN, "rk4", output_dt=2.5e-4)
     assert grid(T_TURN, "rk45", output_dt=2.5e-4).time[-1] == T_TURN  # adaptive: allowed
+
+
+def test_output_times__a_step_within_the_rounding_of_t_is_refused_in_one_line():
+    """Fixed steps feed every start to the peak tracking, whose times must increase: a dt
+    within STEP_ULPS ulps of t_end is refused (adaptive methods only start with it); one just
+    past it gives strictly increasing starts, across an output time too."""
+    from mcchain.errors import SceneError
+    from mcchain.solvers.grid import STEP_ULPS
+
+    t_end = 1.0
+    with pytest.raises(SceneError, match=r"^simulate\.dt: .* within the rounding of the time"):
+        grid(t_end, "rk4", dt=STEP_ULPS * math.ulp(t_end), output_dt=1e6 * math.ulp(t_end))
+    assert grid(t_end, "rk45", dt=STEP_ULPS * math.ulp(t_end), output_dt=0.5).time[-1] == t_end
+    g = grid(t_end, "rk4", dt=(STEP_ULPS + 1) * math.ulp(t_end), output_dt=0.25)
+    starts = [g.step_time(n) for n in range(g.nstep - 3, g.nstep + 1)]
+    assert all(b > a for a, b in itertools.pairwise(starts))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -57,6 +57,11 @@ t_end, below t_end is t_end: the gap is rounding (0.3 / 1e-4 = 2999.999999999999
 interval, and no step that short is taken."""
 
 
+STEP_ULPS = 8
+"""A fixed step is longer than this many ulps of t_end: the rounding of ``time[k] + j · dt``
+(:meth:`OutputGrid.step_time`) is at most 2 ulps of t_end, so step starts strictly increase."""
+
+
 def output_times(settings: Simulate) -> OutputGrid:
     """The output grid of ``settings`` and its fixed-step schedule (see :class:`OutputGrid`)."""
     ratio = settings.output_step / settings.dt
@@ -69,6 +74,15 @@ def output_times(settings: Simulate) -> OutputGrid:
         )
     every = max(every, 1)
     t_end, dt, interval = float(settings.t_end), float(settings.dt), float(settings.output_step)
+    # Every step of a fixed-step method starts after the one before (the kernels feed each
+    # start to the peak tracking, which needs increasing times): dt longer than the rounding
+    # of t near t_end (the step before an output time is at least dt / 2 long: ``every`` is
+    # the nearest whole number of steps).
+    if fixed and dt <= STEP_ULPS * math.ulp(t_end):
+        raise SceneError(
+            f"simulate.dt: {dt:g} s is within the rounding of the time at t_end = {t_end:g} s "
+            f"(at most {STEP_ULPS} ulps); take a larger dt"
+        )
     below = t_end - GRID_RTOL * t_end  # a point at or past this is t_end
     # count: the grid points k · output_dt (k < count) strictly below t_end
     count = max(1, math.floor(t_end / interval) + 1)
