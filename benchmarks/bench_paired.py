@@ -11,12 +11,17 @@ two calls (the order alternates between rounds); the median of the rounds is the
 across processes the same tree's best-of times spread 53-64 ns on the shared machine,
 which hides a few per cent, and under load single rounds spread ±10-25 %.
 
+Each text is compiled at ``--placements`` code placements (never-run lines inserted at the
+top of ``erk_run`` shift the machine code after them) and a round times all of them: where
+the code falls alone moved the rk4 kernel by -4 % to +4 % on a Zen 3 (reading.md, tenth
+stop), as much as the edits measured, so a ratio of one placement each can be its artefact.
+
 Also the bits: every output array of the two texts compared (NaN at the same places; per
 array that differs, its largest difference relative to its largest magnitude and the
 largest distance of an element in ulps of itself).
 
-    python benchmarks/bench_paired.py --before main [--after .] [--rounds 100] [--samples 256]
-        [--steps 2000]
+    python benchmarks/bench_paired.py --before main [--after .] [--rounds 30] [--samples 256]
+        [--steps 2000] [--placements 4]
 
 Prints its figures (the readings of them: benchmarks/results/roofline/reading.md).
 """
@@ -93,6 +98,23 @@ def _captured_call(samples: int, steps: int) -> tuple[int, tuple[Any, ...]]:
     return captured[0]
 
 
+PLACEMENT_ANCHOR = "    nsample = Q0.shape[1]\n"
+"""The line of ``erk_run`` after which :func:`_placed` inserts its never-run lines."""
+
+
+def _placed(text: str, k: int) -> str:
+    """``text`` with the machine code of ``erk_run`` shifted: 2k lines under a condition
+    that never holds (no sample count is negative) after :data:`PLACEMENT_ANCHOR`; ``text``
+    itself for k = 0."""
+    if k == 0:
+        return text
+    assert text.count(PLACEMENT_ANCHOR) == 1, "erk_run's first line moved"
+    lines = "".join(
+        f"        out_pk[0, 0] = out_pk[0, 0] * {1.0 + i / 7:.6f} + {i}.5\n" for i in range(2 * k)
+    )
+    return text.replace(PLACEMENT_ANCHOR, f"{PLACEMENT_ANCHOR}    if nsample < 0:\n{lines}")
+
+
 def _own_lanes(text: str, args: tuple[Any, ...]) -> tuple[int, tuple[Any, ...]]:
     """The lane groups and ``args`` with the lane count of ``text`` (its ``lmax``, read from
     its clamp ``lanes = max(1, min(lanes, N))``): a what-if with other rows than this tree's
@@ -159,9 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--before", required=True, help="a folder, a commit or a .py text")
     parser.add_argument("--after", default=str(REPO), help="a folder, a commit or a .py text")
-    parser.add_argument("--rounds", type=int, default=100)
+    parser.add_argument("--rounds", type=int, default=30)
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument("--placements", type=int, default=4, help="code placements per text")
     args = parser.parse_args(argv)
     import numba
 
@@ -170,28 +193,37 @@ def main(argv: list[str] | None = None) -> int:
     numba.set_num_threads(1)
     with tempfile.TemporaryDirectory(prefix="mcchain-paired-") as scratch:
         texts = [_text(tree, Path(scratch)) for tree in (args.before, args.after)]
-    modules = [NativeModule(text, f"paired_{i}") for i, text in enumerate(texts)]
+    places = range(max(1, args.placements))
+    modules = [
+        [NativeModule(_placed(text, k), f"paired_{i}_{k}") for k in places]
+        for i, text in enumerate(texts)
+    ]
     _, captured = _captured_call(args.samples, args.steps)
     calls = [_own_lanes(text, captured) for text in texts]
-    outputs = [_call(m, *call)[1] for m, call in zip(modules, calls, strict=True)]  # compiled; bits
+    outputs = [_call(m[0], *call)[1] for m, call in zip(modules, calls, strict=True)]  # bits
     notes, same_nan = _bits(*outputs, _array_names(texts[1], captured))
+    for i in (0, 1):
+        for k in places[1:]:
+            _call(modules[i][k], *calls[i])  # compiled before the rounds
     units = args.samples * (args.steps + 1)
-    ratios, times = [], [[], []]
+    times = np.zeros((args.rounds, 2, len(places)))  # ns per instance-step
     for r in range(args.rounds):
-        order = (0, 1) if r % 2 == 0 else (1, 0)
-        spent = {i: _call(modules[i], *calls[i])[0] for i in order}
-        for i in (0, 1):
-            times[i].append(spent[i] / units * 1e9)
-        ratios.append(spent[1] / spent[0])
+        for k in places:
+            for i in (0, 1) if (r + k) % 2 == 0 else (1, 0):
+                times[r, i, k] = _call(modules[i][k], *calls[i])[0] / units * 1e9
+    ratios = times[:, 1, :].sum(axis=1) / times[:, 0, :].sum(axis=1)
     print(f"`python benchmarks/bench_paired.py --before {args.before} --after {args.after} "
-          f"--rounds {args.rounds} --samples {args.samples} --steps {args.steps}`; "
-          f"load average {os.getloadavg()[0]:.1f}\n")  # fmt: skip
-    print("| text | ns per instance-step (median, min) |")
-    print("|---|---|")
-    for name, t in zip(("before", "after"), times, strict=True):
-        print(f"| {name} | {np.median(t):.1f}, {min(t):.1f} |")
+          f"--rounds {args.rounds} --samples {args.samples} --steps {args.steps} "
+          f"--placements {len(places)}`; load average {os.getloadavg()[0]:.1f}\n")  # fmt: skip
+    print("| text | ns per instance-step at each placement (median of the rounds) | min |")
+    print("|---|---|---|")
+    for i, name in enumerate(("before", "after")):
+        medians = ", ".join(f"{x:.1f}" for x in np.median(times[:, i, :], axis=0))
+        print(f"| {name} | {medians} | {times[:, i, :].min():.1f} |")
+    quartiles = np.percentile(ratios, [25, 75])
     print(
-        f"\npaired after/before: median {np.median(ratios):.3f} (rounds "
+        f"\npaired after/before (all placements of a round): median {np.median(ratios):.3f}, "
+        f"quartiles {quartiles[0]:.3f}-{quartiles[1]:.3f} (rounds "
         f"{', '.join(f'{x:.3f}' for x in ratios)})"
     )
     print(f"bits: {'; '.join(notes) or 'identical'}; NaN at the same places: {same_nan}")
