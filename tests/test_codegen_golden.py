@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "e202714bdd29a12b763153b07f581988a4881f0d174dfe8ae003745558159dd7",
         "rk4-projection": "68ab320c40e9300f43ba9d26c5d98505555abbf8ecad9837472ff4feaa312433",
-        "rk45": "36a402ea75b404f58d675d86ce8ea8f3e4a87fea0c2d7f2c4978e974b8ba4f66",
+        "rk45": "cdf2a86bafd939ddd5906236f105b0e194d3941256c289bc2cf7c90b5cf3b8cc",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "6839d3afe61c25150deb34ff4969e90c5c840537812aba6aef2b0f9c9096815c",
         "rk4-projection": "de2151125b0019f71c6dedf0cd706845582ebf9df0735f8b788b0d9d8c6c217b",
-        "rk45": "671fcd454ce6003b7090bd11d78d4f75466bae4ecade540c88f742f583f82dfb",
+        "rk45": "57558932c4e6850d3300d283a176517ebe58445e27ff0f12e135d267602cc94f",
     },
     "fourbar-clearance-auto": {
         "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
         "rk4": "4d91dc13954b7a3b9665cd134ca5bfb2004ffd7b4abd0c048bbdc60e2f7c054d",
         "rk4-projection": "cd0a45de4f30eacace8646b616cdd83b268b042b7dfc4c4e26a7f589cb32584d",
-        "rk45": "bfbfde9efb85c3977d90dc9c659db8efafddd79cfca3777ce4d202b74a99075f",
+        "rk45": "47708293dc5f7e747562a0c8f81f48eda81287b82843651ab16c4657469a3652",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "ab4abfdde8bca1671e9fee4aa1e309aca8ed26881057c0577449cf6e7f71f96e",
         "rk4-projection": "1ddd4d7353ba1d2a2f2b0d29fa13aa06133f3c7bd1ef559fc66c333dba2a2a5f",
-        "rk45": "018514d4779ff3f7e7a5b9faf8653af0bd78621d05803bb7a0bad1ac065198cb",
+        "rk45": "02b6a6bb80b604cffd01af904dfa42b2162604ab3d1441c50e84c7fe16bd0da7",
     },
 }
 

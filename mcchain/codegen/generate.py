@@ -33,6 +33,7 @@ from mcchain.codegen.layout import (
     LMAX,
     OUTPUT_ROW_MEANINGS,
     Layout,
+    output_values,
     row_length,
     row_meanings,
     target_cpu,
@@ -299,6 +300,13 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
         ]
     em.emit(*store)
     block("store_outputs")
+    if "ost" in lay.rows:  # the adaptive kernel's: staged for all lanes, stored for some
+        pairs = [line.split(" = ", 1) for line in store]
+        assert len(pairs) == output_values(topo), "layout.output_values"
+        em.emit(*(f"{at('ost', i)} = {value}" for i, (_, value) in enumerate(pairs)))
+        block("stage_outputs")
+        em.emit(*(f"{target} = {at('ost', i)}" for i, (target, _) in enumerate(pairs)))
+        block("store_staged_outputs")
     em.projection_terms(t="tp")
     block("projection")
     # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).

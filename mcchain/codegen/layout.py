@@ -107,6 +107,16 @@ OUTPUT_ROW_MEANINGS = """\
 """
 """Legend of the output rows, written only into modules that have them."""
 
+
+def output_values(topo: Topology) -> int:
+    """Numbers of one lane's history point: q and v, each joint's force (x, y) and contact
+    force, each driver's torque, the constraint error and the energy, and each contact-law
+    joint's penetration and mode (the stores of :func:`mcchain.codegen.generate`'s
+    ``store_outputs`` block, in its order)."""
+    ncj = len(topo.contact_joints)
+    return 2 * topo.ndof + 3 * topo.njoint + topo.ndriver + 2 + 2 * ncj
+
+
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
     "nim", "pkd", "tff", "tse",
@@ -138,7 +148,8 @@ ADAPTIVE_ROW_MEANINGS = """\
 # is on an output time (its outputs are written after the lanes' checks), itw that output's
 # index; smp the sample in the lane; fsm 1 where its first stage is to compute (a fresh
 # sample, a re-seat); dne 1 where its sample is finished (the lane takes the next one); acc 1
-# where its step was accepted (its new state is copied in after the lanes' acceptance).
+# where its step was accepted (its new state is copied in after the lanes' acceptance); ost
+# the lane's history point (every lane's computed at once, the landed lanes' then stored).
 """
 """Legend of the rows only the adaptive kernel has."""
 
@@ -197,6 +208,7 @@ class Layout:
         if adaptive:
             for name in ("en", "lnd", "itw", "smp", "fsm", "dne", "acc"):
                 self.add(name, 1)
+            self.add("ost", output_values(topo))
         else:
             for name in ("alv", "ncl", "att"):
                 self.add(name, 1)
