@@ -216,6 +216,31 @@ def test_retry__the_ladder_on_known_failures() -> None:
     )
 
 
+def test_retry__an_attempt_the_grid_refuses_is_skipped() -> None:
+    """rk4 at a dt of 500 ulps of t_end: dt / 100 is within the grid's STEP_ULPS, so that
+    attempt is refused (SceneError) and skipped; the samples go on to radau."""
+    import math
+
+    from mcchain.errors import SceneError
+    from mcchain.solvers.grid import output_times
+
+    tried = []
+
+    def solve(model: FakeModel, scene: FakeScene) -> dict[str, np.ndarray]:
+        output_times(scene.simulate)  # the grid's refusal, as simulate meets it
+        tried.append(scene.simulate.dt if scene.simulate.method == "rk4" else "radau")
+        return fake_solve(model, scene)
+
+    sim = Simulate(t_end=1.0, dt=500 * math.ulp(1.0), output_dt=0.5, method="rk4")
+    with pytest.raises(SceneError):
+        output_times(sim.model_copy(update={"dt": sim.dt / 100}))
+    scene, model = FakeScene(sim), FakeModel(np.arange(4))
+    first = fake_solve(model, scene)
+    out = RetryFailed(solve)(model, scene, dict(first))
+    assert tried == [pytest.approx(sim.dt / 10, rel=1e-14), "radau"]
+    assert out[SOLVED_BY].tolist()[3] == RADAU
+
+
 def test_retry__nothing_failed_costs_no_solve() -> None:
     def never(model: Any, scene: Any) -> dict[str, np.ndarray]:
         raise AssertionError("no sample failed: nothing to solve again")

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from mcchain.errors import SceneError
 from mcchain.status import (
     ASSEMBLY_FAILED,
     CONTACT_STEP_TOO_LARGE,
@@ -140,7 +141,10 @@ class RetryFailed:
             per_sample = [k for k in outputs if k not in AXIS_OUTPUTS]
             result = {k: np.array(outputs[k], copy=True) for k in per_sample}
             for value, sim, _ in attempts(scene.simulate):
-                fresh = solve(model.take(todo), scene.model_copy(update={"simulate": sim}))
+                try:
+                    fresh = solve(model.take(todo), scene.model_copy(update={"simulate": sim}))
+                except SceneError:  # settings the grid refuses (a dt within t's rounding)
+                    continue
                 if STEPS_TAKEN in result and STEPS_TAKEN in fresh:
                     result[STEPS_TAKEN][todo] += np.asarray(fresh[STEPS_TAKEN])
                 solved = (np.asarray(fresh["status"]) & FAILURE_BITS) == 0
