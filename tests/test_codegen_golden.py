@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
         "rk4": "e202714bdd29a12b763153b07f581988a4881f0d174dfe8ae003745558159dd7",
         "rk4-projection": "68ab320c40e9300f43ba9d26c5d98505555abbf8ecad9837472ff4feaa312433",
-        "rk45": "cdf2a86bafd939ddd5906236f105b0e194d3941256c289bc2cf7c90b5cf3b8cc",
+        "rk45": "136d0ebd629161f53d65cf45f9ee9f726fa43006c7ac4ee867b54f917e1c1d6f",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
         "rk4": "6839d3afe61c25150deb34ff4969e90c5c840537812aba6aef2b0f9c9096815c",
         "rk4-projection": "de2151125b0019f71c6dedf0cd706845582ebf9df0735f8b788b0d9d8c6c217b",
-        "rk45": "57558932c4e6850d3300d283a176517ebe58445e27ff0f12e135d267602cc94f",
+        "rk45": "c74ea37fde5d8c4fd18c567a94b852f6d6acfe13cd31f3a31e3463dd496f7e9a",
     },
     "fourbar-clearance-auto": {
         "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
         "rk4": "4d91dc13954b7a3b9665cd134ca5bfb2004ffd7b4abd0c048bbdc60e2f7c054d",
         "rk4-projection": "cd0a45de4f30eacace8646b616cdd83b268b042b7dfc4c4e26a7f589cb32584d",
-        "rk45": "47708293dc5f7e747562a0c8f81f48eda81287b82843651ab16c4657469a3652",
+        "rk45": "7ff35210fa68df9175726d5162fd97b10c00bc1c65258e493eb62d957e687a98",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
         "rk4": "ab4abfdde8bca1671e9fee4aa1e309aca8ed26881057c0577449cf6e7f71f96e",
         "rk4-projection": "1ddd4d7353ba1d2a2f2b0d29fa13aa06133f3c7bd1ef559fc66c333dba2a2a5f",
-        "rk45": "02b6a6bb80b604cffd01af904dfa42b2162604ab3d1441c50e84c7fe16bd0da7",
+        "rk45": "cb9442ff51722e226ce74b5e2af8a9089da8f59e8bc55b0435213a28388180a7",
     },
 }
 

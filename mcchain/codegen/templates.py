@@ -509,9 +509,9 @@ def group_outputs_landed_SUFFIX(W, nl, out_q, out_v, out_jf, out_cf, out_dtq, ou
                                 out_en@CT):
     """Outputs of the lanes flagged ``lnd`` (1.0), each at its own time (row ``tl``) into its
     sample's (row ``smp``) history index (row ``itw``): every lane computed at once into rows
-    ``ost`` (a vectorised loop: with the stores to the histories in it, a branch on the flag
-    and a scatter, it ran lane by lane, 9 % of the rk45 step on the slider-crank), then the
-    flagged ones stored, lane by lane."""
+    ``ost`` (a vectorised loop; with the stores to the histories in it, a branch on the flag
+    and a scatter, it ran lane by lane: reading.md, tenth stop), then the flagged ones
+    stored, lane by lane."""
     for l in range(nl):  # lanes: independent
         t_now = @[tl]
         @@load_params

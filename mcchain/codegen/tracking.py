@@ -78,8 +78,8 @@ def peak_blocks(topo: Topology, lay: Layout) -> dict[str, str]:
     def feed(lamrow: str, t: str, tested: bool) -> str:
         """The feed of every quantity at time ``t``; ``tested``: a lane whose time is not
         after the last one it fed (a rejected step's repeated state) keeps its rows; untested
-        (the fixed step's feed, whose times increase), every lane feeds: the per-lane test
-        and its selects cost 4-6 % of the rk4 step (reading.md, tenth stop)."""
+        (the fixed step's feed, whose times increase), every lane feeds, without the per-lane
+        test and its selects (reading.md, tenth stop)."""
         lines = [f"cnt = {at('pkt', 4)}", f"tfeed = {t}"]
         if tested:
             lines.append(f"fresh = cnt == 0.0 or tfeed > {at('pkt', 3)}")
