@@ -25,6 +25,7 @@ from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.fixed_step import FIXED_STEP_VARIANTS, fixed_step_blocks
+from mcchain.codegen.history import history_stores
 from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
@@ -33,7 +34,6 @@ from mcchain.codegen.layout import (
     LMAX,
     OUTPUT_ROW_MEANINGS,
     Layout,
-    output_values,
     row_length,
     row_meanings,
     target_cpu,
@@ -281,28 +281,10 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
         block(name)
     em.outputs(t="t_now")
     block("outputs")
-    store = []
-    for i in range(ndof):
-        store += [f"out_q[sl, it, {i}] = q{i}", f"out_v[sl, it, {i}] = v{i}"]
-    for k in range(topo.njoint):
-        store += [
-            f"out_jf[sl, it, {2 * k}] = jfx{k}",
-            f"out_jf[sl, it, {2 * k + 1}] = jfy{k}",
-            f"out_cf[sl, it, {k}] = cf{k}",
-        ]
-    store += [f"out_dtq[sl, it, {d}] = dtq{d}" for d in range(topo.ndriver)]
-    # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
-    store += ["out_cerr[sl, it] = phimax + energy * 0.0", "out_en[sl, it] = energy"]
-    for k, j in cj.items():
-        store += [
-            f"out_ct[sl, it, {2 * j}] = pen{k}",
-            f"out_ct[sl, it, {2 * j + 1}] = mode{k}",
-        ]
-    em.emit(*store)
+    pairs = history_stores(topo)
+    em.emit(*(f"{target} = {value}" for target, value in pairs))
     block("store_outputs")
     if "ost" in lay.rows:  # the adaptive kernel's: staged for all lanes, stored for some
-        pairs = [line.split(" = ", 1) for line in store]
-        assert len(pairs) == output_values(topo), "layout.output_values"
         em.emit(*(f"{at('ost', i)} = {value}" for i, (_, value) in enumerate(pairs)))
         block("stage_outputs")
         em.emit(*(f"{target} = {at('ost', i)}" for i, (target, _) in enumerate(pairs)))

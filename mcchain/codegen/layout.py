@@ -10,6 +10,7 @@ run-time value, so the loop is vectorised rather than unrolled.
 
 from __future__ import annotations
 
+from mcchain.codegen.history import history_stores
 from mcchain.codegen.topology import Topology
 from mcchain.codes import OUTPUT_WIDTH
 from mcchain.kernels.tableaux import PEAK_CLOCK, PEAK_WIDTH
@@ -108,15 +109,6 @@ OUTPUT_ROW_MEANINGS = """\
 """Legend of the output rows, written only into modules that have them."""
 
 
-def output_values(topo: Topology) -> int:
-    """Numbers of one lane's history point: q and v, each joint's force (x, y) and contact
-    force, each driver's torque, the constraint error and the energy, and each contact-law
-    joint's penetration and mode (the stores of :func:`mcchain.codegen.generate`'s
-    ``store_outputs`` block, in its order)."""
-    ncj = len(topo.contact_joints)
-    return 2 * topo.ndof + 3 * topo.njoint + topo.ndriver + 2 + 2 * ncj
-
-
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
     "nim", "pkd", "tff", "tse",
@@ -208,7 +200,7 @@ class Layout:
         if adaptive:
             for name in ("en", "lnd", "itw", "smp", "fsm", "dne", "acc"):
                 self.add(name, 1)
-            self.add("ost", output_values(topo))
+            self.add("ost", len(history_stores(topo)))
         else:
             for name in ("alv", "ncl", "att"):
                 self.add(name, 1)

@@ -1,0 +1,33 @@
+"""A lane's history point: the numbers the lane kernels write at each output time, in one
+place for the layout that stages them (the adaptive kernel's rows ``ost``) and the code that
+stores them (the ``store_outputs`` blocks of :mod:`mcchain.codegen.generate`)."""
+
+from __future__ import annotations
+
+from mcchain.codegen.topology import Topology
+
+
+def history_stores(topo: Topology) -> list[tuple[str, str]]:
+    """The history point of lane ``l`` at output index ``it`` of sample ``sl``, as
+    ``(target, value)`` pairs: a history element and the emitter's output it takes. In
+    order: q and v of each coordinate, each joint's force (x, y) and contact force, each
+    driver's torque, the constraint error and the energy, each contact-law joint's
+    penetration and mode."""
+    stores = []
+    for i in range(topo.ndof):
+        stores += [(f"out_q[sl, it, {i}]", f"q{i}"), (f"out_v[sl, it, {i}]", f"v{i}")]
+    for k in range(topo.njoint):
+        stores += [
+            (f"out_jf[sl, it, {2 * k}]", f"jfx{k}"),
+            (f"out_jf[sl, it, {2 * k + 1}]", f"jfy{k}"),
+            (f"out_cf[sl, it, {k}]", f"cf{k}"),
+        ]
+    stores += [(f"out_dtq[sl, it, {d}]", f"dtq{d}") for d in range(topo.ndriver)]
+    # energy · 0: NaN for a killed lane's NaN state (max() in phimax drops a NaN), 0 otherwise.
+    stores += [("out_cerr[sl, it]", "phimax + energy * 0.0"), ("out_en[sl, it]", "energy")]
+    for j, k in enumerate(topo.contact_joints):
+        stores += [
+            (f"out_ct[sl, it, {2 * j}]", f"pen{k}"),
+            (f"out_ct[sl, it, {2 * j + 1}]", f"mode{k}"),
+        ]
+    return stores
