@@ -132,8 +132,9 @@ def test_output_times__a_step_within_the_rounding_of_t_is_refused_in_one_line():
         grid(t_end, "rk4", dt=STEP_ULPS * math.ulp(t_end), output_dt=1e6 * math.ulp(t_end))
     assert grid(t_end, "rk45", dt=STEP_ULPS * math.ulp(t_end), output_dt=0.5).time[-1] == t_end
     g = grid(t_end, "rk4", dt=(STEP_ULPS + 1) * math.ulp(t_end), output_dt=0.25)
-    starts = [g.step_time(n) for n in range(g.nstep - 3, g.nstep + 1)]
-    assert all(b > a for a, b in itertools.pairwise(starts))
+    for around in (2 * g.every, g.nstep - 2):  # the output time 0.5, then t_end
+        starts = [g.step_time(n) for n in range(around - 2, min(around + 3, g.nstep + 1))]
+        assert all(b > a for a, b in itertools.pairwise(starts))
 
 
 # ---------------------------------------------------------------------------------------------
