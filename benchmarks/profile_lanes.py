@@ -1,13 +1,16 @@
-"""Where the rk4 lanes' step goes, measured: cpu-clock samples on the machine code.
+"""Where the lanes' step goes, measured: cpu-clock samples on the machine code.
 
-    python benchmarks/profile_lanes.py [--text FILE.py] [--seconds 15] [--top 12]
-        [--disassembly FILE]
+    python benchmarks/profile_lanes.py [--kernel rk4|rk45] [--text FILE.py] [--seconds 15]
+        [--top 12] [--disassembly FILE]
 
-The text (default: this tree's generated rk4 lane text of bench_paired's scene, the
-clearance double pendulum) is compiled (:class:`mcchain.codegen.native.NativeModule`, its
-object code cached in a scratch folder) and its ``erk_run`` called on bench_paired's
-captured arguments (256 samples, 2,000 steps, 1 thread) for ``--seconds`` under
-``perf record -e cpu-clock`` (a software clock: this VM has no hardware counters). Each
+The kernel: ``rk4`` (default), the rk4 lanes' ``erk_run`` on bench_paired's scene, the
+clearance double pendulum (its captured arguments: 256 samples, 2,000 steps); ``rk45``, the
+rk45 lanes' ``adaptive_run`` on the Flores slider-crank (``configs/slider-crank-flores.toml``
+as configured, 512 samples, 4 ms: bench_speed's ``adaptive`` run). The text (default: this
+tree's generated text of that kernel) is compiled (:class:`mcchain.codegen.native.
+NativeModule`, its object code cached in a scratch folder) and its entry called on the
+captured arguments (1 thread) for ``--seconds`` under ``perf record -e cpu-clock`` (a
+software clock: this VM has no hardware counters). Each
 sample's instruction address is placed in the entry's object code (read back from the
 cache file and disassembled with ``objdump``), and the samples are summed per basic block:
 the table gives each hot block's share of the kernel's samples, its size in instructions
@@ -33,26 +36,77 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 _RUN = """
-import json, sys, time
+import json, os, sys, time
 sys.path.insert(0, {bench!r})
 import numba
-import bench_paired as bp
+import profile_lanes as pl
 from mcchain.codegen import native
 from mcchain.codegen.native import NativeModule
 numba.set_num_threads(1)
+entry, groups, args, source = pl.captured({kernel!r})
+if not os.path.exists({text!r}):
+    open({text!r}, "w").write(source)  # this tree's text
 module = NativeModule(open({text!r}).read(), "profiled")
-groups, args = bp._captured_call(256, 2000)
-bp._call(module, groups, args)  # compiled (or loaded) before the clock
+pl.call(module, entry, groups, args)  # compiled (or loaded) before the clock
 print(json.dumps(native._LOADED), flush=True)
 t0 = time.time()
 while time.time() - t0 < {seconds}:
-    bp._call(module, groups, args)
+    pl.call(module, entry, groups, args)
 """
+
+
+def captured(kernel: str) -> tuple[str, int, tuple[Any, ...], str]:
+    """The entry, lane groups, arguments and this tree's text of ``kernel``'s call (see the
+    module docstring)."""
+    import bench_paired
+
+    if kernel == "rk4":
+        groups, args = bench_paired._captured_call(256, 2000)
+        with tempfile.TemporaryDirectory(prefix="mcchain-profile-text-") as scratch:
+            source = bench_paired._text(str(REPO), Path(scratch))
+        return "erk_run", groups, args, source
+    import numpy as np
+
+    from mcchain.codegen import generate
+    from mcchain.scene import compile_model, load_scene_text
+    from mcchain.solvers import simulate as simulate_module
+    from mcchain.solvers.statics import assemble
+
+    text = (REPO / "configs" / "slider-crank-flores.toml").read_text()
+    scene = load_scene_text(text.replace("count = 64", "count = 512"))
+    model = compile_model(scene)
+    start = assemble(model)
+    sim = dict(scene.simulate.model_dump(), t_end=0.004, kernels="lanes", method="rk45")
+    calls: list[tuple[int, tuple[Any, ...]]] = []
+    real = simulate_module.over_samples
+
+    def capture(kernel: Any, count: int, *args: Any, **kwargs: Any) -> None:
+        calls.append((count, tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)))
+        real(kernel, count, *args, **kwargs)
+
+    simulate_module.over_samples = capture
+    try:
+        simulate_module.simulate(model, sim, start.q, start.v, status=start.status)
+    finally:
+        simulate_module.over_samples = real
+    (source,) = (m.source for m in generate._MODULES.values() if "def adaptive_run(" in m.source)
+    groups, args = calls[-1]
+    return "adaptive_run", groups, args, source
+
+
+def call(module: Any, entry: str, groups: int, args: tuple[Any, ...]) -> None:
+    """``entry`` of ``module`` over every lane group, on fresh copies of ``args``."""
+    import numpy as np
+
+    fresh = [np.copy(a) if isinstance(a, np.ndarray) else a for a in args]
+    getattr(module, entry)(0, groups, *fresh)
+
 
 _INSTRUCTION = re.compile(r"\s+([0-9a-f]+):\t((?:[0-9a-f]{2} )+)\s*\t(\S+)\s*(.*)")
 
@@ -105,6 +159,7 @@ def _kind(op: str, arg: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--kernel", choices=("rk4", "rk45"), default="rk4")
     parser.add_argument("--text", default=None, help="a generated text (.py); default: this tree's")
     parser.add_argument("--seconds", type=float, default=15.0)
     parser.add_argument("--top", type=int, default=12)
@@ -112,17 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="mcchain-profile-") as scratch:
         work = Path(scratch)
-        text = work / "text.py"
+        text = work / "text.py"  # written by the first run when not given
         if args.text:
             text.write_text(Path(args.text).read_text())
-        else:
-            import bench_paired
-
-            text.write_text(bench_paired._text(str(REPO), work))
         env = dict(os.environ, MCCHAIN_CACHE_DIR=str(work / "cache"))
-        run = _RUN.format(bench=str(Path(__file__).parent), text=str(text), seconds=0)
+        bench = str(Path(__file__).parent)
+        run = _RUN.format(bench=bench, kernel=args.kernel, text=str(text), seconds=0)
         subprocess.run([sys.executable, "-c", run], env=env, check=True, capture_output=True)
-        run = _RUN.format(bench=str(Path(__file__).parent), text=str(text), seconds=args.seconds)
+        run = _RUN.format(bench=bench, kernel=args.kernel, text=str(text), seconds=args.seconds)
         data = work / "perf.data"
         out = subprocess.run(
             ["perf", "record", "-q", "-e", "cpu-clock", "-F", "10000", "-o", str(data),
@@ -131,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         )  # fmt: skip
         loaded = json.loads(out.stdout.splitlines()[0])
         ((symbol, address),) = ((k, v) for k, v in loaded.items() if k.startswith("profiled."))
-        (cached,) = (work / "cache" / "native").glob("profiled-erk_run-*.bin")
+        entry = "erk_run" if args.kernel == "rk4" else "adaptive_run"
+        (cached,) = (work / "cache" / "native").glob(f"profiled-{entry}-*.bin")
         from mcchain.codegen.native import _object_code
 
         objfile = work / "entry.o"
@@ -148,8 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     samples = collections.Counter(int(ip, 16) - address for ip in ips)
     end = instructions[-1][0] + instructions[-1][1]
     inside = sum(n for off, n in samples.items() if 0 <= off < end)
-    print(f"`python benchmarks/profile_lanes.py --seconds {args.seconds:g}`"
-          f"{' --text ' + args.text if args.text else ''}: {len(ips):,} samples, "
+    print(f"`python benchmarks/profile_lanes.py --kernel {args.kernel} --seconds {args.seconds:g}"
+          f"{' --text ' + args.text if args.text else ''}`: {len(ips):,} samples, "
           f"{inside:,} in {symbol} ({100 * inside / max(len(ips), 1):.0f} %); load average "
           f"{os.getloadavg()[0]:.1f}\n")  # fmt: skip
     rows = []
