@@ -49,8 +49,9 @@ import profile_lanes as pl
 from mcchain.codegen import native
 from mcchain.codegen.native import NativeModule
 numba.set_num_threads(1)
-entry, groups, args, source = pl.captured({kernel!r})
-if not os.path.exists({text!r}):
+given = os.path.exists({text!r})
+entry, groups, args, source = pl.captured({kernel!r}, with_text=not given)
+if not given:
     open({text!r}, "w").write(source)  # this tree's text
 module = NativeModule(open({text!r}).read(), "profiled")
 pl.call(module, entry, groups, args)  # compiled (or loaded) before the clock
@@ -61,15 +62,17 @@ while time.time() - t0 < {seconds}:
 """
 
 
-def captured(kernel: str) -> tuple[str, int, tuple[Any, ...], str]:
-    """The entry, lane groups, arguments and this tree's text of ``kernel``'s call (see the
-    module docstring)."""
+def captured(kernel: str, with_text: bool) -> tuple[str, int, tuple[Any, ...], str]:
+    """The entry, lane groups, arguments and (``with_text``, else "") this tree's text of
+    ``kernel``'s call (see the module docstring)."""
     import bench_paired
 
     if kernel == "rk4":
         groups, args = bench_paired._captured_call(256, 2000)
-        with tempfile.TemporaryDirectory(prefix="mcchain-profile-text-") as scratch:
-            source = bench_paired._text(str(REPO), Path(scratch))
+        source = ""
+        if with_text:
+            with tempfile.TemporaryDirectory(prefix="mcchain-profile-text-") as scratch:
+                source = bench_paired._text(str(REPO), Path(scratch))
         return "erk_run", groups, args, source
     import numpy as np
 
@@ -82,6 +85,7 @@ def captured(kernel: str) -> tuple[str, int, tuple[Any, ...], str]:
     scene = load_scene_text(text.replace("count = 64", "count = 512"))
     model = compile_model(scene)
     start = assemble(model)
+    assert scene.simulate is not None, "the slider-crank config has [simulate]"
     sim = dict(scene.simulate.model_dump(), t_end=0.004, kernels="lanes", method="rk45")
     calls: list[tuple[int, tuple[Any, ...]]] = []
     real = simulate_module.over_samples
