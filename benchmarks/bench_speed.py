@@ -51,7 +51,7 @@ REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "results" / "speed"
 
 KERNELS = r"""
-import json, math, os, re, sys, time
+import json, os, sys, time
 import numpy as np
 import numba
 from mcchain.solvers.simulate import simulate
