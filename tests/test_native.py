@@ -437,6 +437,49 @@ def test_independent_loops__said_parallel_to_llvm_same_values():
     _assert_same_bits(out, ref_out)
 
 
+PREFETCH = """
+from mcchain.kernels.config import prefetch
+
+
+def rows(out, n):
+    for s in range(out.shape[0]):
+        for it in range(n):
+            out[s, it, 0] = s + 0.5 * it
+            prefetch(out, s, it + 3)
+"""
+
+
+def test_prefetch__a_write_hint_past_the_array_allowed_values_unchanged():
+    """``prefetch(array, sample, index)``: an ``llvm.prefetch`` for a write of the row's
+    address, without ``inbounds`` (the row may lie past the array: on the last rows here),
+    and nothing else: the values are plain Python's (where it is a no-op)."""
+    from llvmlite import binding
+
+    from mcchain.codegen.native import _codegen, _target_data
+    from mcchain.codegen.native_expressions import Array
+    from mcchain.codegen.native_translate import ModuleTranslator
+
+    argtypes = (Array("f32", 3, True), "i64")
+    translator = ModuleTranslator(PREFETCH, "mcchain_test_prefetch", _target_data(_codegen()))
+    translator.entry("rows", argtypes, "mcchain_test_prefetch_entry")
+    text = str(translator.ir_module)
+    binding.parse_assembly(text).verify()
+    calls = [line for line in text.splitlines() if 'call void @"llvm.prefetch' in line]
+    assert len(calls) == 1 and calls[0].rstrip().endswith("i32 1, i32 3, i32 1)")
+    defined = {line.split(" = ")[0].strip(): line for line in text.splitlines() if " = " in line}
+    address = calls[0].split("(i8* ")[1].split(",")[0]
+    gep = defined[defined[address].split(" to ")[0].split()[-1]]
+    assert "getelementptr float" in gep and "inbounds" not in gep
+
+    out = np.full((3, 5, 2), np.nan, np.float32)
+    ref = out.copy()
+    NativeModule(PREFETCH, "mcchain_test_prefetch").rows(out, 5)
+    namespace: dict[str, Any] = {}
+    exec(PREFETCH, namespace)
+    namespace["rows"](ref, 5)
+    _assert_same_bits(out, ref)
+
+
 def test_entry_points__unknown_names_are_attribute_errors(native):
     with pytest.raises(AttributeError):
         native.no_such_function  # noqa: B018

@@ -85,9 +85,9 @@ def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    from mcchain.kernels.config import register_fma
+    from mcchain.kernels.config import register_intrinsics
 
-    register_fma()  # the text calls mcchain.kernels.config.fma inside its kernels
+    register_intrinsics()  # the text calls mcchain.kernels.config's fma, prefetch
     spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

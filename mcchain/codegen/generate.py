@@ -25,7 +25,7 @@ from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.fixed_step import FIXED_STEP_VARIANTS, fixed_step_blocks
-from mcchain.codegen.history import history_stores
+from mcchain.codegen.history import history_prefetches, history_stores
 from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
@@ -284,6 +284,8 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     pairs = history_stores(topo)
     em.emit(*(f"{target} = {value}" for target, value in pairs))
     block("store_outputs")
+    em.emit(*history_prefetches(topo))
+    block("prefetch_outputs")
     if "ost" in lay.rows:  # the adaptive kernel's: staged for all lanes, stored for some
         em.emit(*(f"{at('ost', i)} = {value}" for i, (_, value) in enumerate(pairs)))
         block("stage_outputs")
@@ -532,6 +534,8 @@ def generate_source(
         # the contact law's fused multiply-add (contact_power, inlined), the fixed step's
         # combine's rounded products (fixed_step.py): for numba's compile
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
+    if tableau is not None:  # the history helpers' hint (mcchain.kernels.config.prefetch)
+        parts.append("from mcchain.kernels.config import prefetch  # noqa: E402\n")
     if topo.contact_joints:
         if tableau is not None:
             parts.append(CONTACT_ROW_MEANINGS)

@@ -4,7 +4,12 @@ stores them (the ``store_outputs`` blocks of :mod:`mcchain.codegen.generate`).""
 
 from __future__ import annotations
 
+from collections import Counter
+
 from mcchain.codegen.topology import Topology
+
+LINE_BYTES = 64
+"""A cache line, in bytes."""
 
 
 def history_stores(topo: Topology) -> list[tuple[str, str]]:
@@ -31,3 +36,18 @@ def history_stores(topo: Topology) -> list[tuple[str, str]]:
             (f"out_ct[sl, it, {2 * j + 1}]", f"mode{k}"),
         ]
     return stores
+
+
+def history_prefetches(topo: Topology) -> list[str]:
+    """Prefetches of the lines that lane ``l``'s later history points will be written to:
+    per history array, the row of sample ``sl`` a cache line or more past row ``it``'s start
+    (in float32 rows; float64 rows are twice as far). A sample's rows are contiguous (sample,
+    time, k), so each array is a slow stream per lane, too many streams at once for the
+    hardware's prefetchers: unprefetched, the stores missed to memory (reading.md, eleventh
+    stop). Past the last time the address is the next sample's or past the array, which a
+    prefetch allows."""
+    row_length = Counter(target.split("[")[0] for target, _ in history_stores(topo))
+    return [
+        f"prefetch({array}, sl, it + {-(-LINE_BYTES // (4 * n))})"
+        for array, n in row_length.items()
+    ]

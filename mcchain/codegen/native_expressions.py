@@ -159,6 +159,8 @@ class LoweringModule(Protocol):
 
     def intrinsic(self, name: str, ty: ir.Type, nargs: int) -> ir.Function: ...
 
+    def prefetch(self) -> ir.Function: ...
+
     def table(self, name: str) -> _ArrayValue: ...
 
     def specialize(self, name: str, argtypes: tuple[Type, ...]) -> tuple[ir.Function, Returned]: ...
@@ -510,6 +512,15 @@ class FunctionLowering:
         if name == "fma":  # mcchain.kernels.config.fma: rounded once
             operands = [self._cast(*self._scalar(arg), F64) for arg in node.args]
             return b.call(self.module.intrinsic("llvm.fma", _DOUBLE, 3), operands), F64
+        if name == "prefetch":  # mcchain.kernels.config.prefetch: a hint, no value
+            arr = self._array(node.args[0])
+            index = [self._index(i) for i in node.args[1:]]
+            index += [ir.Constant(_I64, 0)] * (arr.ty.ndim - len(index))
+            # Not inbounds: the element may lie past the array (a prefetch never faults).
+            ptr = b.bitcast(self._element_ptr(arr, index, inbounds=False), _I8.as_pointer())
+            hint = [ir.Constant(_I32, k) for k in (1, 3, 1)]  # for a write, keep in all caches
+            b.call(self.module.prefetch(), [ptr, *hint])
+            return None
         if name == "math.sqrt":
             value = self._cast(*self._scalar(node.args[0]), F64)
             return b.call(self.module.intrinsic("llvm.sqrt", _DOUBLE, 1), [value]), F64
@@ -578,7 +589,9 @@ class FunctionLowering:
             raise TranslationError(f"index {ast.unparse(node)} is {ty}")
         return self._cast(value, ty, I64)
 
-    def _element_ptr(self, arr: _ArrayValue, index: list[ir.Value]) -> ir.Value:
+    def _element_ptr(
+        self, arr: _ArrayValue, index: list[ir.Value], inbounds: bool = True
+    ) -> ir.Value:
         b = self.builder
         if len(index) != arr.ty.ndim:
             raise TranslationError("an array indexed with fewer indices than dimensions")
@@ -586,11 +599,11 @@ class FunctionLowering:
             linear = index[0]
             for k in range(1, arr.ty.ndim):
                 linear = b.add(b.mul(linear, arr.shape[k]), index[k])
-            return b.gep(arr.data, [linear], inbounds=True)
+            return b.gep(arr.data, [linear], inbounds=inbounds)
         offset = b.mul(index[0], arr.strides[0])
         for k in range(1, arr.ty.ndim):
             offset = b.add(offset, b.mul(index[k], arr.strides[k]))
-        raw = b.gep(b.bitcast(arr.data, _I8.as_pointer()), [offset], inbounds=True)
+        raw = b.gep(b.bitcast(arr.data, _I8.as_pointer()), [offset], inbounds=inbounds)
         return b.bitcast(raw, arr.data.type)
 
     # -- values ---------------------------------------------------------------------------

@@ -482,6 +482,16 @@ class ModuleTranslator:
             self._intrinsics[name] = fn
         return fn
 
+    def prefetch(self) -> ir.Function:
+        """``llvm.prefetch`` (address, read 0 / write 1, locality 0-3, data cache 1)."""
+        fn = self._intrinsics.get("llvm.prefetch")
+        if fn is None:
+            i8p, i32 = ir.IntType(8).as_pointer(), ir.IntType(32)
+            fnty = ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32])
+            fn = self.ir_module.declare_intrinsic("llvm.prefetch", [i8p], fnty)
+            self._intrinsics["llvm.prefetch"] = fn
+        return fn
+
     def table(self, name: str) -> _ArrayValue:
         """A module constant tuple (a table law's knots or coefficients) as a constant
         array."""

@@ -501,6 +501,9 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@load_lam_dyn
         @@outputs
         @@store_outputs
+    for l in range(lo, hi):  # the next points' lines, outside the vectorised loop
+        sl = s0 + l
+        @@prefetch_outputs
 '''
 
 OUTPUT_LANDED_HELPER = '''
@@ -524,6 +527,7 @@ def group_outputs_landed_SUFFIX(W, nl, out_q, out_v, out_jf, out_cf, out_dtq, ou
             sl = int(@[smp])
             it = int(@[itw])
             @@store_staged_outputs
+            @@prefetch_outputs
 '''
 
 PROJECT_HELPER = '''

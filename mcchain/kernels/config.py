@@ -49,7 +49,7 @@ def fma(a: float, b: float, c: float) -> float:
     """a·b + c rounded once (IEEE 754 fused multiply-add), as the kernels call it.
 
     Compiled (numba, and the lane text through :mod:`mcchain.codegen.native`) it is LLVM's
-    ``llvm.fma`` (:func:`register_fma`), one instruction on a CPU with FMA; here, where the
+    ``llvm.fma`` (:func:`register_intrinsics`), one instruction on a CPU with FMA; here, where the
     kernels run interpreted, the exact product and sum in rationals rounded once (the same
     value for finite operands and result, but the sign of a zero result: +0.0); with an inf
     or NaN operand or an overflowing result, a·b + c as Python rounds it (the same inf or
@@ -60,10 +60,19 @@ def fma(a: float, b: float, c: float) -> float:
         return a * b + c
 
 
+def prefetch(array: Any, sample: int, index: int) -> None:
+    """A hint that the lane kernels will soon write the row ``array[sample, index]`` (its
+    first element's cache line): nothing to compute, no value. Compiled through
+    :mod:`mcchain.codegen.native` it is ``llvm.prefetch`` for a write (``prefetchw``; an
+    address past the array is allowed: a prefetch never faults); numba's compile of the same
+    text (:func:`register_intrinsics`) and plain Python do nothing."""
+
+
 @functools.cache
-def register_fma() -> None:
-    """:func:`fma` compiled by numba as ``llvm.fma`` (once per process; before a kernel that
-    calls it is compiled: :func:`njit` and the numba-compiled lane modules call this)."""
+def register_intrinsics() -> None:
+    """:func:`fma` compiled by numba as ``llvm.fma`` and :func:`prefetch` as nothing (once per
+    process; before a kernel that calls them is compiled: :func:`njit` and the
+    numba-compiled lane modules call this)."""
     from llvmlite import ir
     from numba.core import types
     from numba.extending import intrinsic, overload
@@ -82,6 +91,10 @@ def register_fma() -> None:
     @overload(fma)
     def fma_compiled(a, b, c):  # type: ignore[no-untyped-def]  # numba: as fma's signature
         return lambda a, b, c: llvm_fma(float(a), float(b), float(c))
+
+    @overload(prefetch)
+    def prefetch_compiled(array, sample, index):  # type: ignore[no-untyped-def]  # as above
+        return lambda array, sample, index: None
 
 
 def interpret_kernels() -> bool:
@@ -116,7 +129,7 @@ def njit(*args: Any, **options: Any) -> Any:
             return args[0]
         return lambda function: function
     numba_cache()  # a writable cache, before any kernel is decorated with cache=True
-    register_fma()
+    register_intrinsics()
     from numba import njit as numba_njit
 
     if args and callable(args[0]):
