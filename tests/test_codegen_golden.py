@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "530068bda0e6a26c83bd0f2b1e24ed7bfd605dc76c35ef536505243d3e57017c",
-        "rk4-projection": "7f5558875d8500ee4087567b032e38fc5eaa25956e270793f09d2d9102a10774",
+        "rk4": "e202714bdd29a12b763153b07f581988a4881f0d174dfe8ae003745558159dd7",
+        "rk4-projection": "68ab320c40e9300f43ba9d26c5d98505555abbf8ecad9837472ff4feaa312433",
         "rk45": "286164b619e9392b802f212690440b21cf5380c299c8160a2dcac56fa28dfdad",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "23f4a203ead064ee3642372891be13bbea69fa6e52aacdeb4044cfab68bd162f",
-        "rk4-projection": "e385522adf8c53462c39a0bf7f759a0f671b56459be5121234f72bc1e4041867",
+        "rk4": "6839d3afe61c25150deb34ff4969e90c5c840537812aba6aef2b0f9c9096815c",
+        "rk4-projection": "de2151125b0019f71c6dedf0cd706845582ebf9df0735f8b788b0d9d8c6c217b",
         "rk45": "abefeb6ce013b2cf14ae243305ad1858b624bea0ebb70d0b66733bef0f9828ef",
     },
     "fourbar-clearance-auto": {
         "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
-        "rk4": "7d268d621cc62fa19ce50188ded1aac36a4669f9e0a94222f5ada82e5a957a93",
-        "rk4-projection": "61a94dc3c3c2dcf81c6e2fdf06a285a15610e98dd51dad6c7dac49bcc9db81fb",
+        "rk4": "4d91dc13954b7a3b9665cd134ca5bfb2004ffd7b4abd0c048bbdc60e2f7c054d",
+        "rk4-projection": "cd0a45de4f30eacace8646b616cdd83b268b042b7dfc4c4e26a7f589cb32584d",
         "rk45": "b2017617feae0a1f05c90dc59b6ff34cc644ce19520f0eab415e442f87d9fc90",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "c3e2fb1125100ef64f16fac4f40bce6e33eabcd2817dbd3edc6fcaefe8e5c2f5",
-        "rk4-projection": "92fdc8e6383a7334281ffef4d2a527338da2f860c36102122ddd9d4cce576e76",
+        "rk4": "ab4abfdde8bca1671e9fee4aa1e309aca8ed26881057c0577449cf6e7f71f96e",
+        "rk4-projection": "1ddd4d7353ba1d2a2f2b0d29fa13aa06133f3c7bd1ef559fc66c333dba2a2a5f",
         "rk45": "f2cd54dc273faa5daf016c29b0deda6d0b4233cf2bf15eedd0f08650ce017893",
     },
 }

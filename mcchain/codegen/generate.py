@@ -284,13 +284,15 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     pairs = history_stores(topo)
     em.emit(*(f"{target} = {value}" for target, value in pairs))
     block("store_outputs")
-    em.emit(*history_prefetches(topo))
-    block("prefetch_outputs")
     if "ost" in lay.rows:  # the adaptive kernel's: staged for all lanes, stored for some
         em.emit(*(f"{at('ost', i)} = {value}" for i, (_, value) in enumerate(pairs)))
         block("stage_outputs")
         em.emit(*(f"{target} = {at('ost', i)}" for i, (target, _) in enumerate(pairs)))
         block("store_staged_outputs")
+        # Its lanes land one by one, each on its own stream of rows: the next lines asked
+        # for (the fixed step's group lands at once every few steps: no gain measured).
+        em.emit(*history_prefetches(topo))
+        block("prefetch_outputs")
     em.projection_terms(t="tp")
     block("projection")
     # Masks as exact 0/1 factors: q + 1·dq = q + dq and q + 0·dq = q (no branches).
@@ -534,7 +536,7 @@ def generate_source(
         # the contact law's fused multiply-add (contact_power, inlined), the fixed step's
         # combine's rounded products (fixed_step.py): for numba's compile
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
-    if tableau is not None:  # the history helpers' hint (mcchain.kernels.config.prefetch)
+    if "ost" in lay.rows:  # the landed outputs' hint (mcchain.kernels.config.prefetch)
         parts.append("from mcchain.kernels.config import prefetch  # noqa: E402\n")
     if topo.contact_joints:
         if tableau is not None:

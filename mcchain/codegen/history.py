@@ -39,13 +39,13 @@ def history_stores(topo: Topology) -> list[tuple[str, str]]:
 
 
 def history_prefetches(topo: Topology) -> list[str]:
-    """Prefetches of the lines that lane ``l``'s later history points will be written to:
-    per history array, the row of sample ``sl`` a cache line or more past row ``it``'s start
-    (in float32 rows; float64 rows are twice as far). A sample's rows are contiguous (sample,
-    time, k), so each array is a slow stream per lane, too many streams at once for the
-    hardware's prefetchers: unprefetched, the stores missed to memory (reading.md, eleventh
-    stop). Past the last time the address is the next sample's or past the array, which a
-    prefetch allows."""
+    """Prefetches of the lines that lane ``l``'s later history points will be written to
+    (the adaptive kernel's landed lanes, after their stores): per history array, the row of
+    sample ``sl`` a cache line or more past row ``it``'s start (in float32 rows; float64
+    rows are twice as far). A sample's rows are contiguous (sample, time, k), so each array
+    is a slow stream per lane, too many at once for the hardware's prefetchers: without
+    them the stores missed to memory (reading.md, eleventh stop). Past the last time the
+    address is the next sample's or past the array, which a prefetch allows."""
     row_length = Counter(target.split("[")[0] for target, _ in history_stores(topo))
     return [
         f"prefetch({array}, sl, it + {-(-LINE_BYTES // (4 * n))})"

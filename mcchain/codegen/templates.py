@@ -501,9 +501,6 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@load_lam_dyn
         @@outputs
         @@store_outputs
-    for l in range(lo, hi):  # the next points' lines, outside the vectorised loop
-        sl = s0 + l
-        @@prefetch_outputs
 '''
 
 OUTPUT_LANDED_HELPER = '''
