@@ -64,44 +64,15 @@ while time.time() - t0 < {seconds}:
 
 def captured(kernel: str, with_text: bool) -> tuple[str, int, tuple[Any, ...], str]:
     """The entry, lane groups, arguments and (``with_text``, else "") this tree's text of
-    ``kernel``'s call (see the module docstring)."""
+    ``kernel``'s call (bench_paired's: see the module docstring)."""
     import bench_paired
 
-    if kernel == "rk4":
-        groups, args = bench_paired._captured_call(256, 2000)
-        source = ""
-        if with_text:
-            with tempfile.TemporaryDirectory(prefix="mcchain-profile-text-") as scratch:
-                source = bench_paired._text(str(REPO), Path(scratch))
-        return "erk_run", groups, args, source
-    import numpy as np
-
-    from mcchain.codegen import generate
-    from mcchain.scene import compile_model, load_scene_text
-    from mcchain.solvers import simulate as simulate_module
-    from mcchain.solvers.statics import assemble
-
-    text = (REPO / "configs" / "slider-crank-flores.toml").read_text()
-    scene = load_scene_text(text.replace("count = 64", "count = 512"))
-    model = compile_model(scene)
-    start = assemble(model)
-    assert scene.simulate is not None, "the slider-crank config has [simulate]"
-    sim = dict(scene.simulate.model_dump(), t_end=0.004, kernels="lanes", method="rk45")
-    calls: list[tuple[int, tuple[Any, ...]]] = []
-    real = simulate_module.over_samples
-
-    def capture(kernel: Any, count: int, *args: Any, **kwargs: Any) -> None:
-        calls.append((count, tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)))
-        real(kernel, count, *args, **kwargs)
-
-    simulate_module.over_samples = capture
-    try:
-        simulate_module.simulate(model, sim, start.q, start.v, status=start.status)
-    finally:
-        simulate_module.over_samples = real
-    (source,) = (m.source for m in generate._MODULES.values() if "def adaptive_run(" in m.source)
-    groups, args = calls[-1]
-    return "adaptive_run", groups, args, source
+    groups, args = bench_paired._captured_call(kernel, 256, 2000)
+    source = ""
+    if with_text:
+        with tempfile.TemporaryDirectory(prefix="mcchain-profile-text-") as scratch:
+            source = bench_paired._text(str(REPO), Path(scratch), kernel)
+    return bench_paired.ENTRY[kernel], groups, args, source
 
 
 def call(module: Any, entry: str, groups: int, args: tuple[Any, ...]) -> None:
