@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from mcchain.codegen.history import LINE_BYTES, history_prefetches, history_stores
+from mcchain.codegen.history import ITEM_BYTES, LINE_BYTES, history_prefetches, history_stores
 from mcchain.codegen.topology import Topology
 from mcchain.scene import compile_model, load_scene
 
@@ -31,7 +31,7 @@ def test_prefetches__one_per_history_array_the_first_row_a_line_ahead(config):
         ahead[m.group(1)] = int(m.group(2))
     assert list(ahead) == list(row_length) and len(prefetches) == len(ahead)
     for array, rows in ahead.items():
-        row_bytes = 4 * row_length[array]
+        row_bytes = ITEM_BYTES * row_length[array]
         assert rows * row_bytes >= LINE_BYTES > (rows - 1) * row_bytes, array
     if config == "slider-crank-flores":
         assert {"out_dtq", "out_ct"} <= set(ahead)

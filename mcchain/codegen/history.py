@@ -11,6 +11,9 @@ from mcchain.codegen.topology import Topology
 LINE_BYTES = 64
 """A cache line, in bytes."""
 
+ITEM_BYTES = 4
+"""A history element's bytes in the smaller of the histories' dtypes (float32)."""
+
 
 def history_stores(topo: Topology) -> list[tuple[str, str]]:
     """The history point of lane ``l`` at output index ``it`` of sample ``sl``, as
@@ -48,6 +51,6 @@ def history_prefetches(topo: Topology) -> list[str]:
     address is the next sample's or past the array, which a prefetch allows."""
     row_length = Counter(target.split("[")[0] for target, _ in history_stores(topo))
     return [
-        f"prefetch({array}, sl, it + {-(-LINE_BYTES // (4 * n))})"
+        f"prefetch({array}, sl, it + {-(-LINE_BYTES // (ITEM_BYTES * n))})"
         for array, n in row_length.items()
     ]
