@@ -153,7 +153,9 @@ def _own_lanes(text: str, args: tuple[Any, ...]) -> tuple[int, tuple[Any, ...]]:
     """The lane groups and ``args`` with the lane count of ``text`` (its ``lmax``, read from
     its clamp ``lanes = max(1, min(lanes, N))``): a what-if with other rows than this tree's
     runs every sample in groups of its own width."""
-    width = int(re.search(r"lanes = max\(1, min\(lanes, (\d+)\)\)", text).group(1))
+    clamp = re.search(r"lanes = max\(1, min\(lanes, (\d+)\)\)", text)
+    assert clamp is not None, "the entry's lane clamp moved"
+    width = int(clamp.group(1))
     names = _parameter_names(text)
     nsample = next(a for n, a in zip(names, args, strict=True) if n == "P").shape[1]
     own = tuple(width if n == "lanes" else a for n, a in zip(names, args, strict=True))
@@ -240,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     calls = [_own_lanes(text, captured) for text in texts]
     outputs = [_call(m[0], entry, *call)[1] for m, call in zip(modules, calls, strict=True)]
     names = _array_names(texts[1], captured)
-    notes, same_nan = _bits(*outputs, names)  # every output array, bit for bit
+    notes, same_nan = _bits(outputs[0], outputs[1], names)  # every output array, bit for bit
     for i in (0, 1):
         for k in places[1:]:
             _call(modules[i][k], entry, *calls[i])  # compiled before the rounds
