@@ -14,6 +14,7 @@ from __future__ import annotations
 import filecmp
 import html
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -23,10 +24,12 @@ import pytest
 from mcchain.cli import main
 from mcchain.decision.verdict import run_verdict
 from mcchain.ensemble.registry import STEPS_TAKEN, VARIABLES
+from mcchain.errors import SceneError
 from mcchain.runner import plan, runs
 from mcchain.runner.pipeline import RunResult
 from mcchain.runner.summary import run_summary
 from mcchain.scene.models import Simulate
+from mcchain.solvers.grid import output_times
 from mcchain.solvers.retry import (
     AS_WRITTEN,
     RADAU,
@@ -219,11 +222,6 @@ def test_retry__the_ladder_on_known_failures() -> None:
 def test_retry__an_attempt_the_grid_refuses_is_skipped() -> None:
     """rk4 at a dt of 500 ulps of t_end: dt / 100 is within the grid's STEP_ULPS, so that
     attempt is refused (SceneError) and skipped; the samples go on to radau."""
-    import math
-
-    from mcchain.errors import SceneError
-    from mcchain.solvers.grid import output_times
-
     tried = []
 
     def solve(model: FakeModel, scene: FakeScene) -> dict[str, np.ndarray]:

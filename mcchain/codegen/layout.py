@@ -108,7 +108,6 @@ OUTPUT_ROW_MEANINGS = """\
 """
 """Legend of the output rows, written only into modules that have them."""
 
-
 CONTACT_ROWS = (
     "fm", "ins", "vi", "pd", "pr", "pdc", "prc", "wjc", "dwl",
     "nim", "pkd", "tff", "tse",
