@@ -20,12 +20,17 @@ top of the entry shift the machine code after them) and a round times all of the
 the code falls alone moved the rk4 kernel by -4 % to +4 % on a Zen 3 (reading.md, tenth
 stop), as much as the edits measured, so a ratio of one placement each can be its artefact.
 
+``--after-llvm`` compiles the after text under LLVM command-line options (e.g.
+``-misched-prera-direction=bottomup``) in a process of its own (the options are global to a
+process and the machine-code cache does not key on them: the text gets a comment line naming
+them, so its entries are cached apart), and this process loads that machine code.
+
 Also the bits: every output array of the two texts compared (NaN at the same places; per
 array that differs, its largest difference relative to its largest magnitude and the
 largest distance of an element in ulps of itself).
 
     python benchmarks/bench_paired.py --before main [--after .] [--kernel rk4] [--rounds 30]
-        [--samples 256] [--steps 2000] [--placements 4]
+        [--samples 256] [--steps 2000] [--placements 4] [--after-llvm="-opt=value ..."]
 
 (``--samples`` and ``--steps`` size the rk4 run; the rk45 run is bench_speed's.)
 
@@ -149,6 +154,38 @@ def _placed(text: str, k: int) -> str:
     return text.replace(PLACEMENT_ANCHOR, f"{PLACEMENT_ANCHOR}    if nsample < 0:\n{lines}")
 
 
+_PRECOMPILE = """
+import sys
+import llvmlite.binding as llvm
+for option in sys.argv[4:]:
+    llvm.set_option("", option)
+sys.path.insert(0, sys.argv[1])
+import bench_paired as bp
+from mcchain.codegen.native import NativeModule
+text = open(sys.argv[2]).read()
+_, captured = bp._captured_call("rk4" if "def erk_run(" in text else "rk45", 16, 4)
+for k in range(int(sys.argv[3])):
+    module = NativeModule(bp._placed(text, k), f"paired_1_{k}")
+    bp._call(module, bp.ENTRY["rk4" if "def erk_run(" in text else "rk45"],
+             *bp._own_lanes(text, captured))
+"""
+
+
+def _under_options(text: str, options: str, placements: int, scratch: Path) -> str:
+    """``text`` marked with the LLVM ``options`` (a comment line: cached apart), its entry
+    compiled under them at every placement by a process of its own (into the cache this
+    process reads)."""
+    marked = f"{text}\n# compiled with the LLVM options: {options}\n"
+    path = scratch / "after_llvm.py"
+    path.write_text(marked)
+    subprocess.run(
+        [sys.executable, "-c", _PRECOMPILE, str(Path(__file__).parent), str(path),
+         str(placements), *options.split()],
+        check=True,
+    )  # fmt: skip
+    return marked
+
+
 def _own_lanes(text: str, args: tuple[Any, ...]) -> tuple[int, tuple[Any, ...]]:
     """The lane groups and ``args`` with the lane count of ``text`` (its ``lmax``, read from
     its clamp ``lanes = max(1, min(lanes, N))``): a what-if with other rows than this tree's
@@ -224,28 +261,35 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--placements", type=int, default=4, help="code placements per text")
+    parser.add_argument("--after-llvm", default="", help="LLVM options of the after text")
     args = parser.parse_args(argv)
     import numba
 
-    from mcchain.codegen.native import NativeModule
+    from mcchain.codegen import native
 
     numba.set_num_threads(1)
+    places = range(max(1, args.placements))
     with tempfile.TemporaryDirectory(prefix="mcchain-paired-") as scratch:
         texts = [_text(tree, Path(scratch), args.kernel) for tree in (args.before, args.after)]
-    places = range(max(1, args.placements))
+        if args.after_llvm:
+            texts[1] = _under_options(texts[1], args.after_llvm, len(places), Path(scratch))
     modules = [
-        [NativeModule(_placed(text, k), f"paired_{i}_{k}") for k in places]
+        [native.NativeModule(_placed(text, k), f"paired_{i}_{k}") for k in places]
         for i, text in enumerate(texts)
     ]
     entry = ENTRY[args.kernel]
     _, captured = _captured_call(args.kernel, args.samples, args.steps)
     calls = [_own_lanes(text, captured) for text in texts]
-    outputs = [_call(m[0], entry, *call)[1] for m, call in zip(modules, calls, strict=True)]
+    outputs = []
+    for i in (0, 1):  # every placement compiled (or loaded) before the rounds
+        compiled = native.COUNTS["compiled"]
+        outputs.append(_call(modules[i][0], entry, *calls[i])[1])
+        for k in places[1:]:
+            _call(modules[i][k], entry, *calls[i])
+        if i == 1 and args.after_llvm and native.COUNTS["compiled"] > compiled:
+            raise SystemExit("the after text's code under its LLVM options was not in the cache")
     names = _array_names(texts[1], captured)
     notes, same_nan = _bits(outputs[0], outputs[1], names)  # every output array, bit for bit
-    for i in (0, 1):
-        for k in places[1:]:
-            _call(modules[i][k], entry, *calls[i])  # compiled before the rounds
     if args.kernel == "rk4":
         units = args.samples * (args.steps + 1)
     else:  # accepted steps (the before text's: the same where the bits are)
@@ -259,7 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"`python benchmarks/bench_paired.py --before {args.before} --after {args.after} "
           f"--kernel {args.kernel} --rounds {args.rounds} --samples {args.samples} "
           f"--steps {args.steps} "
-          f"--placements {len(places)}`; load average {os.getloadavg()[0]:.1f}\n")  # fmt: skip
+          f"--placements {len(places)}"
+          + (f' --after-llvm="{args.after_llvm}"' if args.after_llvm else "")
+          + f"`; load average {os.getloadavg()[0]:.1f}\n")  # fmt: skip
     print("| text | ns per instance-step at each placement (median of the rounds) | min |")
     print("|---|---|---|")
     for i, name in enumerate(("before", "after")):
