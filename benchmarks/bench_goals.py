@@ -6,10 +6,11 @@ changed (benchmarks/results/roofline/reading.md), and ``bench_speed.py`` divides
 times taken at different moments. Here one process per thread count (its BLAS limited to
 that many threads before NumPy loads) repeats rounds of three measurements, in an order
 that rotates between rounds: ``simulate`` of the lanes (bench_speed's run: 10,000 samples,
-2,000 steps of 0.1 ms, rk4 lanes), MuJoCo's rollout of the same chain (2,000 samples, 200
-steps; benchmarks/integrators.py) and one float64 matmul (n = 3,000). Each round gives its
-own ratios; the figures are their median and quartiles (and the best times' ratios beside
-them). One thread: process CPU time; two threads: wall time (for all three alike).
+2,000 steps of 0.1 ms, rk4 lanes), MuJoCo's rollout of the same chain (2,000 samples,
+200 steps, the better of two calls; benchmarks/integrators.py) and one float64 matmul
+(n = 3,000). Each round gives its own ratios; the figures are their median and quartiles
+(and the best times' ratios beside them). One thread: process CPU time; two threads: wall
+time (for all three alike).
 
     python benchmarks/bench_goals.py [--rounds 10] [--threads 1,2] [--flops 1128.09]
 

@@ -157,29 +157,29 @@ def _placed(text: str, k: int) -> str:
 _PRECOMPILE = """
 import sys
 import llvmlite.binding as llvm
-for option in sys.argv[4:]:
+folder, path, kernel, placements, *options = sys.argv[1:]
+for option in options:
     llvm.set_option("", option)
-sys.path.insert(0, sys.argv[1])
+sys.path.insert(0, folder)
 import bench_paired as bp
 from mcchain.codegen.native import NativeModule
-text = open(sys.argv[2]).read()
-_, captured = bp._captured_call("rk4" if "def erk_run(" in text else "rk45", 16, 4)
-for k in range(int(sys.argv[3])):
+text = open(path).read()
+_, captured = bp._captured_call(kernel, 16, 4)
+for k in range(int(placements)):
     module = NativeModule(bp._placed(text, k), f"paired_1_{k}")
-    bp._call(module, bp.ENTRY["rk4" if "def erk_run(" in text else "rk45"],
-             *bp._own_lanes(text, captured))
+    bp._call(module, bp.ENTRY[kernel], *bp._own_lanes(text, captured))
 """
 
 
-def _under_options(text: str, options: str, placements: int, scratch: Path) -> str:
-    """``text`` marked with the LLVM ``options`` (a comment line: cached apart), its entry
-    compiled under them at every placement by a process of its own (into the cache this
-    process reads)."""
+def _under_options(text: str, kernel: str, options: str, placements: int, scratch: Path) -> str:
+    """``text`` marked with the LLVM ``options`` (a comment line: cached apart), its
+    ``kernel`` entry compiled under them at every placement by a process of its own (into
+    the cache this process reads)."""
     marked = f"{text}\n# compiled with the LLVM options: {options}\n"
     path = scratch / "after_llvm.py"
     path.write_text(marked)
     subprocess.run(
-        [sys.executable, "-c", _PRECOMPILE, str(Path(__file__).parent), str(path),
+        [sys.executable, "-c", _PRECOMPILE, str(Path(__file__).parent), str(path), kernel,
          str(placements), *options.split()],
         check=True,
     )  # fmt: skip
@@ -272,7 +272,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="mcchain-paired-") as scratch:
         texts = [_text(tree, Path(scratch), args.kernel) for tree in (args.before, args.after)]
         if args.after_llvm:
-            texts[1] = _under_options(texts[1], args.after_llvm, len(places), Path(scratch))
+            texts[1] = _under_options(
+                texts[1], args.kernel, args.after_llvm, len(places), Path(scratch)
+            )
     modules = [
         [native.NativeModule(_placed(text, k), f"paired_{i}_{k}") for k in places]
         for i, text in enumerate(texts)
