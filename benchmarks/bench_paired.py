@@ -105,14 +105,19 @@ def _captured_call(kernel: str, samples: int, steps: int) -> tuple[int, tuple[An
     from mcchain.solvers import simulate as simulate_module
 
     captured: list[tuple[int, tuple[Any, ...]]] = []
-    real = simulate_module.over_samples
+    # rk4's lanes run in blocks (over_samples), rk45's on every thread (on_every_thread)
+    reals = {n: getattr(simulate_module, n) for n in ("over_samples", "on_every_thread")}
 
-    def capture(kernel: Any, count: int, *args: Any, **kwargs: Any) -> None:
-        copies = tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)
-        captured.append((count, copies))
-        real(kernel, count, *args, **kwargs)
+    def capturing(real: Any) -> Any:
+        def capture(kernel: Any, count: int, *args: Any, **kwargs: Any) -> None:
+            copies = tuple(np.copy(a) if isinstance(a, np.ndarray) else a for a in args)
+            captured.append((count, copies))
+            real(kernel, count, *args, **kwargs)
 
-    simulate_module.over_samples = capture
+        return capture
+
+    for name, real in reals.items():
+        setattr(simulate_module, name, capturing(real))
     try:
         if kernel == "rk4":
             from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
@@ -133,7 +138,8 @@ def _captured_call(kernel: str, samples: int, steps: int) -> tuple[int, tuple[An
             # its histories as it runs them (float32): their stores are part of its time
             simulate_module.simulate(model, sim, start.q, start.v, status=start.status)
     finally:
-        simulate_module.over_samples = real
+        for name, real in reals.items():
+            setattr(simulate_module, name, real)
     return captured[-1]
 
 

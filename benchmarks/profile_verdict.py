@@ -142,24 +142,30 @@ def threads_part(scene, model) -> list[str]:
     numba.set_num_threads(2)
     solve_chunk(model.select(0, 2), scene)
     blocks: list[tuple[int, int, int, float, float, float]] = []
-    original = threads_module.over_samples
+    # blocks of items (over_samples), or one call a thread on a shared queue (rk45's lanes)
+    originals = {n: getattr(threads_module, n) for n in ("over_samples", "on_every_thread")}
 
-    def timed(kernel, count, *args, **keywords):
-        def block(start, stop, *rest):
-            t0, c0 = time.perf_counter(), time.thread_time()
-            kernel(start, stop, *rest)
-            blocks.append((threading.get_ident(), start, stop, t0, time.perf_counter(),
-                           time.thread_time() - c0))  # fmt: skip
+    def timed(original):
+        def run(kernel, count, *args, **keywords):
+            def block(start, stop, *rest):
+                t0, c0 = time.perf_counter(), time.thread_time()
+                kernel(start, stop, *rest)
+                blocks.append((threading.get_ident(), start, stop, t0, time.perf_counter(),
+                               time.thread_time() - c0))  # fmt: skip
 
-        original(block, count, *args, **keywords)
+            original(block, count, *args, **keywords)
 
-    simulate_module.over_samples = timed
+        return run
+
+    for name, original in originals.items():
+        setattr(simulate_module, name, timed(original))
     try:
         t0, c0 = time.perf_counter(), os.times()
         solve_chunk(model, scene)
         wall, cpu = time.perf_counter() - t0, os.times().user - c0.user
     finally:
-        simulate_module.over_samples = original
+        for name, original in originals.items():
+            setattr(simulate_module, name, original)
     names = {ident: k for k, ident in enumerate(dict.fromkeys(b[0] for b in blocks))}
     lines = [
         f"### 3. threads: one chunk of {model.nsample} samples, 2 threads (load "
@@ -191,13 +197,14 @@ def main() -> None:
 
 
 def write_result(command: str, lines: list[str], name: str) -> None:
-    """Print ``lines`` under the command, the cores and the time, and save them as ``name``
-    in :data:`RESULTS`."""
+    """Print ``lines`` under the command, the cores and the time, and append them to ``name``
+    in :data:`RESULTS` (the earlier runs and the readings written under them are kept)."""
+    from bench_speed import append_results
+
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     text = f"`{command}` ({os.cpu_count()} cores, {when})\n\n" + "\n".join(lines) + "\n"
     print(text)
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / name).write_text(text, "utf-8")
+    append_results(RESULTS / name, f"## {when}\n\n{text}")
 
 
 if __name__ == "__main__":

@@ -480,6 +480,74 @@ def test_prefetch__a_write_hint_past_the_array_allowed_values_unchanged():
     _assert_same_bits(out, ref)
 
 
+TAKE = """
+from mcchain.kernels.config import take_next
+
+
+def drain(queue, stop, taken, spin):
+    while True:
+        item = take_next(queue)
+        if item >= stop:
+            break
+        taken[item] += 1
+        x = 0.0
+        for k in range(spin):  # some work between takes, so that the threads interleave
+            x += k * 1e-9
+        taken[item] += 0 if x >= 0.0 else 1
+"""
+
+
+def _drained_on_threads(drain, stop: int) -> np.ndarray:
+    """How many times each of the items 0 … stop-1 of one queue was taken, by two threads
+    calling ``drain`` on it at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    queue, taken = np.zeros(1, np.int64), np.zeros(stop, np.int64)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for future in [pool.submit(drain, queue, stop, taken, 2_000) for _ in range(2)]:
+            future.result()
+    assert queue[0] >= stop + 2  # each thread's last take saw the queue empty
+    return taken
+
+
+def test_take_next__one_atomic_add_each_item_taken_once_by_two_threads():
+    """``take_next(queue)``: ``atomicrmw add`` on the queue's first element (its old value
+    returned), through the native translator and through numba; two threads draining one
+    queue take each item exactly once (a plain read and write would give some twice). Plain
+    Python: the next value, the queue raised by one."""
+    from llvmlite import binding
+    from numba import njit
+
+    from mcchain.codegen.native import _codegen, _target_data
+    from mcchain.codegen.native_expressions import Array
+    from mcchain.codegen.native_translate import ModuleTranslator
+    from mcchain.kernels.config import register_intrinsics, take_next
+
+    translator = ModuleTranslator(TAKE, "mcchain_test_take", _target_data(_codegen()))
+    argtypes = (Array("i64", 1, True), "i64", Array("i64", 1, True), "i64")
+    translator.entry("drain", argtypes, "mcchain_test_take_entry")
+    text = str(translator.ir_module)
+    binding.parse_assembly(text).verify()
+    assert len([line for line in text.splitlines() if "atomicrmw add" in line]) == 1
+
+    stop = 4096
+    native = NativeModule(TAKE, "mcchain_test_take")
+    assert np.all(_drained_on_threads(native.drain, stop) == 1)
+    register_intrinsics()
+    namespace: dict[str, Any] = {}
+    exec(TAKE, namespace)
+    compiled = njit(nogil=True)(namespace["drain"])
+    assert np.all(_drained_on_threads(compiled, stop) == 1)
+
+    queue = np.array([7], np.int64)
+    assert (take_next(queue), take_next(queue), int(queue[0])) == (7, 8, 9)
+
+
+def test_take_next__a_queue_of_another_type_refused():
+    with pytest.raises(TranslationError, match="take_next's queue is an int64 array"):
+        NativeModule(TAKE, "mcchain_test_take_f64").drain(np.zeros(1), 8, np.zeros(8, np.int64), 0)
+
+
 def test_entry_points__unknown_names_are_attribute_errors(native):
     with pytest.raises(AttributeError):
         native.no_such_function  # noqa: B018

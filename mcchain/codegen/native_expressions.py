@@ -521,6 +521,12 @@ class FunctionLowering:
             hint = [ir.Constant(_I32, k) for k in (1, 3, 1)]  # for a write, keep in all caches
             b.call(self.module.prefetch(), [ptr, *hint])
             return None
+        if name == "take_next":  # mcchain.kernels.config.take_next: a queue's next item
+            arr = self._array(node.args[0])
+            if arr.ty.dtype != I64:
+                raise TranslationError(f"{self.fn.name}: take_next's queue is an int64 array")
+            one = ir.Constant(_I64, 1)  # each item to one taker; no other memory ordered by it
+            return b.atomic_rmw("add", arr.data, one, "monotonic"), I64
         if name == "math.sqrt":
             value = self._cast(*self._scalar(node.args[0]), F64)
             return b.call(self.module.intrinsic("llvm.sqrt", _DOUBLE, 1), [value]), F64

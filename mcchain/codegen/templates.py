@@ -286,7 +286,7 @@ PROJECT_CALL = """
 _ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
                  max_steps, balpha2, bbeta2, ctol, tau, lanes,
                  out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
-                 status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out"""
+                 status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out, queue"""
 
 _ADAPTIVE_LANE_START = """
 @[smp] = sl
@@ -307,8 +307,11 @@ ADAPTIVE_KERNEL = (
 @njit(**JIT)
 def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control, on the
-    samples of lane groups g_start:g_stop (``lanes`` samples each; threads run blocks of
-    groups).
+    samples of lane groups g_start:g_stop (``lanes`` samples each), taken one at a time from
+    the queue ``queue[0]`` (an int64 array: the next sample; the caller sets it to
+    g_start · lanes). Threads that run this call on the same samples share the queue
+    (``take_next`` gives each sample to one lane of one thread): none waits for another's
+    slower samples, and every lane drains once, at the end.
 
     Every lane has its own time and step; a step never crosses the lane's next output time
     and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
@@ -316,9 +319,10 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     and stage evaluations (the first stage, then NSTAGE - 1 per attempt: FSAL) into
     ``nsteps_out``, ``nrejected_out``, ``nevals_out``.
 
-    A lane whose sample is finished takes the block's next sample (row ``smp``), so the
+    A lane whose sample is finished takes the queue's next sample (row ``smp``), so the
     lanes do not wait for the slowest sample of a group: samples take their own numbers
-    of steps. A sample's numbers do not depend on the lane it runs in or beside whom.
+    of steps. A sample's numbers do not depend on the lane or thread it runs in or beside
+    whom.
     """
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
@@ -326,9 +330,15 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     # below this error norm the ratio is MAX_FACTOR without the power (tableaux.CAP_MARGIN)
     en_cap = (MAX_FACTOR / SAFETY * CAP_MARGIN) ** -(order_err + 1.0)
     lanes = max(1, min(lanes, LMAXV))
-    nxt = g_start * lanes  # the next sample to take
     stop = min(g_stop * lanes, nsample)
-    nl = min(lanes, stop - nxt)
+    first = np.zeros(LMAXV, np.int64)
+    nl = 0
+    for l in range(lanes):
+        sl = take_next(queue)
+        if sl >= stop:
+            break
+        first[l] = sl
+        nl += 1
     if nl <= 0:
         return'''
     + _WORK_ARRAYS.replace("\n        ", "\n    ")
@@ -340,8 +350,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     run = np.zeros(LMAXV, np.bool_)
     hl = np.zeros(LMAXV)
     for l in range(nl):
-        sl = nxt
-        nxt += 1
+        sl = first[l]
 """
     + _lanes(_LANE_SETUP, 8)
     + "\n"
@@ -417,9 +426,8 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
 """
     + _lanes(_LANE_FINISH, 16)
     + """
-                if nxt < stop:
-                    sl = nxt
-                    nxt += 1
+                sl = take_next(queue)
+                if sl < stop:
                     for r in range(NROW):
                         W[r * LMAXV + l] = 0.0
 """

@@ -68,11 +68,22 @@ def prefetch(array: Any, sample: int, index: int) -> None:
     text (:func:`register_intrinsics`) and plain Python do nothing."""
 
 
+def take_next(queue: Any) -> int:
+    """The next item of a queue that threads share: ``queue[0]`` (an int64 array) before it
+    is raised by one, as one atomic step where the kernels are compiled (``atomicrmw add``,
+    through :mod:`mcchain.codegen.native` and numba alike: :func:`register_intrinsics`), so
+    that threads taking items of one queue take each exactly once. Interpreted kernels run on
+    one thread (:func:`mcchain.solvers.threads.over_samples`)."""
+    item = int(queue[0])
+    queue[0] = item + 1
+    return item
+
+
 @functools.cache
 def register_intrinsics() -> None:
-    """:func:`fma` compiled by numba as ``llvm.fma`` and :func:`prefetch` as nothing (once per
-    process; before a kernel that calls them is compiled: :func:`njit` and the
-    numba-compiled lane modules call this)."""
+    """:func:`fma` compiled by numba as ``llvm.fma``, :func:`prefetch` as nothing and
+    :func:`take_next` as an atomic add (once per process; before a kernel that calls them
+    is compiled: :func:`njit` and the numba-compiled lane modules call this)."""
     from llvmlite import ir
     from numba.core import types
     from numba.extending import intrinsic, overload
@@ -95,6 +106,21 @@ def register_intrinsics() -> None:
     @overload(prefetch)
     def prefetch_compiled(array, sample, index):  # type: ignore[no-untyped-def]  # as above
         return lambda array, sample, index: None
+
+    @intrinsic
+    def atomic_take(typingctx: Any, queue: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            array = context.make_array(signature.args[0])(context, builder, args[0])
+            one = ir.Constant(ir.IntType(64), 1)
+            return builder.atomic_rmw("add", array.data, one, "monotonic")
+
+        return types.int64(queue), codegen
+
+    @overload(take_next)
+    def take_next_compiled(queue):  # type: ignore[no-untyped-def]  # as above
+        if not (isinstance(queue, types.Array) and queue.dtype == types.int64):
+            raise TypeError("take_next: the queue is an int64 array")
+        return lambda queue: atomic_take(queue)
 
 
 def interpret_kernels() -> bool:

@@ -59,7 +59,7 @@ from mcchain.solvers.grid import output_times
 from mcchain.solvers.history_rows import ROWS_BLOCK, float64_rows, store_rows
 from mcchain.solvers.kernel_choice import choose_kernels
 from mcchain.solvers.start import start_modes, start_state
-from mcchain.solvers.threads import over_samples
+from mcchain.solvers.threads import on_every_thread, over_samples
 from mcchain.status import FAILURE_BITS
 
 SINGULAR_PIVOT = 1e-8
@@ -292,30 +292,26 @@ def _run_rk4_projection(run: _Run) -> None:
     _run_erk(run, project=True)
 
 
-ADAPTIVE_BLOCKS_PER_THREAD = 2
-"""Blocks of lane groups per thread of the adaptive lanes. Their lanes take a block's samples
-one after another, so samples of unequal lengths share the lanes; only at a block's end do
-lanes wait (drain). Larger blocks drain less: on the Flores slider-crank (512 samples, 4 ms,
-lanes of 16, 2 threads) the lanes' work was 1.034, 1.069 and 1.104 times the samples' own
-for 1, 2 and 4 blocks per thread (replayed from the samples' step counts); 2 keeps some
-balance between threads when another job slows one core."""
-
-
 def _run_rk45(run: _Run) -> None:
     from mcchain.kernels.tableaux import DOPRI5
 
     module, P, Q0, V0 = _lane_setup(run, "rk45")
     s = run.settings
     alpha, beta = s.gains
-    over_samples(
+    # One queue of samples for every thread: a lane whose sample is finished takes the next
+    # (samples of unequal lengths share the lanes) and the lanes drain once, at the end. With
+    # blocks of groups, two per thread, the Flores slider-crank's lanes did 1.069 times the
+    # samples' own work (1.034 with one block per thread), and a thread that finished its
+    # blocks early waited on the other's (23 % of a 1,024-sample chunk's wall on 2 threads).
+    queue = np.array([0], dtype=np.int64)
+    on_every_thread(
         module.adaptive_run, run.groups,
         P, Q0, V0, 0.0, run.time, min(s.dt, s.output_step), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
         DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out),
         *run.contact_args(), run.peaks, *run.lane_output_args(), run.status, run.t_div,
-        run.t_sing, run.t_cl, run.steps, run.rejected_steps, run.evaluations, min_block=1,
-        per_thread=ADAPTIVE_BLOCKS_PER_THREAD,
+        run.t_sing, run.t_cl, run.steps, run.rejected_steps, run.evaluations, queue,
     )  # fmt: skip
 
 

@@ -4,7 +4,8 @@ Every batch kernel is a serial numba function over ``start:stop`` that releases 
 a thread pool runs contiguous blocks side by side. A ``prange`` loop did the same but made
 numba build, optimise and emit each kernel's whole call tree once more for the parallel
 body (benchmarks/results/startup/breakdown.md). Samples never interact, so each sample's numbers do
-not depend on the blocks or the thread count.
+not depend on the blocks or the thread count. A kernel that takes its samples from a queue
+(the adaptive lanes) runs once on every thread instead (:func:`on_every_thread`).
 """
 
 from __future__ import annotations
@@ -67,4 +68,18 @@ def over_samples(
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for future in [pool.submit(kernel, start, stop, *args) for start, stop in blocks]:
+            future.result()
+
+
+def on_every_thread(kernel: Callable[..., Any], count: int, *args: Any) -> None:
+    """Call ``kernel(0, count, *args)`` once on each thread numba may use (once in all where
+    the kernels run interpreted): a kernel whose threads share its items through a queue
+    in ``args`` (:func:`mcchain.kernels.config.take_next`), so that a thread which finishes
+    early takes the others' remaining items one at a time instead of waiting."""
+    threads = 1 if config.INTERPRETED else _numba_threads()
+    if threads == 1:
+        kernel(0, count, *args)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(kernel, 0, count, *args) for _ in range(threads)]:
             future.result()
