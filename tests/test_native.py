@@ -493,7 +493,7 @@ def drain(queue, stop, taken, spin):
         x = 0.0
         for k in range(spin):  # some work between takes, so that the threads interleave
             x += k * 1e-9
-        taken[item] += 0 if x >= 0.0 else 1
+        taken[item] += 0 if x >= 0.0 else 1  # x used: the work is not optimised away
 """
 
 
@@ -513,7 +513,7 @@ def _drained_on_threads(drain, stop: int) -> np.ndarray:
 def test_take_next__one_atomic_add_each_item_taken_once_by_two_threads():
     """``take_next(queue)``: ``atomicrmw add`` on the queue's first element (its old value
     returned), through the native translator and through numba; two threads draining one
-    queue take each item exactly once (a plain read and write would give some twice). Plain
+    queue take each item exactly once (a plain read and write can give some twice). Plain
     Python: the next value, the queue raised by one."""
     from llvmlite import binding
     from numba import njit

@@ -73,7 +73,7 @@ def take_next(queue: Any) -> int:
     is raised by one, as one atomic step where the kernels are compiled (``atomicrmw add``,
     through :mod:`mcchain.codegen.native` and numba alike: :func:`register_intrinsics`), so
     that threads taking items of one queue take each exactly once. Interpreted kernels run on
-    one thread (:func:`mcchain.solvers.threads.over_samples`)."""
+    one thread (:func:`mcchain.solvers.threads.on_every_thread`)."""
     item = int(queue[0])
     queue[0] = item + 1
     return item
