@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
-        "rk4": "e202714bdd29a12b763153b07f581988a4881f0d174dfe8ae003745558159dd7",
-        "rk4-projection": "68ab320c40e9300f43ba9d26c5d98505555abbf8ecad9837472ff4feaa312433",
+        "rk4": "17f6a9d11042cb04673a83349016311389a4a30bac82fb3ed08ee4e76cd44aef",
+        "rk4-projection": "94563e1ed3863b6f16ea2870049de914118bec3a8870a85a6b08a4729b1d573c",
         "rk45": "7a0e2760311f76c3fd625a606a752ede754135a084c72ac5559d1e20d27558b2",
     },
     "fourbar-clearance": {
         "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
-        "rk4": "6839d3afe61c25150deb34ff4969e90c5c840537812aba6aef2b0f9c9096815c",
-        "rk4-projection": "de2151125b0019f71c6dedf0cd706845582ebf9df0735f8b788b0d9d8c6c217b",
+        "rk4": "acf1341a22749b2397efa8734d62a4bcc44e6ab1007bc67f46b59cc189c910f2",
+        "rk4-projection": "e4b31abb34386c9425f6ccda8b1e7b723dd8dfc688e58a9eb897b4d81943aff7",
         "rk45": "2f70a2b57891fd611b3add03e62c3e1416ea7887338b2dd4d5a98502a4522e07",
     },
     "fourbar-clearance-auto": {
         "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
-        "rk4": "4d91dc13954b7a3b9665cd134ca5bfb2004ffd7b4abd0c048bbdc60e2f7c054d",
-        "rk4-projection": "cd0a45de4f30eacace8646b616cdd83b268b042b7dfc4c4e26a7f589cb32584d",
+        "rk4": "4af203813380dfe2635dff89d15d7e68d3b7721b761df93de75d0f8ed59ba7ae",
+        "rk4-projection": "3a9968719261a137758b4431fa8eba51c7ad4ce3399e6d38e759fcf748b3f5d3",
         "rk45": "fe398292d93f88789f6d319c4af7bbdb093ff86b225e60f7cc13b7b42ce786ca",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
-        "rk4": "ab4abfdde8bca1671e9fee4aa1e309aca8ed26881057c0577449cf6e7f71f96e",
-        "rk4-projection": "1ddd4d7353ba1d2a2f2b0d29fa13aa06133f3c7bd1ef559fc66c333dba2a2a5f",
+        "rk4": "1eebf007bcf4e99702c8f99fd5629121a2ebafcdafcbb8549a47976f0be61259",
+        "rk4-projection": "7e828bd94f6a643d40df212c84ba4ae1645e5d981ec9299cc2dc7294e8b0e50d",
         "rk45": "879d2372507ef8b4850cb3ee5266a6bfe8343ac6498d1126d1c6017ff66c3984",
     },
 }

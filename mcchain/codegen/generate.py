@@ -538,7 +538,7 @@ def generate_source(
         parts.append("from mcchain.kernels.config import fma  # noqa: E402\n")
     if "ost" in lay.rows:  # the landed outputs' hint (mcchain.kernels.config.prefetch)
         parts.append("from mcchain.kernels.config import prefetch  # noqa: E402\n")
-    if variant == "rk45":  # its samples' queue (mcchain.kernels.config.take_next)
+    if tableau is not None:  # the queue of samples or groups (mcchain.kernels.config.take_next)
         parts.append("from mcchain.kernels.config import take_next  # noqa: E402\n")
     if topo.contact_joints:
         if tableau is not None:

@@ -151,14 +151,17 @@ the step's checks read (λ, max |Φ|)."""
 _ERK_ARGS = """P, Q0, V0, t_out, h, h_last, nstep, out_every, A, bw, cc, balpha2, bbeta2, ctol, tau,
             robust, project, ptol, max_newton, lanes,
             out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
-            status, t_div, t_sing, t_cl"""
+            status, t_div, t_sing, t_cl, queue"""
 
 ERK_KERNEL = (
     f'''
 @njit(**JIT)
 def erk_run(g_start, g_stop, {_ERK_ARGS}):
     """Fixed-step explicit Runge–Kutta (NSTAGE stages) on the lane groups g_start:g_stop
-    (``lanes`` samples each; threads run blocks of groups); see integrators.py.
+    (``lanes`` samples each), taken one at a time from the queue ``queue[0]`` (an int64
+    array: the next group; the caller sets it to g_start). Threads that run this call on the
+    same groups share the queue (``take_next`` gives each group to one thread), so none waits
+    on another's last block of groups; see integrators.py.
 
     ``nstep`` steps of ``h``, the last one ``h_last`` long; step n starts at
     t_out[n // out_every] + (n % out_every) h, the last state is at t_out[-1] = t_end, and
@@ -166,7 +169,10 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
     lanes = max(1, min(lanes, LMAXV))
-    for g in range(g_start, g_stop):'''
+    while True:
+        g = take_next(queue)
+        if g >= g_stop:
+            break'''
     + _GROUP_SETUP
     + """
         for l in range(nl):
