@@ -218,8 +218,7 @@ def _run_erk(run: _Run, project: bool) -> None:
     run.steps[integrated] = nstep
     run.evaluations[integrated] = RK4.nstage * nstep + 1
     # One queue of lane groups for every thread: a thread takes the next group when it is
-    # done with one (in blocks of groups, 4 per thread, the faster thread waited on the
-    # other's last block: 0.96 of the time on 2 threads with 64 per thread).
+    # done with one, so none waits on another's last block of groups (benchmarks/bench_queue.py).
     queue = np.array([0], dtype=np.int64)
     on_every_thread(
         module.erk_project_run if project else module.erk_run, run.groups,
@@ -303,10 +302,8 @@ def _run_rk45(run: _Run) -> None:
     s = run.settings
     alpha, beta = s.gains
     # One queue of samples for every thread: a lane whose sample is finished takes the next
-    # (samples of unequal lengths share the lanes) and the lanes drain once, at the end. With
-    # blocks of groups, two per thread, the Flores slider-crank's lanes did 1.069 times the
-    # samples' own work (1.034 with one block per thread), and a thread that finished its
-    # blocks early waited on the other's (23 % of a 1,024-sample chunk's wall on 2 threads).
+    # (samples of unequal lengths share the lanes), no thread waits on another's last block,
+    # and the lanes drain once, at the end (benchmarks/bench_queue.py).
     queue = np.array([0], dtype=np.int64)
     on_every_thread(
         module.adaptive_run, run.groups,
