@@ -87,7 +87,7 @@ def load_module(source: str, prefix: str = "mcchain_gen") -> ModuleType:
         os.replace(tmp, path)
     from mcchain.kernels.config import register_intrinsics
 
-    register_intrinsics()  # the text calls mcchain.kernels.config's fma, prefetch
+    register_intrinsics()  # the text calls mcchain.kernels.config's fma, prefetch, take_next
     spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
