@@ -1,7 +1,10 @@
 """Two generated lane texts side by side in one process: the rk4 lanes of the clearance double
 pendulum (``--kernel rk4``, the default) or the rk45 lanes of the Flores slider-crank
 (``--kernel rk45``: ``configs/slider-crank-flores.toml``, 512 samples, 4 ms, bench_speed's
-``adaptive`` run; time per accepted instance-step).
+``adaptive`` run) or of the requirement verdict (``--kernel verdict``: ``configs/slider-crank-
+requirement.toml`` with its outputs, ``histories = "none"``, the shared ideal read from its
+table, as profile_verdict runs it; ``--samples`` samples to ``--steps`` × 10 µs; its text the
+one that run generates); rk45's time per accepted instance-step.
 
 The texts (``generate_source(topology, variant)``) come from two source trees (a folder, or a
 commit exported with ``git archive``), each generated in a process of its own, or from a
@@ -32,7 +35,7 @@ largest distance of an element in ulps of itself).
     python benchmarks/bench_paired.py --before main [--after .] [--kernel rk4] [--rounds 30]
         [--samples 256] [--steps 2000] [--placements 4] [--after-llvm="-opt=value ..."]
 
-(``--samples`` and ``--steps`` size the rk4 run; the rk45 run is bench_speed's.)
+(``--samples`` and ``--steps`` size the rk4 and verdict runs; the rk45 run is bench_speed's.)
 
 Prints its figures (the readings of them: benchmarks/results/roofline/reading.md).
 """
@@ -60,6 +63,16 @@ from mcchain.codegen.topology import Topology
 if sys.argv[1] == "rk4":
     from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
     model = model_of(straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4}), nsample=16)
+elif sys.argv[1] == "verdict":  # the text the verdict's own run generates (with its outputs)
+    import mcchain.codegen.generate as generate
+    sys.path.insert(0, sys.argv[3])
+    import bench_paired
+    texts = []
+    real = generate.generated_text  # the text, made here or read from the cache
+    generate.generated_text = lambda *a, **k: texts.append(real(*a, **k)) or texts[-1]
+    bench_paired._verdict_run(16, 5e-7)
+    sys.stdout.write(texts[-1])
+    raise SystemExit(0)
 else:
     from mcchain.scene import compile_model, load_scene_text
     model = compile_model(load_scene_text(open(sys.argv[2]).read()))
@@ -68,7 +81,9 @@ sys.stdout.write(generate_source(Topology.from_model(model), sys.argv[1]))
 
 SLIDER_CRANK = REPO / "configs" / "slider-crank-flores.toml"
 
-ENTRY = {"rk4": "erk_run", "rk45": "adaptive_run"}
+VERDICT = REPO / "configs" / "slider-crank-requirement.toml"
+
+ENTRY = {"rk4": "erk_run", "rk45": "adaptive_run", "verdict": "adaptive_run"}
 """Each kernel's entry point."""
 
 
@@ -89,7 +104,8 @@ def _text(tree: str, scratch: Path, kernel: str = "rk4") -> str:
     env = dict(os.environ, PYTHONPATH=str(folder.resolve()))
     env["MCCHAIN_CACHE_DIR"] = str(scratch / "cache")
     out = subprocess.run(
-        [sys.executable, "-c", _GENERATE, kernel, str(SLIDER_CRANK)], env=env,
+        [sys.executable, "-c", _GENERATE, kernel, str(SLIDER_CRANK), str(Path(__file__).parent)],
+        env=env,
         capture_output=True, text=True, check=True,
         cwd=scratch,  # not the caller's folder, which `-c` puts first on the path
     )  # fmt: skip
@@ -126,6 +142,8 @@ def _captured_call(kernel: str, samples: int, steps: int) -> tuple[int, tuple[An
             model = model_of(text, nsample=samples)
             sim = dict(t_end=1e-4 * steps, dt=1e-4, output_dt=1e-2, method="rk4", kernels="lanes")
             simulate_module.simulate(model, sim, history_dtype=np.float64)  # every bit shows
+        elif kernel == "verdict":
+            _verdict_run(samples, 1e-5 * steps)
         else:
             from mcchain.scene import compile_model, load_scene_text
             from mcchain.solvers.statics import assemble
@@ -141,6 +159,27 @@ def _captured_call(kernel: str, samples: int, steps: int) -> tuple[int, tuple[An
         for name, real in reals.items():
             setattr(simulate_module, name, real)
     return captured[-1]
+
+
+def _verdict_run(samples: int, t_end: float) -> None:
+    """The requirement verdict's integration (:data:`VERDICT`, ``histories = "none"``, its
+    outputs, the ideal slider-crank read from its table) of ``samples`` samples to ``t_end``
+    (s), as profile_verdict runs it."""
+    import profile_verdict
+
+    from mcchain.solvers import _Ideal
+    from mcchain.solvers.outputs import simulate_outputs
+    from mcchain.solvers.statics import assemble
+
+    scene, model = profile_verdict.light_scene(samples)
+    start = assemble(model)
+    ideal = _Ideal(model, scene)
+    assert scene.simulate is not None, "the requirement config has [simulate]"
+    sim = scene.simulate.model_copy(update={"t_end": t_end})
+    timed = [o for o in scene.output if o.at is None]
+    status = start.status | ideal.status(False)
+    simulate_outputs(model, timed, sim, start.q, start.v, ideal.start(False), status,
+                     histories=False)  # fmt: skip
 
 
 PLACEMENT_ANCHOR = "    nsample = Q0.shape[1]\n"

@@ -1,12 +1,14 @@
 """Where the lanes' step goes, measured: cpu-clock samples on the machine code.
 
-    python benchmarks/profile_lanes.py [--kernel rk4|rk45] [--text FILE.py] [--seconds 15]
+    python benchmarks/profile_lanes.py [--kernel rk4|rk45|verdict] [--text FILE.py] [--seconds 15]
         [--top 12] [--disassembly FILE]
 
 The kernel: ``rk4`` (default), the rk4 lanes' ``erk_run`` on bench_paired's scene, the
 clearance double pendulum (its captured arguments: 256 samples, 2,000 steps); ``rk45``, the
 rk45 lanes' ``adaptive_run`` on the Flores slider-crank (``configs/slider-crank-flores.toml``
-as configured, 512 samples, 4 ms: bench_speed's ``adaptive`` run). The text (default: this
+as configured, 512 samples, 4 ms: bench_speed's ``adaptive`` run); ``verdict``, the rk45
+lanes of the requirement verdict (``configs/slider-crank-requirement.toml``, its outputs,
+``histories = "none"``, 256 samples, 20 ms: bench_paired's ``verdict``). The text (default: this
 tree's generated text of that kernel) is compiled (:class:`mcchain.codegen.native.
 NativeModule`, its object code cached in a scratch folder) and its entry called on the
 captured arguments (1 thread) for ``--seconds`` under ``perf record -e cpu-clock`` (a
@@ -134,7 +136,7 @@ def _kind(op: str, arg: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--kernel", choices=("rk4", "rk45"), default="rk4")
+    parser.add_argument("--kernel", choices=("rk4", "rk45", "verdict"), default="rk4")
     parser.add_argument("--text", default=None, help="a generated text (.py); default: this tree's")
     parser.add_argument("--seconds", type=float, default=15.0)
     parser.add_argument("--top", type=int, default=12)

@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "2f70a2b57891fd611b3add03e62c3e1416ea7887338b2dd4d5a98502a4522e07",
     },
     "fourbar-clearance-auto": {
-        "accel": "13ca8ea5bee77e49f89eaa5cc3f0108edffbae15d4b2045c21f451447f122889",
-        "rk4": "4af203813380dfe2635dff89d15d7e68d3b7721b761df93de75d0f8ed59ba7ae",
-        "rk4-projection": "3a9968719261a137758b4431fa8eba51c7ad4ce3399e6d38e759fcf748b3f5d3",
-        "rk45": "fe398292d93f88789f6d319c4af7bbdb093ff86b225e60f7cc13b7b42ce786ca",
+        "accel": "c0b0003d01286b6f59804eb8b5f343f2004dd539e77456d078fcbe3a4d1e47ab",
+        "rk4": "ef0cb4fb92e5d551c885874a7642c2abd54ae5268e6f94b443581e22c02b9350",
+        "rk4-projection": "8d93f5d06d008d43c8a67e1c053fa665d4865e301b427dd64bd1f6e454515aba",
+        "rk45": "f0ab9c9edd920207e81dd9826edcc448f234fffee53e9bf36c1001b76af38688",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",

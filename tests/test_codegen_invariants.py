@@ -14,7 +14,8 @@ import numpy as np
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.generate import generate_source
 from mcchain.codegen.topology import Topology
-from mcchain.scene import compile_model, load_scene
+from mcchain.contact import LAW_CODES
+from mcchain.scene import compile_model, load_scene, load_scene_text
 from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
@@ -88,3 +89,19 @@ def test_fixed_step_lanes__use_the_invariants_the_adaptive_ones_do_not():
     # S_rr of the clearance row: each body's 1/m, not e_x² /m + e_y² /m
     assert "p_im0" in _stage(rk4) and "Wt2_0" not in _stage(rk4)
     assert "Wt2_0" in _stage(rk45) and "Wt2_3" in _stage(rk45)
+
+
+def test_contact_law__the_scenes_law_is_a_literal_of_the_text():
+    """[joint.contact] law is not sampled: the lanes' text evaluates χ(e) of the scene's law
+    alone (restitution_factor's other branches, three of them divisions, are not in it), and
+    each law has a text of its own."""
+    written = (CONFIGS / "fourbar-clearance.toml").read_text()
+    assert 'law = "lankarani-nikravesh"' in written
+    texts = {}
+    for law in LAW_CODES:
+        scene = load_scene_text(written.replace('"lankarani-nikravesh"', f'"{law}"'))
+        topo = Topology.from_model(compile_model(scene))
+        assert topo.law(2) == LAW_CODES[law]  # joint B
+        texts[law] = generate_source(topo, "rk45", lmax=4)
+        assert not re.search(r"p_lw\d+(__\d+)? ==", texts[law]), law  # no branch on the law
+    assert len(set(texts.values())) == len(LAW_CODES)

@@ -145,6 +145,9 @@ class Emitter(ConstraintKinematics, SchurComplement):
         arguments = [f"{x}{k}" for x in ("pen", "pdot", "ins", "vi", "p_K", "p_mx", "p_lw", "p_er")]
         if self.hertz_exponent:  # lanes whose exponents are all 1.5: contact_power's branch
             arguments[5] = "1.5"
+        law = self.topo.law(k)
+        if law is not None:  # the scene's law: its branch of restitution_factor alone
+            arguments[6] = f"{float(law)!r}"
         fn, delta_slope, _rate_slope = self.inline("contact_law", arguments, k)
         if fn != f"fn{k}":
             self.emit(f"fn{k} = {fn}")

@@ -41,6 +41,9 @@ class Topology:
     spring_a: tuple[int, ...]
     spring_b: tuple[int, ...]
     joint_model: tuple[int, ...] = ()
+    # Per joint, read by contact joints only: the law's code ([joint.contact] law is not
+    # sampled: a literal of the text); (): the law a parameter of the lanes
+    joint_law: tuple[int, ...] = ()
     driver_law: tuple[int, ...] = ()
     force_law: tuple[int, ...] = ()
     driver_joint: tuple[int, ...] = ()
@@ -56,7 +59,7 @@ class Topology:
         # repr) is unchanged by their addition.
         names = [f.name for f in fields(self)]
         if not self.contact_joints:
-            names = [n for n in names if n != "joint_model"]
+            names = [n for n in names if n not in ("joint_model", "joint_law")]
         if not self.harmonic_drivers:
             names = [n for n in names if n != "driver_law"]
         if not self.harmonic_loads:
@@ -87,8 +90,9 @@ class Topology:
             spring_a=t(model.spring_body_a),
             spring_b=t(model.spring_body_b),
             # 1 where the joint may use the contact law: whether from the start or after the
-            # link lets go (model contact or auto) is a parameter of the lanes, as the law.
+            # link lets go (model contact or auto) is a parameter of the lanes.
             joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
+            joint_law=t(model.joint_contact_law),
             driver_law=t(model.driver_law),
             force_law=t(model.force_law),
             driver_joint=t(model.driver_joint),
@@ -171,6 +175,11 @@ class Topology:
     def contact_joints(self) -> tuple[int, ...]:
         """The joints that may use the contact law (model contact or auto)."""
         return tuple(k for k, m in enumerate(self.joint_model) if m != 0)
+
+    def law(self, k: int) -> int | None:
+        """The contact law's code of joint ``k`` (:data:`mcchain.contact.LAW_CODES`), or None
+        where the lanes read it from their parameters."""
+        return self.joint_law[k] if self.joint_law else None
 
     @property
     def harmonic_drivers(self) -> tuple[int, ...]:
