@@ -40,10 +40,10 @@ GOLDEN = {
         "rk45": "2f70a2b57891fd611b3add03e62c3e1416ea7887338b2dd4d5a98502a4522e07",
     },
     "fourbar-clearance-auto": {
-        "accel": "c0b0003d01286b6f59804eb8b5f343f2004dd539e77456d078fcbe3a4d1e47ab",
-        "rk4": "ef0cb4fb92e5d551c885874a7642c2abd54ae5268e6f94b443581e22c02b9350",
-        "rk4-projection": "8d93f5d06d008d43c8a67e1c053fa665d4865e301b427dd64bd1f6e454515aba",
-        "rk45": "f0ab9c9edd920207e81dd9826edcc448f234fffee53e9bf36c1001b76af38688",
+        "accel": "33596a67cad0a6c5652103a2d64bbfd10c6759dfdca02c81c1f7143733aae54d",
+        "rk4": "0ae015ebaac7b2cdf2d7d4aa056c449aa6317520640463638e66f33d3696d116",
+        "rk4-projection": "f7fb8a64193d9542fb6fee19fca3f1f58aa8af0dc365f5eb4f6822c910b95531",
+        "rk45": "73e189d4c86c5268095fca473f9a8198bbaa8403d05ae7385f08ad63f64c4b44",
     },
     "chain4-mixed-spring": {
         "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",

@@ -105,3 +105,21 @@ def test_contact_law__the_scenes_law_is_a_literal_of_the_text():
         texts[law] = generate_source(topo, "rk45", lmax=4)
         assert not re.search(r"p_lw\d+(__\d+)? ==", texts[law]), law  # no branch on the law
     assert len(set(texts.values())) == len(LAW_CODES)
+
+
+def test_contact_friction__terms_only_where_some_sample_has_friction():
+    """A contact joint with μ = 0 in every sample has no friction terms in the lanes' text
+    (at μ = 0 they are exact zeros); μ > 0 in one sample of the batch brings them back."""
+    written = (CONFIGS / "fourbar-clearance.toml").read_text()
+    frictionless = Topology.from_model(compile_model(load_scene_text(written)))
+    assert frictionless.joint_friction == (0, 0, 0, 0) and not frictionless.friction(2)
+    text = generate_source(frictionless, "rk45", lmax=4)
+    assert not re.search(r"\b(slip|ftn|ft)2(__\d+)? = ", text)
+    swept = written.replace(
+        "[sample.vary]\n", '[sample.vary]\n"joint.B.contact.friction" = { uniform = [0.0, 0.1] }\n'
+    )
+    model = compile_model(load_scene_text(swept))
+    assert model.joint_contact_friction.shape == (model.nsample, 4)
+    rubbing = Topology.from_model(model)
+    assert rubbing.joint_friction == (0, 0, 1, 0) and rubbing.friction(2)
+    assert re.search(r"\bslip2(__\d+)? = ", generate_source(rubbing, "rk45", lmax=4))

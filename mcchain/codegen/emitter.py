@@ -110,7 +110,8 @@ class Emitter(ConstraintKinematics, SchurComplement):
         rows = self.rows()
         for k in self.contact_row:
             self.contact_law(k)
-            self.contact_friction(k, a0)
+            if self.topo.friction(k):  # else its terms, exact zeros at μ = 0, are left out
+                self.contact_friction(k, a0)
         for r, row in enumerate(rows):
             gone = _cancelling(row, a0) if self.cancel_gravity else set()
             terms = [_mul(val, a0[c]) for c, val in row.items() if c not in gone]

@@ -42,8 +42,11 @@ class Topology:
     spring_b: tuple[int, ...]
     joint_model: tuple[int, ...] = ()
     # Per joint, read by contact joints only: the law's code ([joint.contact] law is not
-    # sampled: a literal of the text); (): the law a parameter of the lanes
+    # sampled: a literal of the text) and 1 where some sample's Coulomb μ is not 0 (the
+    # text of a joint without has no friction terms). (): the law a parameter of the lanes,
+    # friction everywhere.
     joint_law: tuple[int, ...] = ()
+    joint_friction: tuple[int, ...] = ()
     driver_law: tuple[int, ...] = ()
     force_law: tuple[int, ...] = ()
     driver_joint: tuple[int, ...] = ()
@@ -59,7 +62,7 @@ class Topology:
         # repr) is unchanged by their addition.
         names = [f.name for f in fields(self)]
         if not self.contact_joints:
-            names = [n for n in names if n not in ("joint_model", "joint_law")]
+            names = [n for n in names if n not in ("joint_model", "joint_law", "joint_friction")]
         if not self.harmonic_drivers:
             names = [n for n in names if n != "driver_law"]
         if not self.harmonic_loads:
@@ -93,6 +96,7 @@ class Topology:
             # link lets go (model contact or auto) is a parameter of the lanes.
             joint_model=tuple(int(m != 0) for m in np.asarray(model.joint_model).reshape(-1)),
             joint_law=t(model.joint_contact_law),
+            joint_friction=_friction(model),
             driver_law=t(model.driver_law),
             force_law=t(model.force_law),
             driver_joint=t(model.driver_joint),
@@ -176,6 +180,10 @@ class Topology:
         """The joints that may use the contact law (model contact or auto)."""
         return tuple(k for k, m in enumerate(self.joint_model) if m != 0)
 
+    def friction(self, k: int) -> bool:
+        """Whether contact joint ``k`` may have friction (some sample's μ is not 0)."""
+        return not self.joint_friction or self.joint_friction[k] != 0
+
     def law(self, k: int) -> int | None:
         """The contact law's code of joint ``k`` (:data:`mcchain.contact.LAW_CODES`), or None
         where the lanes read it from their parameters."""
@@ -218,6 +226,12 @@ class Topology:
     def slots(self) -> dict[str, int]:
         """Row of ``P`` holding each named per-sample quantity."""
         return {slot.name: i for i, slot in enumerate(self.packed())}
+
+
+def _friction(model: Model) -> tuple[int, ...]:
+    """Per joint, 1 where some sample's μ is not 0 (NaN counts as friction)."""
+    mu = np.asarray(model.joint_contact_friction, dtype=np.float64).reshape(-1, model.njoint)
+    return tuple(int(np.any(mu[:, k] != 0.0)) for k in range(model.njoint))
 
 
 def _tables(
