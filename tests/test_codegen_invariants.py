@@ -109,7 +109,7 @@ def test_contact_law__the_scenes_law_is_a_literal_of_the_text():
 
 def test_contact_friction__terms_only_where_some_sample_has_friction():
     """A contact joint with μ = 0 in every sample has no friction terms in the lanes' text
-    (at μ = 0 they are exact zeros); μ > 0 in one sample of the batch brings them back."""
+    (at μ = 0 they are exact zeros); μ swept over the samples brings them back."""
     written = (CONFIGS / "fourbar-clearance.toml").read_text()
     frictionless = Topology.from_model(compile_model(load_scene_text(written)))
     assert frictionless.joint_friction == (0, 0, 0, 0) and not frictionless.friction(2)

@@ -26,7 +26,8 @@ from mcchain.parameters import Slot, packed_slots
 
 @dataclass(frozen=True, repr=False)
 class Topology:
-    """The structure of a model that generated code depends on (never parameter values).
+    """The structure of a model that generated code depends on (never parameter values; of
+    them only whether a contact joint has friction at all, :attr:`joint_friction`).
 
     Constraint rows follow :func:`mcchain.model.constraint_rows`: joints in order (2 rows
     ideal, 1 clearance), then drivers.
