@@ -290,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(peak.measure()))
         return 0
     OUT.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
     env = dict(os.environ)
     sub = ["--only", args.only, "--repeats", str(args.repeats)]
     with tempfile.TemporaryDirectory(prefix="roofline-") as fresh:
@@ -304,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
         peaks = _child(["--peaks"], env)
     (OUT / "roofline.json").write_text(json.dumps({"counts": counts, "times": times,
                                                     "peaks": peaks}, indent=1))  # fmt: skip
-    text = report(counts, times, peaks, args, load_before)
+    text = report(counts, times, peaks, args, load_before, time.perf_counter() - started)
     print(text)
     (OUT / "roofline.md").write_text(text)
     chart(counts, times, peaks, OUT / "roofline.png")
@@ -312,8 +313,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def report(counts: list[dict], times: list[dict], peaks: dict[str, Any],
-           args: argparse.Namespace, load: float) -> str:  # fmt: skip
-    """The Markdown of roofline.md: command, ceilings, what is counted, the table."""
+           args: argparse.Namespace, load: float, seconds: float) -> str:  # fmt: skip
+    """The Markdown of roofline.md: command, ceilings, what is counted, the table
+    (``seconds``: how long the run took)."""
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=HERE, text=True,
+                            capture_output=True).stdout.strip() or "unknown"  # fmt: skip
+    when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     command = "python benchmarks/bench_roofline.py" + (f" --only {args.only}" if args.only else "")
     dgemm = {th: max(peaks[f"dgemm_{th}"], key=lambda d: d["gflops"]) for th in (1, 2)}
     ceilings = [
@@ -335,7 +340,8 @@ def report(counts: list[dict], times: list[dict], peaks: dict[str, Any],
         [
             "# Roofline of mcchain's kernel paths",
             "",
-            f"`{command}` (about an hour: every kernel compiled cold with counters, then timed). "
+            f"`{command}` ({when}, the kernels of {commit}; {seconds / 60:.0f} min: every kernel "
+            "compiled cold with counters, then timed). "
             f"Load average {load:.1f} when the timed runs started ({peaks.get('load', 0):.1f} at "
             "the ceilings'): the machine is shared (2 cores); the figures are best-of runs, "
             "the ceilings and the kernels on 1 thread on CPU time, the kernels on 2 threads on "
