@@ -291,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     OUT.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=HERE, text=True,
+                            capture_output=True).stdout.strip() or "unknown"  # fmt: skip
     env = dict(os.environ)
     sub = ["--only", args.only, "--repeats", str(args.repeats)]
     with tempfile.TemporaryDirectory(prefix="roofline-") as fresh:
@@ -305,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
         peaks = _child(["--peaks"], env)
     (OUT / "roofline.json").write_text(json.dumps({"counts": counts, "times": times,
                                                     "peaks": peaks}, indent=1))  # fmt: skip
-    text = report(counts, times, peaks, args, load_before, time.perf_counter() - started)
+    text = report(counts, times, peaks, args, load_before, time.perf_counter() - started, commit)
     print(text)
     (OUT / "roofline.md").write_text(text)
     chart(counts, times, peaks, OUT / "roofline.png")
@@ -313,11 +315,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def report(counts: list[dict], times: list[dict], peaks: dict[str, Any],
-           args: argparse.Namespace, load: float, seconds: float) -> str:  # fmt: skip
+           args: argparse.Namespace, load: float, seconds: float, commit: str) -> str:  # fmt: skip
     """The Markdown of roofline.md: command, ceilings, what is counted, the table
-    (``seconds``: how long the run took)."""
-    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=HERE, text=True,
-                            capture_output=True).stdout.strip() or "unknown"  # fmt: skip
+    (``seconds``: how long the run took; ``commit``: the tree's when it started)."""
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     command = "python benchmarks/bench_roofline.py" + (f" --only {args.only}" if args.only else "")
     dgemm = {th: max(peaks[f"dgemm_{th}"], key=lambda d: d["gflops"]) for th in (1, 2)}
