@@ -28,28 +28,28 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 
 GOLDEN = {
     "double-pendulum-clearance": {
-        "accel": "1a41bfb571f6ca124a599e0dd71a185981a4aed4b1425150719019ce91b11038",
+        "accel": "2ad8088f6b58eb68112dc271b22aeefa42f4966ebae5edcad12b9baf9b3a4954",
         "rk4": "17f6a9d11042cb04673a83349016311389a4a30bac82fb3ed08ee4e76cd44aef",
         "rk4-projection": "94563e1ed3863b6f16ea2870049de914118bec3a8870a85a6b08a4729b1d573c",
-        "rk45": "7a0e2760311f76c3fd625a606a752ede754135a084c72ac5559d1e20d27558b2",
+        "rk45": "0463fd955aa0e955b23aa6d518d9e13e2ae6d537bc146b174b73d478e047dbd8",
     },
     "fourbar-clearance": {
-        "accel": "e184b480b6a9a4ee302f08d8efbf7cb17ebaf3650a0e8ee248c102fe489b0d6b",
+        "accel": "78c5f8e3a95473f0e75d29927a5446a971ce217ae72d23e1d1dc60f5f072a29c",
         "rk4": "acf1341a22749b2397efa8734d62a4bcc44e6ab1007bc67f46b59cc189c910f2",
         "rk4-projection": "e4b31abb34386c9425f6ccda8b1e7b723dd8dfc688e58a9eb897b4d81943aff7",
-        "rk45": "2f70a2b57891fd611b3add03e62c3e1416ea7887338b2dd4d5a98502a4522e07",
+        "rk45": "36813833ea5fd8811988b511c8c5d495ce008dab953a1ffba14144fc56cea7da",
     },
     "fourbar-clearance-auto": {
-        "accel": "33596a67cad0a6c5652103a2d64bbfd10c6759dfdca02c81c1f7143733aae54d",
+        "accel": "0bca67646de5e10daeefbdca55035f301ac81ae6c053155e1dcbeada60a69518",
         "rk4": "0ae015ebaac7b2cdf2d7d4aa056c449aa6317520640463638e66f33d3696d116",
         "rk4-projection": "f7fb8a64193d9542fb6fee19fca3f1f58aa8af0dc365f5eb4f6822c910b95531",
-        "rk45": "73e189d4c86c5268095fca473f9a8198bbaa8403d05ae7385f08ad63f64c4b44",
+        "rk45": "a0d0f7544c6b63f403153f6e34dded3427f4d127de35865273a650a6068a3777",
     },
     "chain4-mixed-spring": {
-        "accel": "b731760ef4c677815383a346aef8f0bbdd888aae32c2504e9862cf5d94cce221",
+        "accel": "f20493b13273534cfa99e5f8e799e8a69f6084ccabd4a12c22edfa662efb1bf1",
         "rk4": "1eebf007bcf4e99702c8f99fd5629121a2ebafcdafcbb8549a47976f0be61259",
         "rk4-projection": "7e828bd94f6a643d40df212c84ba4ae1645e5d981ec9299cc2dc7294e8b0e50d",
-        "rk45": "879d2372507ef8b4850cb3ee5266a6bfe8343ac6498d1126d1c6017ff66c3984",
+        "rk45": "4bbb90dfc51454e9ccff2b1eb01e0684e34211da049d05bfa9c32597aea1a2f9",
     },
 }
 

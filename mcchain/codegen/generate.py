@@ -96,7 +96,8 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
 def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -> dict[str, str]:
     fixed_step = lay.fixed_step  # the fixed-step kernel's blocks (templates.ERK_KERNEL)
     em = Emitter(topo)
-    em.parallel_pivots = em.cancel_gravity = em.select_flags = fixed_step
+    em.parallel_pivots = em.cancel_gravity = fixed_step
+    em.select_flags = True  # the same values in every variant
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -558,11 +559,11 @@ def generate_source(
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
     # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots) and
-    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity), the
-    # pivots' flags are selects (SchurComplement.select_flags: the same values); the
+    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity); the
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
-    # of a pivot into a different sequence of impacts.
+    # of a pivot into a different sequence of impacts. Every variant's pivot flags are
+    # selects (SchurComplement.select_flags: the same values).
     blocks = _blocks(topo, nstage, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy

@@ -130,9 +130,8 @@ class SchurComplement:
     select_flags = False
     """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
     else 0.0``, rather than the comparison times 1.0 (whose conversion took three
-    instructions): the same values. The generator sets it for the fixed-step variants (the
-    adaptive ones' text is left as it was; what it gives, and why the pivots' inverses are
-    not selects too: benchmarks/results/roofline/reading.md)."""
+    instructions): the same values. The generator sets it for every variant (what it gives,
+    and why the pivots' inverses are not selects too: benchmarks/results/roofline/reading.md)."""
 
     def _flag(self, condition: str) -> str:
         """1.0 where ``condition`` holds, else 0.0 (NaN: 0.0)."""
