@@ -29,9 +29,14 @@ from typing import Any
 
 import numpy as np
 
-LANES_ARGUMENT = 19
-"""The position of ``lanes`` among the kernels' arguments after ``g_start, g_stop``
-(templates._ERK_ARGS, templates._ADAPTIVE_ARGS)."""
+
+def _lanes_argument(kernel: str) -> int:
+    """The position of ``lanes`` among the kernel's arguments after ``g_start, g_stop``
+    (templates._ERK_ARGS, templates._ADAPTIVE_ARGS)."""
+    from mcchain.codegen import templates
+
+    text = templates._ERK_ARGS if kernel == "rk4" else templates._ADAPTIVE_ARGS
+    return [name.strip() for name in text.split(",")].index("lanes")
 
 
 def _captured(kernel: str) -> tuple[Any, int, tuple[Any, ...]]:
@@ -84,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     entry, count, kernel_args = _captured(args.kernel)
     per_thread = args.per_thread or (4 if args.kernel == "rk4" else 2)
     # rk4's queue holds lane groups, rk45's samples
-    scale = 1 if args.kernel == "rk4" else int(kernel_args[LANES_ARGUMENT])
+    scale = 1 if args.kernel == "rk4" else int(kernel_args[_lanes_argument(args.kernel)])
     numba.set_num_threads(2)
 
     def fresh() -> list[Any]:

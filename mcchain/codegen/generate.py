@@ -97,7 +97,6 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     fixed_step = lay.fixed_step  # the fixed-step kernel's blocks (templates.ERK_KERNEL)
     em = Emitter(topo)
     em.parallel_pivots = em.cancel_gravity = fixed_step
-    em.select_flags = True  # the same values in every variant
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -562,8 +561,7 @@ def generate_source(
     # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity); the
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
-    # of a pivot into a different sequence of impacts. Every variant's pivot flags are
-    # selects (SchurComplement.select_flags: the same values).
+    # of a pivot into a different sequence of impacts.
     blocks = _blocks(topo, nstage, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy

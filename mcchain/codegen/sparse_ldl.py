@@ -127,17 +127,13 @@ class SchurComplement:
     in exact arithmetic, within an ulp or two of 1/m as written out); the generator fills it
     for the fixed-step variants."""
 
-    select_flags = False
-    """Whether a pivot's flag ``okp`` (1.0 kept, 0.0 dropped) is a select, ``1.0 if d > tau S
-    else 0.0``, rather than the comparison times 1.0 (whose conversion took three
-    instructions): the same values. The generator sets it for every variant (what it gives,
-    and why the pivots' inverses are not selects too: benchmarks/results/roofline/reading.md)."""
-
-    def _flag(self, condition: str) -> str:
-        """1.0 where ``condition`` holds, else 0.0 (NaN: 0.0)."""
-        if self.select_flags:
-            return f"1.0 if {condition} else 0.0"
-        return f"({condition}) * 1.0"
+    @staticmethod
+    def _flag(condition: str) -> str:
+        """A pivot's flag ``okp``: 1.0 where ``condition`` holds, else 0.0 (NaN: 0.0), as a
+        select (the comparison times 1.0, the same values, took three instructions to convert;
+        what the select gives, and why the pivots' inverses are not selects too:
+        benchmarks/results/roofline/reading.md)."""
+        return f"1.0 if {condition} else 0.0"
 
     def _minv(self, col: int) -> str:
         return f"p_{self._minv_slot(col)}"

@@ -5,7 +5,7 @@ a thread pool runs contiguous blocks side by side. A ``prange`` loop did the sam
 numba build, optimise and emit each kernel's whole call tree once more for the parallel
 body (benchmarks/results/startup/breakdown.md). Samples never interact, so each sample's numbers do
 not depend on the blocks or the thread count. A kernel that takes its samples from a queue
-(the adaptive lanes) runs once on every thread instead (:func:`on_every_thread`).
+(the lane kernels) runs once on every thread instead (:func:`on_every_thread`).
 """
 
 from __future__ import annotations
