@@ -278,7 +278,10 @@ def test_rk4_lanes__slow_groups_are_turned_within_rounding(monkeypatch, tier, to
     assert (speeds * dt < ROTATION_BOUND / 2).all()
     if tier == "fdlibm":
         assert (speeds * dt <= SHORT_ROTATION_BOUND).all()
-    rotated, reference = _run_both(monkeypatch, model, "rk4", dt, 20, tier)
+    # 200 steps: the two tiers' pairs differ in a last bit here and there, and the crank's
+    # reaches the outputs through its own reactions only (its rows are out of S,
+    # Emitter.eliminate_prescribed): in 20 steps no output differed.
+    rotated, reference = _run_both(monkeypatch, model, "rk4", dt, 200, tier)
     assert (rotated["status"] == 0).all() and (reference["status"] == 0).all()
     differs = False
     for name in ("q", "v", "joint_force", "driver_torque", "energy"):

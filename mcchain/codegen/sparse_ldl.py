@@ -127,6 +127,27 @@ class SchurComplement:
     in exact arithmetic, within an ulp or two of 1/m as written out); the generator fills it
     for the fixed-step variants."""
 
+    eliminated_rows: frozenset[int] = frozenset()
+    """Rows of B left out of S (a prescribed body's own rows while
+    :meth:`mcchain.codegen.emitter.Emitter.acceleration` eliminates it: their λ come from
+    the body's own equations after the solve)."""
+
+    eliminated_columns: frozenset[int] = frozenset()
+    """Columns of B left out of S and of M⁻¹Bᵀ (a prescribed body's: its accelerations are
+    known before the solve)."""
+
+    def schur_rows(self) -> list[dict[int, Coef]]:
+        """The rows of B that S is made of: :meth:`rows` without :attr:`eliminated_rows`
+        (empty) and :attr:`eliminated_columns`."""
+        rows = self.rows()
+        if not self.eliminated_rows and not self.eliminated_columns:
+            return rows
+        return [
+            {} if r in self.eliminated_rows else
+            {c: v for c, v in row.items() if c not in self.eliminated_columns}
+            for r, row in enumerate(rows)
+        ]  # fmt: skip
+
     @staticmethod
     def _flag(condition: str) -> str:
         """A pivot's flag ``okp``: 1.0 where ``condition`` holds, else 0.0 (NaN: 0.0), as a
@@ -150,14 +171,16 @@ class SchurComplement:
         dependent on the previous ones, λ_j = 0) and counted in ``sing``; integrators either
         flag the sample SINGULAR or, on the robust path, carry on with the basic solution.
         """
-        rows = self.rows()
-        n = len(rows)
+        rows = self.schur_rows()
         for r, row in enumerate(rows):
             for col, val in row.items():
                 self.emit(f"Wt{r}_{col} = {_mul(val, self._minv(col))}")
-        pattern = [{j for j in range(n) if set(rows[i]) & set(rows[j])} for i in range(n)]
-        order = _block_order(pattern, [r for r in range(n) if self.topo.own_row(r)])
+        pattern = [{j for j in range(len(rows)) if set(rows[i]) & set(rows[j])} for i in
+                   range(len(rows))]  # fmt: skip
+        order = _block_order(pattern, [r for r in range(len(rows)) if self.topo.own_row(r)])
+        order = [r for r in order if r not in self.eliminated_rows]
         self.order = order
+        n = len(order)  # from here on, positions in the order
         # Entries of S in the permuted numbering (i, j: positions), lower part.
         pos = {r: i for i, r in enumerate(order)}
         S: dict[tuple[int, int], str] = {}
@@ -166,7 +189,7 @@ class SchurComplement:
         # and the coupling S_jr F_n moves to the right-hand side (:meth:`acceleration`). In
         # link mode (fm = 0) the selects give the values of the link alone.
         self.coupling: dict[tuple[int, int], str] = {}
-        for ri in range(n):
+        for ri in range(len(rows)):
             for rj in pattern[ri]:
                 i, j = pos[ri], pos[rj]
                 if j > i:
@@ -298,7 +321,7 @@ class SchurComplement:
         coordinates, ±1) are fewer values to keep across the Schur solve than those of M⁻¹Bᵀ,
         and ±1 costs no product.
         """
-        rows = self.rows()
+        rows = self.schur_rows()
         for c in range(self.topo.ndof):
             terms = [_mul(row[c], f"{x}{r}") for r, row in enumerate(rows) if c in row]
             head = base[c] if base else 0.0

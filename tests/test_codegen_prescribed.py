@@ -1,0 +1,131 @@
+"""codegen: a body whose own rows prescribe its motion (a driven crank: an ideal revolute to
+the ground and a driver) is taken out of S = B M⁻¹ Bᵀ (``Emitter.eliminate_prescribed``): its
+accelerations from those rows before the solve, their λ from its equations after it. The same
+solution in exact arithmetic: the runs agree with the text that keeps the rows within
+rounding, reactions and driver torques included."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from mcchain.codegen import emitter, generate
+from mcchain.codegen.emitter import Emitter, _substitution
+from mcchain.codegen.native import NativeModule
+from mcchain.codegen.topology import Topology
+from mcchain.solvers.simulate import simulate
+from mcchain.solvers.statics import assemble
+from mcchain.testing.scenes import (
+    DOUBLE_PENDULUM,
+    flores_pin_text,
+    fourbar_text,
+    model_of,
+    slider_crank_text,
+    straight_chain_text,
+)
+
+ROUNDING_RTOL = 1e-11
+"""Two roundings of the same fixed-step run apart (a few hundred steps): far below the
+method's error."""
+
+
+def _prescribed(text: str) -> dict[int, list[int]]:
+    """{body: its own rows} that the emitter takes out of S."""
+    em = Emitter(Topology.from_model(model_of(text, nsample=1)))
+    em.bodies()
+    em.joints()
+    return {b: sorted(own) for b, (own, _) in em.prescribed_bodies().items()}
+
+
+def test_prescribed_bodies__a_driven_crank_and_nothing_else():
+    # the slider-crank: the crank (body 0), its ground joint's rows 0, 1 and the driver's row
+    for text in (slider_crank_text(), fourbar_text()):
+        driver_row = Topology.from_model(model_of(text, nsample=1)).driver_row[0]
+        assert _prescribed(text) == {0: [0, 1, driver_row]}
+    # no driver: a pendulum on its ground pivot keeps a degree of freedom
+    assert _prescribed(straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4})) == {}
+    # clearance at the crank's ground pivot: its row is not the crank's alone to solve
+    loose = slider_crank_text().replace(
+        'bodies = ["ground", "crank"]', 'bodies = ["ground", "crank"]\nclearance = 1e-4'
+    )
+    assert _prescribed(loose) == {}
+
+
+def test_prescribed_bodies__not_a_body_in_a_contact_joint():
+    # the Flores slider-crank: the crank prescribed; the piston pin's contact joint joins the
+    # rod and the slider, neither prescribed
+    assert list(_prescribed(flores_pin_text())) == [0]
+
+
+@pytest.mark.parametrize(
+    ("equations", "unknowns", "plan"),
+    [
+        # a crank: the driver's row first, then its pivot's two rows
+        ({0: {0: 1.0, 2: "w"}, 1: {1: 1.0, 2: "u"}, 7: {2: 1.0}}, {0, 1, 2},
+         [(7, 2), (0, 0), (1, 1)]),
+        ({0: {0: -1.0}}, {0}, [(0, 0)]),  # −1 pivots too
+        ({0: {0: 2.0}}, {0}, None),  # a division: not taken
+        ({0: {0: 1.0, 1: 1.0}, 1: {0: 1.0, 1: -1.0}}, {0, 1}, None),  # coupled
+        ({0: {0: "a"}}, {0}, None),  # a coefficient that varies
+    ],
+)  # fmt: skip
+def test_substitution__one_unknown_and_a_unit_pivot_at_each_step(equations, unknowns, plan):
+    assert _substitution(equations, unknowns) == plan
+
+
+def test_generate__the_crank_s_rows_leave_the_factorisation():
+    topo = Topology.from_model(model_of(flores_pin_text(), nsample=1))
+    text = generate.generate_source(topo, "rk45")
+    stage = text[text.index("def group_stage_hertz_dp") :]
+    stage = stage[: stage.index("@njit", 10)]
+    # eight rows (O 2, A 2, B 1, P 2, driver 1) of which five are factored
+    assert len(set(re.findall(r"\bokp(\d+)__1 =", stage))) == 5
+    assert "pqdd2__1 = gam7__2" in stage  # the crank's angular acceleration from its driver
+
+
+def _both(monkeypatch, model, sim: dict) -> tuple[dict, dict]:
+    """The lanes' run of ``model`` with the elimination (as generated) and without it."""
+    topo = Topology.from_model(model)
+    variant = sim["method"]
+    eliminated = generate.generate_source(topo, variant)
+    monkeypatch.setattr(emitter.Emitter, "eliminate_prescribed", False)
+    kept = generate.generate_source(topo, variant)
+    monkeypatch.undo()
+    assert kept != eliminated  # the premise
+    start = assemble(model)
+    mine = simulate(model, sim, start.q, start.v, np.float64, status=start.status)
+    module = NativeModule(kept, f"prescribed_kept_{variant.replace('-', '_')}")
+    monkeypatch.setattr(generate, "lane_kernels", lambda *args: module)
+    reference = simulate(model, sim, start.q, start.v, np.float64, status=start.status)
+    return mine, reference
+
+
+@pytest.mark.parametrize("method", ["rk4", "rk4-projection"])
+def test_fixed_step_lanes__the_same_run_within_rounding(monkeypatch, method):
+    """The driven slider-crank at 50 Hz over 300 steps: positions, velocities, every joint's
+    force (the crank's ground pivot's from the crank's equations) and the driver's torque."""
+    model = model_of(slider_crank_text(), nsample=8)
+    sim = dict(t_end=0.03, dt=1e-4, output_dt=1e-3, method=method, kernels="lanes")
+    mine, reference = _both(monkeypatch, model, sim)
+    assert (mine["status"] == 0).all() and (reference["status"] == 0).all()
+    for name in ("q", "v", "joint_force", "driver_torque", "energy", "constraint_error"):
+        a, b = np.asarray(mine[name]), np.asarray(reference[name])
+        assert np.array_equal(np.isnan(a), np.isnan(b)), name
+        scale = np.nanmax(np.abs(b)) if name != "constraint_error" else 1e-3  # m: |Φ| ≪ it
+        np.testing.assert_allclose(a, b, rtol=0, atol=ROUNDING_RTOL * scale, equal_nan=True)
+
+
+def test_rk45_lanes__the_flores_pin_within_its_tolerance(monkeypatch):
+    """The Flores slider-crank (the piston pin on the contact law after it lets go, 12 ms):
+    the adaptive lanes with and without the elimination take steps that round apart, so
+    they agree to the run's tolerance, not to rounding; peak forces within 1e-6."""
+    model = model_of(flores_pin_text(t_end=0.012), nsample=8)
+    sim = dict(t_end=0.012, dt=1e-7, output_dt=1e-4, method="rk45", rtol=1e-9, atol=1e-12,
+               kernels="lanes")  # fmt: skip
+    mine, reference = _both(monkeypatch, model, sim)
+    assert (mine["status"] == 0).all() and (reference["status"] == 0).all()
+    np.testing.assert_allclose(mine["q"], reference["q"], rtol=0, atol=1e-9)
+    for name in ("peak_joint_force", "peak_driver_torque", "peak_contact_force"):
+        np.testing.assert_allclose(mine[name], reference[name], rtol=1e-6)
