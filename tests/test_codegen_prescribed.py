@@ -1,8 +1,8 @@
-"""codegen: a body whose own rows prescribe its motion (a driven crank: an ideal revolute to
-the ground and a driver) is taken out of S = B M⁻¹ Bᵀ (``Emitter.eliminate_prescribed``): its
-accelerations from those rows before the solve, their λ from its equations after it. The same
-solution in exact arithmetic: the runs agree with the text that keeps the rows within
-rounding, reactions and driver torques included."""
+"""codegen: rows of B that fix a body's accelerations alone (a driven crank's pivot and
+driver, a slider's guide angle) are taken out of S = B M⁻¹ Bᵀ (``Emitter.eliminate_fixed``):
+those accelerations from the rows before the solve, the rows' λ from the body's equations
+after it. The same solution in exact arithmetic: the runs agree with the text that keeps
+the rows within rounding, reactions and driver torques included."""
 
 from __future__ import annotations
 
@@ -31,32 +31,41 @@ ROUNDING_RTOL = 1e-11
 method's error."""
 
 
-def _prescribed(text: str) -> dict[int, list[int]]:
-    """{body: its own rows} that the emitter takes out of S."""
+def _fixed(text: str) -> dict[int, list[tuple[int, int]]]:
+    """{body: [(row, column), ...]} that the emitter takes out of S."""
     em = Emitter(Topology.from_model(model_of(text, nsample=1)))
     em.bodies()
     em.joints()
-    return {b: sorted(own) for b, (own, _) in em.prescribed_bodies().items()}
+    return em.fixed_accelerations()
 
 
-def test_prescribed_bodies__a_driven_crank_and_nothing_else():
-    # the slider-crank: the crank (body 0), its ground joint's rows 0, 1 and the driver's row
-    for text in (slider_crank_text(), fourbar_text()):
-        driver_row = Topology.from_model(model_of(text, nsample=1)).driver_row[0]
-        assert _prescribed(text) == {0: [0, 1, driver_row]}
+def test_fixed_accelerations__a_driven_crank_and_a_slider_s_angle():
+    # the slider-crank: the crank (body 0) by its driver's row (its angle), then its ground
+    # pivot's rows 0, 1 (x, y); the slider (body 2) by its guide's angle row (column 8)
+    rows = Topology.from_model(model_of(slider_crank_text(), nsample=1))
+    angle_row = rows.joint_row[3] + 1  # joint P: its normal row, then its angle row
+    assert _fixed(slider_crank_text()) == {
+        0: [(rows.driver_row[0], 2), (0, 0), (1, 1)],
+        2: [(angle_row, 8)],
+    }
+    four = Topology.from_model(model_of(fourbar_text(), nsample=1))
+    assert _fixed(fourbar_text()) == {0: [(four.driver_row[0], 2), (0, 0), (1, 1)]}
     # no driver: a pendulum on its ground pivot keeps a degree of freedom
-    assert _prescribed(straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4})) == {}
-    # clearance at the crank's ground pivot: its row is not the crank's alone to solve
+    assert _fixed(straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4})) == {}
+    # clearance at the crank's ground pivot: the driver still fixes its angle
     loose = slider_crank_text().replace(
         'bodies = ["ground", "crank"]', 'bodies = ["ground", "crank"]\nclearance = 1e-4'
     )
-    assert _prescribed(loose) == {}
+    assert _fixed(loose)[0] == [(Topology.from_model(model_of(loose, nsample=1)).driver_row[0], 2)]
 
 
-def test_prescribed_bodies__not_a_body_in_a_contact_joint():
-    # the Flores slider-crank: the crank prescribed; the piston pin's contact joint joins the
-    # rod and the slider, neither prescribed
-    assert list(_prescribed(flores_pin_text())) == [0]
+def test_fixed_accelerations__not_a_body_in_a_contact_joint_with_friction():
+    # the Flores slider-crank: the piston pin's contact joint joins the rod and the slider,
+    # frictionless: the slider's angle is fixed; with friction the slider keeps its rows
+    assert sorted(_fixed(flores_pin_text())) == [0, 2]
+    rough = flores_pin_text().replace("poisson_ratio = 0.3", "poisson_ratio = 0.3\nfriction = 0.1")
+    assert "friction = 0.1" in rough  # the premise
+    assert sorted(_fixed(rough)) == [0]
 
 
 @pytest.mark.parametrize(
@@ -66,9 +75,11 @@ def test_prescribed_bodies__not_a_body_in_a_contact_joint():
         ({0: {0: 1.0, 2: "w"}, 1: {1: 1.0, 2: "u"}, 7: {2: 1.0}}, {0, 1, 2},
          [(7, 2), (0, 0), (1, 1)]),
         ({0: {0: -1.0}}, {0}, [(0, 0)]),  # −1 pivots too
-        ({0: {0: 2.0}}, {0}, None),  # a division: not taken
-        ({0: {0: 1.0, 1: 1.0}, 1: {0: 1.0, 1: -1.0}}, {0, 1}, None),  # coupled
-        ({0: {0: "a"}}, {0}, None),  # a coefficient that varies
+        ({0: {0: 2.0}}, {0}, []),  # a division: not taken
+        ({0: {0: 1.0, 1: 1.0}, 1: {0: 1.0, 1: -1.0}}, {0, 1}, []),  # coupled
+        ({0: {0: "a"}}, {0}, []),  # a coefficient that varies
+        # a slider: its angle row alone; its normal row keeps x and y open
+        ({6: {6: "nx", 7: "ny", 8: "w"}, 7: {8: 1.0}}, {6, 7, 8}, [(7, 8)]),
     ],
 )  # fmt: skip
 def test_substitution__one_unknown_and_a_unit_pivot_at_each_step(equations, unknowns, plan):
@@ -80,9 +91,11 @@ def test_generate__the_crank_s_rows_leave_the_factorisation():
     text = generate.generate_source(topo, "rk45")
     stage = text[text.index("def group_stage_hertz_dp") :]
     stage = stage[: stage.index("@njit", 10)]
-    # eight rows (O 2, A 2, B 1, P 2, driver 1) of which five are factored
-    assert len(set(re.findall(r"\bokp(\d+)__1 =", stage))) == 5
-    assert "pqdd2__1 = gam7__2" in stage  # the crank's angular acceleration from its driver
+    # eight rows (O 2, A 2, B 1, P 2, driver 1) of which four are factored: not the crank's
+    # three nor the slider's angle row
+    assert len(set(re.findall(r"\bokp(\d+)__1 =", stage))) == 4
+    assert "fqdd2__1 = gam7__2" in stage  # the crank's angular acceleration from its driver
+    assert "fqdd8__1 = gam6__2" in stage  # the slider's from its guide
 
 
 def _both(monkeypatch, model, sim: dict) -> tuple[dict, dict]:
@@ -90,7 +103,7 @@ def _both(monkeypatch, model, sim: dict) -> tuple[dict, dict]:
     topo = Topology.from_model(model)
     variant = sim["method"]
     eliminated = generate.generate_source(topo, variant)
-    monkeypatch.setattr(emitter.Emitter, "eliminate_prescribed", False)
+    monkeypatch.setattr(emitter.Emitter, "eliminate_fixed", False)
     kept = generate.generate_source(topo, variant)
     monkeypatch.undo()
     assert kept != eliminated  # the premise

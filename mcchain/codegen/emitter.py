@@ -31,41 +31,35 @@ class Emitter(ConstraintKinematics, SchurComplement):
     the fixed-step lanes set it; the adaptive lanes and the radau right-hand side keep the
     terms and their bits (their round-off, a few 1e-16 |g|, is part of their values)."""
 
-    eliminate_prescribed = True
-    """Take the bodies whose motion their own rows prescribe (:meth:`prescribed_bodies`) out
-    of S: their accelerations from those rows before the solve, the rows' λ from the body's
-    equations after it (the same solution in exact arithmetic, a smaller S: on the
-    verdict's slider-crank three of eight rows, benchmarks/results/verdict/prescribed.md).
-    Every variant's acceleration takes it; the projection's corrections keep the rows."""
+    eliminate_fixed = True
+    """Take out of S the rows that fix a body's accelerations alone
+    (:meth:`fixed_accelerations`: a driven crank's three, a slider's angle): those
+    accelerations from the rows before the solve, the rows' λ from the body's equations after
+    it. The same solution in exact arithmetic, a smaller S (the verdict's slider-crank: four
+    of eight rows; benchmarks/results/verdict/prescribed.md). Every variant's acceleration
+    takes it; the projection's corrections keep the rows."""
 
-    def prescribed_bodies(self) -> dict[int, tuple[list[int], list[tuple[int, int]]]]:
-        """Bodies whose three accelerations three rows of B fix alone: rows whose columns
-        are all the body's (an ideal revolute to the ground and a driver on the same body:
-        a driven crank), none of them a clearance row, the body in no contact joint, and
-        the 3×3 block solvable by substitution with ±1 pivots both ways (no division: the
-        accelerations by rows, the rows' λ by columns). {body: (its rows, the forward
-        plan as (row, column) pairs)}; the backward plan is :func:`_substitution` of the
-        transpose."""
+    def fixed_accelerations(self) -> dict[int, list[tuple[int, int]]]:
+        """Per body, rows of B that fix some of its accelerations alone: rows whose columns
+        are all the body's (a driver on it; an ideal revolute or a prismatic joint to the
+        ground), no clearance row, solved one at a time by substitution, each with one
+        coordinate left and a ±1 coefficient (no division): a driven crank's pivot and driver
+        fix all three, a slider's guide its angle. {body: ([(row, column), ...] in solving
+        order)}. A body in a contact joint with friction keeps its rows (its friction force is
+        in its free acceleration, not in the equations its reactions come from)."""
         topo = self.topo
         rows = self.rows()
         clearance = set(topo.clearance_rows)
-        touched = {topo.joint_a[k] for k in self.contact_row} | {
-            topo.joint_b[k] for k in self.contact_row
-        }
+        rough = {topo.joint_a[k] for k in self.contact_row if topo.friction(k)}
+        rough |= {topo.joint_b[k] for k in self.contact_row if topo.friction(k)}
         found = {}
         for b in range(topo.nbody):
             cols = {3 * b, 3 * b + 1, 3 * b + 2}
-            own = [r for r, row in enumerate(rows) if row and set(row) <= cols]
-            if len(own) != 3 or b in touched or clearance & set(own):
-                continue
-            block = {r: rows[r] for r in own}
-            forward = _substitution(block, cols)
-            transposed: dict[int, dict[int, Coef]] = {c: {} for c in cols}
-            for r, row in block.items():
-                for c, val in row.items():
-                    transposed[c][r] = val
-            if forward is not None and _substitution(transposed, set(own)) is not None:
-                found[b] = (own, forward)
+            own = {r: rows[r] for r, row in enumerate(rows)
+                   if row and set(row) <= cols and r not in clearance}  # fmt: skip
+            plan = _substitution(own, cols) if b not in rough else []
+            if plan:
+                found[b] = plan
         return found
 
     def loaded_bodies(self) -> set[int]:
@@ -145,16 +139,16 @@ class Emitter(ConstraintKinematics, SchurComplement):
             else:
                 a0[c] = ("p_gx", "p_gy", 0.0)[k]
         rows = self.rows()
-        prescribed = self.prescribed_bodies() if self.eliminate_prescribed else {}
-        for _own, forward in prescribed.values():
-            # B_E q̈_b = γ_E over the body's own rows E, by substitution (±1 pivots)
-            for r, c in forward:
+        fixed = self.fixed_accelerations() if self.eliminate_fixed else {}
+        for plan in fixed.values():
+            # B_E q̈ = γ_E over the body's rows E that fix them, by substitution (±1 pivots)
+            for r, c in plan:
                 known = [_mul(val, a0[d]) for d, val in rows[r].items() if d != c]
                 value = f"gam{r}" if not known else f"gam{r} - {_sum(known)}"
-                self.emit(f"pqdd{c} = {value if rows[r][c] == 1.0 else f'-({value})'}")
-                a0[c] = f"pqdd{c}"
-        self.eliminated_rows = frozenset(r for own, _ in prescribed.values() for r in own)
-        self.eliminated_columns = frozenset(3 * b + i for b in prescribed for i in range(3))
+                self.emit(f"fqdd{c} = {value if rows[r][c] == 1.0 else f'-({value})'}")
+                a0[c] = f"fqdd{c}"
+        self.eliminated_rows = frozenset(r for plan in fixed.values() for r, _ in plan)
+        self.eliminated_columns = frozenset(c for plan in fixed.values() for _, c in plan)
         for k in self.contact_row:
             self.contact_law(k)
             if self.topo.friction(k):  # else its terms, exact zeros at μ = 0, are left out
@@ -183,20 +177,23 @@ class Emitter(ConstraintKinematics, SchurComplement):
         self.contact_stiffness_check()
         self.schur_solve("rhs", "lam")
         self.apply_wt("lam", "qdd", a0)
-        for b, (own, _) in prescribed.items():
-            self._prescribed_reactions(b, own, rows)
+        for b, plan in fixed.items():
+            self._fixed_reactions(b, plan, rows)
         self.eliminated_rows = self.eliminated_columns = frozenset()
 
-    def _prescribed_reactions(self, b: int, own: list[int], rows: list[dict[int, Coef]]) -> None:
-        """``lam{r}`` of prescribed body ``b``'s own rows from its equations of motion,
-        B_Eᵀ λ_E = F_b − M_b q̈_b − Σ_(other rows) B_rᵀ λ_r, by substitution (±1 pivots)."""
+    def _fixed_reactions(
+        self, b: int, plan: list[tuple[int, int]], rows: list[dict[int, Coef]]
+    ) -> None:
+        """``lam{r}`` of the rows E of :meth:`fixed_accelerations` ``plan`` (body ``b``) from
+        the body's equations at the columns C they fix, B_ECᵀ λ_E = F_C − M_C q̈_C −
+        Σ_(other rows) B_rCᵀ λ_r: the plan's transpose, backwards (±1 pivots)."""
         loaded = self.loaded_bodies()
-        transposed: dict[int, dict[int, Coef]] = {3 * b + i: {} for i in range(3)}
+        own = {r for r, _ in plan}
+        transposed: dict[int, dict[int, Coef]] = {c: {} for _, c in plan}
         for r in own:
             for c, val in rows[r].items():
-                transposed[c][r] = val
-        backward = _substitution(transposed, set(own))
-        assert backward is not None  # prescribed_bodies checked it
+                if c in transposed:
+                    transposed[c][r] = val
         for c in transposed:
             gravity: Coef = (f"p_m{b} * p_gx", f"p_m{b} * p_gy", 0.0)[c % 3]
             mass = f"p_{'J' if c % 3 == 2 else 'm'}{b}"
@@ -204,10 +201,12 @@ class Emitter(ConstraintKinematics, SchurComplement):
                       if c in row and r not in own]  # fmt: skip
             terms: list[Coef] = [f"F{c}" if b in loaded else gravity, f"(-{mass} * qdd{c})"]
             terms += [f"(-{t})" for t in others]
-            self.emit(f"pres{c} = {_sum(terms)}")
+            self.emit(f"fres{c} = {_sum(terms)}")
+        backward = _substitution(transposed, own)
+        assert len(backward) == len(own)  # a triangular plan's transpose is triangular
         for c, r in backward:
             known = [_mul(val, f"lam{s}") for s, val in transposed[c].items() if s != r]
-            value = f"pres{c}" if not known else f"pres{c} - {_sum(known)}"
+            value = f"fres{c}" if not known else f"fres{c} - {_sum(known)}"
             self.emit(f"lam{r} = {value if transposed[c][r] == 1.0 else f'-({value})'}")
 
     def contact_law(self, k: int) -> None:
@@ -369,25 +368,26 @@ class Emitter(ConstraintKinematics, SchurComplement):
 
 def _substitution(
     equations: dict[int, dict[int, Coef]], unknowns: set[int]
-) -> list[tuple[int, int]] | None:
-    """An order to solve ``equations`` ({equation: {unknown: coefficient}}) for
-    ``unknowns`` by substitution, each step an equation with one unknown left whose
-    coefficient is ±1 (no division): [(equation, unknown), ...], or None."""
+) -> list[tuple[int, int]]:
+    """Solve ``equations`` ({equation: {unknown: coefficient}}) for as many of
+    ``unknowns`` as substitution reaches, each step an equation with one unknown left whose
+    coefficient is ±1 (no division): [(equation, unknown), ...] in solving order (the
+    equations left over, and their unknowns, are not in it)."""
     left = set(unknowns)
-    pending = dict(equations)
-    plan = []
-    while left:
-        step = next(
-            ((e, (set(eq) & left).pop()) for e, eq in sorted(pending.items())
-             if len(set(eq) & left) == 1 and eq[(set(eq) & left).pop()] in (1.0, -1.0)),
-            None,
-        )  # fmt: skip
+    pending = dict(sorted(equations.items()))
+    plan: list[tuple[int, int]] = []
+    while True:
+        step = None
+        for e, eq in pending.items():
+            open_ = set(eq) & left
+            if len(open_) == 1 and eq[next(iter(open_))] in (1.0, -1.0):
+                step = (e, open_.pop())
+                break
         if step is None:
-            return None
+            return plan
         plan.append(step)
         left.discard(step[1])
         del pending[step[0]]
-    return plan
 
 
 def _negated(x: Coef, y: Coef) -> bool:

@@ -128,13 +128,13 @@ class SchurComplement:
     for the fixed-step variants."""
 
     eliminated_rows: frozenset[int] = frozenset()
-    """Rows of B left out of S (a prescribed body's own rows while
-    :meth:`mcchain.codegen.emitter.Emitter.acceleration` eliminates it: their λ come from
+    """Rows of B left out of S (rows that fix a body's accelerations alone, while
+    :meth:`mcchain.codegen.emitter.Emitter.acceleration` eliminates them: their λ come from
     the body's own equations after the solve)."""
 
     eliminated_columns: frozenset[int] = frozenset()
-    """Columns of B left out of S and of M⁻¹Bᵀ (a prescribed body's: its accelerations are
-    known before the solve)."""
+    """Columns of B left out of S and of M⁻¹Bᵀ (the coordinates those rows fix: their
+    accelerations are known before the solve)."""
 
     def schur_rows(self) -> list[dict[int, Coef]]:
         """The rows of B that S is made of: :meth:`rows` without :attr:`eliminated_rows`
