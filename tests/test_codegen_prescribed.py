@@ -68,6 +68,16 @@ def test_fixed_accelerations__not_a_body_in_a_contact_joint_with_friction():
     assert sorted(_fixed(rough)) == [0]
 
 
+def test_fixed_accelerations__a_redundant_row_keeps_the_body_s_rows():
+    # a second angle row on the crank (as a driver on a body that cannot turn would give):
+    # nothing of it would be left for S, so the crank keeps its rows there
+    em = Emitter(Topology.from_model(model_of(slider_crank_text(), nsample=1)))
+    em.bodies()
+    em.joints()
+    em._rows_cache = [*em.rows(), {2: -1.0}]
+    assert list(em.fixed_accelerations()) == [2]  # the slider's angle only
+
+
 @pytest.mark.parametrize(
     ("equations", "unknowns", "plan"),
     [

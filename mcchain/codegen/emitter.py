@@ -46,7 +46,9 @@ class Emitter(ConstraintKinematics, SchurComplement):
         coordinate left and a ±1 coefficient (no division): a driven crank's pivot and driver
         fix all three, a slider's guide its angle. {body: ([(row, column), ...] in solving
         order)}. A body in a contact joint with friction keeps its rows (its friction force is
-        in its free acceleration, not in the equations its reactions come from)."""
+        in its free acceleration, not in the equations its reactions come from); so does one
+        with a row those fix entirely beside them (redundant: S keeps it, and its dropped
+        pivot flags the sample as before)."""
         topo = self.topo
         rows = self.rows()
         clearance = set(topo.clearance_rows)
@@ -58,6 +60,10 @@ class Emitter(ConstraintKinematics, SchurComplement):
             own = {r: rows[r] for r, row in enumerate(rows)
                    if row and set(row) <= cols and r not in clearance}  # fmt: skip
             plan = _substitution(own, cols) if b not in rough else []
+            fixed = {c for _, c in plan}
+            solved = {r for r, _ in plan}
+            if any(set(row) <= fixed for r, row in own.items() if r not in solved):
+                continue  # a redundant row (nothing of it left for S): the rows stay
             if plan:
                 found[b] = plan
         return found
