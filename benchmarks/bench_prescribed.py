@@ -103,11 +103,11 @@ def main(argv: list[str] | None = None) -> int:
         f"`python benchmarks/bench_prescribed.py --samples {args.samples} --rounds "
         f"{args.rounds}` (1 thread, CPU time; load average {os.getloadavg()[0]:.1f})",
         "",
-        "| scene | coordinates, rows | evaluations | accepted steps | rejected | "
+        "| scene | coordinates, rows of B | evaluations | accepted steps | rejected | "
         "ns an evaluation (median) |",
         "|---|---|---|---|---|---|",
     ]
-    shape = {"crank": "9, 8", "rod": "6, 5"}
+    shape = {name: f"{model.ndof}, {model.ncon}" for name, (_, model, _) in runs.items()}
     for name in runs:
         ev, st, rj = counts[name]
         lines.append(f"| {name} | {shape[name]} | {ev:,} | {st:,} | {rj:,} | "

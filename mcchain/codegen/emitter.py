@@ -44,8 +44,8 @@ class Emitter(ConstraintKinematics, SchurComplement):
         are all the body's (a driver on it; an ideal revolute or a prismatic joint to the
         ground), no clearance row, solved one at a time by substitution, each with one
         coordinate left and a ±1 coefficient (no division): a driven crank's pivot and driver
-        fix all three, a slider's guide its angle. {body: ([(row, column), ...] in solving
-        order)}. A body in a contact joint with friction keeps its rows (its friction force is
+        fix all three, a slider's guide its angle. {body: [(row, column), ...] in solving
+        order}. A body in a contact joint with friction keeps its rows (its friction force is
         in its free acceleration, not in the equations its reactions come from); so does one
         with a row those fix entirely beside them (redundant: S keeps it, and its dropped
         pivot flags the sample as before)."""
