@@ -1,16 +1,22 @@
 """codegen: the fixed-step kernel's stage rows (``mcchain.codegen.fixed_step``): each stage
-writes its k into rows of its own, and the step's combine rounds as the loop kernel does."""
+writes its k into rows of its own, and the step's combine rounds as the loop kernel does; the
+adaptive stage's state (``adaptive_step.stage_state_block``): y + h Σ a_sj k_j over the
+stages its row of A reads, and no sum of the step multiplies a zero weight."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
+from mcchain.codegen.adaptive_step import stage_state_block
 from mcchain.codegen.fixed_step import fixed_step_blocks
+from mcchain.codegen.generate import generate_source
 from mcchain.codegen.layout import Layout
 from mcchain.codegen.native import NativeModule
 from mcchain.codegen.topology import Topology
 from mcchain.kernels.config import fma
-from mcchain.kernels.tableaux import RK4
+from mcchain.kernels.tableaux import DOPRI5, RK4
 from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
 
 LANES = 16
@@ -81,3 +87,50 @@ def test_combine__rounds_each_product_then_sums_from_the_first_stage():
                     fused = fma(bh[j], ks[j], fused)
                 fused_apart += x + fused != got
     assert fused_apart > 0  # the data tell the roundings apart
+
+
+def test_adaptive_stage_state__each_stage_sums_only_the_stages_its_row_reads():
+    """Compiled, the block writes stage s's state y + h Σ_j a_sj k_j into rows ys for every s
+    (the first stage's: y itself), equal to the sum over the whole row of A (zeros included)
+    within a rounding of its terms, and its branch names exactly the k_j of a_sj ≠ 0 (j < s);
+    the stage's k goes to kq_s's rows (the first stage's to kqc's)."""
+    topo = _topology()
+    lay = Layout(topo, DOPRI5.nstage, LANES, adaptive=True)
+    text = stage_state_block(DOPRI5, lay)
+    body = "\n".join("    " + line for line in text.splitlines())
+    source = f"import numpy as np\n\n\ndef state(W, nl, s, A, out):\n{body}\n    out[0] = kw\n"
+    module = NativeModule(source, "mcchain_test_stage_rows_adaptive_state")
+    rng = np.random.default_rng(20261130)
+    ndof = topo.ndof
+    for s in range(DOPRI5.nstage):
+        W = rng.normal(size=lay.size * LANES)
+        h = rng.uniform(1e-6, 1e-3, size=LANES)
+        W[lay.rows["hs"] * LANES : (lay.rows["hs"] + 1) * LANES] = h
+        before = W.copy()
+        kw = np.zeros(1, dtype=np.int64)
+        module.state(W, LANES, s, np.ascontiguousarray(DOPRI5.A), kw)
+        first = lay.rows["kqc"] if s == 0 else lay.rows[f"kq{s}"]
+        assert kw[0] == first * LANES
+        for r in range(2 * ndof):
+            rows = [before[(lay.rows[f"kq{j}"] + r) * LANES : (lay.rows[f"kq{j}"] + r + 1) * LANES]
+                    for j in range(DOPRI5.nstage)]  # fmt: skip
+            y = before[(lay.rows["q"] + r) * LANES : (lay.rows["q"] + r + 1) * LANES]
+            terms = [DOPRI5.A[s, j] * h * rows[j] for j in range(DOPRI5.nstage)]
+            want = y + sum(terms)
+            got = W[(lay.rows["ys"] + r) * LANES : (lay.rows["ys"] + r + 1) * LANES]
+            scale = np.abs(y) + sum(np.abs(t) for t in terms)
+            assert np.all(np.abs(got - want) <= 4e-16 * scale)
+        branch = text.split(f"s == {s}:")[1].split("elif")[0]
+        read = {int(j) for j in re.findall(r"ah(\d+) \*", branch)}
+        assert read == {j for j in range(s) if DOPRI5.A[s, j] != 0.0}
+
+
+def test_adaptive_step__no_sum_multiplies_a_zero_weight():
+    """The rk45 text's new state and error sums name the stages of b ≠ 0 and b − b̂ ≠ 0 only
+    (Dormand–Prince: k1 in neither, k6 not in b), and no stage's state reads the last stage
+    (A's last column is zero)."""
+    text = generate_source(_topology(), "rk45")
+    assert re.findall(r"\bbw(\d+) = bw", text) == [str(j) for j in range(7) if DOPRI5.b[j]]
+    errors = [str(j) for j in range(7) if DOPRI5.b_error[j]]
+    assert re.findall(r"\bbe(\d+) = be", text) == errors
+    assert "ah6" not in text and "aa6" not in text

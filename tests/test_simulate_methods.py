@@ -203,7 +203,7 @@ def test_demand_order__same_stores_as_written():
     lay = Layout(topo, RK4.nstage, fixed_step=True)
     template = "for l in range(nl):\n    @@load_params\n    @@load_stage_sub\n    @@accel_stage\n"
     template += "    @@store_stage\n"
-    blocks = _blocks(topo, RK4.nstage, lay)
+    blocks = _blocks(topo, RK4, lay)
     text = _fill(template, blocks, _tokens(topo, RK4.nstage, lay), lay)
     stage = {"kr": lay.rows["kq0"] * LMAX, "kw": lay.rows["kq1"] * LMAX}  # stage 1's rows
     body = [line.strip() for line in text.splitlines()[1:] if line.strip()]

@@ -21,6 +21,7 @@ from types import ModuleType
 import numpy as np
 
 from mcchain.codegen import templates
+from mcchain.codegen.adaptive_step import stage_state_block, step_blocks
 from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
@@ -93,8 +94,11 @@ def _fill(template: str, blocks: dict[str, str], tokens: dict[str, str], lay: La
     return text
 
 
-def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -> dict[str, str]:
+def _blocks(
+    topo: Topology, tableau: Tableau, lay: Layout, outputs: Signature = ()
+) -> dict[str, str]:
     fixed_step = lay.fixed_step  # the fixed-step kernel's blocks (templates.ERK_KERNEL)
+    nstage = tableau.nstage
     em = Emitter(topo)
     em.parallel_pivots = em.cancel_gravity = fixed_step
     ndof, ncon = topo.ndof, topo.ncon
@@ -160,15 +164,12 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     block("load_lam")
     em.emit(*(f"lam{r} = W[(lamrow + {r}) * {lay.lmax} + l]" for r in range(ncon)))
     block("load_lam_dyn")
-    em.emit(*(f"aa{j} = A[s, {j}]" for j in range(nstage)))
-    block("stage_coefs_row")
-    em.emit(*(f"ah{j} = aa{j} * hh" for j in range(nstage)))
-    block("stage_coefs_per_lane")
-    for i in range(ndof):
-        qt = " + ".join(f"ah{j} * {at(f'kq{j}', i)}" for j in range(nstage))
-        vt = " + ".join(f"ah{j} * {at(f'kv{j}', i)}" for j in range(nstage))
-        em.emit(f"q{i} = {at('q', i)} + ({qt})", f"v{i} = {at('v', i)} + ({vt})")
-    block("load_stage")
+    b["stage_state"] = b["load_stage"] = ""
+    if not fixed_step:  # the adaptive stage reads its state from rows ys (_stage_state)
+        b["stage_state"] = stage_state_block(tableau, lay)
+        em.emit(*(f"q{i} = {at('ys', i)}" for i in range(ndof)))
+        em.emit(*(f"v{i} = {at('ys', ndof + i)}" for i in range(ndof)))
+        block("load_stage")
     if fixed_step:  # the bodies' sin/cos computed before the stage (_stage_angles)
         em.angle_rows = lambda body: (at("scc", 2 * body), at("scc", 2 * body + 1))
     em.acceleration(t="ts")
@@ -197,8 +198,9 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     b.update(_stage_angles(topo, lay) if fixed_step else {})
     b.update(fixed_step_blocks(topo, nstage, lay) if fixed_step else {})
 
-    # the stage's k: the fixed step's into this stage's rows (fixed_step_blocks), else kqc
-    k_row = (lambda i: lay.stage_at(i, "kw")) if fixed_step else (lambda i: at("kqc", i))
+    # the stage's k into this stage's rows at the run-time offset kw (fixed_step_blocks,
+    # _stage_state; the adaptive first stage's: rows kqc)
+    k_row = lambda i: lay.stage_at(i, "kw")  # noqa: E731
     stage_k = [f"{k_row(i)} = v{i}" for i in range(ndof)]
     stage_k += [f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)]
     stage_contact = []
@@ -319,49 +321,19 @@ def _blocks(topo: Topology, nstage: int, lay: Layout, outputs: Signature = ()) -
     em.emit(*(f"{at('v', i)} = scale * v{i}" for i in range(3 * topo.own_bodies)))
     block("scale_velocity")
 
-    # Adaptive: new state and error norm (scaled as scipy's RK45: atol + rtol·max(|y|, |y_new|)),
-    # summed over q0, v0, q1, v1, ..., of every lane at once (a vectorised lane loop: per
-    # lane the same operations in the same order as one lane alone).
-    stride = 2 * ndof
-    for name in ("error_coefs", "error_norm", "copy_stage"):
+    # Adaptive: the step's new state and error norm (adaptive_step.py)
+    for name in ("error_coefs", "new_state", "error_norm"):
         b[name] = ""
     if "en" in lay.rows:  # the adaptive kernel's layout
-        em.emit(
-            *(f"bw{j} = bw[{j}]" for j in range(nstage)),
-            *(f"be{j} = be[{j}]" for j in range(nstage)),
-        )
-        block("error_coefs")
-        # An ideal copy (Topology.reference) follows the mechanism's steps: its rows are not
-        # in the norm (its terms would be exact zeros of the sum), so the mechanism steps as
-        # it would alone.
-        own = 3 * topo.own_bodies
-        em.emit(f"hh = {at('hs')}", "en = 0.0")
-        for i in range(2 * ndof):
-            r = (i % 2) * ndof + i // 2
-            rows = [at("kq0", r + stride * j) for j in range(nstage)]
-            new = " + ".join(f"bw{j} * {row}" for j, row in enumerate(rows))
-            err = " + ".join(f"be{j} * {row}" for j, row in enumerate(rows))
-            em.emit(f"y{i} = {at('q', r)}", f"yn{i} = y{i} + hh * ({new})")
-            em.emit(f"{at('qn', r)} = yn{i}")
-            if i < 2 * own:
-                em.emit(
-                    f"e{i} = hh * ({err}) / (atol + rtol * max(abs(y{i}), abs(yn{i})))",
-                    f"en = en + e{i} * e{i}",
-                )
-        em.emit(
-            f"en = math.sqrt(en / {2 * own})",
-            f"{at('en')} = en if en == en else np.inf",
-        )
-        block("error_norm")
-        em.emit(*(f"W[(ks + {i}) * {lay.lmax} + l] = {at('kqc', i)}" for i in range(2 * ndof)))
-        block("copy_stage")
+        b.update(step_blocks(topo, tableau, lay))
     # An accepted step: its checks at once; its new state, last stage (FSAL) and λ copied
     # afterwards, every lane at once (row acc: accepted).
     b["accept"] = "\n".join([f"{at('chk')} = {at('chkc')}", f"{at('sg')} = {at('sga')}"])
     b["accept_copy"] = ""
     if "acc" in lay.rows:
         copies = [(at("q", r), at("qn", r)) for r in range(2 * ndof)]
-        copies += [(at("kq0", r), at("kq0", r + stride * (nstage - 1))) for r in range(2 * ndof)]
+        last = 2 * ndof * (nstage - 1)  # the last stage's rows (FSAL)
+        copies += [(at("kq0", r), at("kq0", r + last)) for r in range(2 * ndof)]
         copies += [(at("lam", r), at("lamc", r)) for r in range(ncon)]
         em.emit(f"done = {at('acc')} > 0.0", *(f"{a} = {b_} if done else {a}" for a, b_ in copies))
         em.emit(f"{at('acc')} = 0.0")
@@ -527,7 +499,11 @@ def generate_source(
     lmax = lane_rows(topo, variant, outputs) if lmax is None else lmax
     lay = _layout(topo, variant, nstage, lmax, outputs)
     fixed = lay.fixed_step
-    if lmax > LMAX:
+    if lmax > LMAX and variant != "rk45":
+        # The rk45 lanes one register of lanes at a time: their stage keeps more values live
+        # (contact, outputs), and two registers side by side spilled more than they overlapped
+        # (verdict kernel 0.94, Flores slider-crank 0.95; the rk4 lanes' 1.04 the other way:
+        # benchmarks/results/verdict/combine.md).
         parts.append(f"{INTERLEAVE_CONSTANT} = {lmax // LMAX}  # SIMD registers of lanes per row\n")
     if tableau is not None:
         parts += [row_meanings(fixed), lay.row_map(f"{users} ({nstage} stages)")]
@@ -562,17 +538,17 @@ def generate_source(
     # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
     # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
     # of a pivot into a different sequence of impacts.
-    blocks = _blocks(topo, nstage, lay, outputs)
+    blocks = _blocks(topo, RK4 if tableau is None else tableau, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
         # the markers the copy and the dispatch replace (else the copy would silently be the
         # general stage, or never be called)
-        for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", "    @@stage_coefs_row\n"):
+        for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", "    @@stage_state\n"):
             assert marker in templates.STAGE_HELPER, marker
         hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
         hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
         general = templates.STAGE_HELPER.replace(
-            "    @@stage_coefs_row\n", "    @@hertz_dispatch\n    @@stage_coefs_row\n"
+            "    @@stage_state\n", "    @@hertz_dispatch\n    @@stage_state\n"
         )
         parts_of = tuple(
             general + hertz if part is templates.STAGE_HELPER else part for part in parts_of

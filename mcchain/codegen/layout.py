@@ -85,7 +85,7 @@ def row_meanings(fixed_step: bool) -> str:
     stage = (
         "(each written by its stage, read by the next stage and by the step's combine);"
         if fixed_step
-        else "kqc, kvc the current stage;"
+        else "kqc, kvc the first stage's; ys the stage's state (q, v);"
     )
     return f"""\
 # W rows: P parameters (slots of Topology.slots); q, v state; kq{{j}}, kv{{j}} stage j (q', v');
@@ -175,8 +175,9 @@ class Layout:
             self.add(f"kq{j}", topo.ndof)
             self.add(f"kv{j}", topo.ndof)
         if not fixed_step:
-            self.add("kqc", topo.ndof)  # current stage, then copied to its rows
+            self.add("kqc", topo.ndof)  # the first stage's, copied to kq0 where it starts
             self.add("kvc", topo.ndof)
+            self.add("ys", 2 * topo.ndof)  # the stage's state (q, v)
         self.add("qn", topo.ndof)
         self.add("vn", topo.ndof)
         self.add("lam", ncon1)

@@ -464,11 +464,10 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 @[sga] = @[sga] * keep + @[sgc]
                 @@contact_stage_max
                 nev[l] += 1 if run[l] else 0
-            ks = K0ROW + 2 * NDOF * s  # the stage's rows: the current stage copied there
-            for l in range(nl):  # lanes: independent
-                @@copy_stage
         # Error estimate of every lane at once, then acceptance and next step per lane.
         @@error_coefs
+        for l in range(nl):  # lanes: schedule
+            @@new_state
         for l in range(nl):  # lanes: schedule
             @@error_norm
         for l in range(nl):
@@ -643,14 +642,14 @@ STAGE_HELPER = '''
 @njit(**JIT)
 def group_stage_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau):
     """Stage ``s`` (node ``cs``) of every lane at its own time and step (rows ``tl``, ``hs``)
-    into the current stage's rows (kqc, kvc, lamc, chkc, sgc; with contact joints pdc, prc,
-    wjc, wcc). One copy of the stage for the adaptive loop and the first stage: numba's
+    from its state (rows ys, summed first: ``stage_state``): its k into its rows kq_s, kv_s
+    (stage 0's into kqc, kvc), the current stage's lamc, chkc, sgc (with contact joints pdc,
+    prc, wjc, wcc). One copy of the stage for the adaptive loop and the first stage: numba's
     compile time grows faster than the length of a function."""
-    @@stage_coefs_row
+    @@stage_state
     for l in range(nl):  # lanes: schedule
         hh = @[hs]
         ts = @[tl] + cs * hh
-        @@stage_coefs_per_lane
         @@load_params
         @@load_stage
         @@accel_stage
