@@ -7,6 +7,7 @@ import sys
 
 CODEGEN_MODULES = (
     "mcchain.codegen",
+    "mcchain.codegen.adaptive_step",
     "mcchain.codegen.cache",
     "mcchain.codegen.contact_blocks",
     "mcchain.codegen.emitter",

@@ -2,7 +2,10 @@
 driver, a slider's guide angle) are taken out of S = B M⁻¹ Bᵀ (``Emitter.eliminate_fixed``):
 those accelerations from the rows before the solve, the rows' λ from the body's equations
 after it. The same solution in exact arithmetic: the runs agree with the text that keeps
-the rows within rounding, reactions and driver torques included."""
+the rows within rounding, reactions and driver torques included. The adaptive stage writes
+the coordinates those rows fix in closed form (``Emitter.prescribe``): the crank's angle is
+θ0 + ω t and its centre the pivot's to rounding, and the run agrees with the integrated one
+to its tolerance."""
 
 from __future__ import annotations
 
@@ -162,3 +165,70 @@ def test_rk45_lanes__the_flores_pin_within_its_tolerance(monkeypatch):
     np.testing.assert_allclose(mine["q"], reference["q"], rtol=0, atol=1e-9)
     for name in ("peak_joint_force", "peak_driver_torque", "peak_contact_force"):
         np.testing.assert_allclose(mine[name], reference[name], rtol=1e-6)
+
+
+def _harmonic_crank() -> str:
+    """The slider-crank with a harmonic driver (a swing on top of θ0 + ω t)."""
+    law = 'law = "harmonic"\namplitude = 0.1\nfrequency = 20.0\nphase = 0.3\n'
+    return slider_crank_text().replace('body = "crank"\nomega', f'body = "crank"\n{law}omega')
+
+
+def test_prescribed_coordinates__the_closed_forms_of_the_fixed_rows():
+    # the crank's angle (driver at constant speed), then its centre (ideal pivot to the
+    # ground); the slider's angle (its guide's angle row); in the fixed rows' order
+    topo = Topology.from_model(model_of(slider_crank_text(), nsample=1))
+    angle_row = topo.joint_row[3] + 1
+    em = Emitter(topo)
+    assert em.prescribed_coordinates() == [
+        (0, topo.driver_row[0], 2), (0, 0, 0), (0, 1, 1), (2, angle_row, 8)
+    ]  # fmt: skip
+    loose = Topology.from_model(model_of(_loose_crank(), nsample=1))
+    assert Emitter(loose).prescribed_coordinates()[:1] == [(0, loose.driver_row[0], 2)]
+    assert all(b != 0 or c == 2 for b, _, c in Emitter(loose).prescribed_coordinates())
+    double = straight_chain_text(**DOUBLE_PENDULUM, clearance={1: 5e-4})
+    assert Emitter(Topology.from_model(model_of(double, nsample=1))).prescribed_coordinates() == []
+    # a harmonic law's swing stays in the rows: nothing of the crank in closed form
+    swing = Topology.from_model(model_of(_harmonic_crank(), nsample=1))
+    assert 1 in swing.harmonic_drivers or 0 in swing.harmonic_drivers
+    assert [b for b, _, _ in Emitter(swing).prescribed_coordinates()] == [2]
+
+
+def test_rk45_lanes__the_crank_follows_its_closed_form(monkeypatch):
+    """The adaptive lanes on the slider-crank (no contact law, 20 ms at 50 Hz): the crank's
+    angle is θ0 + ω t and its centre −A(θ) s (the pivot at the origin), with their rates, to
+    rounding at every output after the start (the assembled state's); the slider's angle its
+    guide's; against the same lanes
+    integrating those coordinates (``prescribe`` off), positions within 1e-9 m and the driver's
+    torque within 1e-6 of its largest."""
+    omega, angle0, half = 100.0 * np.pi, 0.7, 0.025
+    model = model_of(slider_crank_text(), nsample=4)
+    sim = dict(t_end=0.02, dt=1e-5, output_dt=1e-3, method="rk45", rtol=1e-9, atol=1e-12,
+               kernels="lanes")  # fmt: skip
+    topo = Topology.from_model(model)
+    integrated = generate.generate_source(topo, "rk45")
+    monkeypatch.setattr(emitter.Emitter, "prescribe", False)
+    assert generate.generate_source(topo, "rk45") != integrated  # the premise
+    monkeypatch.undo()
+    start = assemble(model)
+    mine = simulate(model, sim, start.q, start.v, np.float64, status=start.status)
+    assert (mine["status"] == 0).all()
+    t = np.asarray(mine["time"])
+    q, v = np.asarray(mine["q"]), np.asarray(mine["v"])
+    crank, w = q[:, :, 0], v[:, :, 0]  # (sample, time, [x, y, θ])
+    theta = np.broadcast_to(angle0 + omega * t, crank[..., 2].shape)
+    np.testing.assert_allclose(crank[..., 2], theta, rtol=4e-16)
+    np.testing.assert_allclose(w[:, 1:, 2], omega, rtol=1e-15)  # t0: the assembly's v
+    np.testing.assert_allclose(w[:, 0, 2], omega, rtol=1e-14)
+    np.testing.assert_allclose(crank[..., 0], half * np.cos(theta), rtol=0, atol=1e-17)
+    np.testing.assert_allclose(crank[..., 1], half * np.sin(theta), rtol=0, atol=1e-17)
+    np.testing.assert_allclose(w[..., 0], -omega * half * np.sin(theta), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(w[..., 1], omega * half * np.cos(theta), rtol=0, atol=1e-14)
+    assert (q[:, 1:, 2, 2] == 0.0).all() and (v[:, 1:, 2, 2] == 0.0).all()  # the guide's 0
+    monkeypatch.setattr(emitter.Emitter, "prescribe", False)
+    module = NativeModule(generate.generate_source(topo, "rk45"), "prescribed_integrated_rk45")
+    monkeypatch.undo()
+    monkeypatch.setattr(generate, "lane_kernels", lambda *args: module)
+    reference = simulate(model, sim, start.q, start.v, np.float64, status=start.status)
+    np.testing.assert_allclose(q, reference["q"], rtol=0, atol=1e-9)
+    torque = np.asarray(reference["driver_torque"])
+    np.testing.assert_allclose(mine["driver_torque"], torque, atol=1e-6 * np.abs(torque).max())

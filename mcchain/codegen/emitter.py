@@ -16,7 +16,7 @@ and ``contact.py``, which the loop kernels call and :meth:`Emitter.kernel` inlin
 from __future__ import annotations
 
 from mcchain.codegen.kinematics import ConstraintKinematics
-from mcchain.codegen.lane_text import FORCE_KERNELS
+from mcchain.codegen.lane_text import FORCE_KERNELS, JOINT_KERNELS
 from mcchain.codegen.sincos import TWO_PI, sincos_code
 from mcchain.codegen.sparse_ldl import Coef, SchurComplement, _mul, _sum
 from mcchain.model import GROUND, JOINT_IDEAL, JOINT_PRISMATIC
@@ -38,6 +38,11 @@ class Emitter(ConstraintKinematics, SchurComplement):
     it. The same solution in exact arithmetic, a smaller S (the verdict's slider-crank: four
     of eight rows; benchmarks/results/verdict/prescribed.md). Every variant's acceleration
     takes it; the projection's corrections keep the rows."""
+
+    prescribe = True
+    """Write the coordinates that :meth:`prescribed_coordinates` lists in closed form in the
+    adaptive stage (:meth:`prescribed_state`), not integrated: a driven crank's angle and
+    centre, a slider's angle (benchmarks/results/verdict/prescribed.md)."""
 
     def fixed_accelerations(self) -> dict[int, list[tuple[int, int]]]:
         """Per body, rows of B that fix some of its accelerations alone: rows whose columns
@@ -67,6 +72,76 @@ class Emitter(ConstraintKinematics, SchurComplement):
             if plan:
                 found[b] = plan
         return found
+
+    def prescribed_coordinates(self) -> list[tuple[int, int, int]]:
+        """The coordinates of :meth:`fixed_accelerations` that their row fixes as a closed
+        form of the time and the parameters, [(body, row, column), ...] in solving order:
+        the angle of a body driven at constant speed (θ = θ0 + ω t) or held by a prismatic
+        joint to the ground (θ = ±θ_rel), then the position of its ideal revolute to the
+        ground (r = the ground point − A(θ) s); each body's up to its first row of another
+        kind (a harmonic or table law, whose swing the constraint rows keep)."""
+        topo = self.topo
+        drivers = {r: d for d, r in enumerate(topo.driver_row)}
+        joint_of = {topo.joint_row[k] + i: k for k in range(topo.njoint) for i in range(2)}
+        found = []
+        for b, plan in self.fixed_accelerations().items():
+            for r, c in plan:
+                if r in drivers:
+                    d = drivers[r]
+                    tabled = bool(topo.driver_tables) and bool(topo.driver_tables[d])
+                    closed = d not in topo.harmonic_drivers and not tabled
+                else:
+                    k = joint_of[r]
+                    angle_row = r == topo.joint_row[k] + 1
+                    closed = topo.joint_kind[k] == JOINT_IDEAL or (
+                        topo.joint_kind[k] == JOINT_PRISMATIC and angle_row
+                    )
+                if not closed:
+                    break
+                found.append((b, r, c))
+        return found
+
+    def prescribed_state(self, t: str = "t") -> None:
+        """``q{c}``, ``v{c}`` of the :meth:`prescribed_coordinates` at time ``t`` in closed
+        form (each row's Φ = 0 and Φ̇ = 0 solved for its coordinate, in the plan's order), and
+        the sin/cos of each such angle, which :meth:`bodies` then leaves alone
+        (:attr:`angles_ready`)."""
+        topo = self.topo
+        drivers = {r: d for d, r in enumerate(topo.driver_row)}
+        joint_of = {topo.joint_row[k] + i: k for k in range(topo.njoint) for i in range(2)}
+        pointed: set[int] = set()
+        for b, r, c in self.prescribed_coordinates():
+            th = 3 * b + 2
+            if r in drivers:  # Φ = θ − θ0 − ω t at θ = 0, negated; θ̇ = ω
+                d = drivers[r]
+                start, speed = f"p_th0_{d}", f"p_om{d}"
+                arguments = ["0.0", start, speed, t, "0.0"]
+                (phi,) = self.kernel(JOINT_KERNELS, "driver_residual", arguments)
+                (rate,) = self.kernel(JOINT_KERNELS, "driver_speed", [speed, "0.0"])
+                self.emit(f"q{c} = -({phi})", f"v{c} = {rate}")
+            else:
+                k = joint_of[r]
+                own_side = topo.joint_b[k] == b  # Φ's sign at the body's coordinate: +1 on b
+                if topo.joint_kind[k] == JOINT_PRISMATIC:  # θ_b − θ_a − θ_rel = 0
+                    (_, angle) = self.kernel(
+                        JOINT_KERNELS, "prismatic_residual",
+                        ["0.0", "0.0", "0.0", "0.0", "0.0", "0.0", f"p_rel{k}"],
+                    )  # fmt: skip
+                    value = f"-({angle})" if own_side else angle
+                    self.emit(f"q{c} = {value}", f"v{c} = 0.0")
+                else:  # d = (r_b + A_b s_b) − (r_a + A_a s_a) = 0, ḋ = 0, the ground still
+                    if k not in pointed:
+                        self._point(topo.joint_a[k], f"p_sax{k}", f"p_say{k}", f"pa{k}")
+                        self._point(topo.joint_b[k], f"p_sbx{k}", f"p_sby{k}", f"pb{k}")
+                        pointed.add(k)
+                    ground, body = (f"pa{k}", f"pb{k}") if own_side else (f"pb{k}", f"pa{k}")
+                    if c == 3 * b:
+                        self.emit(f"q{c} = {ground}x - {body}x", f"v{c} = v{th} * {body}y")
+                    else:
+                        self.emit(f"q{c} = {ground}y - {body}y", f"v{c} = -(v{th} * {body}x)")
+            if c == th:
+                self.emit(*sincos_code(f"q{th}", f"sn{b}", f"cs{b}", f"{b}"))
+                self.angles_ready.add(b)
 
     def loaded_bodies(self) -> set[int]:
         """Bodies carrying a load or a spring (the others feel gravity only)."""

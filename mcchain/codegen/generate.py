@@ -165,10 +165,16 @@ def _blocks(
     em.emit(*(f"lam{r} = W[(lamrow + {r}) * {lay.lmax} + l]" for r in range(ncon)))
     block("load_lam_dyn")
     b["stage_state"] = b["load_stage"] = ""
-    if not fixed_step:  # the adaptive stage reads its state from rows ys (_stage_state)
-        b["stage_state"] = stage_state_block(tableau, lay)
-        em.emit(*(f"q{i} = {at('ys', i)}" for i in range(ndof)))
-        em.emit(*(f"v{i} = {at('ys', ndof + i)}" for i in range(ndof)))
+    prescribed: list[int] = []  # the adaptive stage's coordinates in closed form
+    if not fixed_step:  # the adaptive stage's state: rows ys (adaptive_step.py), closed forms
+        if em.prescribe:
+            prescribed = [c for _, _, c in em.prescribed_coordinates()]
+        b["stage_state"] = stage_state_block(tableau, lay, prescribed)
+        summed = [i for i in range(ndof) if i not in prescribed]
+        em.emit(*(f"q{i} = {at('ys', i)}" for i in summed))
+        em.emit(*(f"v{i} = {at('ys', ndof + i)}" for i in summed))
+        if prescribed:
+            em.prescribed_state(t="ts")
         block("load_stage")
     if fixed_step:  # the bodies' sin/cos computed before the stage (_stage_angles)
         em.angle_rows = lambda body: (at("scc", 2 * body), at("scc", 2 * body + 1))
@@ -195,6 +201,7 @@ def _blocks(
                 "    return",
             ]
         )
+    em.angles_ready.clear()  # the closed-form angles' sin/cos: the stage's alone
     b.update(_stage_angles(topo, lay) if fixed_step else {})
     b.update(fixed_step_blocks(topo, nstage, lay) if fixed_step else {})
 
@@ -218,6 +225,9 @@ def _blocks(
         f"{at('chkc')} = phimax + prb * 0.0",
         *([] if fixed_step else [f"{at('sgc')} = sing"]),
         *stage_contact,
+        # the closed forms at the stage's time (the last stage's: the step's new state)
+        *(f"{at('ys', c)} = q{c}" for c in prescribed),
+        *(f"{at('ys', ndof + c)} = v{c}" for c in prescribed),
     )
     block("store_stage")
     em.emit(*stage_k, *stage_contact)
@@ -325,7 +335,7 @@ def _blocks(
     for name in ("error_coefs", "new_state", "error_norm"):
         b[name] = ""
     if "en" in lay.rows:  # the adaptive kernel's layout
-        b.update(step_blocks(topo, tableau, lay))
+        b.update(step_blocks(topo, tableau, lay, prescribed))
     # An accepted step: its checks at once; its new state, last stage (FSAL) and λ copied
     # afterwards, every lane at once (row acc: accepted).
     b["accept"] = "\n".join([f"{at('chk')} = {at('chkc')}", f"{at('sg')} = {at('sga')}"])

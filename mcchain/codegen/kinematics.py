@@ -31,11 +31,16 @@ class ConstraintKinematics(LaneText):
         self.angle_rows: Callable[[int], tuple[str, str]] | None = None
         """Where :meth:`bodies` reads body b's sin/cos (computed before, in a lane loop of
         their own), or None: computed in place."""
+        self.angles_ready: set[int] = set()
+        """Bodies whose sin/cos are already in scope (an angle written in closed form:
+        :meth:`mcchain.codegen.emitter.Emitter.prescribed_state`): :meth:`bodies` skips them."""
 
     def bodies(self, q: str = "q", tag: str = "") -> None:
         """sin/cos of every body angle: ``sn{b}``, ``cs{b}`` (read from :attr:`angle_rows`
         where set)."""
         for b in range(self.topo.nbody):
+            if b in self.angles_ready:
+                continue
             sn, cs = f"sn{b}{tag}", f"cs{b}{tag}"
             if self.angle_rows is not None:
                 rows = self.angle_rows(b)
