@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "2ad8088f6b58eb68112dc271b22aeefa42f4966ebae5edcad12b9baf9b3a4954",
         "rk4": "17f6a9d11042cb04673a83349016311389a4a30bac82fb3ed08ee4e76cd44aef",
         "rk4-projection": "94563e1ed3863b6f16ea2870049de914118bec3a8870a85a6b08a4729b1d573c",
-        "rk45": "405ccd715c23ff54267cbbbaba14e9a822143ba01ef0ba996b5b876328d5b5c6",
+        "rk45": "0e87e533cd8b12122092369f13f0922cbb8797869381cacc5914fae034316cd1",
     },
     "fourbar-clearance": {
         "accel": "48eb5c4fa719742757bf94dfbec5d404c39dba1622078d1362e3ea6083bb6069",
         "rk4": "1972cd479e34935b0b3535328ad1497b5d5d5120ab4987619f48e0a5b30b554f",
         "rk4-projection": "75b6f751f9ff0b11f95ebce6f7f67a87ef846ee9bdba39da55324cab0a228613",
-        "rk45": "bcd1ed67b4068edba45877e5b710c9f939fb968b43a91c279a555b64193e2067",
+        "rk45": "1458e6af5f8544b376d5352e14ff57a49a41b44b67efc030427a0bb3643852de",
     },
     "fourbar-clearance-auto": {
         "accel": "c94e9149069771a63678d610b9641e8535711cc838da674db730fe9cc8717511",
         "rk4": "318f525eb701de8524e41c42e9d8d34000485d7e58a0812ade6c4c5000b8559b",
         "rk4-projection": "6f67055c98bdb966e74308375c3c3d9871aef8c34ab832b3fbb050e23b460b35",
-        "rk45": "20a5f7f5df14321db8e3eac7e199f6d391ba05374dc21a14397a0a67540a17e5",
+        "rk45": "21b2105b4f0fa606b965d8ba93b3caa4e22879643da31ab068a5c9d2f7f07f0a",
     },
     "chain4-mixed-spring": {
         "accel": "f20493b13273534cfa99e5f8e799e8a69f6084ccabd4a12c22edfa662efb1bf1",
         "rk4": "1eebf007bcf4e99702c8f99fd5629121a2ebafcdafcbb8549a47976f0be61259",
         "rk4-projection": "7e828bd94f6a643d40df212c84ba4ae1645e5d981ec9299cc2dc7294e8b0e50d",
-        "rk45": "73da496d2ad43bcda77c83fa8b47976a66af1e7eb7bf584f5fce6933413321a5",
+        "rk45": "58432027dd7ec825095fd06bc80178ec47d753b88f96752d1c67ebe598b90431",
     },
 }
 

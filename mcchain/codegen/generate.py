@@ -197,7 +197,8 @@ def _blocks(
                 "for l in range(nl):",
                 f"    nother += 1 if {other} else 0",
                 "if nother == 0:",
-                "    group_stage_hertz_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau)",
+                "    group_stage_hertz_SUFFIX("
+                "W, nl, s_first, s_stop, A, cc, balpha2, bbeta2, tau, run, nev)",
                 "    return",
             ]
         )
@@ -553,13 +554,12 @@ def generate_source(
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy
         # the markers the copy and the dispatch replace (else the copy would silently be the
         # general stage, or never be called)
-        for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", "    @@stage_state\n"):
+        stages = "    for s in range(s_first, s_stop):\n"
+        for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", stages):
             assert marker in templates.STAGE_HELPER, marker
         hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
         hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
-        general = templates.STAGE_HELPER.replace(
-            "    @@stage_state\n", "    @@hertz_dispatch\n    @@stage_state\n"
-        )
+        general = templates.STAGE_HELPER.replace(stages, "    @@hertz_dispatch\n" + stages)
         parts_of = tuple(
             general + hertz if part is templates.STAGE_HELPER else part for part in parts_of
         )

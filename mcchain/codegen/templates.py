@@ -457,13 +457,7 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
                 @[hs] = min(hl[l], t_out[iout[l]] - @[tl])
             else:
                 @[hs] = 0.0
-        for s in range(1, NSTAGE):
-            group_stage_SUFFIX(W, nl, s, A, cc[s], balpha2, bbeta2, tau)
-            keep = 0.0 if s == 1 else 1.0
-            for l in range(nl):
-                @[sga] = @[sga] * keep + @[sgc]
-                @@contact_stage_max
-                nev[l] += 1 if run[l] else 0
+        group_stage_SUFFIX(W, nl, 1, NSTAGE, A, cc, balpha2, bbeta2, tau, run, nev)
         # Error estimate of every lane at once, then acceptance and next step per lane.
         @@error_coefs
         for l in range(nl):  # lanes: schedule
@@ -640,20 +634,33 @@ have no first-stage helper)."""
 
 STAGE_HELPER = '''
 @njit(**JIT)
-def group_stage_SUFFIX(W, nl, s, A, cs, balpha2, bbeta2, tau):
-    """Stage ``s`` (node ``cs``) of every lane at its own time and step (rows ``tl``, ``hs``)
-    from its state (rows ys, summed first: ``stage_state``): its k into its rows kq_s, kv_s
-    (stage 0's into kqc, kvc), the current stage's lamc, chkc, sgc (with contact joints pdc,
-    prc, wjc, wcc). One copy of the stage for the adaptive loop and the first stage: numba's
-    compile time grows faster than the length of a function."""
-    @@stage_state
-    for l in range(nl):  # lanes: schedule
-        hh = @[hs]
-        ts = @[tl] + cs * hh
-        @@load_params
-        @@load_stage
-        @@accel_stage
-        @@store_stage
+def group_stage_SUFFIX(W, nl, s_first, s_stop, A, cc, balpha2, bbeta2, tau, run, nev):
+    """Stages ``s_first`` … ``s_stop`` − 1 (nodes ``cc``) of every lane at its own time and
+    step (rows ``tl``, ``hs``), each from its state (rows ys, summed first: ``stage_state``):
+    its k into its rows kq_s, kv_s (stage 0's into kqc, kvc), the current stage's lamc, chkc,
+    sgc (with contact joints pdc, prc, wjc, wcc); after each stage s > 0 the step's rank-loss
+    count (sga), contact stiffness (wca) and the running lanes' evaluations (``nev``). The
+    step's stages in one call: the constants the stage's loop holds in registers or on the
+    stack are set up once a step, not once a stage (a lane group is a few registers of
+    lanes: a stage's loop runs a few times a call). One copy of the stage for the adaptive
+    loop and the first stage: numba's compile time grows faster than the length of a
+    function."""
+    for s in range(s_first, s_stop):
+        cs = cc[s]
+        @@stage_state
+        for l in range(nl):  # lanes: schedule
+            hh = @[hs]
+            ts = @[tl] + cs * hh
+            @@load_params
+            @@load_stage
+            @@accel_stage
+            @@store_stage
+        if s > 0:
+            keep = 0.0 if s == 1 else 1.0
+            for l in range(nl):
+                @[sga] = @[sga] * keep + @[sgc]
+                @@contact_stage_max
+                nev[l] += 1 if run[l] else 0
 '''
 
 FIRST_STAGE_HELPER = '''
@@ -664,7 +671,11 @@ def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
     current-stage rows, which it also writes, are written again before they are read."""
     for l in range(nl):
         @[hs] = 0.0
-    group_stage_SUFFIX(W, nl, np.int64(0), A, 0.0, balpha2, bbeta2, tau)
+    # stage 0 alone, at node 0: no step's counts
+    nodes = np.zeros(1)
+    idle = np.zeros(LMAXV, np.bool_)
+    counts = np.zeros(LMAXV, np.int64)
+    group_stage_SUFFIX(W, nl, 0, 1, A, nodes, balpha2, bbeta2, tau, idle, counts)
     for l in range(nl):
         if @[fsm] == 0.0:
             continue
