@@ -28,28 +28,28 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 
 GOLDEN = {
     "double-pendulum-clearance": {
-        "accel": "2ad8088f6b58eb68112dc271b22aeefa42f4966ebae5edcad12b9baf9b3a4954",
-        "rk4": "17f6a9d11042cb04673a83349016311389a4a30bac82fb3ed08ee4e76cd44aef",
-        "rk4-projection": "94563e1ed3863b6f16ea2870049de914118bec3a8870a85a6b08a4729b1d573c",
-        "rk45": "0e87e533cd8b12122092369f13f0922cbb8797869381cacc5914fae034316cd1",
+        "accel": "5d35b27eba1e9d46141ec2413f96de7e75d75237aa3e217c0b22e19fe3674ef3",
+        "rk4": "048a4ec5abfa0e4ee0bb1209f4423e6047235612ba617e427bceb02ff5faf874",
+        "rk4-projection": "fdcb8e13a27d29738b71fa8a6be535bbe7f62f32a26b02ca55aeee15af7cf688",
+        "rk45": "6c5c9085709a991d7079f07518de05463fc2836f6d4968aa8998d1676b25e5e3",
     },
     "fourbar-clearance": {
-        "accel": "48eb5c4fa719742757bf94dfbec5d404c39dba1622078d1362e3ea6083bb6069",
-        "rk4": "1972cd479e34935b0b3535328ad1497b5d5d5120ab4987619f48e0a5b30b554f",
-        "rk4-projection": "75b6f751f9ff0b11f95ebce6f7f67a87ef846ee9bdba39da55324cab0a228613",
-        "rk45": "1458e6af5f8544b376d5352e14ff57a49a41b44b67efc030427a0bb3643852de",
+        "accel": "bbb59dd6a89da1aee006ec35981de6b29659f34b5b6e0eaaa0ce2185e0f8e404",
+        "rk4": "f6d5ad072f234e986c6f9f238f9c6f2d624eaca80aedec65ee844ca013f09b57",
+        "rk4-projection": "496c420c20f65807518152687d54217fae8db033aed6afb06127b4d572ce9f69",
+        "rk45": "436c00c6e1d50df39513b46f57097472b1935e93e30f997fe6f7a3c73bcde781",
     },
     "fourbar-clearance-auto": {
-        "accel": "c94e9149069771a63678d610b9641e8535711cc838da674db730fe9cc8717511",
-        "rk4": "318f525eb701de8524e41c42e9d8d34000485d7e58a0812ade6c4c5000b8559b",
-        "rk4-projection": "6f67055c98bdb966e74308375c3c3d9871aef8c34ab832b3fbb050e23b460b35",
-        "rk45": "21b2105b4f0fa606b965d8ba93b3caa4e22879643da31ab068a5c9d2f7f07f0a",
+        "accel": "7118f4934ffa5ef307ce36816c33523278bd4cca7b47ca2ee6e55a060b0b418f",
+        "rk4": "9f00aa2b57a535fbfdb5b0675239b51fed0040d7b2838ef96ff7b2d4b101b511",
+        "rk4-projection": "335132290130f5b89d7c6ce4ff7f441970c80b661e594b38454dcc9dab69b85e",
+        "rk45": "9c5541f896e963d589bd2ae0dfc7d21b097bdb4b86ff9c23209d81700e91848c",
     },
     "chain4-mixed-spring": {
-        "accel": "f20493b13273534cfa99e5f8e799e8a69f6084ccabd4a12c22edfa662efb1bf1",
-        "rk4": "1eebf007bcf4e99702c8f99fd5629121a2ebafcdafcbb8549a47976f0be61259",
-        "rk4-projection": "7e828bd94f6a643d40df212c84ba4ae1645e5d981ec9299cc2dc7294e8b0e50d",
-        "rk45": "58432027dd7ec825095fd06bc80178ec47d753b88f96752d1c67ebe598b90431",
+        "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",
+        "rk4": "4df3dd54014904c6e4490abf672e3d8e8390879436a763ce8306a9c5445732d1",
+        "rk4-projection": "4453581d7971ee83b7880639dcdde77d1b420d017c96f3a35268f6aa43c55b90",
+        "rk45": "2bfd0df29cc9f1bcbd20c5e785f3fbb8e67a19611aed8061bcd30333f6e311e4",
     },
 }
 

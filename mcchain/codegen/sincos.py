@@ -7,8 +7,13 @@ function calls: rounding to an integer is
 stays ≤ 1 ulp-ish for |x| < 1e6 rad). Calls such as np.floor cost numba's type inference more
 than anything else in generated code.
 
-The quadrant is the integer k mod 4 (it was taken with the rounding trick: 12 more flops
-per sine-cosine pair, on the lane group's critical path). Its swap and signs stay the factors
+The quadrant j = k mod 4 takes one more rounding: m = k − 4·round(k/4) ∈ {−2, …, 2}, j = m + 4
+where m < 0 (a select), every step in vector registers. As an integer (``int(k) & 3``) it
+needed four scalar conversions and their shuffles a sine-cosine on AVX2, which has no vector
+conversion of doubles to 64-bit integers, on the lane group's critical path (the verdict
+kernel 0.940 with the rounding, the rk4 lanes unchanged: benchmarks/results/verdict/
+combine.md); an older rounding form (a floor by offsets, two roundings) cost 12 flops more.
+Its swap and signs stay the factors
 sw·p_c + (1 − sw)·p_s and 1 − 2h: as selects (9 flops fewer again) they gave the same sine
 and cosine, but LLVM then fused the other product of a·sin θ + b·cos θ into its multiply-add
 (selects of ±x are not multiplies), which moved the lanes' results by an ulp.
@@ -57,12 +62,13 @@ _SINCOS_TEMPLATE = "\n".join(
         "{r} = (({x} - {k} * 1.5707963267341256) - {k} * 6.077100506303966e-11)"
         " - {k} * 2.0222662487111665e-21",
         _KERNELS,
-        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3} (k is a whole number: exact as an int; & 3 is
-        # mod 4 for negative k too); h = j // 2: j ≥ 2; sw: odd j (sine and cosine swap);
-        # the sine's sign is 1 − 2h, the cosine's (1 − 2h)(1 − 2 sw).
-        "{j} = int({k}) & 3",
-        "{h} = float({j} // 2)",
-        "{sw} = float({j} & 1)",
+        # Quadrant j = k mod 4 ∈ {0, 1, 2, 3} (k a whole number, m = k − 4 round(k/4) exact,
+        # negative m wrapped); h: j ≥ 2; sw: odd j (sine and cosine swap); the sine's sign
+        # is 1 − 2h, the cosine's (1 − 2h)(1 − 2 sw).
+        f"{{m}} = {{k}} - 4.0 * (({{k}} * 0.25 + {_ROUND}) - {_ROUND})",
+        "{j} = {m} + 4.0 if {m} < 0.0 else {m}",
+        "{h} = 1.0 if {j} >= 2.0 else 0.0",
+        "{sw} = {j} - 2.0 * {h}",
         "{ss} = 1.0 - 2.0 * {h}",
         "{sa} = {sw} * {pc} + (1.0 - {sw}) * {ps}",
         "{ca} = {sw} * {ps} + (1.0 - {sw}) * {pc}",
@@ -74,7 +80,7 @@ _SINCOS_TEMPLATE = "\n".join(
 
 def sincos_code(x: str, sin: str, cos: str, tag: str) -> list[str]:
     """Lines computing ``sin``/``cos`` of the expression ``x`` (temporaries suffixed ``tag``)."""
-    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "h", "sw", "ss", "sa", "ca")
+    temps = ("k", "r", "z", "ps", "hz", "w", "pc", "j", "h", "sw", "ss", "sa", "ca", "m")
     names = {n: f"_{n}{tag}" for n in temps}
     return _SINCOS_TEMPLATE.format(x=x, sin=sin, cos=cos, **names).splitlines()
 
