@@ -207,7 +207,7 @@ def _blocks(
     b.update(fixed_step_blocks(topo, nstage, lay) if fixed_step else {})
 
     # the stage's k into this stage's rows at the run-time offset kw (fixed_step_blocks,
-    # _stage_state; the adaptive first stage's: rows kqc)
+    # adaptive_step.stage_state_block; the adaptive first stage's: rows kqc)
     k_row = lambda i: lay.stage_at(i, "kw")  # noqa: E731
     stage_k = [f"{k_row(i)} = v{i}" for i in range(ndof)]
     stage_k += [f"{k_row(ndof + i)} = qdd{i}" for i in range(ndof)]
