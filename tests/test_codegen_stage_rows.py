@@ -96,7 +96,7 @@ def test_adaptive_stage_state__each_stage_sums_only_the_stages_its_row_reads():
     the stage's k goes to kq_s's rows (the first stage's to kqc's)."""
     topo = _topology()
     lay = Layout(topo, DOPRI5.nstage, LANES, adaptive=True)
-    text = stage_state_block(DOPRI5, lay)
+    text = stage_state_block(topo, DOPRI5, lay)
     body = "\n".join("    " + line for line in text.splitlines())
     source = f"import numpy as np\n\n\ndef state(W, nl, s, A, out):\n{body}\n    out[0] = kw\n"
     module = NativeModule(source, "mcchain_test_stage_rows_adaptive_state")

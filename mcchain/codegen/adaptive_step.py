@@ -21,13 +21,15 @@ from mcchain.codegen.topology import Topology
 from mcchain.kernels.tableaux import Tableau
 
 
-def stage_state_block(tableau: Tableau, lay: Layout, prescribed: Collection[int] = ()) -> str:
+def stage_state_block(
+    topo: Topology, tableau: Tableau, lay: Layout, prescribed: Collection[int] = ()
+) -> str:
     """Block ``stage_state`` of the adaptive stage: ``kw``, the offset of the rows its k goes
     to (stage 0's: kqc, which the first stage copies to kq0 for the lanes it starts; stage
     s's: kq_s), and y + h Σ_j a_sj k_j into rows ys for every lane, in a branch per stage
     summing the j < s of a_sj ≠ 0 in the order of j; not the ``prescribed`` columns' q and v
     (the stage writes them)."""
-    nstage, ndof = tableau.nstage, lay.rows["kv0"] - lay.rows["kq0"]
+    nstage, ndof = tableau.nstage, topo.ndof
     at = lay.at
     summed = [r for r in range(2 * ndof) if r % ndof not in prescribed]  # q then v rows
     first = f"{lay.rows['kq0']} + {2 * ndof} * s if s > 0 else {lay.rows['kqc']}"

@@ -81,8 +81,7 @@ class Emitter(ConstraintKinematics, SchurComplement):
         ground (r = the ground point − A(θ) s); each body's up to its first row of another
         kind (a harmonic or table law, whose swing the constraint rows keep)."""
         topo = self.topo
-        drivers = {r: d for d, r in enumerate(topo.driver_row)}
-        joint_of = {topo.joint_row[k] + i: k for k in range(topo.njoint) for i in range(2)}
+        drivers, joint_of = self._row_sources()
         found = []
         for b, plan in self.fixed_accelerations().items():
             for r, c in plan:
@@ -101,14 +100,21 @@ class Emitter(ConstraintKinematics, SchurComplement):
                 found.append((b, r, c))
         return found
 
+    def _row_sources(self) -> tuple[dict[int, int], dict[int, int]]:
+        """{row: driver} of the drivers' rows and {row: joint} of the joints' (a joint's
+        second row included)."""
+        topo = self.topo
+        drivers = {r: d for d, r in enumerate(topo.driver_row)}
+        joint_of = {topo.joint_row[k] + i: k for k in range(topo.njoint) for i in range(2)}
+        return drivers, joint_of
+
     def prescribed_state(self, t: str = "t") -> None:
         """``q{c}``, ``v{c}`` of the :meth:`prescribed_coordinates` at time ``t`` in closed
         form (each row's Φ = 0 and Φ̇ = 0 solved for its coordinate, in the plan's order), and
         the sin/cos of each such angle, which :meth:`bodies` then leaves alone
         (:attr:`angles_ready`)."""
         topo = self.topo
-        drivers = {r: d for d, r in enumerate(topo.driver_row)}
-        joint_of = {topo.joint_row[k] + i: k for k in range(topo.njoint) for i in range(2)}
+        drivers, joint_of = self._row_sources()
         pointed: set[int] = set()
         for b, r, c in self.prescribed_coordinates():
             th = 3 * b + 2

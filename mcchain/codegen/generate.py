@@ -169,7 +169,7 @@ def _blocks(
     if not fixed_step:  # the adaptive stage's state: rows ys (adaptive_step.py), closed forms
         if em.prescribe:
             prescribed = [c for _, _, c in em.prescribed_coordinates()]
-        b["stage_state"] = stage_state_block(tableau, lay, prescribed)
+        b["stage_state"] = stage_state_block(topo, tableau, lay, prescribed)
         summed = [i for i in range(ndof) if i not in prescribed]
         em.emit(*(f"q{i} = {at('ys', i)}" for i in summed))
         em.emit(*(f"v{i} = {at('ys', ndof + i)}" for i in summed))
