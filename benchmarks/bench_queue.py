@@ -32,10 +32,10 @@ import numpy as np
 
 def _lanes_argument(kernel: str) -> int:
     """The position of ``lanes`` among the kernel's arguments after ``g_start, g_stop``
-    (templates._ERK_ARGS, adaptive_templates.ADAPTIVE_ARGS)."""
-    from mcchain.codegen import adaptive_templates, templates
+    (templates._ERK_ARGS, templates._ADAPTIVE_ARGS)."""
+    from mcchain.codegen import templates
 
-    text = templates._ERK_ARGS if kernel == "rk4" else adaptive_templates.ADAPTIVE_ARGS
+    text = templates._ERK_ARGS if kernel == "rk4" else templates._ADAPTIVE_ARGS
     return [name.strip() for name in text.split(",")].index("lanes")
 
 

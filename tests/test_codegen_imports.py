@@ -18,7 +18,6 @@ CODEGEN_MODULES = (
     "mcchain.codegen.layout",
     "mcchain.codegen.schedule",
     "mcchain.codegen.templates",
-    "mcchain.codegen.adaptive_templates",
     "mcchain.codegen.tracking",
     "mcchain.codegen.topology",
 )

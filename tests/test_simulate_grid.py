@@ -161,20 +161,12 @@ def test_simulate__the_issue_example_lands_on_t_end_with_the_written_step(fourba
 @pytest.mark.parametrize(("method", "kernels"), ALL)
 def test_simulate__states_at_0_628_are_the_same_bits_whatever_t_end(fourbar, method, kernels):
     """Step times come from the step index, not from t_end: the run to 0.628 and the run to
-    2π/10 take the same steps up to 0.628. rk45 takes the same accepted steps but the short
-    run's last, cut to land on 0.628: the stored points before that step are the same bits
-    (each from its step's dense output), those inside it the same to the tolerance."""
+    2π/10 take the same steps up to 0.628 (rk45: the same accepted steps, each landing on
+    the same output times)."""
     short = history(fourbar, T_WHOLE, method, kernels)
     long = history(fourbar, T_TURN, method, kernels)
     assert short["time"][-1] == long["time"][628] == T_WHOLE
     for name in ("q", "v"):
-        if method == "rk45":
-            equal = short[name] == long[name][:, :629]
-            same = equal.all(axis=tuple(i for i in range(equal.ndim) if i != 1))
-            first = int(np.argmin(same)) if not same.all() else 629
-            assert same[:first].all() and first >= 620, (name, first)  # a last step of ms
-            np.testing.assert_allclose(short[name], long[name][:, :629], rtol=0, atol=1e-9)
-            continue
         assert np.array_equal(short[name][:, -1], long[name][:, 628]), name
         assert np.array_equal(short[name], long[name][:, :629]), name
     if method != "rk45":
@@ -264,7 +256,7 @@ def test_run__stores_the_grid_and_counts_the_steps_taken(tmp_path: Path, fourbar
             loaded = load_scene(scene)
             counted = solve_chunk(compile_model(loaded), loaded)["steps_taken"]
             taken = float(np.sum(counted)) / 3
-            assert 0 < taken < 629  # its own steps: the stored times are its dense output's
+            assert taken > 629  # at least one step per output interval
     assert throughput["steps_per_sample"] == taken
     assert throughput["instance_steps_per_s"] == pytest.approx(
         taken * throughput["samples_per_s"], rel=1e-12

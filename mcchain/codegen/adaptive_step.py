@@ -28,13 +28,11 @@ def stage_state_block(
     to (stage 0's: kqc, which the first stage copies to kq0 for the lanes it starts; stage
     s's: kq_s), and y + h Σ_j a_sj k_j into rows ys for every lane, in a branch per stage
     summing the j < s of a_sj ≠ 0 in the order of j; not the ``prescribed`` columns' q and v
-    (the stage writes them). Stage ``nstage`` is a dense output's evaluation, at the state
-    its round put into rows ys (:func:`dense_blocks`); its k goes to rows kqc (free during a
-    step: the step's first stage is in kq0)."""
+    (the stage writes them)."""
     nstage, ndof = tableau.nstage, topo.ndof
     at = lay.at
     summed = [r for r in range(2 * ndof) if r % ndof not in prescribed]  # q then v rows
-    first = f"{lay.rows['kq0']} + {2 * ndof} * s if 0 < s < {nstage} else {lay.rows['kqc']}"
+    first = f"{lay.rows['kq0']} + {2 * ndof} * s if s > 0 else {lay.rows['kqc']}"
     lines = [f"kw = ({first}) * {lay.lmax}"]
     for s in range(nstage):
         read = [j for j in range(s) if tableau.A[s, j]]
@@ -90,72 +88,3 @@ def step_blocks(
         "new_state": "\n".join(new),
         "error_norm": "\n".join(norm),
     }
-
-
-def accept_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
-    """Blocks of an accepted step (row acc), every lane at once after the lanes' acceptance:
-    ``accept_lam`` its λ (before its dense outputs, which overwrite rows lamc),
-    ``accept_copy`` its new state and last stage (FSAL: kq0 is the next step's first), after
-    them; ``contact_save`` (in the acceptance, before the contact's bookkeeping moves them on)
-    the step's ins and vi of each contact-law joint into rows insd, vid (its dense output
-    points are evaluated with them: :func:`dense_blocks`). Empty for a layout without rows
-    acc."""
-    blocks = dict.fromkeys(("accept_lam", "accept_copy", "contact_save"), "")
-    if "acc" not in lay.rows:
-        return blocks
-    at, ndof = lay.at, topo.ndof
-    done = f"done = {at('acc')} > 0.0"
-    copies = [(at("lam", r), at("lamc", r)) for r in range(topo.ncon)]
-    blocks["accept_lam"] = "\n".join([done, *(f"{a} = {b} if done else {a}" for a, b in copies)])
-    last = 2 * ndof * (nstage - 1)  # the last stage's rows (FSAL)
-    copies = [(at("q", r), at("qn", r)) for r in range(2 * ndof)]
-    copies += [(at("kq0", r), at("kq0", r + last)) for r in range(2 * ndof)]
-    lines = [done, *(f"{a} = {b} if done else {a}" for a, b in copies), f"{at('acc')} = 0.0"]
-    blocks["accept_copy"] = "\n".join(lines)
-    pairs = [
-        (at(saved, j), at(row, j))
-        for j in range(len(topo.contact_joints))
-        for saved, row in (("insd", "ins"), ("vid", "vi"))
-    ]
-    blocks["contact_save"] = "\n".join(f"{a} = {b}" for a, b in pairs) or "pass"
-    return blocks
-
-
-def dense_blocks(topo: Topology, tableau: Tableau, lay: Layout) -> dict[str, str]:
-    """Blocks of the queue of dense output points (templates.DENSE_HELPER; rows dq, slots of
-    :func:`~mcchain.codegen.layout.dense_slot` rows from the run-time row ``slot``):
-    ``dense_push`` the point at θ = (t_k − t_a)/h of lane l's accepted step (``tk``, ``it``,
-    ``th``, ``hh`` in scope): y_a + h Σ_j b_j(θ) k_j (``tableau.dense``: the array ``dense``),
-    read before the new state is copied in, and the step's contact state (fm; ins, vi as
-    the step had them: rows insd, vid); ``dense_pop`` a slot into rows tdn, itw, ys and the
-    contact rows (theirs held in rows dhd); ``dense_restore`` the held contact rows back."""
-    blocks = dict.fromkeys(("dense_push", "dense_pop", "dense_restore"), "")
-    if "dq" not in lay.rows or tableau.dense is None:
-        return blocks
-    at, ndof, lmax = lay.at, topo.ndof, lay.lmax
-    slot = lambda i: f"W[(slot + {i}) * {lmax} + l]"  # noqa: E731
-    read = [j for j in range(tableau.nstage) if tableau.dense[j].any()]
-    push = [
-        f"w{j} = hh * (th * (dense[{j}, 0] + th * (dense[{j}, 1] + th * (dense[{j}, 2]"
-        f" + th * dense[{j}, 3]))))"
-        for j in read
-    ]
-    push += [f"{slot(0)} = tk", f"{slot(1)} = it"]
-    for r in range(2 * ndof):
-        terms = " + ".join(f"w{j} * {at(f'kq{j}', r)}" for j in read)
-        push.append(f"{slot(2 + r)} = {at('q', r)} + ({terms})")
-    pop = [f"{at('tdn')} = {slot(0)}", f"{at('itw')} = {slot(1)}"]
-    pop += [f"{at('ys', r)} = {slot(2 + r)}" for r in range(2 * ndof)]
-    restore = []
-    for j in range(len(topo.contact_joints)):
-        first = 2 + 2 * ndof + 3 * j
-        for i, (row, step) in enumerate((("fm", "fm"), ("ins", "insd"), ("vi", "vid"))):
-            push.append(f"{slot(first + i)} = {at(step, j)}")
-            pop += [f"{at('dhd', 3 * j + i)} = {at(row, j)}", f"{at(row, j)} = {slot(first + i)}"]
-            restore.append(f"{at(row, j)} = {at('dhd', 3 * j + i)}")
-    blocks.update(
-        dense_push="\n".join(push),
-        dense_pop="\n".join(pop),
-        dense_restore="\n".join(restore or ["pass"]),
-    )
-    return blocks

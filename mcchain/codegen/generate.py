@@ -20,13 +20,8 @@ from types import ModuleType
 
 import numpy as np
 
-from mcchain.codegen import adaptive_templates, templates
-from mcchain.codegen.adaptive_step import (
-    accept_blocks,
-    dense_blocks,
-    stage_state_block,
-    step_blocks,
-)
+from mcchain.codegen import templates
+from mcchain.codegen.adaptive_step import stage_state_block, step_blocks
 from mcchain.codegen.cache import copied_functions, load_module
 from mcchain.codegen.contact_blocks import contact_blocks
 from mcchain.codegen.emitter import Emitter
@@ -36,12 +31,10 @@ from mcchain.codegen.lane_text import FORCE_KERNELS
 from mcchain.codegen.layout import (
     ADAPTIVE_ROW_MEANINGS,
     CONTACT_ROW_MEANINGS,
-    DENSE_QUEUE,
     FIXED_STEP_ROW_MEANINGS,
     LMAX,
     OUTPUT_ROW_MEANINGS,
     Layout,
-    dense_slot,
     row_length,
     row_meanings,
     target_cpu,
@@ -171,8 +164,6 @@ def _blocks(
     block("load_lam")
     em.emit(*(f"lam{r} = W[(lamrow + {r}) * {lay.lmax} + l]" for r in range(ncon)))
     block("load_lam_dyn")
-    em.emit(*(f"{x}{i % ndof} = W[(qrow + {i}) * {lay.lmax} + l]" for i, x in _qv(ndof)))
-    block("load_state_dyn")
     b["stage_state"] = b["load_stage"] = ""
     prescribed: list[int] = []  # the adaptive stage's coordinates in closed form
     if not fixed_step:  # the adaptive stage's state: rows ys (adaptive_step.py), closed forms
@@ -346,20 +337,22 @@ def _blocks(
         b[name] = ""
     if "en" in lay.rows:  # the adaptive kernel's layout
         b.update(step_blocks(topo, tableau, lay, prescribed))
-    # An accepted step: its checks at once; its λ, then its new state and last stage (FSAL)
-    # copied afterwards, every lane at once (row acc: accepted).
+    # An accepted step: its checks at once; its new state, last stage (FSAL) and λ copied
+    # afterwards, every lane at once (row acc: accepted).
     b["accept"] = "\n".join([f"{at('chk')} = {at('chkc')}", f"{at('sg')} = {at('sga')}"])
-    b.update(accept_blocks(topo, nstage, lay))
-    b.update(dense_blocks(topo, tableau, lay))
+    b["accept_copy"] = ""
+    if "acc" in lay.rows:
+        copies = [(at("q", r), at("qn", r)) for r in range(2 * ndof)]
+        last = 2 * ndof * (nstage - 1)  # the last stage's rows (FSAL)
+        copies += [(at("kq0", r), at("kq0", r + last)) for r in range(2 * ndof)]
+        copies += [(at("lam", r), at("lamc", r)) for r in range(ncon)]
+        em.emit(f"done = {at('acc')} > 0.0", *(f"{a} = {b_} if done else {a}" for a, b_ in copies))
+        em.emit(f"{at('acc')} = 0.0")
+        block("accept_copy")
     b.update(contact_blocks(topo, lay, b["kill_lane"]))
     b.update(tracking_blocks(topo, lay))
     b.update(output_blocks(topo, lay, outputs))
     return b
-
-
-def _qv(ndof: int) -> list[tuple[int, str]]:
-    """(row, name) of the state's rows from its first: q0 … q_{n-1}, then v0 … v_{n-1}."""
-    return [(i, "q" if i < ndof else "v") for i in range(2 * ndof)]
 
 
 def _ground_determinants(em: Emitter, lay: Layout) -> str:
@@ -449,10 +442,6 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "VROW": str(lay.rows["v"]),
         "LAMROW": str(lay.rows["lam"]),
         "LAMCROW": str(lay.rows["lamc"]),
-        # the adaptive kernel's (-1 where the layout has none: no text reads them)
-        **{f"{name.upper()}ROW": str(lay.rows.get(name, -1)) for name in ("tl", "ys", "tdn", "dq")},
-        "DQSLOTS": str(DENSE_QUEUE),
-        "DQWIDTH": str(dense_slot(topo)),
         "K0ROW": str(lay.rows["kq0"]),
         "FAILBITS": str(FAILURE_BITS),
         "DIVERGED_BIT": str(DIVERGED),
@@ -493,11 +482,10 @@ VARIANTS: dict[str, tuple[str, Tableau | None, str, tuple[str, ...]]] = {
         DOPRI5,
         "dp",
         (
-            adaptive_templates.ADAPTIVE_KERNEL,
-            adaptive_templates.OUTPUT_LANDED_HELPER,
-            adaptive_templates.DENSE_HELPER,
-            adaptive_templates.FIRST_STAGE_HELPER,
-            adaptive_templates.STAGE_HELPER,
+            templates.ADAPTIVE_KERNEL,
+            templates.OUTPUT_LANDED_HELPER,
+            templates.FIRST_STAGE_HELPER,
+            templates.STAGE_HELPER,
         ),
     ),
 }
@@ -567,13 +555,14 @@ def generate_source(
         # the markers the copy and the dispatch replace (else the copy would silently be the
         # general stage, or never be called)
         stages = "    for s in range(s_first, s_stop):\n"
-        stage = adaptive_templates.STAGE_HELPER
         for marker in ("group_stage_SUFFIX(", "@@accel_stage\n", stages):
-            assert marker in stage, marker
-        hertz = stage.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
+            assert marker in templates.STAGE_HELPER, marker
+        hertz = templates.STAGE_HELPER.replace("group_stage_SUFFIX(", "group_stage_hertz_SUFFIX(")
         hertz = hertz.replace("@@accel_stage\n", "@@accel_stage_hertz\n")
-        general = stage.replace(stages, "    @@hertz_dispatch\n" + stages)
-        parts_of = tuple(general + hertz if part is stage else part for part in parts_of)
+        general = templates.STAGE_HELPER.replace(stages, "    @@hertz_dispatch\n" + stages)
+        parts_of = tuple(
+            general + hertz if part is templates.STAGE_HELPER else part for part in parts_of
+        )
     if tableau is not None and topo.contact_joints:
         refresh = templates.RESEAT_REFRESH if variant == "rk45" else ""
         parts_of = (*parts_of, templates.RESEAT_HELPER.replace("@@refresh_call\n", refresh))

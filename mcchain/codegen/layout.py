@@ -78,18 +78,6 @@ def row_length(nrow: int) -> int:
     return LMAX * k
 
 
-DENSE_QUEUE = 4
-"""Slots of a lane's queue of dense output points: a lane's points wait until every running
-lane of its group has one, and the group's evaluation serves them all at once (a point per
-lane a round); a full queue calls a round before it takes another."""
-
-
-def dense_slot(topo: Topology) -> int:
-    """Rows of one queued dense output point: its time, its history index, q and v, then
-    the step's fm, ins, vi of each contact-law joint."""
-    return 2 + 2 * topo.ndof + 3 * len(topo.contact_joints)
-
-
 def row_meanings(fixed_step: bool) -> str:
     """Legend of the row map written into the header of a generated module; the fixed-step
     kernel's has no rows kqc, kvc (its stages write their rows kq{j}, kv{j} themselves:
@@ -151,12 +139,8 @@ ADAPTIVE_ROW_MEANINGS = """\
 # is on an output time (its outputs are written after the lanes' checks), itw that output's
 # index; smp the sample in the lane; fsm 1 where its first stage is to compute (a fresh
 # sample, a re-seat); dne 1 where its sample is finished (the lane takes the next one); acc 1
-# where its step was accepted (its new state is copied in after the lanes' acceptance); ta
-# the accepted step's start; tdn an output time inside it (its dense output); ost the lane's
-# history point (every lane's computed at once, the landed lanes' then stored); dqh, dqc the
-# head and length of the lane's queue of dense output points, dq its slots (time, history
-# index, q, v, then fm, ins, vi per contact-law joint); insd, vid ins and vi of the step
-# (per contact-law joint); dhd fm, ins, vi held while a queued point is evaluated.
+# where its step was accepted (its new state is copied in after the lanes' acceptance); ost
+# the lane's history point (every lane's computed at once, the landed lanes' then stored).
 """
 """Legend of the rows only the adaptive kernel has."""
 
@@ -214,17 +198,9 @@ class Layout:
             if adaptive:
                 self.add("pw", ncj)
         if adaptive:
-            for name in ("en", "lnd", "itw", "smp", "fsm", "dne", "acc", "ta", "tdn"):
+            for name in ("en", "lnd", "itw", "smp", "fsm", "dne", "acc"):
                 self.add(name, 1)
             self.add("ost", len(history_stores(topo)))
-            # the queue of dense output points (mcchain.codegen.adaptive_step.dense_blocks)
-            self.add("dqh", 1)
-            self.add("dqc", 1)
-            self.add("dq", DENSE_QUEUE * dense_slot(topo))
-            if ncj:  # the step's contact state, for its dense outputs
-                self.add("insd", ncj)
-                self.add("vid", ncj)
-                self.add("dhd", 3 * ncj)
         else:
             for name in ("alv", "ncl", "att"):
                 self.add(name, 1)

@@ -66,7 +66,7 @@ def outputs(P, Q, V, LAM, t_now, jf_out, cf_out, dtq_out, cerr_out, en_out):
         @@store_outputs_py
 '''
 
-LANE_SETUP = """
+_LANE_SETUP = """
 for k in range(NSLOT):
     W[(PROW + k) * LMAXV + l] = P[k, sl]
 st[l] = status[sl]
@@ -83,7 +83,7 @@ for i in range(NDOF):
 """Lane ``l`` takes sample ``sl``: its parameters, status and start state into W (whose
 column is all zeros before)."""
 
-LANE_FINISH = """
+_LANE_FINISH = """
 status[sl] = st[l]
 t_div[sl] = tdv[l]
 t_sing[sl] = tsg[l]
@@ -96,13 +96,13 @@ dead = (st[l] & FAILBITS) != 0
 """Lane ``l``'s sample ``sl`` is finished: its status and per-sample results out."""
 
 
-def lanes_block(body: str, indent: int) -> str:
+def _lanes(body: str, indent: int) -> str:
     """``body`` (a per-lane text of this module) indented by ``indent`` spaces."""
     pad = " " * indent
     return "\n".join(pad + line if line else "" for line in body.strip("\n").splitlines())
 
 
-WORK_ARRAYS = """
+_WORK_ARRAYS = """
         W = np.zeros(NROW * LMAXV)
         st = np.zeros(LMAXV, np.uint32)
         tdv = np.full(LMAXV, np.nan)
@@ -113,12 +113,12 @@ _GROUP_SETUP = (
     """
         s0 = g * lanes
         nl = min(lanes, nsample - s0)"""
-    + WORK_ARRAYS
+    + _WORK_ARRAYS
     + """
         for l in range(nl):
             sl = s0 + l
 """
-    + lanes_block(LANE_SETUP, 12)
+    + _lanes(_LANE_SETUP, 12)
     + "\n"
 )
 
@@ -127,7 +127,7 @@ _GROUP_FINISH = (
         for l in range(nl):
             sl = s0 + l
 """
-    + lanes_block(LANE_FINISH, 12)
+    + _lanes(_LANE_FINISH, 12)
     + "\n"
 )
 
@@ -216,11 +216,11 @@ def erk_run(g_start, g_stop, {_ERK_ARGS}):
                 # the loop without them: 2 % of the step).
                 if s == 0:
 """
-    + lanes_block(_FIRST_STAGE_LANES, 20)
+    + _lanes(_FIRST_STAGE_LANES, 20)
     + """
                 else:
 """
-    + lanes_block(_STAGE_LANES.replace("STORE", "store_stage_later"), 20)
+    + _lanes(_STAGE_LANES.replace("STORE", "store_stage_later"), 20)
     + """
                 if s > 0:
                     continue
@@ -289,6 +289,213 @@ PROJECT_CALL = """
             if project:
                 group_project_SUFFIX(W, nl, t, ptol, max_newton, tau)"""
 
+_ADAPTIVE_ARGS = """P, Q0, V0, t0, t_out, h0, A, bw, be, cc, order_err, rtol, atol, hmin,
+                 max_steps, balpha2, bbeta2, ctol, tau, lanes,
+                 out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT, out_pk@OT,
+                 status, t_div, t_sing, t_cl, nsteps_out, nrejected_out, nevals_out, queue"""
+
+_ADAPTIVE_LANE_START = """
+@[smp] = sl
+@[fsm] = 1.0
+@[tl] = t0
+iout[l] = 0
+nstp[l] = 0
+nrej[l] = 0
+hl[l] = h0
+run[l] = True
+nev[l] = 0 if (st[l] & FAILBITS) != 0 else 1
+"""
+"""... and, in the adaptive kernel, its clocks: the first stage (FSAL) is still to compute
+(row ``fsm``)."""
+
+ADAPTIVE_KERNEL = (
+    f'''
+@njit(**JIT)
+def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
+    """Embedded Runge–Kutta (NSTAGE stages, FSAL) with per-sample step control, on the
+    samples of lane groups g_start:g_stop (``lanes`` samples each), taken one at a time from
+    the queue ``queue[0]`` (an int64 array: the next sample; the caller sets it to
+    g_start · lanes). Threads that run this call on the same samples share the queue
+    (``take_next`` gives each sample to one lane of one thread): none waits for another's
+    slower samples, and every lane drains once, at the end.
+
+    Every lane has its own time and step; a step never crosses the lane's next output time
+    and lands on it exactly. A lane whose step would fall below ``hmin`` or that exceeds
+    ``max_steps`` attempts is flagged DIVERGED. Per sample: accepted steps, rejected steps
+    and stage evaluations (the first stage, then NSTAGE - 1 per attempt: FSAL) into
+    ``nsteps_out``, ``nrejected_out``, ``nevals_out``.
+
+    A lane whose sample is finished takes the queue's next sample (row ``smp``), so the
+    lanes do not wait for the slowest sample of a group: samples take their own numbers
+    of steps. A sample's numbers do not depend on the lane or thread it runs in or beside
+    whom.
+    """
+    nsample = Q0.shape[1]
+    nout = t_out.shape[0]
+    expo = -1.0 / (order_err + 1.0)
+    # below this error norm the ratio is MAX_FACTOR without the power (tableaux.CAP_MARGIN)
+    en_cap = (MAX_FACTOR / SAFETY * CAP_MARGIN) ** -(order_err + 1.0)
+    lanes = max(1, min(lanes, LMAXV))
+    stop = min(g_stop * lanes, nsample)
+    first = np.zeros(LMAXV, np.int64)
+    nl = 0
+    for l in range(lanes):
+        sl = take_next(queue)
+        if sl >= stop:
+            break
+        first[l] = sl
+        nl += 1
+    if nl <= 0:
+        return'''
+    + _WORK_ARRAYS.replace("\n        ", "\n    ")
+    + """
+    iout = np.zeros(LMAXV, np.int64)
+    nstp = np.zeros(LMAXV, np.int64)
+    nrej = np.zeros(LMAXV, np.int64)
+    nev = np.zeros(LMAXV, np.int64)
+    run = np.zeros(LMAXV, np.bool_)
+    hl = np.zeros(LMAXV)
+    for l in range(nl):
+        sl = first[l]
+"""
+    + _lanes(_LANE_SETUP, 8)
+    + "\n"
+    + _lanes(_ADAPTIVE_LANE_START, 8)
+    + """
+    nfresh = nl
+    while True:
+        if nfresh > 0:
+            # First stage at the fresh lanes' start; later steps reuse the last stage (FSAL).
+            group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau)
+            for l in range(nl):
+                if @[fsm] > 0.0:
+                    @@contact_start
+                    @[fsm] = 0.0
+        nfresh = 0
+        # Failures, contact and outputs at each lane's current (accepted) state (a lane's
+        # state met again after a rejected step, or beside fresh lanes, changes nothing);
+        # the outputs of the lanes on an output time (row lnd) all at once, after.
+        nrun = 0
+        nland = 0
+        ndone = 0
+        for l in range(nl):
+            @[lnd] = 0.0
+            if not run[l]:
+                continue
+            alive = (st[l] & FAILBITS) == 0
+            if alive and not (@[chk] <= ctol):
+                st[l] |= DIVERGED_BIT
+                tdv[l] = @[tl]
+                alive = False
+            if alive and @[sg] > 0.0:
+                st[l] |= SINGULAR_BIT
+                tsg[l] = @[tl]
+                alive = False
+            if not alive:
+                @@kill_lane
+            elif (st[l] & CONTACT_BIT) == 0:
+                ts = @[tl]
+                @@contact_check
+            @@contact_switch
+            if iout[l] < nout and @[tl] == t_out[iout[l]]:
+                @[lnd] = 1.0
+                @[itw] = iout[l]
+                nland += 1
+                iout[l] += 1
+            if iout[l] >= nout or not alive:
+                @[dne] = 1.0
+                ndone += 1
+            else:
+                nrun += 1
+        # Tracking at each lane's state (one met again is skipped), every lane at once.
+        for l in range(nl):  # lanes: independent
+            @@track_accepted
+        for l in range(nl):
+            @@track_fixup
+        @@outputs_feed
+        if nland > 0 and out_q.shape[1] > 0:  # none without histories (0 times)
+            group_outputs_landed_SUFFIX(
+                W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en@CT
+            )
+        if ndone > 0:
+            # Finished or dead: the rest of a dead lane's history is NaN; the lane takes
+            # the next sample, if any.
+            for l in range(nl):
+                if @[dne] == 0.0:
+                    continue
+                sl = int(@[smp])
+                nan_history(sl, iout[l], out_q, out_v, out_jf, out_cf, out_dtq, out_cerr, out_en)
+                @@contact_dead
+                nsteps_out[sl] = nstp[l] - nrej[l]
+                nrejected_out[sl] = nrej[l]
+                nevals_out[sl] = nev[l]
+"""
+    + _lanes(_LANE_FINISH, 16)
+    + """
+                sl = take_next(queue)
+                if sl < stop:
+                    for r in range(NROW):
+                        W[r * LMAXV + l] = 0.0
+"""
+    + _lanes(_LANE_SETUP, 20)
+    + "\n"
+    + _lanes(_ADAPTIVE_LANE_START, 20)
+    + """
+                    nfresh += 1
+                    nrun += 1
+                else:
+                    run[l] = False
+                    @[dne] = 0.0
+        if nfresh > 0:
+            continue  # the fresh lanes' start: its checks and outputs first
+        if nrun == 0:
+            break
+        @@contact_reseat
+        # One attempted step on every running lane: stages 1 .. NSTAGE-1.
+        for l in range(nl):
+            if run[l]:
+                @[hs] = min(hl[l], t_out[iout[l]] - @[tl])
+            else:
+                @[hs] = 0.0
+        group_stage_SUFFIX(W, nl, 1, NSTAGE, A, cc, balpha2, bbeta2, tau, run, nev)
+        # Error estimate of every lane at once, then acceptance and next step per lane.
+        @@error_coefs
+        for l in range(nl):  # lanes: schedule
+            @@new_state
+        for l in range(nl):  # lanes: schedule
+            @@error_norm
+        for l in range(nl):
+            if not run[l]:
+                continue
+            hh = @[hs]
+            en = @[en]
+            nstp[l] += 1
+            ok = en <= 1.0
+            fac = SAFETY * en**expo if en > en_cap else MAX_FACTOR
+            fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+            if not ok:
+                fac = min(fac, 1.0)
+            @@contact_event
+            target = t_out[iout[l]]
+            landed = hh == target - @[tl]
+            cut = hh < hl[l]
+            if ok:
+                @@contact_accept
+                @@accept
+                @[acc] = 1.0
+                @[tl] = target if landed else @[tl] + hh
+                # A step cut short to land on an output time keeps the controller's step.
+                hl[l] = max(hl[l], hh * fac) if cut else hh * fac
+            else:
+                hl[l] = hh * fac
+                nrej[l] += 1
+            if (not (hl[l] >= hmin)) or nstp[l] > max_steps:
+                @[chk] = np.inf
+        for l in range(nl):  # lanes: independent
+            @@accept_copy"""
+)
+
+
 OUTPUT_HELPER = '''
 @njit(**JIT)
 def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf, out_cf,
@@ -301,6 +508,30 @@ def group_outputs_SUFFIX(W, lo, hi, s0, it, t_now, lamrow, out_q, out_v, out_jf,
         @@load_lam_dyn
         @@outputs
         @@store_outputs
+'''
+
+OUTPUT_LANDED_HELPER = '''
+@njit(**JIT)
+def group_outputs_landed_SUFFIX(W, nl, out_q, out_v, out_jf, out_cf, out_dtq, out_cerr,
+                                out_en@CT):
+    """Outputs of the lanes flagged ``lnd`` (1.0), each at its own time (row ``tl``) into its
+    sample's (row ``smp``) history index (row ``itw``): every lane computed at once into rows
+    ``ost`` (a vectorised loop; with the stores to the histories in it, a branch on the flag
+    and a scatter, it ran lane by lane: reading.md, tenth stop), then the flagged ones
+    stored, lane by lane."""
+    for l in range(nl):  # lanes: independent
+        t_now = @[tl]
+        @@load_params
+        @@load_state
+        @@load_lam
+        @@outputs
+        @@stage_outputs
+    for l in range(nl):
+        if @[lnd] > 0.0:
+            sl = int(@[smp])
+            it = int(@[itw])
+            @@store_staged_outputs
+            @@prefetch_outputs
 '''
 
 PROJECT_HELPER = '''
@@ -400,3 +631,54 @@ RESEAT_REFRESH = """    if refresh:  # the re-seated lanes' first stage (FSAL) a
 """
 """The re-seat's call of the first stage, in the adaptive variant only (the fixed-step ones
 have no first-stage helper)."""
+
+STAGE_HELPER = '''
+@njit(**JIT)
+def group_stage_SUFFIX(W, nl, s_first, s_stop, A, cc, balpha2, bbeta2, tau, run, nev):
+    """Stages ``s_first`` … ``s_stop`` − 1 (nodes ``cc``) of every lane at its own time and
+    step (rows ``tl``, ``hs``), each from its state (rows ys, summed first: ``stage_state``):
+    its k into its rows kq_s, kv_s (stage 0's into kqc, kvc), the current stage's lamc, chkc,
+    sgc (with contact joints pdc, prc, wjc, wcc); after each stage s > 0 the step's rank-loss
+    count (sga), contact stiffness (wca) and the running lanes' evaluations (``nev``). The
+    step's stages in one call: the constants the stage's loop holds in registers or on the
+    stack are set up once a step, not once a stage (a lane group is a few registers of
+    lanes: a stage's loop runs a few times a call). One copy of the stage for the adaptive
+    loop and the first stage: numba's compile time grows faster than the length of a
+    function."""
+    for s in range(s_first, s_stop):
+        cs = cc[s]
+        @@stage_state
+        for l in range(nl):  # lanes: schedule
+            hh = @[hs]
+            ts = @[tl] + cs * hh
+            @@load_params
+            @@load_stage
+            @@accel_stage
+            @@store_stage
+        if s > 0:
+            keep = 0.0 if s == 1 else 1.0
+            for l in range(nl):
+                @[sga] = @[sga] * keep + @[sgc]
+                @@contact_stage_max
+                nev[l] += 1 if run[l] else 0
+'''
+
+FIRST_STAGE_HELPER = '''
+@njit(**JIT)
+def group_first_stage_SUFFIX(W, nl, A, balpha2, bbeta2, tau):
+    """Stage 0 at the state of the lanes flagged ``fsm`` (later steps reuse their last
+    stage): a fresh sample's start, or a just re-seated state. The other lanes' step and
+    current-stage rows, which it also writes, are written again before they are read."""
+    for l in range(nl):
+        @[hs] = 0.0
+    # stage 0 alone, at node 0: no step's counts
+    nodes = np.zeros(1)
+    idle = np.zeros(LMAXV, np.bool_)
+    counts = np.zeros(LMAXV, np.int64)
+    group_stage_SUFFIX(W, nl, 0, 1, A, nodes, balpha2, bbeta2, tau, idle, counts)
+    for l in range(nl):
+        if @[fsm] == 0.0:
+            continue
+        @@accept_zero
+        @@contact_stage_max
+'''

@@ -25,7 +25,7 @@ CAP_MARGIN = 1.0 + 1e-6
 """Adaptive step control: an error norm at most (MAX_FACTOR / SAFETY · CAP_MARGIN)^-(q+1)
 takes the ratio MAX_FACTOR without the power err^(-1/(q+1)), which there is above MAX_FACTOR
 / SAFETY by the margin, a million times its rounding: the same ratio, one ``pow`` fewer a
-step on the steps with a small error (a step cut short to land on t_end, a quiet stretch)."""
+step on the steps with a small error (the steps cut short to land on an output time)."""
 
 
 @dataclass(frozen=True)
@@ -33,9 +33,7 @@ class Tableau:
     """Explicit Runge–Kutta tableau: stages c, matrix A (strictly lower), weights b.
 
     ``b_error`` (embedded pairs): b − b̂, the weights of the local error estimate; ``order``
-    is the order of b, ``error_order`` the order of b̂. ``dense`` (nstage, 4): a continuous
-    extension, y(t + θh) = y + h Σ_j b_j(θ) k_j with b_j(θ) = Σ_m dense[j, m] θ^(m+1)
-    (b_j(1) = b_j).
+    is the order of b, ``error_order`` the order of b̂.
     """
 
     name: str
@@ -45,7 +43,6 @@ class Tableau:
     order: int
     b_error: np.ndarray | None = None
     error_order: int | None = None
-    dense: np.ndarray | None = None
 
     @property
     def nstage(self) -> int:
@@ -85,30 +82,6 @@ DOPRI5 = Tableau(
     order=5,
     b_error=_DP_B - _DP_BHAT,
     error_order=4,
-    # Shampine's quartic interpolant (L. F. Shampine, "Some practical Runge-Kutta
-    # formulas", Math. Comp. 46 (1986) 135-150; the coefficients scipy's RK45 uses): fourth
-    # order at every θ, the step's own fifth-order y at θ = 1.
-    dense=np.array(
-        [
-            [1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432],
-            [0.0, 0.0, 0.0, 0.0],
-            [
-                0.0,
-                131558114200 / 32700410799,
-                -68118460800 / 10900136933,
-                87487479700 / 32700410799,
-            ],
-            [0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072],
-            [
-                0.0,
-                127303824393 / 49829197408,
-                -318862633887 / 49829197408,
-                701980252875 / 199316789632,
-            ],
-            [0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844],
-            [0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423],
-        ]
-    ),
 )
 """Dormand–Prince 5(4), first same as last (the last stage is the next step's first)."""
 

@@ -10,9 +10,7 @@ Contract of :func:`simulate`:
    (:func:`.grid.output_times`: k · ``output_dt``, then t_end itself as the last) and the
    outputs below. Fixed-step methods need ``output_dt`` to be a whole multiple of ``dt`` and step
    with ``dt`` as written, except a last step shortened to land on t_end; adaptive ones
-   step as their error control says and write the output times inside a step from its
-   continuous extension (rk45: its first step ``dt``, its last lands on t_end), so the output
-   times change none of their steps.
+   land exactly on every output time.
 3. Start: the model's ``q0``/``v0`` (assembled by statics) or the arrays passed as
    ``q_start``/``v_start`` (e.g. the equilibrium with zero velocity); ``perturb`` adds to
    named coordinates, and the other coordinates are then projected back onto the position
@@ -309,9 +307,8 @@ def _run_rk45(run: _Run) -> None:
     queue = np.array([0], dtype=np.int64)
     on_every_thread(
         module.adaptive_run, run.groups,
-        P, Q0, V0, 0.0, run.time, s.dt, DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
-        DOPRI5.c, DOPRI5.dense, float(DOPRI5.error_order or 4), s.rtol, s.atol,
-        ADAPTIVE_MIN_STEP * s.t_end,
+        P, Q0, V0, 0.0, run.time, min(s.dt, s.output_step), DOPRI5.A, DOPRI5.b, DOPRI5.b_error,
+        DOPRI5.c, float(DOPRI5.error_order or 4), s.rtol, s.atol, ADAPTIVE_MIN_STEP * s.t_end,
         ADAPTIVE_MAX_STEPS, 2.0 * alpha, beta * beta, s.constraint_tolerance, SINGULAR_PIVOT,
         run.lanes, *_flat_outputs(run.out),
         *run.contact_args(), run.peaks, *run.lane_output_args(), run.status, run.t_div,
@@ -472,15 +469,14 @@ def simulate(
             projection's Newton iterations evaluate Φ, not accelerations, and are not
             counted). rk45: accepted and rejected attempts up to the end or the failure;
             ``evaluations`` 1 (the first stage) + 6 per attempt (7 stages, the last one is
-            the next step's first: FSAL); the evaluation at each output time inside a step
-            (its dense output) is the histories', not counted. radau: the accepted steps
-            and the right-hand-side evaluations over all segments (scipy's ``nfev``; the
-            finite-difference Jacobian's not included; a sample stopped by a singular
-            evaluation reports every call up to it); ``rejected_steps`` -1, not counted.
-            generalized-alpha: the steps completed (up to a failure), ``rejected_steps`` 0,
-            ``evaluations`` 1 (the start's index-1 solve) + one residual per Newton
-            iteration (+ 1: the index-1 solve after a last step shortened to land on
-            t_end). Samples failed on entry: all 0 (radau's ``rejected_steps`` -1).
+            the next step's first: FSAL). radau: the accepted steps and the right-hand-side
+            evaluations over all segments (scipy's ``nfev``; the finite-difference
+            Jacobian's not included; a sample stopped by a singular evaluation reports
+            every call up to it); ``rejected_steps`` -1, not counted. generalized-alpha:
+            the steps completed (up to a failure), ``rejected_steps`` 0, ``evaluations`` 1
+            (the start's index-1 solve) + one residual per Newton iteration (+ 1: the
+            index-1 solve after a last step shortened to land on t_end). Samples failed
+            on entry: all 0 (radau's ``rejected_steps`` -1).
         outputs: the ``[[output]]``s to track (:class:`mcchain.solvers.output_plan.OutputPlan`,
             for this model: with a relative one, the model carries its ideal copy); their
             values are returned as ``output_values`` (sample, nout), NaN for a failed sample.
@@ -488,7 +484,7 @@ def simulate(
             ``time`` and every history come back with 0 times (shape (nsample, 0, ...)),
             nothing allocated, filled or written for them; every per-sample value (status,
             peaks, contact summaries, outputs, diagnostics) is the same, bit for bit (the
-            output times change no step).
+            steps still land on every output time).
 
     Returns:
         Arrays by ensemble variable name (see the module docstring), plus ``status``,
