@@ -285,3 +285,19 @@ def test_cli_report__parses_and_calls_write_report(
     assert capsys.readouterr().err == (
         "mcchain: error: mcchain report: the following arguments are required: run\n"
     )
+
+
+def test_console_main__collects_cycles_less_often_in_its_own_process_only() -> None:
+    """The ``mcchain`` process sets the collector's youngest generation to
+    GC_FIRST_GENERATION before its command runs; importing the package (a library call, the
+    tests) leaves Python's thresholds as they were."""
+    code = (
+        "import gc, mcchain.cli as cli\n"
+        "print(gc.get_threshold())\n"
+        "cli.main = lambda: print(gc.get_threshold()) or 0\n"
+        "cli.console_main()\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    imported, in_command = out.stdout.splitlines()
+    assert imported == "(700, 10, 10)"
+    assert in_command == "(50000, 20, 20)"
