@@ -43,7 +43,7 @@ GOLDEN = {
         "accel": "7118f4934ffa5ef307ce36816c33523278bd4cca7b47ca2ee6e55a060b0b418f",
         "rk4": "9f00aa2b57a535fbfdb5b0675239b51fed0040d7b2838ef96ff7b2d4b101b511",
         "rk4-projection": "335132290130f5b89d7c6ce4ff7f441970c80b661e594b38454dcc9dab69b85e",
-        "rk45": "9c5541f896e963d589bd2ae0dfc7d21b097bdb4b86ff9c23209d81700e91848c",
+        "rk45": "0848e8f24cdaf50cb9b982c7fe8814f033578cff69df332cff52ab7f214bdee7",
     },
     "chain4-mixed-spring": {
         "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",

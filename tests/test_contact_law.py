@@ -407,6 +407,41 @@ def test_hermite_peak__monotone_steps_and_no_step_behind():
     assert kc.hermite_peak(math.nan, math.nan, 2e-6, 0.1, 1e-6) == 2e-6  # the first step
 
 
+def one_step_bisection(d0, r0, d1, r1, h, rate0, rate1):
+    """:func:`mcchain.kernels.contact.dwell_start` as it was written first, one bisection
+    step at a time: the reference its two steps a round must equal bit for bit."""
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        theta = 0.5 * (lo + hi)
+        value, slope = kc._hermite.py_func(theta, d0, r0, d1, r1, h)
+        if kc.quasi_static_slack.py_func(rate0 + theta * (rate1 - rate0), value, slope) >= 0.0:
+            hi = theta
+        else:
+            lo = theta
+        if hi - lo <= 1e-14:
+            break
+    return hi
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    st.floats(0.0, 1e-4),  # δ0, m
+    rates,  # δ̇0, m/s
+    st.floats(0.0, 1e-4),  # δ1, m
+    rates,
+    st.floats(1e-8, 1e-4),  # h, s
+    st.floats(0.0, 1e6),  # ρ at the start, 1/s
+    st.floats(0.0, 1e6),  # ρ at the end
+)
+@example(1e-6, -0.05, 1e-6, 0.05, 1e-5, 5e4, 5e4)  # |δ̇| dips and rises: two crossings
+@example(1e-6, 0.0, 1e-6, 0.0, 1e-5, 1e4, 1e4)  # holds everywhere: the first quarter
+@example(1e-6, math.nan, 1e-6, 0.0, 1e-5, 1e4, 1e4)  # NaN: never holds, the step's end
+def test_dwell_start__two_steps_a_round_equal_one_at_a_time(d0, r0, d1, r1, h, rate0, rate1):
+    expected = one_step_bisection(d0, r0, d1, r1, h, rate0, rate1)
+    assert kc.dwell_start(d0, r0, d1, r1, h, rate0, rate1) == expected
+    assert kc.dwell_start.py_func(d0, r0, d1, r1, h, rate0, rate1) == expected
+
+
 def test_contact_bookkeeping__onset_separation_and_the_seated_kinds_on_linear_steps():
     """On a linear δ(t) the Hermite crossing is exact: an onset half-way books half the
     step as free flight, one impact at δ̇⁻; a separation half-way books the other half and

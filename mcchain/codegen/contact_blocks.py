@@ -120,12 +120,15 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         """Model auto: back to the link once the re-seat criterion (:func:`criterion`) has
         held for RESEAT_PERIODS periods of the contact (mcchain.contact); the lane is then
         projected. ``located`` (adaptive): the dwell's start located in its step
-        (:func:`dwell`) and the step that completes it retried to end there
-        (``contact_event``); else (fixed step) counted in whole steps: re-seated at the end
+        (:func:`dwell`, run once by ``contact_event``, which also retries the step that
+        completes it to end there); else (fixed step) counted in whole steps: re-seated at the end
         of the step that completes it."""
         dwl, wj = at("dwl", j), at("wjc", j)
         if located:
-            count = [*dwell(j, k, lamrow, h, d1, r1, vrow), "if dwn >= 0.0:", f"    {dwl} = dwn"]
+            # the dwell and ω_c at the step's end as the event check found them (the same
+            # inputs: an accepted step is the one it checked; a second dwell_start, its
+            # bisection, was 4 % of the verdict's kernel)
+            count = [f"dwn = dwn{j}", f"wn = wn{j}", "if dwn >= 0.0:", f"    {dwl} = dwn"]
         else:
             count = [
                 f"wn = math.sqrt({wj}) if {wj} > 0.0 else 0.0",
@@ -246,11 +249,17 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
     # Model auto under the law: a step in which the re-seat dwell completes is retried the
     # same way to end just past where (dwell) ω_c reaches 2π RESEAT_PERIODS,
     # so the re-seat time does not follow the steps.
+    # The dwell is kept per joint (dwn{j}, wn{j}) for the accepted step's bookkeeping
+    # (reseat); −1 where the joint is not under the law of model auto (no dwell there).
     for j, k in enumerate(joints if adaptive else ()):
         d1, r1 = at("pdc", j), at("prc", j)
         event += [
+            f"dwn{j} = -1.0",
+            f"wn{j} = 0.0",
             f"if {at('fm', j)} == 1.0 and {model(k)} == {AUTO!r}.0:",
             *indent(dwell(j, k, "lamc", "hh", d1, r1, "vn")),
+            f"    dwn{j} = dwn",
+            f"    wn{j} = wn",
             f"    if dwn >= 0.0 and dwn * wn >= {2.0 * math.pi * RESEAT_PERIODS!r}:",
             # (dwell at the step's start + θ hh) ω_c(θ) = 2π RESEAT_PERIODS, ω_c linear
             # between the ends, by bisection (a fixed point does not converge where the dwell

@@ -592,7 +592,7 @@ def _contact_functions(adaptive: bool) -> str:
     """The source of the contact kernels the lane kernels call, copied into the generated
     module from :mod:`mcchain.kernels.contact` (:func:`mcchain.codegen.cache.
     copied_functions`). ``adaptive``: with ``dwell_start`` (the located start of a re-seat
-    dwell) and the ``quasi_static_slack`` it calls.
+    dwell) and the ``quasi_static_slack`` and ``_dwell_slack`` it calls.
     """
     from mcchain.contact import SEATED, SEATED_AT_SWITCH
     from mcchain.kernels import contact
@@ -604,7 +604,7 @@ def _contact_functions(adaptive: bool) -> str:
         contact.hermite_peak,
         contact.contact_bookkeeping,
     )
-    located = (contact.quasi_static_slack, contact.dwell_start)
+    located = (contact.quasi_static_slack, contact._dwell_slack, contact.dwell_start)
     parts.append(copied_functions(*kernels, *(located if adaptive else ())))
     return "\n\n".join(parts)
 
