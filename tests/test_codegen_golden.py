@@ -31,25 +31,25 @@ GOLDEN = {
         "accel": "5d35b27eba1e9d46141ec2413f96de7e75d75237aa3e217c0b22e19fe3674ef3",
         "rk4": "048a4ec5abfa0e4ee0bb1209f4423e6047235612ba617e427bceb02ff5faf874",
         "rk4-projection": "fdcb8e13a27d29738b71fa8a6be535bbe7f62f32a26b02ca55aeee15af7cf688",
-        "rk45": "6c5c9085709a991d7079f07518de05463fc2836f6d4968aa8998d1676b25e5e3",
+        "rk45": "92e5bccd052c34b6130646e498ce4760f30ce0ee28557ed8862587a1165dfd2a",
     },
     "fourbar-clearance": {
         "accel": "bbb59dd6a89da1aee006ec35981de6b29659f34b5b6e0eaaa0ce2185e0f8e404",
         "rk4": "f6d5ad072f234e986c6f9f238f9c6f2d624eaca80aedec65ee844ca013f09b57",
         "rk4-projection": "496c420c20f65807518152687d54217fae8db033aed6afb06127b4d572ce9f69",
-        "rk45": "436c00c6e1d50df39513b46f57097472b1935e93e30f997fe6f7a3c73bcde781",
+        "rk45": "87bb0d9d4697449741d4d059dc9ee35413c96188556e4bdfe648e3e901ad3b3c",
     },
     "fourbar-clearance-auto": {
         "accel": "7118f4934ffa5ef307ce36816c33523278bd4cca7b47ca2ee6e55a060b0b418f",
         "rk4": "9f00aa2b57a535fbfdb5b0675239b51fed0040d7b2838ef96ff7b2d4b101b511",
         "rk4-projection": "335132290130f5b89d7c6ce4ff7f441970c80b661e594b38454dcc9dab69b85e",
-        "rk45": "0848e8f24cdaf50cb9b982c7fe8814f033578cff69df332cff52ab7f214bdee7",
+        "rk45": "c3b05eb69f6e6374c16897e4458cdfb9885c2bf6bfb86bfaf99506ce038ab2ed",
     },
     "chain4-mixed-spring": {
         "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",
         "rk4": "4df3dd54014904c6e4490abf672e3d8e8390879436a763ce8306a9c5445732d1",
         "rk4-projection": "4453581d7971ee83b7880639dcdde77d1b420d017c96f3a35268f6aa43c55b90",
-        "rk45": "2bfd0df29cc9f1bcbd20c5e785f3fbb8e67a19611aed8061bcd30333f6e311e4",
+        "rk45": "05c83421ed8f6df03da0c4f984d248f9db1a1ae28005441548d03728962d8ab2",
     },
 }
 

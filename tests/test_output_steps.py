@@ -15,7 +15,7 @@ import numpy as np
 from mcchain.codes import OUTPUT_WIDTH
 from mcchain.kernels import output_steps as kos
 from mcchain.kernels import outputs as ko
-from mcchain.kernels.tableaux import CAP_MARGIN, MAX_FACTOR, MIN_FACTOR, SAFETY
+from mcchain.kernels.tableaux import CAP_MARGIN, KEEP_MARGIN, MAX_FACTOR, MIN_FACTOR, SAFETY
 
 SPECIALS = [0.0, -0.0, 1.0, -1.0, math.nan, math.inf, -math.inf]
 
@@ -164,6 +164,34 @@ def test_cap_margin__below_the_capped_error_the_ratio_is_the_largest():
         # ... and not far above it: the cap gives up little
         above = cap * (1.0 + 1e-5)
         assert SAFETY * above**expo < MAX_FACTOR
+
+
+def test_keep_margin__a_cut_step_keeps_the_controller_step_without_the_power():
+    """A step cut short to land (hh < hl) and accepted keeps hl = max(hl, hh · fac); the
+    adaptive lanes skip the power (fac) where en ≥ KEEP_MARGIN (SAFETY hh / hl)^(q+1), the
+    bound multiplied up as the lanes do. There the power's fac, clamped, gives hl exactly:
+    error norms at the bound, an ulp either side of it, a millionth above it and anywhere
+    above, steps from a hair short of hl to a millionth of it."""
+    rng = np.random.default_rng(64)
+    kept = 0
+    for order_err in (1.0, 2.0, 3.0, 4.0, 5.0, 7.0):
+        expo = -1.0 / (order_err + 1.0)
+        cap = (MAX_FACTOR / SAFETY * CAP_MARGIN) ** -(order_err + 1.0)
+        for _ in range(3000):
+            hl = float(10.0 ** rng.uniform(-9.0, -2.0))
+            hh = hl * float(rng.choice([1.0 - 1e-15, rng.uniform(1e-6, 1.0)]))
+            bound = KEEP_MARGIN
+            for _ in range(int(order_err) + 1):
+                bound *= SAFETY * hh / hl
+            for en in (bound, math.nextafter(bound, 0.0), math.nextafter(bound, 2.0),
+                       bound * (1.0 + 1e-6), bound * float(rng.uniform(1.0, 1e3))):  # fmt: skip
+                if not (hh < hl and 0.0 < en <= 1.0 and en >= bound):
+                    continue
+                fac = SAFETY * en**expo if en > cap else MAX_FACTOR
+                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+                assert max(hl, hh * fac) == hl, (order_err, hh, hl, en)
+                kept += 1
+    assert kept > 30000
 
 
 def test_lanes_feed__its_vector_loop_touches_only_its_lane():

@@ -59,6 +59,7 @@ from mcchain.contact import (
 from mcchain.kernels.tableaux import (
     CAP_MARGIN,
     DOPRI5,
+    KEEP_MARGIN,
     MAX_FACTOR,
     MIN_FACTOR,
     RK4,
@@ -456,6 +457,7 @@ def _tokens(topo: Topology, nstage: int, lay: Layout) -> dict[str, str]:
         "MIN_FACTOR": repr(MIN_FACTOR),
         "MAX_FACTOR": repr(MAX_FACTOR),
         "CAP_MARGIN": repr(CAP_MARGIN),
+        "KEEP_MARGIN": repr(KEEP_MARGIN),
     }
 
 

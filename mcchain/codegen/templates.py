@@ -333,8 +333,9 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
     nsample = Q0.shape[1]
     nout = t_out.shape[0]
     expo = -1.0 / (order_err + 1.0)
-    # below this error norm the ratio is MAX_FACTOR without the power (tableaux.CAP_MARGIN)
+    # below this error norm the ratio is its largest without the power (tableaux, cap margin)
     en_cap = (MAX_FACTOR / SAFETY * CAP_MARGIN) ** -(order_err + 1.0)
+    err_power = int(order_err) + 1
     lanes = max(1, min(lanes, LMAXV))
     stop = min(g_stop * lanes, nsample)
     first = np.zeros(LMAXV, np.int64)
@@ -471,14 +472,27 @@ def adaptive_run(g_start, g_stop, {_ADAPTIVE_ARGS}):
             en = @[en]
             nstp[l] += 1
             ok = en <= 1.0
-            fac = SAFETY * en**expo if en > en_cap else MAX_FACTOR
-            fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
+            cut = hh < hl[l]
+            # A step cut short to land on an output time keeps the controller's step hl
+            # unless hh fac exceeds it, which it cannot where en is at least the bound
+            # (tableaux, keep margin): there the power is not taken (fac 0 keeps hl).
+            keep = ok and cut
+            if keep:
+                bound = KEEP_MARGIN
+                ratio = SAFETY * hh / hl[l]
+                for _ in range(err_power):
+                    bound *= ratio
+                keep = en >= bound
+            if keep:
+                fac = 0.0
+            else:
+                fac = SAFETY * en**expo if en > en_cap else MAX_FACTOR
+                fac = min(MAX_FACTOR, max(MIN_FACTOR, fac))
             if not ok:
                 fac = min(fac, 1.0)
             @@contact_event
             target = t_out[iout[l]]
             landed = hh == target - @[tl]
-            cut = hh < hl[l]
             if ok:
                 @@contact_accept
                 @@accept
