@@ -43,7 +43,7 @@ GOLDEN = {
         "accel": "7118f4934ffa5ef307ce36816c33523278bd4cca7b47ca2ee6e55a060b0b418f",
         "rk4": "9f00aa2b57a535fbfdb5b0675239b51fed0040d7b2838ef96ff7b2d4b101b511",
         "rk4-projection": "335132290130f5b89d7c6ce4ff7f441970c80b661e594b38454dcc9dab69b85e",
-        "rk45": "c3b05eb69f6e6374c16897e4458cdfb9885c2bf6bfb86bfaf99506ce038ab2ed",
+        "rk45": "448ff4b8b026d82c9f8dbec352ff59ca167044b5ca3d42bb603b4f4a4e0d196a",
     },
     "chain4-mixed-spring": {
         "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",

@@ -434,7 +434,7 @@ def one_step_bisection(d0, r0, d1, r1, h, rate0, rate1):
     st.floats(0.0, 1e6),  # ρ at the end
 )
 @example(1e-6, -0.05, 1e-6, 0.05, 1e-5, 5e4, 5e4)  # |δ̇| dips and rises: two crossings
-@example(1e-6, 0.0, 1e-6, 0.0, 1e-5, 1e4, 1e4)  # holds everywhere: the first quarter
+@example(1e-6, 0.0, 1e-6, 0.0, 1e-5, 1e4, 1e4)  # holds everywhere: hi falls to 2^-47
 @example(1e-6, math.nan, 1e-6, 0.0, 1e-5, 1e4, 1e4)  # NaN: never holds, the step's end
 def test_dwell_start__two_steps_a_round_equal_one_at_a_time(d0, r0, d1, r1, h, rate0, rate1):
     expected = one_step_bisection(d0, r0, d1, r1, h, rate0, rate1)

@@ -126,8 +126,7 @@ def contact_blocks(topo: Topology, lay: Layout, kill: str) -> dict[str, str]:
         dwl, wj = at("dwl", j), at("wjc", j)
         if located:
             # the dwell and ω_c at the step's end as the event check found them (the same
-            # inputs: an accepted step is the one it checked; a second dwell_start, its
-            # bisection, was 4 % of the verdict's kernel)
+            # inputs: an accepted step is the one it checked), not a second dwell_start
             count = [f"dwn = dwn{j}", f"wn = wn{j}", "if dwn >= 0.0:", f"    {dwl} = dwn"]
         else:
             count = [

@@ -467,7 +467,7 @@ def dwell_start(d0, r0, d1, r1, h, rate0, rate1):
     the step off; bisection on the interpolant finds it to 1e-14 of the step.
 
     Two bisection steps a round: the midpoint and both quarter points are evaluated side by
-    side (three independent chains instead of one long one: 0.7× the time), then the
+    side (three independent chains of evaluations instead of one long one), then the
     midpoint's half is halved at its quarter point: the same points, the same bracket and
     the same result as one step at a time.
 
