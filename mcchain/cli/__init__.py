@@ -80,9 +80,9 @@ def console_main() -> NoReturn:
     commands._may_interpret = sys.argv[1:2] in (["validate"], ["run"])
     # The cyclic collector's first generation at 50,000 objects instead of 700: the start's
     # imports (numba, scipy.special, pydantic) and the scene allocate long-lived objects by
-    # the hundred thousand, and a run paid 0.25 s of collections for them (249, two of them
-    # full; 3 collections and 0.09-0.13 s so: the 4,096-sample verdict, gc.callbacks). The
-    # process's own setting, as mypy's: a library call (tests, notebooks) keeps Python's.
+    # the hundred thousand, which the default collects again and again for nothing
+    # (benchmarks/results/verdict/verdict.md). The process's own setting, as mypy's: a
+    # library call (tests, notebooks) keeps Python's.
     gc.set_threshold(GC_FIRST_GENERATION, 20, 20)
     code = main()
     atexit._run_exitfuncs()
