@@ -11,10 +11,7 @@ ratios are of medians and repeat by repeat. The ensembles of the first repeat ar
 variable by variable: the bitwise equal ones are listed, the others with their largest
 difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
 loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
-figure a loaded machine disturbs least. Before each run the host's speed of the moment is
-probed (:func:`host_probe`: a float64 matmul on this process's BLAS threads, GFLOP/s): the
-host's speed drifts by 1.4× within minutes on the same code, and the probe puts each run's
-wall time beside it. ``--threads`` is passed to ``mcchain run`` (the
+figure a loaded machine disturbs least. ``--threads`` is passed to ``mcchain run`` (the
 machine's 2 cores by default). ``--bytecode``: the runs keep their compiled bytecode (in
 ``--work``), as an installed package has it, where the environment sets
 ``PYTHONDONTWRITEBYTECODE`` (then each run compiles mcchain's hundred modules from source).
@@ -82,24 +79,6 @@ def compare(before: Path, after: Path) -> list[str]:
     return [f"bitwise equal: {', '.join(same)}", *lines]
 
 
-PROBE_SIZE = 1000
-"""Order of the probe's matmul: 2 GFLOP, some 30 ms on this 2-core host."""
-
-
-def host_probe(repeats: int = 3) -> float:
-    """The host's speed now: GFLOP/s of the best of ``repeats`` float64 matmuls of order
-    :data:`PROBE_SIZE` (NumPy's BLAS, its default threads: the machine's cores)."""
-    a = np.random.default_rng(0).random((PROBE_SIZE, PROBE_SIZE))
-    b = a.T.copy()
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        a @ b
-        best = min(best, time.perf_counter() - t0)
-    time.sleep(0.3)  # OpenBLAS's threads spin for a while after a call: not into the run
-    return 2.0 * PROBE_SIZE**3 / best / 1e9
-
-
 def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list[str]]:
     tree = work / f"tree-{args.before[:10]}"
     before = tree if tree.exists() else export_tree(args.before, work)
@@ -115,15 +94,14 @@ def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list
         folders = {}
         for name in order:
             folders[name] = work / f"run-{name}-{r}-{time.time_ns()}"
-            probe = host_probe()
             result = mcchain_run(variants[name], scene, args.samples, folders[name], extra)
             result.pop("stdout")
-            rows.append({"variant": name, "repeat": r, "probe": probe, **result})
+            rows.append({"variant": name, "repeat": r, **result})
             t = result["timings"]
             print(
                 f"  {name:6s} repeat {r}: {result['wall']:6.2f} s (prepare {t['prepare']:.2f}, "
                 f"warmup {t['warmup']:.2f}, compute {t['compute']:.2f}, merge {t['merge']:.2f}),"
-                f" load {result['load']:.2f}, probe {probe:.1f} GFLOP/s",
+                f" load {result['load']:.2f}",
                 flush=True,
             )
         if r == 0:
@@ -137,10 +115,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         f"### {args.samples} samples, `mcchain run --threads {args.threads}` end to end, warm "
         "(median of the repeats; the 1-minute load average at each run's start)",
         "",
-        "| variant | wall (s) | "
-        + " | ".join(keys)
-        + " | wall - compute | user CPU (s) | probe (GFLOP/s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|---|---|",
+        "| variant | wall (s) | " + " | ".join(keys) + " | wall - compute | user CPU (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -149,8 +125,7 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
             f"| {name} | {statistics.median(r['wall'] for r in mine):.2f} | "
             + " | ".join(f"{m:.2f}" for m in med)
             + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
-            + f" | {statistics.median(r['cpu'] for r in mine):.1f}"
-            + f" | {statistics.median(r['probe'] for r in mine):.1f} | "
+            + f" | {statistics.median(r['cpu'] for r in mine):.1f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
         )
@@ -162,15 +137,11 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
     for r in sorted({row["repeat"] for row in rows}):
         w = {row["variant"]: row["wall"] for row in rows if row["repeat"] == r}
         pairs.append(f"{w['before'] / w['after']:.2f}")
-    by_probe = sorted(rows, key=lambda row: row["probe"])
     verdicts = {tuple(row["verdict"]) for row in rows}
     lines += [
         "",
         f"before / after (medians): {wall['before'] / wall['after']:.2f}; repeat by repeat: "
         f"{', '.join(pairs)}",
-        "",
-        "every run's wall time (s) beside the host probe just before it (GFLOP/s), slowest "
-        "host first: " + ", ".join(f"{row['wall']:.2f} at {row['probe']:.0f}" for row in by_probe),
         "",
         "the verdict lines: " + ("the same in every run" if len(verdicts) == 1 else "DIFFER"),
         *(f"    {line}" for line in sorted(verdicts)[0]),
