@@ -11,7 +11,9 @@ ratios are of medians and repeat by repeat. The ensembles of the first repeat ar
 variable by variable: the bitwise equal ones are listed, the others with their largest
 difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
 loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
-figure a loaded machine disturbs least. ``--threads`` is passed to ``mcchain run`` (the
+figure a loaded machine disturbs least. After each run, ``mcchain verdict`` of its folder
+(the same tree) is timed too: the designer's read of a finished run. ``--threads`` is passed
+to ``mcchain run`` (the
 machine's 2 cores by default). ``--bytecode``: the runs keep their compiled bytecode (in
 ``--work``), as an installed package has it, where the environment sets
 ``PYTHONDONTWRITEBYTECODE`` (then each run compiles mcchain's hundred modules from source).
@@ -29,6 +31,7 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -79,6 +82,18 @@ def compare(before: Path, after: Path) -> list[str]:
     return [f"bitwise equal: {', '.join(same)}", *lines]
 
 
+def verdict_seconds(tree: Path, folder: Path) -> float:
+    """Wall seconds of ``mcchain verdict folder`` run from ``tree`` (exit 0, 1 or 4)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    command = [sys.executable, "-m", "mcchain.cli", "verdict", str(folder)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tree)
+    seconds = time.perf_counter() - t0
+    if proc.returncode not in (0, 1, 4):
+        raise RuntimeError(f"{command}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+    return seconds
+
+
 def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list[str]]:
     tree = work / f"tree-{args.before[:10]}"
     before = tree if tree.exists() else export_tree(args.before, work)
@@ -96,12 +111,13 @@ def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list
             folders[name] = work / f"run-{name}-{r}-{time.time_ns()}"
             result = mcchain_run(variants[name], scene, args.samples, folders[name], extra)
             result.pop("stdout")
+            result["verdict_wall"] = verdict_seconds(variants[name], folders[name])
             rows.append({"variant": name, "repeat": r, **result})
             t = result["timings"]
             print(
                 f"  {name:6s} repeat {r}: {result['wall']:6.2f} s (prepare {t['prepare']:.2f}, "
                 f"warmup {t['warmup']:.2f}, compute {t['compute']:.2f}, merge {t['merge']:.2f}),"
-                f" load {result['load']:.2f}",
+                f" load {result['load']:.2f}; mcchain verdict {result['verdict_wall']:.2f} s",
                 flush=True,
             )
         if r == 0:
@@ -115,8 +131,10 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         f"### {args.samples} samples, `mcchain run --threads {args.threads}` end to end, warm "
         "(median of the repeats; the 1-minute load average at each run's start)",
         "",
-        "| variant | wall (s) | " + " | ".join(keys) + " | wall - compute | user CPU (s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|---|",
+        "| variant | wall (s) | "
+        + " | ".join(keys)
+        + " | wall - compute | user CPU (s) | `mcchain verdict` (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -125,7 +143,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
             f"| {name} | {statistics.median(r['wall'] for r in mine):.2f} | "
             + " | ".join(f"{m:.2f}" for m in med)
             + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
-            + f" | {statistics.median(r['cpu'] for r in mine):.1f} | "
+            + f" | {statistics.median(r['cpu'] for r in mine):.1f}"
+            + f" | {statistics.median(r['verdict_wall'] for r in mine):.2f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
         )

@@ -2,7 +2,8 @@
 xarray's: the same variables, dtypes, bytes and attributes, and the same verdict lines and
 retry counts from the run's observers — with failed (NaN, -1) samples, never-events, no
 failure and every sample failed; a file that needs CF decoding read by xarray instead; and a
-``mcchain run`` of a requirement scene that imports no xarray, pandas or dask."""
+``mcchain run`` of a requirement scene, and ``mcchain verdict`` of it, that import no
+xarray, pandas or dask."""
 
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from mcchain.decision.allocation_table import allocations, box_allocations
 from mcchain.decision.sampled import design_of
 from mcchain.decision.summary import summarize, summary_lines
 from mcchain.decision.until import sequential_settings
+from mcchain.decision.verdict import VerdictTable
 from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
 from mcchain.ensemble.per_sample import (
     NeedsDecoding,
@@ -169,10 +171,11 @@ def test_per_sample__a_damaged_file_says_how_to_rebuild(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow  # a fresh interpreter loads the kernels (2-5 s)
-def test_run__reads_its_verdict_without_xarray_and_equal_to_it(tmp_path: Path) -> None:
+def test_run_and_verdict__read_without_xarray_and_equal_to_it(tmp_path: Path) -> None:
     """A ``mcchain run`` of the shipped requirement scene (4 samples, retries on) records
-    the verdict lines and retry counts xarray gives on its ensemble, without importing
-    xarray, pandas or dask (0.7-0.95 s of import, then the CF decoding of every variable)."""
+    the verdict lines and retry counts xarray gives on its ensemble, and ``mcchain verdict``
+    of the run prints the table xarray's Dataset gives, each without importing xarray,
+    pandas or dask (0.7-0.95 s of import, then the CF decoding of every variable)."""
     from mcchain.testing.scenes import config_text, with_lines
 
     scene = tmp_path / "slider.toml"
@@ -199,3 +202,18 @@ def test_run__reads_its_verdict_without_xarray_and_equal_to_it(tmp_path: Path) -
         assert_same_as_xarray(light, ds)
         assert_same_decisions(light, ds)
         assert record["retries"] == retry_counts(ds[SOLVED_BY].values, SIMULATE)
+        by_xarray = VerdictTable(
+            summarize(ds), design_of(ds), sequential_settings(ds.attrs), []
+        ).lines()
+    code = (
+        "import json, sys\n"
+        "from mcchain.decision.verdict import run_verdict\n"
+        f"print(json.dumps(run_verdict({str(folder)!r}).lines()))\n"
+        "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    printed, modules = proc.stdout.splitlines()[-2:]
+    assert modules == "[]"
+    assert json.loads(printed) == by_xarray and by_xarray[0].startswith("requirement")

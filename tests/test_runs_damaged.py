@@ -43,7 +43,7 @@ def test_open_run__a_cut_file_says_how_to_rebuild_it(damaged: Path) -> None:
         mcchain.open_run(damaged)
 
 
-@pytest.mark.parametrize("command", ["report", "show"])
+@pytest.mark.parametrize("command", ["report", "show", "verdict"])
 def test_commands__one_line_exit_2(damaged, tmp_path, monkeypatch, capsys, command) -> None:
     extra = ["--save", tmp_path / "x.rrd"] if command == "show" else []
     ran = in_process(monkeypatch, capsys)(command, damaged, *extra, cwd=tmp_path)
