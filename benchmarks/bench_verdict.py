@@ -12,9 +12,10 @@ variable by variable: the bitwise equal ones are listed, the others with their l
 difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
 loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
 figure a loaded machine disturbs least. After each run, ``mcchain verdict`` of its folder
-(the same tree) is timed too: the designer's read of a finished run. ``--threads`` is passed
-to ``mcchain run`` (the
-machine's 2 cores by default). ``--bytecode``: the runs keep their compiled bytecode (in
+and then ``mcchain export --requirements`` of it (the same tree) are timed too: the
+designer's reads of a finished run (the verdict table; the allocation and what-if files).
+``--threads`` is passed to ``mcchain run`` (the machine's 2 cores by default).
+``--bytecode``: the runs keep their compiled bytecode (in
 ``--work``), as an installed package has it, where the environment sets
 ``PYTHONDONTWRITEBYTECODE`` (then each run compiles mcchain's hundred modules from source).
 
@@ -82,10 +83,11 @@ def compare(before: Path, after: Path) -> list[str]:
     return [f"bitwise equal: {', '.join(same)}", *lines]
 
 
-def verdict_seconds(tree: Path, folder: Path) -> float:
-    """Wall seconds of ``mcchain verdict folder`` run from ``tree`` (exit 0, 1 or 4)."""
+def read_seconds(tree: Path, folder: Path, *command_args: str) -> float:
+    """Wall seconds of ``mcchain <command_args> folder`` run from ``tree`` (exit 0, 1 or 4:
+    a verdict's codes)."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    command = [sys.executable, "-m", "mcchain.cli", "verdict", str(folder)]
+    command = [sys.executable, "-m", "mcchain.cli", *command_args, str(folder)]
     t0 = time.perf_counter()
     proc = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tree)
     seconds = time.perf_counter() - t0
@@ -111,17 +113,32 @@ def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list
             folders[name] = work / f"run-{name}-{r}-{time.time_ns()}"
             result = mcchain_run(variants[name], scene, args.samples, folders[name], extra)
             result.pop("stdout")
-            result["verdict_wall"] = verdict_seconds(variants[name], folders[name])
+            result["verdict_wall"] = read_seconds(variants[name], folders[name], "verdict")
+            result["export_wall"] = read_seconds(
+                variants[name], folders[name], "export", "--requirements"
+            )
             rows.append({"variant": name, "repeat": r, **result})
             t = result["timings"]
             print(
                 f"  {name:6s} repeat {r}: {result['wall']:6.2f} s (prepare {t['prepare']:.2f}, "
                 f"warmup {t['warmup']:.2f}, compute {t['compute']:.2f}, merge {t['merge']:.2f}),"
-                f" load {result['load']:.2f}; mcchain verdict {result['verdict_wall']:.2f} s",
+                f" load {result['load']:.2f}; mcchain verdict {result['verdict_wall']:.2f} s,"
+                f" export --requirements {result['export_wall']:.2f} s",
                 flush=True,
             )
         if r == 0:
             check = compare(folders["before"] / "ensemble.nc", folders["after"] / "ensemble.nc")
+            exported = sorted(p.name for p in (folders["before"] / "export").iterdir())
+            differ = [
+                n
+                for n in exported
+                if (folders["before"] / "export" / n).read_bytes()
+                != (folders["after"] / "export" / n).read_bytes()
+            ]
+            check.append(
+                f"`export --requirements` files ({', '.join(exported)}): "
+                + (f"differ: {', '.join(differ)}" if differ else "byte for byte the same")
+            )
     return rows, check
 
 
@@ -133,8 +150,9 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         "",
         "| variant | wall (s) | "
         + " | ".join(keys)
-        + " | wall - compute | user CPU (s) | `mcchain verdict` (s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|---|---|",
+        + " | wall - compute | user CPU (s) | `mcchain verdict` (s) | `export --requirements`"
+        " (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -144,7 +162,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
             + " | ".join(f"{m:.2f}" for m in med)
             + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
             + f" | {statistics.median(r['cpu'] for r in mine):.1f}"
-            + f" | {statistics.median(r['verdict_wall'] for r in mine):.2f} | "
+            + f" | {statistics.median(r['verdict_wall'] for r in mine):.2f}"
+            + f" | {statistics.median(r['export_wall'] for r in mine):.2f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
         )

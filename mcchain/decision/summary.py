@@ -533,7 +533,7 @@ def validity_lines(
 
 
 # -- files ---------------------------------------------------------------------------------
-def write_requirements(ds: xr.Dataset, folder: Path) -> list[Path]:
+def write_requirements(ds: StoredEnsemble, folder: Path) -> list[Path]:
     """``requirements.csv``, ``allocation.csv``, ``requirements.txt``, then
     ``allocation-box.csv`` (two or more sampled parameters), ``whatif.csv`` and
     ``whatif.png`` into ``folder``; returns their paths in that order."""
@@ -562,11 +562,15 @@ def export_requirements(run: str | Path) -> list[Path]:
     Raises:
         RunError: the run has no requirements.
     """
+    from mcchain.ensemble.per_sample import open_stored
     from mcchain.errors import RunError
-    from mcchain.runner.runs import open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import ENSEMBLE, open_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
-    with open_run(folder) as ds:  # closed after: xarray shares the file with later opens
+    # as the verdict reads a run (netCDF4 alone); an unfinished run, from its parts (xarray)
+    stored = folder / ENSEMBLE
+    opened = open_stored(stored) if stored.is_file() else open_run(folder)
+    with opened as ds:  # closed after: the file is shared with later opens
         if not stored_requirements(ds):
             raise RunError(
                 f"{run}: the run has no [[requirement]]: nothing to export with --requirements"

@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import stats
 
 from mcchain.decision.allocation_table import failed_samples
 from mcchain.decision.requirements import stored_requirements
@@ -47,8 +46,7 @@ from mcchain.decision.sampled import SampledParameter, sampled_parameters
 from mcchain.decision.stats import one_sided_bounds
 
 if TYPE_CHECKING:
-    import xarray as xr
-
+    from mcchain.ensemble.per_sample import StoredEnsemble
     from mcchain.scene.study import Distribution
 
 SHARES = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1)
@@ -344,7 +342,7 @@ def whatif_rows(
     return rows
 
 
-def whatifs(ds: xr.Dataset) -> list[WhatIf]:
+def whatifs(ds: StoredEnsemble) -> list[WhatIf]:
     """Every requirement's what-if rows over every sampled parameter."""
     from mcchain.decision.sampled import EXACT_DESIGNS, design_of
 
@@ -358,7 +356,7 @@ def whatifs(ds: xr.Dataset) -> list[WhatIf]:
     return rows
 
 
-def write_whatif(ds: xr.Dataset, folder: Path) -> list[Path]:
+def write_whatif(ds: StoredEnsemble, folder: Path) -> list[Path]:
     """``whatif.csv`` and ``whatif.png`` into ``folder`` (nothing without sampled
     parameters)."""
     from mcchain.decision.tables import write_csv
@@ -382,6 +380,8 @@ def kish_clopper_pearson(
     """The self-normalised estimate Σ w 1{fail}/Σ w with the Clopper–Pearson bounds at Kish's
     n_eff (non-integer counts: the beta quantiles), each end one-sided at ``confidence``: the
     common approximation this module measures against (``benchmarks/bench_whatif.py``)."""
+    from scipy import stats  # here: 0.8 s of import that the export itself does not use
+
     w = np.asarray(weights, dtype=np.float64)
     p = float(np.sum(w * failed) / w.sum())
     n_eff = float(w.sum() ** 2 / np.sum(w * w))
