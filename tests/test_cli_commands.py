@@ -109,6 +109,21 @@ def test_cli__console_entry_point_smoke(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_cli_help__says_what_the_tool_is_for_a_user(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``mcchain --help`` opens with what the tool does, in plain text (no docstring markup),
+    and points to the scene reference."""
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--help"])
+    out = capsys.readouterr().out
+    assert exit_info.value.code == 0
+    description = " ".join(out.split("\n\n")[1].split())
+    assert description.startswith("Monte Carlo studies of planar linkages")
+    assert "clearance" in description and "verdicts" in description
+    assert "``" not in out and "docs/scenes.md" in out
+
+
 @pytest.mark.parametrize(
     ("files", "args", "fragments"),
     [

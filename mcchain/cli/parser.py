@@ -12,7 +12,11 @@ from typing import Any, NoReturn
 
 from mcchain import __version__
 
-DESCRIPTION = "``mcchain`` command line: a thin front end, and the one place that parses arguments."
+DESCRIPTION = (
+    "Monte Carlo studies of planar linkages whose joints have clearance: sample clearances, "
+    "masses, lengths and loads; get equilibria, natural frequencies, time histories, joint "
+    "reactions and requirement verdicts for every instance."
+)
 """The first line of ``mcchain --help``."""
 
 NAMED_ERRORS = ("show", "report")
