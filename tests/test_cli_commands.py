@@ -231,17 +231,23 @@ def test_cli_runs__lists_the_runs_of_a_folder(mcchain: Callable[..., Ran], tmp_p
     assert empty.returncode == 0 and "no runs" in empty.stdout
 
 
+def fresh_interpreter(code: str) -> str:
+    """What a fresh interpreter prints running ``code`` with this tree's mcchain (what it
+    imports is then only what ``code`` needs)."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    return proc.stdout
+
+
 def test_cli_runs__does_not_import_numpy_numba_or_xarray() -> None:
     code = (
         "import sys; from mcchain import cli; cli.main(['runs', '--out', '/nonexistent']);"
         "print(sorted(m for m in ('numpy', 'numba', 'xarray', 'netCDF4', 'dask')"
         " if m in sys.modules))"
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    assert proc.stdout.splitlines()[-1] == "[]"
+    assert fresh_interpreter(code).splitlines()[-1] == "[]"
 
 
 def test_cli_show__parses_and_calls_show_run(

@@ -8,9 +8,6 @@ xarray, pandas or dask."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -18,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 import xarray as xr
+from test_cli_commands import fresh_interpreter
 from test_decision_verdict import slider_crank_like
 
 from mcchain.decision.allocation_table import allocations, box_allocations
@@ -189,11 +187,7 @@ def test_run_and_verdict__read_without_xarray_and_equal_to_it(tmp_path: Path) ->
         f"plan.start_run({str(scene)!r}, run_dir={str(folder)!r}, progress=False)\n"
         "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))"
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    assert proc.stdout.splitlines()[-1] == "[]"
+    assert fresh_interpreter(code).splitlines()[-1] == "[]"
     record = json.loads((folder / "run.json").read_text())
     path = folder / "ensemble.nc"
     assert record["requirements"] == lines_by_xarray(path)
@@ -211,9 +205,6 @@ def test_run_and_verdict__read_without_xarray_and_equal_to_it(tmp_path: Path) ->
         f"print(json.dumps(run_verdict({str(folder)!r}).lines()))\n"
         "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))"
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    )
-    printed, modules = proc.stdout.splitlines()[-2:]
+    printed, modules = fresh_interpreter(code).splitlines()[-2:]
     assert modules == "[]"
     assert json.loads(printed) == by_xarray and by_xarray[0].startswith("requirement")

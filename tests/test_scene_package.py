@@ -5,16 +5,11 @@ the other models."""
 from __future__ import annotations
 
 import importlib
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+from test_cli_commands import fresh_interpreter
 
 import mcchain.scene
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("name", mcchain.scene.__all__)
@@ -35,10 +30,7 @@ def test_scene_package__the_requirement_model_alone_loads_no_compiler() -> None:
     code = (
         "import sys\n"
         "from mcchain.scene.study import Requirement\n"
-        "print(sorted(m for m in sys.modules if m.startswith('mcchain.scene')))"
+        "print(*sorted(m for m in sys.modules if m.startswith('mcchain.scene')))"
     )
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
-    ).stdout
-    assert out.split() == ["['mcchain.scene',", "'mcchain.scene.fields',", "'mcchain.scene.study']"]
+    loaded = fresh_interpreter(code).split()
+    assert loaded == ["mcchain.scene", "mcchain.scene.fields", "mcchain.scene.study"]
