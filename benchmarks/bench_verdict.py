@@ -11,9 +11,10 @@ ratios are of medians and repeat by repeat. The ensembles of the first repeat ar
 variable by variable: the bitwise equal ones are listed, the others with their largest
 difference. ``wall - compute`` (median of each run's) is what a run spends outside its chunk
 loop — the interpreter's start, imports, kernel loads, merge, the verdict read back — the
-figure a loaded machine disturbs least. After each run, ``mcchain verdict`` of its folder
-and then ``mcchain export --requirements`` of it (the same tree) are timed too: the
-designer's reads of a finished run (the verdict table; the allocation and what-if files).
+figure a loaded machine disturbs least. After each run, ``mcchain verdict`` of its folder,
+``mcchain export --requirements`` of it and ``mcchain confirm`` of a range (:data:`CONFIRM`)
+from it (the same tree) are timed too: the designer's steps after a run (the verdict table;
+the allocation and what-if files; a fresh run inside a cut range, its verdict).
 ``--threads`` is passed to ``mcchain run`` (the machine's 2 cores by default).
 ``--bytecode``: the runs keep their compiled bytecode (in
 ``--work``), as an installed package has it, where the environment sets
@@ -83,6 +84,11 @@ def compare(before: Path, after: Path) -> list[str]:
     return [f"bitwise equal: {', '.join(same)}", *lines]
 
 
+CONFIRM = ("--requirement", "slider-accuracy", "--range", "joint.B.clearance=:1.5e-4")
+"""The confirmation timed after each run: the slider's accuracy inside clearances up to
+0.15 mm (299 fresh samples: the success-run count at 1 % and 95 %)."""
+
+
 def read_seconds(tree: Path, folder: Path, *command_args: str) -> float:
     """Wall seconds of ``mcchain <command_args> folder`` run from ``tree`` (exit 0, 1 or 4:
     a verdict's codes)."""
@@ -117,18 +123,27 @@ def run_variants(args: argparse.Namespace, work: Path) -> tuple[list[dict], list
             result["export_wall"] = read_seconds(
                 variants[name], folders[name], "export", "--requirements"
             )
+            confirm_dir = ["--quiet", "--run-dir", str(folders[name] / "confirmed")]
+            result["confirm_wall"] = read_seconds(
+                variants[name], folders[name], "confirm", *CONFIRM, *confirm_dir
+            )
             rows.append({"variant": name, "repeat": r, **result})
             t = result["timings"]
             print(
                 f"  {name:6s} repeat {r}: {result['wall']:6.2f} s (prepare {t['prepare']:.2f}, "
                 f"warmup {t['warmup']:.2f}, compute {t['compute']:.2f}, merge {t['merge']:.2f}),"
                 f" load {result['load']:.2f}; mcchain verdict {result['verdict_wall']:.2f} s,"
-                f" export --requirements {result['export_wall']:.2f} s",
+                f" export --requirements {result['export_wall']:.2f} s,"
+                f" confirm {result['confirm_wall']:.2f} s",
                 flush=True,
             )
         if r == 0:
             check = compare(folders["before"] / "ensemble.nc", folders["after"] / "ensemble.nc")
-            exported = sorted(p.name for p in (folders["before"] / "export").iterdir())
+            exported = sorted(  # confirm's scene copy names its run folder: not compared
+                p.name
+                for p in (folders["before"] / "export").iterdir()
+                if not p.name.startswith("confirm-")
+            )
             differ = [
                 n
                 for n in exported
@@ -151,8 +166,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
         "| variant | wall (s) | "
         + " | ".join(keys)
         + " | wall - compute | user CPU (s) | `mcchain verdict` (s) | `export --requirements`"
-        " (s) | loads |",
-        "|---|---|" + "---|" * len(keys) + "---|---|---|---|---|",
+        " (s) | `confirm` (s) | loads |",
+        "|---|---|" + "---|" * len(keys) + "---|---|---|---|---|---|",
     ]
     for name in ("before", "after"):
         mine = [r for r in rows if r["variant"] == name]
@@ -163,7 +178,8 @@ def table(rows: list[dict], check: list[str], args: argparse.Namespace) -> str:
             + f" | {statistics.median(r['wall'] - r['timings']['compute'] for r in mine):.2f}"
             + f" | {statistics.median(r['cpu'] for r in mine):.1f}"
             + f" | {statistics.median(r['verdict_wall'] for r in mine):.2f}"
-            + f" | {statistics.median(r['export_wall'] for r in mine):.2f} | "
+            + f" | {statistics.median(r['export_wall'] for r in mine):.2f}"
+            + f" | {statistics.median(r['confirm_wall'] for r in mine):.2f} | "
             + ", ".join(f"{r['load']:.1f}" for r in mine)
             + " |"
         )

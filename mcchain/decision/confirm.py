@@ -292,7 +292,7 @@ def confirm_run(
     from mcchain.runner.runs import (
         SCENE_COPY,
         check_new_run_dir,
-        open_run,
+        open_stored_run,
         read_record,
         resolve_run,
         writable_folder,
@@ -317,7 +317,7 @@ def confirm_run(
     record = read_record(folder)
     if run_dir is not None:
         check_new_run_dir(run_dir)
-    with open_run(folder) as ds:
+    with open_stored_run(folder) as ds:
         named = {r.name: r for r in stored_requirements(ds)}
         if requirement not in named:
             have = ", ".join(named) or "none"
@@ -384,7 +384,7 @@ def confirm_run(
         "screening": {"samples_kept": kept, "failures": failures},
     }
     write_record(result.folder, new)
-    with open_run(result.folder) as ds:
+    with open_stored_run(result.folder) as ds:
         summary = next(s for s in summarize(ds) if s.name == req.name)
     lines = tuple(run_summary(result.record))
     return ConfirmResult(result.folder, req.name, cuts, samples, seed, how_many, summary, lines)

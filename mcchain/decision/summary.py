@@ -562,15 +562,11 @@ def export_requirements(run: str | Path) -> list[Path]:
     Raises:
         RunError: the run has no requirements.
     """
-    from mcchain.ensemble.per_sample import open_stored
     from mcchain.errors import RunError
-    from mcchain.runner.runs import ENSEMBLE, open_run, resolve_run, writable_folder
+    from mcchain.runner.runs import open_stored_run, resolve_run, writable_folder
 
     folder = resolve_run(run)
-    # as the verdict reads a run (netCDF4 alone); an unfinished run, from its parts (xarray)
-    stored = folder / ENSEMBLE
-    opened = open_stored(stored) if stored.is_file() else open_run(folder)
-    with opened as ds:  # closed after: the file is shared with later opens
+    with open_stored_run(folder) as ds:  # closed after: the file is shared with later opens
         if not stored_requirements(ds):
             raise RunError(
                 f"{run}: the run has no [[requirement]]: nothing to export with --requirements"

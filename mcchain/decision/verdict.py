@@ -107,15 +107,14 @@ def run_verdict(run: str | Path) -> VerdictTable:
     from mcchain.decision.requirements import stored_requirements
     from mcchain.decision.summary import design_of, summarize
     from mcchain.decision.until import sequential_settings
-    from mcchain.ensemble.per_sample import open_stored
-    from mcchain.runner.runs import COMPLETED, ENSEMBLE, read_record, resolve_run
+    from mcchain.runner.runs import COMPLETED, ENSEMBLE, open_stored_run, read_record, resolve_run
 
     folder = resolve_run(run)
     record = read_record(folder)
     if record.get("status") != COMPLETED or not (folder / ENSEMBLE).is_file():
         raise RunError(f"verdict: {run} is not completed (mcchain run --resume {run})")
     try:  # as the run's own summary reads it: netCDF4 alone, xarray where a variable decodes
-        ds = open_stored(folder / ENSEMBLE)
+        ds = open_stored_run(folder)
     except (OSError, ValueError) as exc:
         raise RunError(f"verdict: {folder / ENSEMBLE} is unreadable ({exc})") from None
     with ds:

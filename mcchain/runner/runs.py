@@ -43,6 +43,7 @@ from mcchain.runner import DEFAULT_OUT
 if TYPE_CHECKING:
     import xarray as xr
 
+    from mcchain.ensemble.per_sample import StoredEnsemble
     from mcchain.runner.job import Job
 
 log = logging.getLogger("mcchain")
@@ -393,6 +394,20 @@ class RunInfo:
     start: str
     chunks_done: int | None = None
     chunks: int | None = None
+
+
+def open_stored_run(run: str | Path) -> StoredEnsemble:
+    """The ensemble of a run for the decision readers (``verdict``, ``export --requirements``,
+    ``confirm``): a completed run's ``ensemble.nc`` read with netCDF4 alone
+    (:func:`mcchain.ensemble.per_sample.open_stored`: xarray only where a variable needs
+    decoding), an unfinished run's finished parts as :func:`open_run` gives them. Either
+    closes as a context manager."""
+    from mcchain.ensemble.per_sample import open_stored
+
+    folder = resolve_run(run)
+    if (folder / ENSEMBLE).is_file():
+        return open_stored(folder / ENSEMBLE)
+    return open_run(folder)
 
 
 def list_runs(out: str | Path = DEFAULT_OUT) -> list[RunInfo]:
