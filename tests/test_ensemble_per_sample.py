@@ -2,8 +2,8 @@
 xarray's: the same variables, dtypes, bytes and attributes, and the same verdict lines and
 retry counts from the run's observers — with failed (NaN, -1) samples, never-events, no
 failure and every sample failed; a file that needs CF decoding read by xarray instead; and a
-``mcchain run`` of a requirement scene, and ``mcchain verdict`` of it, that import no
-xarray, pandas or dask."""
+``mcchain run`` of a requirement scene, ``mcchain verdict`` of it and ``mcchain confirm``
+from it, that import no xarray, pandas or dask."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from test_decision_verdict import slider_crank_like
 
 from mcchain.decision.allocation_table import allocations, box_allocations
 from mcchain.decision.sampled import design_of
-from mcchain.decision.summary import summarize, summary_lines
+from mcchain.decision.summary import requirement_lines, summarize, summary_lines
 from mcchain.decision.until import sequential_settings
 from mcchain.decision.verdict import VerdictTable
 from mcchain.ensemble.io import DamagedEnsemble, open_ensemble
@@ -169,11 +169,12 @@ def test_per_sample__a_damaged_file_says_how_to_rebuild(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow  # a fresh interpreter loads the kernels (2-5 s)
-def test_run_and_verdict__read_without_xarray_and_equal_to_it(tmp_path: Path) -> None:
+def test_run_verdict_and_confirm__read_without_xarray_and_equal_to_it(tmp_path: Path) -> None:
     """A ``mcchain run`` of the shipped requirement scene (4 samples, retries on) records
-    the verdict lines and retry counts xarray gives on its ensemble, and ``mcchain verdict``
-    of the run prints the table xarray's Dataset gives, each without importing xarray,
-    pandas or dask (0.7-0.95 s of import, then the CF decoding of every variable)."""
+    the verdict lines and retry counts xarray gives on its ensemble; ``mcchain verdict`` of
+    the run prints the table xarray's Dataset gives, and ``mcchain confirm`` of a range the
+    verdict lines xarray gives on its new run: each without importing xarray, pandas or
+    dask (0.7-0.95 s of import, then the CF decoding of every variable)."""
     from mcchain.testing.scenes import config_text, with_lines
 
     scene = tmp_path / "slider.toml"
@@ -208,3 +209,18 @@ def test_run_and_verdict__read_without_xarray_and_equal_to_it(tmp_path: Path) ->
     printed, modules = fresh_interpreter(code).splitlines()[-2:]
     assert modules == "[]"
     assert json.loads(printed) == by_xarray and by_xarray[0].startswith("requirement")
+    confirmed = tmp_path / "confirmed"
+    code = (
+        "import sys\n"
+        "from mcchain.decision.confirm import confirm_run\n"
+        f"result = confirm_run({str(folder)!r}, 'slider-accuracy', samples=4, progress=False,\n"
+        f"    ranges=['joint.B.clearance=:1.5e-4'], run_dir={str(confirmed)!r})\n"
+        "print(*result.lines(), sep='\\n')\n"
+        "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))"
+    )
+    *printed_lines, modules = fresh_interpreter(code).splitlines()
+    assert modules == "[]"
+    with open_ensemble(confirmed / "ensemble.nc", dask=False) as ds:
+        summary = next(s for s in summarize(ds) if s.name == "slider-accuracy")
+    by_xarray = requirement_lines(summary, "random" if summary.exact else None)[:2]
+    assert summary.samples == 4 and printed_lines[-2:] == by_xarray
