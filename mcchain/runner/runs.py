@@ -380,6 +380,20 @@ def open_run(run: str | Path) -> xr.Dataset:
     return open_parts(parts)
 
 
+def open_stored_run(run: str | Path) -> StoredEnsemble:
+    """The ensemble of a run for the decision readers (``verdict``, ``export --requirements``,
+    ``confirm``): a completed run's ``ensemble.nc`` read with netCDF4 alone
+    (:func:`mcchain.ensemble.per_sample.open_stored`: xarray only where a variable needs
+    decoding), an unfinished run's finished parts as :func:`open_run` gives them. Either
+    closes as a context manager."""
+    from mcchain.ensemble.per_sample import open_stored
+
+    folder = resolve_run(run)
+    if (folder / ENSEMBLE).is_file():
+        return open_stored(folder / ENSEMBLE)
+    return open_run(folder)
+
+
 @dataclass(frozen=True)
 class RunInfo:
     """One line of ``mcchain runs``."""
@@ -394,20 +408,6 @@ class RunInfo:
     start: str
     chunks_done: int | None = None
     chunks: int | None = None
-
-
-def open_stored_run(run: str | Path) -> StoredEnsemble:
-    """The ensemble of a run for the decision readers (``verdict``, ``export --requirements``,
-    ``confirm``): a completed run's ``ensemble.nc`` read with netCDF4 alone
-    (:func:`mcchain.ensemble.per_sample.open_stored`: xarray only where a variable needs
-    decoding), an unfinished run's finished parts as :func:`open_run` gives them. Either
-    closes as a context manager."""
-    from mcchain.ensemble.per_sample import open_stored
-
-    folder = resolve_run(run)
-    if (folder / ENSEMBLE).is_file():
-        return open_stored(folder / ENSEMBLE)
-    return open_run(folder)
 
 
 def list_runs(out: str | Path = DEFAULT_OUT) -> list[RunInfo]:
