@@ -380,7 +380,7 @@ def kish_clopper_pearson(
     """The self-normalised estimate Σ w 1{fail}/Σ w with the Clopper–Pearson bounds at Kish's
     n_eff (non-integer counts: the beta quantiles), each end one-sided at ``confidence``: the
     common approximation this module measures against (``benchmarks/bench_whatif.py``)."""
-    from scipy import stats  # here: 0.8 s of import that the export itself does not use
+    from scipy import stats  # here, not at the top: the export never calls this function
 
     w = np.asarray(weights, dtype=np.float64)
     p = float(np.sum(w * failed) / w.sum())

@@ -11,7 +11,7 @@ out as the flat arrays the kernels read. This package never imports numba or the
 
 Its names are imported on first use (as :mod:`mcchain`'s own): a reader of a run's stored
 requirements needs ``study``'s model alone, not the scene compiler and every model with it
-(0.13 s of a 0.8 s ``mcchain verdict``).
+(benchmarks/results/verdict/verdict.md).
 """
 
 from __future__ import annotations
