@@ -29,14 +29,14 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "5d35b27eba1e9d46141ec2413f96de7e75d75237aa3e217c0b22e19fe3674ef3",
-        "rk4": "048a4ec5abfa0e4ee0bb1209f4423e6047235612ba617e427bceb02ff5faf874",
-        "rk4-projection": "fdcb8e13a27d29738b71fa8a6be535bbe7f62f32a26b02ca55aeee15af7cf688",
+        "rk4": "c2680b43fd5601e5f42f0d856a44903d4ed8ccf7fd98d79cce90cd953757fcbb",
+        "rk4-projection": "22e1804385a91a8cb7f0ddc823c27019788f07551d7f3f5938ac10ab2fc26f97",
         "rk45": "92e5bccd052c34b6130646e498ce4760f30ce0ee28557ed8862587a1165dfd2a",
     },
     "fourbar-clearance": {
         "accel": "bbb59dd6a89da1aee006ec35981de6b29659f34b5b6e0eaaa0ce2185e0f8e404",
-        "rk4": "f6d5ad072f234e986c6f9f238f9c6f2d624eaca80aedec65ee844ca013f09b57",
-        "rk4-projection": "496c420c20f65807518152687d54217fae8db033aed6afb06127b4d572ce9f69",
+        "rk4": "74d88f57da5bb1ab6fbf0b469b8afd7a5091931db81c5bb86935ddd00ebd7a9a",
+        "rk4-projection": "a4a7b8b88b6d6f877e22a7c829f01c3edf101ab05c7148e31ab5a2f9b47858b1",
         "rk45": "87bb0d9d4697449741d4d059dc9ee35413c96188556e4bdfe648e3e901ad3b3c",
     },
     "fourbar-clearance-auto": {
@@ -47,8 +47,8 @@ GOLDEN = {
     },
     "chain4-mixed-spring": {
         "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",
-        "rk4": "4df3dd54014904c6e4490abf672e3d8e8390879436a763ce8306a9c5445732d1",
-        "rk4-projection": "4453581d7971ee83b7880639dcdde77d1b420d017c96f3a35268f6aa43c55b90",
+        "rk4": "dbd96d9f2d38e958841ee2c02e81f84d7c9fbc5b87e7a1364101b4c2691188b3",
+        "rk4-projection": "3d57a9c47d922700644bfc19d35be9844d38139e118d01c51e3218bf4ef78112",
         "rk45": "05c83421ed8f6df03da0c4f984d248f9db1a1ae28005441548d03728962d8ab2",
     },
 }

@@ -136,6 +136,8 @@ JOINT_AND_FORCE_LAWS = {
     ],
     (kj, "clearance_rate"): lambda rng: [_normal(rng) for _ in range(4)],
     (kj, "clearance_gamma"): lambda rng: [_normal(rng) for _ in range(8)],
+    (kj, "distance_squared"): lambda rng: [_normal(rng) for _ in range(2)],
+    (kj, "clearance_gamma_scaled"): lambda rng: [_normal(rng) for _ in range(7)],
     (kj, "axis_normal"): lambda rng: [_normal(rng) for _ in range(4)],
     (kj, "axis_turn"): lambda rng: [_normal(rng) for _ in range(6)],
     (kj, "prismatic_residual"): lambda rng: [_normal(rng) for _ in range(7)],

@@ -1,8 +1,9 @@
 """codegen: the fixed-step lanes' per-sample invariants of S = B M⁻¹ Bᵀ. An ideal revolute
 joint to the ground has a 2×2 block of S whose determinant does not change with the state
 (rows ``gdet``, computed once per sample: its second pivot divides for nothing); a clearance
-row's S_rr takes e_x² + e_y² = 1 (``SchurComplement.unit_rows``). The adaptive lanes keep
-the products written out."""
+row enters the solve multiplied by |d| (``ConstraintKinematics.scaled_rows``), its S_rr as
+|d|² Σ 1/m (``SchurComplement.unit_rows``). The adaptive lanes keep the products written
+out and the unit normal."""
 
 from __future__ import annotations
 
@@ -10,13 +11,19 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.generate import generate_source
-from mcchain.codegen.topology import Topology
+from mcchain.codegen.kinematics import ConstraintKinematics
+from mcchain.codegen.native import NativeModule
+from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.contact import LAW_CODES
+from mcchain.kernels.joints import clearance_gamma, clearance_gamma_scaled
+from mcchain.model import JointKind
 from mcchain.scene import compile_model, load_scene, load_scene_text
-from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, straight_chain_text
+from mcchain.testing.dense import kkt_acceleration
+from mcchain.testing.scenes import DOUBLE_PENDULUM, model_of, scene_model, straight_chain_text
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -86,9 +93,56 @@ def test_fixed_step_lanes__use_the_invariants_the_adaptive_ones_do_not():
     assert re.search(r"N1\w* = W\[\d+ \+ l\]\n", rk4)
     assert re.search(r"Di1\w* = Dp1_0\w* \* W\[\d+ \+ l\] if", rk4)
     assert re.search(r"Di1\w* = okp1\w* / \(okp1\w* \* D1", rk45)  # sequential, as before
-    # S_rr of the clearance row: each body's 1/m, not e_x² /m + e_y² /m
-    assert "p_im0" in _stage(rk4) and "Wt2_0" not in _stage(rk4)
+    # S_rr of the clearance row: |d|² (1/m₀ + 1/m₁), not d_x² /m + d_y² /m
+    assert re.search(r"= \(rr1\w* \* \(p_im0\w* \+ p_im1\w*\) \+", _stage(rk4))
+    assert "Wt2_0" not in _stage(rk4)
     assert "Wt2_0" in _stage(rk45) and "Wt2_3" in _stage(rk45)
+    # the clearance row scaled by |d| in the fixed-step lanes only: no 1/|d| before the solve
+    assert "ex1" not in _stage(rk4) and "ex1" in _stage(rk45)
+
+
+def test_clearance_gamma_scaled__is_the_distance_times_gamma():
+    """|d| γ in the cross-product form against |d| times γ written with e = d/|d|, to the
+    rounding of the terms they sum, over separations from 1e-6 m to 1 m."""
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        d = rng.normal(size=2) * 10.0 ** rng.uniform(-6, 0)
+        rate, g = rng.normal(size=2) * 10.0 ** rng.uniform(-3, 1), rng.normal(size=2) * 100
+        rho = float(np.hypot(*d))
+        e = d / rho
+        reference = rho * clearance_gamma(*e, *g, *rate, float(e @ rate), 1.0 / rho)
+        scaled = clearance_gamma_scaled(*d, *g, *rate, 1.0 / (rho * rho))
+        scale = rho * (float(np.abs(g).sum()) + float(rate @ rate) / rho)
+        assert abs(scaled - reference) <= 1e-14 * scale
+
+
+@pytest.mark.parametrize("name", ["clearance_bar", "fourbar", "double_pendulum", "slider_crank"])
+def test_scaled_clearance_rows__the_dense_solves_accelerations_and_multipliers(name, monkeypatch):
+    """The acceleration with every clearance row scaled by |d| (the fixed-step lanes' form),
+    written into the accel kernel, at random states off the constraints (Baumgarte terms
+    on): q̈ and λ (multiplied back by |d|) of the dense KKT solve, as the unscaled text
+    gives them (test_simulate_methods)."""
+    model = scene_model(name)
+    assert JointKind.CLEARANCE in set(model.joint_kind.tolist()) or name == "slider_crank"
+    topo = Topology.from_model(model)
+    monkeypatch.setattr(ConstraintKinematics, "scaled_rows", True)
+    source = generate_source(topo, "accel")
+    assert "rr" in source or name == "slider_crank"
+    module = NativeModule(source, f"scaled_rows_{name}")
+    rng = np.random.default_rng(5)
+    n = 6
+    Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
+    V = rng.normal(0.0, 1.0, (model.ndof, n))
+    P = np.repeat(pack_parameters(model, topo), n, axis=1)
+    qdd, lam = np.zeros((model.ndof, n)), np.zeros((model.ncon, n))
+    chk, sing = np.zeros(n), np.zeros(n)
+    alpha, beta, t = 3.0, 7.0, 0.3
+    module.accel(P, Q, V, t, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
+    for j in range(n):
+        ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], t, (alpha, beta))
+        np.testing.assert_allclose(qdd[:, j], ref_qdd, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(lam[:, j], ref_lam, rtol=1e-10, atol=1e-10)
+        assert sing[j] == 0.0
 
 
 def test_contact_law__the_scenes_law_is_a_literal_of_the_text():

@@ -266,6 +266,8 @@ class Emitter(ConstraintKinematics, SchurComplement):
         self.apply_wt("lam", "qdd", a0)
         for b, plan in fixed.items():
             self._fixed_reactions(b, plan, rows)
+        for r, k in self.scaled_clearance_rows().items():  # the solve's λ/|d|: λ
+            self.emit(f"lam{r} = rho{k} * lam{r}")
         self.eliminated_rows = self.eliminated_columns = frozenset()
 
     def _fixed_reactions(
@@ -380,6 +382,8 @@ class Emitter(ConstraintKinematics, SchurComplement):
                 f"phi{r} = phi{r} if fm{k} == 0.0 else 0.0",
                 f"phid{r} = phid{r} if fm{k} == 0.0 else 0.0",
             )
+        for r, k in self.scaled_clearance_rows().items():  # |d| Φ, |d| Φ̇ of a scaled row
+            self.emit(f"phi{r} = rho{k} * phi{r}", f"phid{r} = rho{k} * phid{r}")
         self.schur_factor()
         self.schur_solve("phi", "mu")
         self.schur_solve("phid", "nu")

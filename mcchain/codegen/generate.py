@@ -101,7 +101,7 @@ def _blocks(
     fixed_step = lay.fixed_step  # the fixed-step kernel's blocks (templates.ERK_KERNEL)
     nstage = tableau.nstage
     em = Emitter(topo)
-    em.parallel_pivots = em.cancel_gravity = fixed_step
+    em.parallel_pivots = em.cancel_gravity = em.scaled_rows = fixed_step
     ndof, ncon = topo.ndof, topo.ncon
     at = lay.at
     b: dict[str, str] = {}
@@ -546,11 +546,12 @@ def generate_source(
     if tableau is RK4:
         sub = RK4.A[np.tril_indices(RK4.nstage, -2)]
         assert not sub.any(), "the fixed-step kernel needs a strictly sub-diagonal tableau"
-    # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots) and
-    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity); the
-    # adaptive lanes and the radau right-hand side keep the sequential pivots and the terms,
-    # and their bits: the shipped contact-law configs run rk45, whose impacts amplify an ulp
-    # of a pivot into a different sequence of impacts.
+    # The fixed-step lanes' pivots divide side by side (SchurComplement.parallel_pivots),
+    # their B M⁻¹F drops the terms uniform gravity cancels (Emitter.cancel_gravity) and
+    # their clearance rows enter the solve scaled by |d| (ConstraintKinematics.scaled_rows);
+    # the adaptive lanes and the radau right-hand side keep the sequential pivots, the terms
+    # and the unit normals, and their bits: the shipped contact-law configs run rk45, whose
+    # impacts amplify an ulp of a pivot into a different sequence of impacts.
     blocks = _blocks(topo, RK4 if tableau is None else tableau, lay, outputs)
     tokens = {**_tokens(topo, nstage, lay), "SUFFIX": suffix}
     if variant == "rk45" and topo.contact_joints:  # the stage, and its Hertz copy

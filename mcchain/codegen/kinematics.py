@@ -25,6 +25,16 @@ class ConstraintKinematics(LaneText):
     (points, separations, normals), :meth:`rows` (B's non-zeros), :meth:`constraint_values`
     (Φ, Φ̇, max |Φ|) and :meth:`gamma` (γ)."""
 
+    scaled_rows = False
+    """Whether each clearance row not under a contact law enters the solve multiplied by
+    |d| (:meth:`scaled_clearance_rows`): its entries are d's instead of the unit normal
+    e = d/|d|'s, its γ and its Baumgarte terms are |d| times the row's (:meth:`gamma`), and
+    the solve gives λ/|d|, which the emitter multiplies back. The same S⁻¹ in exact
+    arithmetic, and neither √ nor 1/|d| on the way to the row's pivot (a shorter chain); other
+    bits of λ and q̈, a few ulp (benchmarks/results/roofline/reading.md). Φ and Φ̇ keep
+    their meaning (max |Φ|, the outputs). The generator sets it for the fixed-step
+    variants."""
+
     def __init__(self, topo: Topology):
         super().__init__(topo)
         self._rows_cache: list[dict[int, Coef]] | None = None
@@ -90,6 +100,12 @@ class ConstraintKinematics(LaneText):
                 guarded = "1.0" if k in self.contact_row else "0.0"
                 (inverse,) = self.kernel(JOINT_KERNELS, "inverse_distance", [f"rho{k}", guarded])
                 (rho,) = self.kernel(JOINT_KERNELS, "distance", [f"dx{k}", f"dy{k}"])
+                if topo.joint_row[k] in self.scaled_clearance_rows():
+                    # ρ² for the scaled row's S_rr and γ; ρ the same √ of it as `distance`
+                    separation = [f"dx{k}", f"dy{k}"]
+                    (squared,) = self.kernel(JOINT_KERNELS, "distance_squared", separation)
+                    self.emit(f"rr{k} = {squared}")
+                    rho = f"math.sqrt(rr{k})"
                 self.emit(
                     f"rho{k} = {rho}",
                     f"irho{k} = {inverse}",
@@ -150,8 +166,9 @@ class ConstraintKinematics(LaneText):
                 if b != GROUND:
                     angle[3 * b + 2] = 1.0
                 rows += [row, angle]
-            else:
-                ex, ey = f"ex{k}", f"ey{k}"
+            else:  # the unit normal's entries, or d's where the row is scaled
+                scaled = topo.joint_row[k] in self.scaled_clearance_rows()
+                ex, ey = (f"dx{k}", f"dy{k}") if scaled else (f"ex{k}", f"ey{k}")
                 row = point_row(b, 1.0, ex, ey, *pb)
                 row.update(point_row(a, -1.0, ex, ey, *pa))
                 rows.append(row)
@@ -169,13 +186,28 @@ class ConstraintKinematics(LaneText):
         self._rows_cache = rows
         return rows
 
-    def unit_normal_rows(self) -> dict[int, tuple[str, str]]:
+    def unit_normal_rows(self) -> dict[int, tuple[str, str, Coef]]:
         """The row of each clearance joint not under a contact law: its entries at a body's
         x and y are ± its unit normal (ex, ey) (under a law, n = 0 at the bearing's
-        centre). {row: (ex, ey)}."""
+        centre), or ± d (dx, dy) where the row is scaled, whose square is ρ² (rr), not 1.
+        {row: (x entry, y entry, their squared norm)}."""
         topo = self.topo
+        scaled = self.scaled_clearance_rows()
         return {
-            topo.joint_row[k]: (f"ex{k}", f"ey{k}")
+            r: (f"dx{k}", f"dy{k}", f"rr{k}") if r in scaled else (f"ex{k}", f"ey{k}", 1.0)
+            for k in range(topo.njoint)
+            if topo.joint_kind[k] == JOINT_CLEARANCE and k not in self.contact_row
+            for r in (topo.joint_row[k],)
+        }
+
+    def scaled_clearance_rows(self) -> dict[int, int]:
+        """{row: joint} of the clearance rows the solve takes multiplied by |d| (with
+        :attr:`scaled_rows`; else none)."""
+        topo = self.topo
+        if not self.scaled_rows:
+            return {}
+        return {
+            topo.joint_row[k]: k
             for k in range(topo.njoint)
             if topo.joint_kind[k] == JOINT_CLEARANCE and k not in self.contact_row
         }
@@ -285,8 +317,10 @@ class ConstraintKinematics(LaneText):
         self.emit("phimax = 0.0", *(f"phimax = max(phimax, {t})" for t in terms))
 
     def gamma(self, v: str = "v", baumgarte: bool = True) -> None:
-        """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v)."""
+        """``gam{r}``: B q̈ = γ − 2α Φ̇ − β² Φ (after :meth:`constraint_values` with v); a
+        scaled row's (:attr:`scaled_rows`) |d| times it."""
         topo = self.topo
+        scaled = self.scaled_clearance_rows()
         for k in range(topo.njoint):
             r = topo.joint_row[k]
             a, b = topo.joint_a[k], topo.joint_b[k]
@@ -299,6 +333,19 @@ class ConstraintKinematics(LaneText):
             elif topo.joint_kind[k] == JOINT_PRISMATIC:
                 gam = self._axis_gamma(f"nx{k}", f"ny{k}", k, wa)
                 self.emit(f"gam{r} = {gam}", f"gam{r + 1} = 0.0")
+            elif r in scaled:  # |d| γ, |d| Φ̇ = d·ḋ and |d| Φ (Baumgarte) of the scaled row
+                arguments = [f"dx{k}", f"dy{k}", f"cqx{k}", f"cqy{k}", f"ddx{k}", f"ddy{k}"]
+                (gam,) = self.kernel(
+                    JOINT_KERNELS, "clearance_gamma_scaled", [*arguments, f"irr{k}"], f"_g{k}"
+                )
+                rate_arguments = arguments[:2] + arguments[4:]  # d·ḋ = |d| Φ̇
+                (rate,) = self.kernel(JOINT_KERNELS, "clearance_rate", rate_arguments)
+                self.emit(
+                    f"irr{k} = 1.0 / rr{k}",
+                    f"gam{r} = {gam}",
+                    f"sphid{r} = {rate}",
+                    f"sphi{r} = rho{k} * phi{r}",
+                )
             else:
                 arguments = [f"ex{k}", f"ey{k}", f"cqx{k}", f"cqy{k}", f"ddx{k}", f"ddy{k}"]
                 (gam,) = self.kernel(
@@ -318,7 +365,8 @@ class ConstraintKinematics(LaneText):
             self.emit(f"gam{r} = " + _tidy(" + ".join(terms) if terms else "0.0"))
         if baumgarte:
             for r in range(topo.ncon):
-                self.emit(f"gam{r} = gam{r} - balpha2 * phid{r} - bbeta2 * phi{r}")
+                s = "s" if r in scaled else ""
+                self.emit(f"gam{r} = gam{r} - balpha2 * {s}phid{r} - bbeta2 * {s}phi{r}")
 
     def _axis_gamma(self, wx: str, wy: str, k: int, wa: str) -> str:
         """γ of the row w·d of joint k (a prismatic offset row, w = n, or its slider

@@ -120,11 +120,12 @@ class SchurComplement:
     :attr:`parallel_pivots`, the second pivot of such a pair is :meth:`_ground_pivot`'s: no
     division in the stage. The generator fills it for the fixed-step variants."""
 
-    unit_rows: Mapping[int, tuple[str, str]] = MappingProxyType({})
-    """Rows of B whose entries at each body's x and y are ± a unit vector (ex, ey), by row:
-    the names (a clearance joint's normal, not under a contact law, where it is 0 at the
-    bearing's centre). In S_rr such a body's two terms e_x² /m + e_y² /m are its 1/m (equal
-    in exact arithmetic, within an ulp or two of 1/m as written out); the generator fills it
+    unit_rows: Mapping[int, tuple[str, str, Coef]] = MappingProxyType({})
+    """Rows of B whose entries at each body's x and y are ± one vector w of a known squared
+    norm, by row: the names of w_x, w_y and of |w|² (a clearance joint's unit normal, |w|² =
+    1, or its d where the row is scaled, |w|² = ρ²; not under a contact law, where n is 0 at
+    the bearing's centre). In S_rr such bodies' terms w_x² /m + w_y² /m are |w|² Σ 1/m
+    (equal in exact arithmetic, within an ulp or two as written out); the generator fills it
     for the fixed-step variants."""
 
     eliminated_rows: frozenset[int] = frozenset()
@@ -264,21 +265,25 @@ class SchurComplement:
         )
 
     def _unit_terms(
-        self, r: int, row: dict[int, Coef], cols: list[int], unit: tuple[str, str]
+        self, r: int, row: dict[int, Coef], cols: list[int], unit: tuple[str, str, Coef]
     ) -> list[Coef]:
-        """The terms of S_rr for a row of :attr:`unit_rows`: 1/m of each body whose x and y
-        entries are ±(ex, ey) (e_x² + e_y² = 1), the products for the other entries."""
+        """The terms of S_rr for a row of :attr:`unit_rows`: |w|² times the sum of 1/m of the
+        bodies whose x and y entries are ±(w_x, w_y), then the products for the other
+        entries."""
+        masses: list[Coef] = []
         terms: list[Coef] = []
         for c in cols:
             b, k = divmod(c, 3)
             pair = (row.get(3 * b), row.get(3 * b + 1))
-            signed = [tuple(_mul(sign, e) for e in unit) for sign in (1.0, -1.0)]
+            signed = [tuple(_mul(sign, e) for e in unit[:2]) for sign in (1.0, -1.0)]
             if k < 2 and pair in signed:
                 if k == 0:
-                    terms.append(self._minv(c))
+                    masses.append(self._minv(c))
                 continue
             terms.append(_mul(row[c], f"Wt{r}_{c}"))
-        return terms
+        if not masses:
+            return terms
+        return [_mul(unit[2], _sum(masses)), *terms]
 
     def _ground_pivot(self, j: int, k: int, sjj: str, det: str, inverse: str) -> None:
         """:meth:`_single_pivot` where pivot k is the first of its column (d_k = S_kk, E_jk =

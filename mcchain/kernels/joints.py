@@ -122,6 +122,21 @@ def clearance_gamma(ex, ey, gx, gy, ddx, ddy, along, irho):
 
 
 @njit(**JIT)
+def distance_squared(dx, dy):
+    """|d|², m²."""
+    return dx * dx + dy * dy
+
+
+@njit(**JIT)
+def clearance_gamma_scaled(dx, dy, gx, gy, ddx, ddy, inverse_square):
+    """|d| γ: γ of a clearance row |d| − c (:func:`clearance_gamma`) for the row multiplied
+    by |d| (entries d·∂d/∂q), with ``inverse_square`` = 1/|d|²: d·g − (d × ḋ)²/|d|², as
+    |ḋ|²|d|² − (d·ḋ)² = (d × ḋ)² (no √ and no 1/|d| in it), m²/s²."""
+    cross = dx * ddy - dy * ddx
+    return dx * gx + dy * gy - cross * cross * inverse_square
+
+
+@njit(**JIT)
 def axis_normal(c, sn, ux, uy):
     """n = A_a Ω u_0 of a prismatic joint's unit axis u_0 fixed in body a at angle θ_a
     (c, sn = cos θ_a, sin θ_a): the world normal to the axis."""
