@@ -110,3 +110,51 @@ def test_confirm__refused_when_no_range_meets_the_target(
     assert not (tmp_path / "more").exists()
     missing = mcchain("confirm", "nowhere", "--requirement", "pulsation", cwd=tmp_path)
     assert_usage_error(missing, "nowhere: no such run folder")
+
+
+def _passing_failures_scipy_stats(n: np.ndarray, target: float, confidence: float) -> np.ndarray:
+    """passing_failures as first written, on scipy.stats (the reference of the planning)."""
+    from scipy import stats
+
+    n = np.asarray(n, dtype=np.int64)
+    lo, hi = np.full(n.shape, -1), n.copy()
+    while np.any(hi - lo > 1):
+        mid = (lo + hi) // 2
+        with np.errstate(invalid="ignore"):
+            ok = stats.beta.ppf(confidence, mid + 1, np.maximum(n - mid, 1)) <= target
+        ok &= mid >= 0
+        lo = np.where(ok & (hi - lo > 1), mid, lo)
+        hi = np.where(~ok & (hi - lo > 1), mid, hi)
+    return lo
+
+
+def test_confirm_planning__the_counts_scipy_stats_gives_without_importing_it() -> None:
+    """The confirming run's count (default_count) and the failures each count may show
+    (passing_failures) on scipy.special alone: the integers scipy.stats gives, over the
+    planning's counts (the success-run figure to 2^24) and its edges: no failure inside,
+    a rate at or above the target (no count passes), counts too small to pass even with
+    no failure (−1)."""
+    from scipy import stats
+
+    from mcchain.decision.confirm import default_count, passing_failures
+    from mcchain.decision.stats import success_run_count
+
+    for target, confidence in ((0.01, 0.95), (0.001, 0.99), (0.05, 0.9), (0.2, 0.5)):
+        success = success_run_count(target, confidence)
+        counts = np.unique(np.geomspace(1, 1 << 24, 400).astype(np.int64))
+        got = passing_failures(counts, target, confidence)
+        np.testing.assert_array_equal(
+            got, _passing_failures_scipy_stats(counts, target, confidence)
+        )
+        assert got[counts < success].max() == -1 and got[counts >= success].min() >= 0
+        for failures, kept in ((0, 50), (1, 4000), (3, 3000), (7, 2000), (5, 5), (1, 10**6)):
+            count, why = default_count(failures, kept, target, confidence)
+            rate = failures / kept
+            if failures == 0 or rate >= target:
+                assert count == success, why
+                continue
+            plan = np.unique(np.geomspace(success, 1 << 24, 400).astype(np.int64))
+            power = stats.binom.cdf(_passing_failures_scipy_stats(plan, target, confidence),
+                                    plan, rate)  # fmt: skip
+            enough = np.flatnonzero(power >= 0.9)
+            assert count == (int(plan[enough[0]]) if enough.size else int(plan[-1])), why

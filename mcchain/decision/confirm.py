@@ -33,7 +33,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from mcchain.errors import McchainError, RunError
 
@@ -230,14 +229,18 @@ CONFIRM_POWER = 0.9
 
 def passing_failures(n: np.ndarray, target: float, confidence: float) -> np.ndarray:
     """For each sample count n, the most failures whose one-sided ``confidence`` upper
-    bound (Clopper–Pearson) is still <= target (−1: not even zero)."""
+    bound (Clopper–Pearson) is still <= target (−1: not even zero). The bound is
+    ``scipy.special.betaincinv``, the same bits as ``scipy.stats.beta.ppf`` without importing
+    ``scipy.stats`` (about 1 s of every ``mcchain confirm``; tested)."""
+    from scipy.special import betaincinv
+
     n = np.asarray(n, dtype=np.int64)
     lo = np.full(n.shape, -1)
     hi = n.copy()  # n failures never pass
     while np.any(hi - lo > 1):  # bisection on k: the bound rises with k
         mid = (lo + hi) // 2
-        ok = stats.beta.ppf(confidence, mid + 1, np.maximum(n - mid, 1)) <= target
-        ok &= mid >= 0
+        ok = betaincinv(np.maximum(mid + 1, 1), np.maximum(n - mid, 1), confidence) <= target
+        ok &= mid >= 0  # −1 failures: the bound of none is not asked
         lo = np.where(ok & (hi - lo > 1), mid, lo)
         hi = np.where(~ok & (hi - lo > 1), mid, hi)
     return lo
@@ -249,7 +252,7 @@ def default_count(failures: int, kept: int, target: float, confidence: float) ->
     passes with no failure); else the smallest count at which the run passes with
     probability :data:`CONFIRM_POWER` if the rate seen inside is the true one (a planning
     figure: the rate of a range chosen on the same samples is, if anything, optimistic)."""
-    from mcchain.decision.stats import success_run_count
+    from mcchain.decision.stats import binom_cdf, success_run_count
 
     success = success_run_count(target, confidence)
     if failures == 0 or kept == 0:
@@ -258,7 +261,9 @@ def default_count(failures: int, kept: int, target: float, confidence: float) ->
     if rate >= target:
         return success, "the success-run figure: the rate seen inside does not pass at any count"
     counts = np.unique(np.geomspace(success, 1 << 24, 400).astype(np.int64))
-    power = stats.binom.cdf(passing_failures(counts, target, confidence), counts, rate)
+    passing = passing_failures(counts, target, confidence)
+    # P(Bin(n, rate) <= k); none at k = −1 (no count of failures passes there)
+    power = np.where(passing >= 0, binom_cdf(np.maximum(passing, 0), counts, rate), 0.0)
     enough = np.flatnonzero(power >= CONFIRM_POWER)
     if enough.size == 0:
         return int(counts[-1]), f"the most this planning looks at: {counts[-1]}"
