@@ -385,6 +385,30 @@ def test_scatter__a_nonlinear_relation_gets_binned_medians_not_a_straight_line()
     assert_texts_inside(fig)
 
 
+def test_spearman__scipys_rank_correlation_on_ties_nan_and_no_spread() -> None:
+    """The report's Spearman ρ (mid-ranks' correlation, no scipy.stats) against
+    scipy.stats.spearmanr over the finite pairs: random, tied, monotone, NaN-holed data;
+    NaN where fewer than 3 pairs or no spread is left."""
+    rng = np.random.default_rng(4)
+    for n in (3, 4, 17, 400):
+        for x, y in (
+            (rng.normal(size=n), rng.normal(size=n)),
+            (rng.integers(0, 3, n).astype(float), rng.integers(0, 4, n).astype(float)),
+            (np.arange(n, dtype=float), np.exp(np.arange(n) / n)),
+            (np.arange(n, dtype=float), -(np.arange(n, dtype=float) ** 3)),
+        ):
+            want = spearmanr(x, y).statistic
+            if np.isfinite(want):
+                assert scatter.spearman(x, y) == pytest.approx(want, abs=1e-14)
+            holed = np.where(rng.random(n) < 0.2, np.nan, x)
+            ok = np.isfinite(holed)
+            if ok.sum() >= 3 and np.ptp(holed[ok]) > 0 and np.ptp(y[ok]) > 0:
+                want = spearmanr(holed[ok], y[ok]).statistic
+                assert scatter.spearman(holed, y) == pytest.approx(want, abs=1e-14)
+    assert np.isnan(scatter.spearman(np.array([1.0, 2.0, np.nan]), np.array([3.0, 1.0, 2.0])))
+    assert np.isnan(scatter.spearman(np.ones(5), np.arange(5.0)))
+
+
 def test_scatter__a_constant_result_is_named_not_drawn() -> None:
     ds, _ = _clearance_mass_dataset(8)
     flat = report.Result("q_eq", ("x bar", "θ bar"), np.full((8, 2), 0.25), "m or rad")

@@ -78,13 +78,14 @@ def binned_quantiles(
 
 def spearman(x: np.ndarray, y: np.ndarray) -> float:
     """Spearman's rank correlation over the finite pairs (NaN with fewer than 3 or no
-    spread)."""
-    from scipy.stats import spearmanr
+    spread): the correlation of their mid-ranks, as ``scipy.stats.spearmanr`` (to
+    rounding; tested) without importing ``scipy.stats`` (about 1 s of ``mcchain report``)."""
+    from mcchain.decision.allocation import mid_ranks
 
     ok = np.isfinite(x) & np.isfinite(y)
     if ok.sum() < 3 or np.ptp(x[ok]) == 0.0 or np.ptp(y[ok]) == 0.0:
         return float("nan")
-    return float(spearmanr(x[ok], y[ok]).statistic)
+    return float(np.corrcoef(mid_ranks(x[ok]), mid_ranks(y[ok]))[0, 1])
 
 
 def parameter_scatter(
