@@ -12,12 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_simulate_methods import BAUMGARTE, T_ACCEL, accel_at_random_states
 
 from mcchain.codegen.emitter import Emitter
 from mcchain.codegen.generate import generate_source
 from mcchain.codegen.kinematics import ConstraintKinematics
 from mcchain.codegen.native import NativeModule
-from mcchain.codegen.topology import Topology, pack_parameters
+from mcchain.codegen.topology import Topology
 from mcchain.contact import LAW_CODES
 from mcchain.kernels.joints import clearance_gamma, clearance_gamma_scaled
 from mcchain.model import JointKind
@@ -129,17 +130,9 @@ def test_scaled_clearance_rows__the_dense_solves_accelerations_and_multipliers(n
     source = generate_source(topo, "accel")
     assert "rr" in source or name == "slider_crank"
     module = NativeModule(source, f"scaled_rows_{name}")
-    rng = np.random.default_rng(5)
-    n = 6
-    Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
-    V = rng.normal(0.0, 1.0, (model.ndof, n))
-    P = np.repeat(pack_parameters(model, topo), n, axis=1)
-    qdd, lam = np.zeros((model.ndof, n)), np.zeros((model.ncon, n))
-    chk, sing = np.zeros(n), np.zeros(n)
-    alpha, beta, t = 3.0, 7.0, 0.3
-    module.accel(P, Q, V, t, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
-    for j in range(n):
-        ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], t, (alpha, beta))
+    Q, V, qdd, lam, _, sing = accel_at_random_states(module, model, topo, n=6, seed=5)
+    for j in range(Q.shape[1]):
+        ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], T_ACCEL, BAUMGARTE)
         np.testing.assert_allclose(qdd[:, j], ref_qdd, rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(lam[:, j], ref_lam, rtol=1e-10, atol=1e-10)
         assert sing[j] == 0.0

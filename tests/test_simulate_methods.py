@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ from mcchain.codegen.generate import lane_kernels
 from mcchain.codegen.topology import Topology, pack_parameters
 from mcchain.errors import SceneError
 from mcchain.kernels.tableaux import DOPRI5, RK4, GeneralizedAlpha
-from mcchain.model import JointKind
+from mcchain.model import JointKind, Model
 from mcchain.solvers.simulate import METHODS, simulate
 from mcchain.testing.dense import energy, equations, kkt_acceleration
 from mcchain.testing.scenes import scene_model
@@ -83,6 +85,28 @@ def test_sincos__matches_numpy():
         assert abs(s - np.sin(x)) <= SINCOS_TOL and abs(c - np.cos(x)) <= SINCOS_TOL
 
 
+BAUMGARTE = (3.0, 7.0)
+"""α, β of the accel kernels' checks at random states (:func:`accel_at_random_states`)."""
+T_ACCEL = 0.3
+
+
+def accel_at_random_states(
+    module: Any, model: Model, topo: Topology, n: int = 5, seed: int = 7
+) -> tuple[np.ndarray, ...]:
+    """``module.accel`` at ``n`` random states near the model's start, off the constraints
+    (Baumgarte :data:`BAUMGARTE` on, t = :data:`T_ACCEL`): Q, V, q̈, λ, max |Φ|, singular
+    counts, each with the states along its last axis."""
+    rng = np.random.default_rng(seed)
+    Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
+    V = rng.normal(0.0, 1.0, (model.ndof, n))
+    P = np.repeat(pack_parameters(model, topo), n, axis=1)
+    qdd, lam = np.zeros((model.ndof, n)), np.zeros((model.ncon, n))
+    chk, sing = np.zeros(n), np.zeros(n)
+    alpha, beta = BAUMGARTE
+    module.accel(P, Q, V, T_ACCEL, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
+    return Q, V, qdd, lam, chk, sing
+
+
 @pytest.mark.parametrize(
     "name", ["loaded", "fourbar", "clearance_bar", "slider_crank", "telescope"]
 )
@@ -91,16 +115,9 @@ def test_accel__matches_dense_kkt(name):
     model = scene_model(name)
     topo = Topology.from_model(model)
     module = lane_kernels(topo, "accel")
-    rng = np.random.default_rng(7)
-    n = 5
-    Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
-    V = rng.normal(0.0, 1.0, (model.ndof, n))
+    Q, V, qdd, lam, chk, sing = accel_at_random_states(module, model, topo)
+    n, t, (alpha, beta) = Q.shape[1], T_ACCEL, BAUMGARTE
     P = np.repeat(pack_parameters(model, topo), n, axis=1)
-    qdd, lam = np.zeros((model.ndof, n)), np.zeros((model.ncon, n))
-    chk, sing = np.zeros(n), np.zeros(n)
-    alpha, beta = 3.0, 7.0
-    t = 0.3
-    module.accel(P, Q, V, t, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
     for j in range(n):
         ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], t, (alpha, beta))
         np.testing.assert_allclose(qdd[:, j], ref_qdd, rtol=ACCEL_RTOL, atol=ACCEL_RTOL)
