@@ -205,7 +205,7 @@ def chain_key(x: np.ndarray, side: str) -> np.ndarray:
 def mid_ranks(x: np.ndarray) -> np.ndarray:
     """Ranks 1..n of ``x``, tied values sharing the mean of their ranks (what
     ``scipy.stats.rankdata(x, method="average")`` gives, without importing scipy.stats:
-    0.3-1 s of every verdict)."""
+    slow to import: benchmarks/results/verdict/verdict.md)."""
     _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
     last = np.cumsum(counts)  # the rank of the last of each group of ties
     return (last - (counts - 1) / 2.0)[inverse.reshape(-1)]

@@ -231,7 +231,8 @@ def passing_failures(n: np.ndarray, target: float, confidence: float) -> np.ndar
     """For each sample count n, the most failures whose one-sided ``confidence`` upper
     bound (Clopper–Pearson) is still <= target (−1: not even zero). The bound is
     ``scipy.special.betaincinv``, the same bits as ``scipy.stats.beta.ppf`` without importing
-    ``scipy.stats`` (about 1 s of every ``mcchain confirm``; tested)."""
+    ``scipy.stats`` (tested; what the import cost ``mcchain confirm``:
+    benchmarks/results/verdict/verdict.md)."""
     from scipy.special import betaincinv
 
     n = np.asarray(n, dtype=np.int64)

@@ -44,9 +44,9 @@ VERDICTS = (PASS, FAIL, UNDECIDED, EMPTY)
 
 
 def binom_cdf(k: np.ndarray, n: np.ndarray | int, p: float) -> np.ndarray:
-    """P(Bin(n, p) <= k) for integers ``k`` >= 0 (and counts ``n``, broadcast with ``k``):
-    ``scipy.stats.binom.cdf``, bit for bit (the
-    boost ufunc it evaluates), without importing ``scipy.stats`` (0.3-1 s of every verdict;
+    """P(Bin(n, p) <= k) for integers ``k`` >= 0 and counts ``n`` (broadcast with ``k``):
+    ``scipy.stats.binom.cdf``, bit for bit (the boost ufunc it evaluates), without importing
+    ``scipy.stats`` (slow to import: benchmarks/results/verdict/verdict.md;
     Clopper-Pearson's ``beta.ppf`` is ``scipy.special.betaincinv`` likewise). Falls back to
     ``scipy.stats`` where a scipy lacks that ufunc; tests compare the two."""
     try:

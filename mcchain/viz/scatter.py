@@ -79,7 +79,8 @@ def binned_quantiles(
 def spearman(x: np.ndarray, y: np.ndarray) -> float:
     """Spearman's rank correlation over the finite pairs (NaN with fewer than 3 or no
     spread): the correlation of their mid-ranks, as ``scipy.stats.spearmanr`` (to
-    rounding; tested) without importing ``scipy.stats`` (about 1 s of ``mcchain report``)."""
+    rounding; tested) without importing ``scipy.stats`` (slow to import:
+    benchmarks/results/verdict/verdict.md)."""
     from mcchain.decision.allocation import mid_ranks
 
     ok = np.isfinite(x) & np.isfinite(y)
