@@ -204,8 +204,8 @@ def chain_key(x: np.ndarray, side: str) -> np.ndarray:
 
 def mid_ranks(x: np.ndarray) -> np.ndarray:
     """Ranks 1..n of ``x``, tied values sharing the mean of their ranks (what
-    ``scipy.stats.rankdata(x, method="average")`` gives, without importing scipy.stats:
-    slow to import: benchmarks/results/verdict/verdict.md)."""
+    ``scipy.stats.rankdata(x, method="average")`` gives, without importing scipy.stats, slow
+    to import: benchmarks/results/verdict/verdict.md)."""
     _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
     last = np.cumsum(counts)  # the rank of the last of each group of ties
     return (last - (counts - 1) / 2.0)[inverse.reshape(-1)]
