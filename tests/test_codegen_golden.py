@@ -29,26 +29,26 @@ LMAX_PINNED = 4  # one AVX2 register of doubles; the text depends on the row len
 GOLDEN = {
     "double-pendulum-clearance": {
         "accel": "5d35b27eba1e9d46141ec2413f96de7e75d75237aa3e217c0b22e19fe3674ef3",
-        "rk4": "c2680b43fd5601e5f42f0d856a44903d4ed8ccf7fd98d79cce90cd953757fcbb",
-        "rk4-projection": "22e1804385a91a8cb7f0ddc823c27019788f07551d7f3f5938ac10ab2fc26f97",
+        "rk4": "cbb4ca5383443d1c0c6c5bc9fcbc9cf4dfb7be4621d40d76602b03d97032be9f",
+        "rk4-projection": "451eb679aac2d55471480389846ad5932b711246e4b049a8244fa62f7ccee8c9",
         "rk45": "92e5bccd052c34b6130646e498ce4760f30ce0ee28557ed8862587a1165dfd2a",
     },
     "fourbar-clearance": {
         "accel": "bbb59dd6a89da1aee006ec35981de6b29659f34b5b6e0eaaa0ce2185e0f8e404",
-        "rk4": "74d88f57da5bb1ab6fbf0b469b8afd7a5091931db81c5bb86935ddd00ebd7a9a",
-        "rk4-projection": "a4a7b8b88b6d6f877e22a7c829f01c3edf101ab05c7148e31ab5a2f9b47858b1",
+        "rk4": "eab7ec975691704870f20b350003278665352daeb308844942b60b054a472a1e",
+        "rk4-projection": "cf963fd39c381c0a3e01bc0cfce36b33e0cc2af23a86e311eb399785f890c0c5",
         "rk45": "87bb0d9d4697449741d4d059dc9ee35413c96188556e4bdfe648e3e901ad3b3c",
     },
     "fourbar-clearance-auto": {
         "accel": "7118f4934ffa5ef307ce36816c33523278bd4cca7b47ca2ee6e55a060b0b418f",
-        "rk4": "9f00aa2b57a535fbfdb5b0675239b51fed0040d7b2838ef96ff7b2d4b101b511",
-        "rk4-projection": "335132290130f5b89d7c6ce4ff7f441970c80b661e594b38454dcc9dab69b85e",
+        "rk4": "f53de8cbca8e5066619ffc42b2c7018b1cf83e1eab6ee574ec06ad234fb70c4d",
+        "rk4-projection": "f55df8bd8971785b9a7951cbcab4327c3fda6b0f7266769843bc6f8024e1f8dd",
         "rk45": "448ff4b8b026d82c9f8dbec352ff59ca167044b5ca3d42bb603b4f4a4e0d196a",
     },
     "chain4-mixed-spring": {
         "accel": "f1cbc2a53c8fc2f050fdd0fda1d112eb27d39b84a4774371c5a29c9561ffe5e2",
-        "rk4": "dbd96d9f2d38e958841ee2c02e81f84d7c9fbc5b87e7a1364101b4c2691188b3",
-        "rk4-projection": "3d57a9c47d922700644bfc19d35be9844d38139e118d01c51e3218bf4ef78112",
+        "rk4": "8b05f876b596f97e5610d1015d3ebb898d97f7ee7ba737f08cf065dc62b36f9d",
+        "rk4-projection": "a67dc1d6ea10574ddcc32440d7158f8a2a81b488c5d82cf3e6066e8ade9b206a",
         "rk45": "05c83421ed8f6df03da0c4f984d248f9db1a1ae28005441548d03728962d8ab2",
     },
 }

@@ -54,10 +54,10 @@ def test_layout__the_fixed_steps_stage_rows_are_where_the_kernel_reads_them():
     assert lay.stage_at(topo.ndof + 1, "kr") == f"W[kr + {(topo.ndof + 1) * LANES} + l]"
 
 
-def test_combine__rounds_each_product_then_sums_from_the_first_stage():
-    """Compiled with contraction, the combine is bit for bit the loop kernel's order
-    (``dq = 0.0 + b₀h k₀``, then ``dq = dq + b_j h k_j``, each product rounded; q + dq),
-    signed zeros included; the fused forms LLVM could have chosen differ on these data."""
+def test_combine__fuses_each_stage_into_the_sum_from_the_first_stage():
+    """Compiled with contraction, the combine is bit for bit its stated chain (``dq =
+    b₀h k₀``, then ``dq = fma(b_j h, k_j, dq)``; q + dq), signed zeros included; the loop
+    kernel's order (each product rounded, then summed) differs on these data."""
     topo = _topology()
     lay = Layout(topo, RK4.nstage, LANES, fixed_step=True)
     rng = np.random.default_rng(20261129)
@@ -70,23 +70,23 @@ def test_combine__rounds_each_product_then_sums_from_the_first_stage():
     _combine_module(topo, lay).combine(W, bw, hn, LANES)
 
     ndof = topo.ndof
-    fused_apart = 0
+    rounded_apart = 0
     for shift, state in ((0, "q"), (ndof, "v")):
         for i in range(ndof):
             for lane in range(LANES):
                 ks = [before[(lay.rows[f"kq{j}"] + shift + i) * LANES + lane] for j in range(4)]
                 bh = [float(b * hn) for b in bw]
+                fused = np.float64(bh[0]) * np.float64(ks[0])
+                for j in range(1, 4):
+                    fused = fma(bh[j], ks[j], fused)
+                x = before[(lay.rows[state] + i) * LANES + lane]
+                got = W[(lay.rows[state] + i) * LANES + lane]
+                assert np.float64(x + fused).tobytes() == np.float64(got).tobytes()
                 dq = 0.0 + bh[0] * ks[0]
                 for j in range(1, 4):
                     dq = dq + bh[j] * ks[j]
-                x = before[(lay.rows[state] + i) * LANES + lane]
-                got = W[(lay.rows[state] + i) * LANES + lane]
-                assert np.float64(x + dq).tobytes() == np.float64(got).tobytes()
-                fused = fma(bh[0], ks[0], 0.0)
-                for j in range(1, 4):
-                    fused = fma(bh[j], ks[j], fused)
-                fused_apart += x + fused != got
-    assert fused_apart > 0  # the data tell the roundings apart
+                rounded_apart += x + dq != got
+    assert rounded_apart > 0  # the data tell the roundings apart
 
 
 def test_adaptive_stage_state__each_stage_sums_only_the_stages_its_row_reads():

@@ -20,12 +20,15 @@ def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str
     """Blocks ``load_stage_sub`` (the stage's state, from the previous stage's k),
     ``combine_coefs`` and ``combine`` (the step's new state) of the fixed-step kernel.
 
-    The combine rounds as the loop kernel does (mcchain.kernels.explicit, uncontracted):
-    each p_j = b_j h k_j rounded on its own, the sum from the first stage on, then the
-    state plus the sum, q + (((p0 + p1) + p2) + p3), every row alike. ``fma(b, k, 0.0)``
-    is that rounded product in a form LLVM cannot fuse into the sum (a product ``b * k``
-    would be: ``fastmath={"contract"}``): b·k rounded, +0.0 where it is −0.0, as the loop
-    kernel's 0.0 + b h k (tests/test_codegen_stage_rows.py).
+    The combine's rounding is stated, every row alike: the increment as a chain of fused
+    multiply-adds from the first stage on, d = fma(b₃h, k₃, fma(b₂h, k₂, fma(b₁h, k₁,
+    b₀h·k₀))), then the state plus it, q + d (one rounding a stage where the loop kernel,
+    mcchain.kernels.explicit, rounds each product and each sum: a few ulp apart; the lanes'
+    stages differ from the loop's by as much already). Written out as ``fma`` calls, the
+    choice is the text's, not LLVM's (with ``fastmath={"contract"}`` a sum of products
+    contracts row by row as its DAG combiner picks); fused, the combine took 3 % less of the
+    step than with each product rounded apart (benchmarks/results/roofline/reading.md;
+    tests/test_codegen_stage_rows.py).
     """
     ndof = topo.ndof
     load = []
@@ -38,11 +41,10 @@ def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str
     combine = []
     for x, shift in (("q", 0), ("v", ndof)):
         for i in range(ndof):
-            terms = [f"fma(bh{j}, W[{(base[j] + shift + i) * lay.lmax} + l], 0.0)"
-                     for j in range(nstage)]  # fmt: skip
-            total = terms[0]
-            for term in terms[1:]:
-                total = f"({total} + {term})"
+            ks = [f"W[{(base[j] + shift + i) * lay.lmax} + l]" for j in range(nstage)]
+            total = f"bh0 * {ks[0]}"  # an fma's addend: no contraction can take it
+            for j in range(1, nstage):
+                total = f"fma(bh{j}, {ks[j]}, {total})"
             combine.append(f"{lay.at(x, i)} = {lay.at(x, i)} + {total}")
     return {
         "load_stage_sub": "\n".join(load),
