@@ -26,9 +26,8 @@ def fixed_step_blocks(topo: Topology, nstage: int, lay: Layout) -> dict[str, str
     mcchain.kernels.explicit, rounds each product and each sum: a few ulp apart; the lanes'
     stages differ from the loop's by as much already). Written out as ``fma`` calls, the
     choice is the text's, not LLVM's (with ``fastmath={"contract"}`` a sum of products
-    contracts row by row as its DAG combiner picks); fused, the combine took 3 % less of the
-    step than with each product rounded apart (benchmarks/results/roofline/reading.md;
-    tests/test_codegen_stage_rows.py).
+    contracts row by row as its DAG combiner picks); fused, because it is the faster of the
+    two stated forms (benchmarks/results/roofline/reading.md; tests/test_codegen_stage_rows.py).
     """
     ndof = topo.ndof
     load = []
