@@ -88,6 +88,7 @@ class ConstraintKinematics(LaneText):
     def joints(self, q: str = "q", tag: str = "") -> None:
         """Points ``pa{k}``, ``pb{k}`` and separation ``dx{k}``, ``dy{k}`` of every joint."""
         topo = self.topo
+        scaled = self.scaled_clearance_rows()
         for k in range(topo.njoint):
             a, b = topo.joint_a[k], topo.joint_b[k]
             self._point(a, f"p_sax{k}", f"p_say{k}", f"pa{k}", q, tag)
@@ -99,13 +100,14 @@ class ConstraintKinematics(LaneText):
                 # and none needed (F_n = 0 there), so n = 0 rather than NaN.
                 guarded = "1.0" if k in self.contact_row else "0.0"
                 (inverse,) = self.kernel(JOINT_KERNELS, "inverse_distance", [f"rho{k}", guarded])
-                (rho,) = self.kernel(JOINT_KERNELS, "distance", [f"dx{k}", f"dy{k}"])
-                if topo.joint_row[k] in self.scaled_clearance_rows():
+                separation = [f"dx{k}", f"dy{k}"]
+                if topo.joint_row[k] in scaled:
                     # ρ² for the scaled row's S_rr and γ; ρ the same √ of it as `distance`
-                    separation = [f"dx{k}", f"dy{k}"]
                     (squared,) = self.kernel(JOINT_KERNELS, "distance_squared", separation)
                     self.emit(f"rr{k} = {squared}")
                     rho = f"math.sqrt(rr{k})"
+                else:
+                    (rho,) = self.kernel(JOINT_KERNELS, "distance", separation)
                 self.emit(
                     f"rho{k} = {rho}",
                     f"irho{k} = {inverse}",
@@ -138,6 +140,7 @@ class ConstraintKinematics(LaneText):
         if self._rows_cache is not None:
             return self._rows_cache
         topo = self.topo
+        scaled = self.scaled_clearance_rows()
         rows: list[dict[int, Coef]] = []
 
         def point_row(body: int, sign: float, wx: Coef, wy: Coef, px: str, py: str) -> dict:
@@ -167,8 +170,8 @@ class ConstraintKinematics(LaneText):
                     angle[3 * b + 2] = 1.0
                 rows += [row, angle]
             else:  # the unit normal's entries, or d's where the row is scaled
-                scaled = topo.joint_row[k] in self.scaled_clearance_rows()
-                ex, ey = (f"dx{k}", f"dy{k}") if scaled else (f"ex{k}", f"ey{k}")
+                in_scaled = topo.joint_row[k] in scaled
+                ex, ey = (f"dx{k}", f"dy{k}") if in_scaled else (f"ex{k}", f"ey{k}")
                 row = point_row(b, 1.0, ex, ey, *pb)
                 row.update(point_row(a, -1.0, ex, ey, *pa))
                 rows.append(row)
@@ -191,21 +194,18 @@ class ConstraintKinematics(LaneText):
         x and y are ± its unit normal (ex, ey) (under a law, n = 0 at the bearing's
         centre), or ± d (dx, dy) where the row is scaled, whose square is ρ² (rr), not 1.
         {row: (x entry, y entry, their squared norm)}."""
-        topo = self.topo
-        scaled = self.scaled_clearance_rows()
-        return {
-            r: (f"dx{k}", f"dy{k}", f"rr{k}") if r in scaled else (f"ex{k}", f"ey{k}", 1.0)
-            for k in range(topo.njoint)
-            if topo.joint_kind[k] == JOINT_CLEARANCE and k not in self.contact_row
-            for r in (topo.joint_row[k],)
-        }
+        if self.scaled_rows:
+            return {r: (f"dx{k}", f"dy{k}", f"rr{k}") for r, k in self._link_rows().items()}
+        return {r: (f"ex{k}", f"ey{k}", 1.0) for r, k in self._link_rows().items()}
 
     def scaled_clearance_rows(self) -> dict[int, int]:
         """{row: joint} of the clearance rows the solve takes multiplied by |d| (with
         :attr:`scaled_rows`; else none)."""
+        return self._link_rows() if self.scaled_rows else {}
+
+    def _link_rows(self) -> dict[int, int]:
+        """{row: joint} of the clearance joints not under a contact law."""
         topo = self.topo
-        if not self.scaled_rows:
-            return {}
         return {
             topo.joint_row[k]: k
             for k in range(topo.njoint)
