@@ -94,8 +94,8 @@ def accel_at_random_states(
     module: Any, model: Model, topo: Topology, n: int = 5, seed: int = 7
 ) -> tuple[np.ndarray, ...]:
     """``module.accel`` at ``n`` random states near the model's start, off the constraints
-    (Baumgarte :data:`BAUMGARTE` on, t = :data:`T_ACCEL`): Q, V, q̈, λ, max |Φ|, singular
-    counts, each with the states along its last axis."""
+    (Baumgarte :data:`BAUMGARTE` on, t = :data:`T_ACCEL`): the packed parameters P, Q, V,
+    q̈, λ, max |Φ|, singular counts, each with the states along its last axis."""
     rng = np.random.default_rng(seed)
     Q = model.q0[0][:, None] + rng.normal(0.0, 0.02, (model.ndof, n))
     V = rng.normal(0.0, 1.0, (model.ndof, n))
@@ -104,7 +104,7 @@ def accel_at_random_states(
     chk, sing = np.zeros(n), np.zeros(n)
     alpha, beta = BAUMGARTE
     module.accel(P, Q, V, T_ACCEL, 2 * alpha, beta**2, 1e-8, qdd, lam, chk, sing)
-    return Q, V, qdd, lam, chk, sing
+    return P, Q, V, qdd, lam, chk, sing
 
 
 @pytest.mark.parametrize(
@@ -115,9 +115,8 @@ def test_accel__matches_dense_kkt(name):
     model = scene_model(name)
     topo = Topology.from_model(model)
     module = lane_kernels(topo, "accel")
-    Q, V, qdd, lam, chk, sing = accel_at_random_states(module, model, topo)
+    P, Q, V, qdd, lam, chk, sing = accel_at_random_states(module, model, topo)
     n, t, (alpha, beta) = Q.shape[1], T_ACCEL, BAUMGARTE
-    P = np.repeat(pack_parameters(model, topo), n, axis=1)
     for j in range(n):
         ref_qdd, ref_lam = kkt_acceleration(model, 0, Q[:, j], V[:, j], t, (alpha, beta))
         np.testing.assert_allclose(qdd[:, j], ref_qdd, rtol=ACCEL_RTOL, atol=ACCEL_RTOL)
